@@ -1,0 +1,2 @@
+//! logsh: log-SH shading of Blender G-buffers.
+pub mod sh;

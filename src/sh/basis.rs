@@ -1,0 +1,149 @@
+//! Real spherical-harmonic basis at any order, in f32 or f64.
+//!
+//! Conventions, stated once for the whole crate:
+//! - World space is Blender's: right-handed, Z up. `theta` is the polar angle from +Z,
+//!   `phi` the azimuth from +X towards +Y.
+//! - An order-`n` expansion holds bands `l = 0..n`, so `n * n` coefficients, stored band
+//!   after band at `index(l, m) = l * (l + 1) + m` (paper 000, Eq. 4).
+//! - Real, orthonormal basis without the Condon-Shortley phase:
+//!   `y_l^m = sqrt(2) K_l^m P_l^m(cos theta) cos(m phi)` for `m > 0`,
+//!   `y_l^0 = K_l^0 P_l(cos theta)`,
+//!   `y_l^m = sqrt(2) K_l^|m| P_l^|m|(cos theta) sin(|m| phi)` for `m < 0`,
+//!   with `K_l^m = sqrt((2l + 1) / (4 pi) * (l - m)! / (l + m)!)`. Band 1 is therefore
+//!   `sqrt(3 / 4 pi) * (y, z, x)`: every basis function with `m > 0` has a positive lobe
+//!   along +X.
+//! - A spherical function `f` has coefficients `f_i = integral of f y_i` over the sphere
+//!   (paper 000, Eq. 3), so the constant 1 is `[2 sqrt(pi), 0, ...]` and the integral of
+//!   a product of two band-limited functions is the dot product of their vectors.
+
+use num_traits::{Float, FloatConst, FromPrimitive};
+use std::fmt::Debug;
+
+/// The scalar types the SH code runs in: f32 (the GPU's precision) and f64 (tables and
+/// reference values).
+pub trait Real: Float + FloatConst + FromPrimitive + Debug + Send + Sync + Default + 'static {
+    /// Converts an f64 constant or table entry.
+    fn of(x: f64) -> Self {
+        Self::from_f64(x).expect("every f64 converts to f32 or f64")
+    }
+}
+impl Real for f32 {}
+impl Real for f64 {}
+
+/// Lowest and highest supported orders. The math is defined for any order; the tables
+/// and the shading kernels are tested from 3 to 8.
+pub const MIN_ORDER: usize = 3;
+pub const MAX_ORDER: usize = 8;
+/// Coefficients of the highest supported order, for fixed-size per-pixel buffers.
+pub const MAX_COEFFICIENTS: usize = MAX_ORDER * MAX_ORDER;
+
+/// Number of coefficients of an order-`order` expansion.
+pub const fn coefficient_count(order: usize) -> usize {
+    order * order
+}
+
+/// Position of `(l, m)` in a coefficient vector, `-l <= m <= l`.
+pub const fn index(l: usize, m: i32) -> usize {
+    (l * (l + 1)) as usize + m as isize as usize
+}
+
+/// Band `l` of the coefficient at `i`.
+pub fn band_of(i: usize) -> usize {
+    (i as f64).sqrt() as usize
+}
+
+/// Normalisation `K_l^m` for `m >= 0`.
+pub fn normalisation(l: usize, m: usize) -> f64 {
+    let mut ratio = 1.0; // (l - m)! / (l + m)!
+    for k in (l - m + 1)..=(l + m) {
+        ratio /= k as f64;
+    }
+    ((2 * l + 1) as f64 / (4.0 * std::f64::consts::PI) * ratio).sqrt()
+}
+
+/// Evaluates all `order * order` basis functions at the unit direction `(x, y, z)` into
+/// `out[..order * order]`.
+///
+/// Uses `P_l^m(cos theta) = sin^m(theta) Q_l^m(z)` and
+/// `sin^m(theta) (cos m phi, sin m phi) = (Re, Im) (x + i y)^m`, so no trigonometry and
+/// no division: exact at the poles. Relative accuracy about 1e-15 (f64) or 1e-6 (f32)
+/// through order 8.
+pub fn eval_basis<T: Real>(order: usize, dir: [T; 3], out: &mut [T]) {
+    let [x, y, z] = dir;
+    let n = order;
+    assert!(out.len() >= n * n, "eval_basis: output holds fewer than order^2 values");
+    let sqrt2 = T::SQRT_2();
+    // (x + i y)^m, starting at m = 0.
+    let (mut cm, mut sm) = (T::one(), T::zero());
+    for m in 0..n {
+        // Q_m^m = (2m - 1)!!, then the upward recurrence in l.
+        let mut q_prev = T::zero();
+        let mut q = T::of(double_factorial_odd(m));
+        for l in m..n {
+            if l == m + 1 {
+                q_prev = q;
+                q = z * T::of((2 * m + 1) as f64) * q_prev;
+            } else if l > m + 1 {
+                let next = (T::of((2 * l - 1) as f64) * z * q - T::of((l + m - 1) as f64) * q_prev)
+                    / T::of((l - m) as f64);
+                q_prev = q;
+                q = next;
+            }
+            let k = T::of(normalisation(l, m));
+            if m == 0 {
+                out[index(l, 0)] = k * q;
+            } else {
+                out[index(l, m as i32)] = sqrt2 * k * q * cm;
+                out[index(l, -(m as i32))] = sqrt2 * k * q * sm;
+            }
+        }
+        let (c, s) = (cm * x - sm * y, cm * y + sm * x);
+        cm = c;
+        sm = s;
+    }
+}
+
+/// Basis at `(theta, phi)`; see [`eval_basis`].
+pub fn eval_basis_spherical<T: Real>(order: usize, theta: T, phi: T, out: &mut [T]) {
+    let (st, ct) = theta.sin_cos();
+    let (sp, cp) = phi.sin_cos();
+    eval_basis(order, [st * cp, st * sp, ct], out);
+}
+
+/// Evaluates an expansion at a direction: `sum_i coeffs[i] y_i(dir)`.
+pub fn eval_expansion<T: Real>(order: usize, coeffs: &[T], dir: [T; 3]) -> T {
+    let mut y = [T::zero(); MAX_COEFFICIENTS * 4];
+    let y = &mut y[..order * order];
+    eval_basis(order, dir, y);
+    coeffs.iter().zip(y.iter()).fold(T::zero(), |acc, (&c, &b)| acc + c * b)
+}
+
+/// Legendre polynomials `P_0(z) ..= P_{count-1}(z)` (unnormalised, `P_l(1) = 1`).
+pub fn legendre<T: Real>(count: usize, z: T, out: &mut [T]) {
+    for l in 0..count {
+        out[l] = match l {
+            0 => T::one(),
+            1 => z,
+            _ => {
+                (T::of((2 * l - 1) as f64) * z * out[l - 1] - T::of((l - 1) as f64) * out[l - 2])
+                    / T::of(l as f64)
+            }
+        };
+    }
+}
+
+/// Normalised Legendre polynomial `P^_l = sqrt((2l + 1) / 2) P_l` (paper 000, Eq. 13):
+/// orthonormal on [-1, 1], and `y_l^0 = P^_l(cos theta) / sqrt(2 pi)` (Eq. 12).
+pub fn nlp_scale(l: usize) -> f64 {
+    ((2 * l + 1) as f64 / 2.0).sqrt()
+}
+
+/// `sqrt(4 pi / (2l + 1))`, the Funk-Hecke factor of paper 000, Eq. 5.
+pub fn funk_hecke_factor(l: usize) -> f64 {
+    (4.0 * std::f64::consts::PI / (2 * l + 1) as f64).sqrt()
+}
+
+fn double_factorial_odd(m: usize) -> f64 {
+    // (2m - 1)!! with (-1)!! = 1.
+    (1..=m).fold(1.0, |acc, k| acc * (2 * k - 1) as f64)
+}
