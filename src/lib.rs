@@ -1,2 +1,3 @@
 //! logsh: log-SH shading of Blender G-buffers.
+pub mod logsh;
 pub mod sh;

@@ -44,7 +44,7 @@ pub const fn coefficient_count(order: usize) -> usize {
 
 /// Position of `(l, m)` in a coefficient vector, `-l <= m <= l`.
 pub const fn index(l: usize, m: i32) -> usize {
-    (l * (l + 1)) as usize + m as isize as usize
+    ((l * (l + 1)) as isize + m as isize) as usize
 }
 
 /// Band `l` of the coefficient at `i`.

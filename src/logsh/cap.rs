@@ -1,0 +1,58 @@
+//! Log visibility of a spherical blocker (paper 000, Eq. 24-26, Section 4.2).
+
+use crate::sh::basis::{legendre, Real};
+
+/// Writes the `order` ZH coefficients of the log visibility of a cap of angular radius
+/// `alpha` around +Z: `log(eps)` inside the cap, 0 outside (Eq. 26):
+/// `V_l = log(eps) 2 pi K_l integral_{cos alpha}^{1} P_l(z) dz`, `K_l = sqrt((2l+1)/(4 pi))`,
+/// with `integral_x^1 P_l = (P_{l-1}(x) - P_{l+1}(x)) / (2l + 1)`. Closed form, exact up to
+/// rounding, any order.
+pub fn cap_log_zh<T: Real>(order: usize, log_epsilon: T, alpha: T, out: &mut [T]) {
+    let x = alpha.cos();
+    let mut p = [T::zero(); crate::sh::MAX_ORDER + 2];
+    legendre(order + 1, x, &mut p);
+    let two_pi = T::of(2.0 * std::f64::consts::PI);
+    for l in 0..order {
+        let integral = if l == 0 {
+            T::one() - x
+        } else {
+            (p[l - 1] - p[l + 1]) / T::of((2 * l + 1) as f64)
+        };
+        let k = T::of(((2 * l + 1) as f64 / (4.0 * std::f64::consts::PI)).sqrt());
+        out[l] = log_epsilon * two_pi * k * integral;
+    }
+}
+
+/// What one sphere contributes at one receiver.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum BlockerView<T> {
+    /// The blocker's centre lies on or behind the receiver's tangent plane
+    /// (`n . d <= 0`, paper 000 end of Section 4.2): it is skipped. A receiver on the
+    /// surface of the mesh a sphere approximates sees that sphere this way.
+    Culled,
+    /// Unit direction to the centre, angular radius of the cap, and the weight of its log
+    /// vector (the ratio attenuation `r / |c - p|`, or 1).
+    Cap { direction: [T; 3], alpha: T, weight: T },
+}
+
+/// Sees the sphere `(centre, radius)` from receiver `p` with normal `n` (Eq. 24).
+///
+/// A receiver inside or touching the sphere (`|c - p| <= r`) sees it as the hemisphere
+/// around the direction to its centre (`alpha = pi/2`, the limit of Eq. 24 at the
+/// surface) with ratio weight 1: the value stays finite and continuous across the
+/// surface. A receiver exactly at the centre has no direction to it and is culled.
+pub fn view_blocker<T: Real>(p: [T; 3], n: [T; 3], centre: [T; 3], radius: T, ratio_attenuation: bool) -> BlockerView<T> {
+    let d = [centre[0] - p[0], centre[1] - p[1], centre[2] - p[2]];
+    let distance = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+    if distance <= T::zero() || !distance.is_finite() {
+        return BlockerView::Culled;
+    }
+    let direction = [d[0] / distance, d[1] / distance, d[2] / distance];
+    if direction[0] * n[0] + direction[1] * n[1] + direction[2] * n[2] <= T::zero() {
+        return BlockerView::Culled;
+    }
+    let ratio = (radius / distance).min(T::one());
+    let alpha = ratio.asin();
+    let weight = if ratio_attenuation { ratio } else { T::one() };
+    BlockerView::Cap { direction, alpha, weight }
+}

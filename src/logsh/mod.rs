@@ -1,0 +1,14 @@
+//! Log-SH building blocks of paper 000 at any order: height-field slices and wedges
+//! (Eq. 15-23), sphere caps (Eq. 24-26) and BRDF lobes (Eq. 27), all as log vectors that
+//! are summed per pixel and exponentiated once.
+pub mod cap;
+pub mod lobe;
+pub mod slice;
+pub mod training;
+pub mod wedge;
+
+pub use cap::{cap_log_zh, view_blocker, BlockerView};
+pub use lobe::{lobe_log_zh, lobe_log_zh_as, Lobe};
+pub use slice::nlp_slice;
+pub use training::training_log_vectors;
+pub use wedge::WedgeOperator;
