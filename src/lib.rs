@@ -1,3 +1,16 @@
-//! logsh: log-SH shading of Blender G-buffers.
+//! logsh: soft environment shadows and glossy reflections for Blender G-buffers, by
+//! log-SH exponentiation (Giraud and Nowrouzezahrai, "Practical Shading of Height Fields
+//! and Meshes using Spherical Harmonic Exponentiation"; paper 000 in the design notes).
+//!
+//! Layout: [`sh`] is the SH core (basis, rotation, products, exponentiation), [`logsh`]
+//! the log-SH building blocks of the paper, [`heightfield`] the horizon march of SN08,
+//! [`scene`] the format-v1 reader and output writers, [`shade`] the per-pixel pipeline on
+//! the CPU, [`synth`] procedural scenes, [`cli`] and [`run`] the command line.
+pub mod cli;
+pub mod heightfield;
 pub mod logsh;
+pub mod run;
+pub mod scene;
 pub mod sh;
+pub mod shade;
+pub mod synth;

@@ -1,1 +1,14 @@
-fn main() {}
+use clap::Parser;
+use logsh::cli::{Cli, Command};
+
+fn main() {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Shade(args) => logsh::run::shade(&args),
+        Command::Example(args) => logsh::run::example(&args),
+    };
+    if let Err(error) = result {
+        eprintln!("error: {error:#}");
+        std::process::exit(1);
+    }
+}

@@ -1,0 +1,77 @@
+//! Mean and worst absolute error against the closed form `1 - sin^2(alpha) cos(beta)` on
+//! sphere-over-plane scenes (format v1, Blender 5 layout, constant white light, albedo 1,
+//! no height field), per order, eps, exponentiation and tangent occlusion.
+//!
+//! `cargo run --release --example sphere_accuracy [-- --quick]`
+use logsh::scene::{Scene, Sphere};
+use logsh::shade::{shade_frame, ShadingSettings};
+use logsh::sh::ExpMethod;
+use logsh::synth::{sphere_over_plane, SphereOverPlane};
+
+/// Sphere placements: (centre, radius), single spheres from grazing to close, and a pair.
+pub fn placements() -> Vec<Vec<Sphere>> {
+    let s = |c: [f64; 3], r: f64| Sphere { center: c, radius: r };
+    vec![
+        vec![s([0.0, 0.0, 2.0], 1.0)],
+        vec![s([0.0, 0.0, 1.3], 1.0)],
+        vec![s([1.0, 0.5, 3.0], 1.5)],
+        vec![s([0.0, 0.0, 4.0], 0.7)],
+        vec![s([-1.5, 0.0, 1.5], 0.6), s([1.5, 0.5, 2.0], 0.9)],
+    ]
+}
+
+fn main() {
+    let quick = std::env::args().any(|a| a == "--quick");
+    let dir = std::env::temp_dir().join(format!("logsh-sphere-accuracy-{}", std::process::id()));
+    let mut scenes = Vec::new();
+    for (i, spheres) in placements().into_iter().enumerate() {
+        let spec = SphereOverPlane { spheres, width: 160, height: 90, ..Default::default() };
+        let path = dir.join(format!("scene{i}"));
+        sphere_over_plane(&path, &spec).expect("write scene");
+        let scene = Scene::load(&path).expect("load scene");
+        let frame = scene.frame(1).expect("load frame");
+        let expected = spec.expected_image(&frame.gbuffer);
+        scenes.push((scene, frame, expected));
+    }
+    let orders: Vec<usize> = if quick { vec![4, 8] } else { (3..=8).collect() };
+    let epsilons = [0.01, 0.02, 0.03, 0.05, 0.07, 0.1, 0.15, 0.2];
+    let methods = if quick { vec![ExpMethod::Hyb] } else { vec![ExpMethod::Exact, ExpMethod::Hyb, ExpMethod::Ol, ExpMethod::Series] };
+    println!("order eps    exp     tangent  mean_abs  worst_scene_mean  max_abs");
+    for order in orders {
+        for &epsilon in &epsilons {
+            for &method in &methods {
+                for tangent in [true, false] {
+                    let mut settings = ShadingSettings::for_order(order);
+                    settings.epsilon = epsilon;
+                    settings.exp = method;
+                    settings.tangent_occlusion = tangent;
+                    let (mut sum, mut count, mut worst_mean, mut max_abs) = (0.0, 0usize, 0.0f64, 0.0f64);
+                    for (scene, frame, expected) in &scenes {
+                        let shaded = shade_frame(scene, frame, &settings).expect("shade");
+                        let (mut s, mut c) = (0.0, 0usize);
+                        for (px, e) in shaded.rgba.iter().zip(expected) {
+                            if let Some(e) = e {
+                                let err = (px[0] as f64 - e).abs();
+                                s += err;
+                                c += 1;
+                                max_abs = max_abs.max(err);
+                            }
+                        }
+                        worst_mean = worst_mean.max(s / c as f64);
+                        sum += s;
+                        count += c;
+                    }
+                    println!(
+                        "{order:5} {epsilon:<6} {:<7} {:<8} {:.4}    {:.4}            {:.4}",
+                        format!("{method:?}"),
+                        tangent,
+                        sum / count as f64,
+                        worst_mean,
+                        max_abs
+                    );
+                }
+            }
+        }
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -1,0 +1,578 @@
+//! SN08's multi-resolution horizon search (Snyder & Nowrouzezahrai 2008, "Fast Soft
+//! Self-Shadowing on Dynamic Height Fields", Sections 4 and 6), as used by paper 000
+//! Section 4.1 for height-field self-shadowing and cast shadows.
+//!
+//! # Indexing
+//!
+//! SN08 numbers levels coarse to fine (its `f_{N-1}` is the original map). Here level
+//! 0 is the original map and level `j` is coarser, with target spacing
+//! `Delta_j = Delta_0 b^j`, `b = 2^(1/k)` (SN08 Section 4, "level step k"): our `j`
+//! is SN08's `N - 1 - i`.
+//!
+//! # What is built (once per frame, [`HorizonPyramid::new`])
+//!
+//! - Level `j` is a corner-registered grid over the same rectangle with
+//!   `ceil((n - 1)/b^j) + 1` samples per axis (at least 2; an axis with one sample
+//!   keeps one), so its spacing is at most `Delta_0 b^j`. Levels stop at the first
+//!   one that is 2 samples wide on every axis; SN08's count
+//!   `N = ceil(k log2 n) + 1` is the same up to rounding.
+//! - Level `j > 0` samples the level-0 samples prefiltered by a separable tent whose
+//!   radius is the level's spacing (clamp-to-edge at the borders, which is the flat
+//!   continuation). A tent of one output spacing is the ideal prefilter of linear
+//!   ("bilinear") decimation; SN08 Section 6 reaches each level by successive bilinear
+//!   decimations instead (a compounded kernel of comparable width; not measured
+//!   here). We filter each level directly from level 0 so no rounding compounds.
+//! - Levels are stored at their own resolution, each a flat `Vec<f32>` with its size
+//!   and spacing (GPU-friendly). SN08 Section 6 resamples every level back to full
+//!   resolution with a bicubic B-spline and reads it bilinearly; that costs
+//!   `N` full-size maps (41 x 4 MB for a 1024^2 map), so instead the bicubic B-spline
+//!   is evaluated at query time from the level's own samples (16 taps, or 4 taps via
+//!   the [SH05] bilinear trick on hardware that filters f32). The result is the same
+//!   B-spline surface SN08's pre-pass samples, without its final bilinear resampling.
+//!
+//! # The march (per query point and azimuth, [`HorizonPyramid::horizon_elevations`])
+//!
+//! Steps at distances `d_j = l Delta_0 b^j` (SN08 Eq. 2 with `l = 1`; `Delta_0` the
+//! finer level-0 spacing), `j` starting at `round(k log2 first_step)` (SN08 starts at
+//! `j = 0`, one spacing; the default starts half a spacing out), each reading level
+//! `L(j) = clamp(j - ceil(k o), 0, N - 1)` (SN08's level offset `o`; SN08's text
+//! clamps with `max`, evidently meaning `min` in its indexing):
+//!
+//! `omega_j = atan((f_L(x + d_j u) - f_L(x) - h) / d_j)`   (SN08 Eq. 2-3)
+//!
+//! Self-intersection: the receiver term is `f_L(x)`, the *same level's*
+//! reconstruction under the query point (SN08 Eq. 2), not the point's own z. Every
+//! level reproduces a plane exactly (tent and B-spline weights are symmetric and sum
+//! to 1) away from the map's border, so on any plane, tilted or not, `omega_j` is
+//! exactly the plane's elevation along `u` and a point on the surface never shadows
+//! itself, however coarse the level. The point's own z enters only through
+//! `h = max(z - H(x), 0)`, its height above the level-0 (bilinear) surface (paper 000
+//! Section 4.1, "Height Field Cast Shadows": project onto the height field and offset
+//! by the height above it). A height-field pixel has `h ~ 0`; a G-buffer position a
+//! little *below* the bilinear surface (the mesh's triangles differ from it by up to
+//! a fraction of the cell's curvature) is clamped to `h = 0` instead of being buried,
+//! and one a little above lowers the nearest steps' tangents by `h / d_j`, which
+//! matters only for `h` comparable to the first step (half a spacing).
+//!
+//! Over scale, either the maximum of the cubic B-spline through the `omega_j`
+//! (SN08 Eq. 4-5, sampled at knots and midpoints with weights {1/6, 2/3, 1/6} and
+//! {1/48, 23/48, 23/48, 1/48}, SN08 Section 6; end values replicated), or the
+//! maximum over the steps with one arctangent (SN08 Section 6's environment-light
+//! speed-up, the default), clamped at 0 (SN08, after Eq. 5; exact here, see the
+//! parent module's doc).
+//!
+//! The march stops after the first step beyond `t_far`, the distance after which the
+//! ray's clamped footprint stops moving (the flat continuation is then constant and
+//! its horizon contribution decreases with distance), and never takes more than
+//! [`HorizonPyramid::max_steps`] steps; the step table reaches 16 map diagonals, so
+//! points up to ~15 diagonals outside the map still see it. Beyond the last step
+//! taken, the constant continuation's `atan((c - z)/t)` is read at the first step
+//! past `t_far`, up to a factor `b` farther than its true maximum at `t_far`.
+//!
+//! # Cost
+//!
+//! Per query: one level read per level used (the receiver terms, shared by all
+//! azimuths), then per azimuth one level read per step, about
+//! `k log2(t_far / (first_step Delta_0)) + 1` steps: 37 on average for a 129^2 map
+//! with the defaults, 41 levels and at most 64 steps for 1025^2. A level read is 16
+//! samples (bicubic B-spline) or 4 (bilinear). Building costs about `4 n^2`
+//! multiply-adds per level and `gamma(k) = 1/(1 - 2^(-2/k))` times the map's memory
+//! (3.4x at k = 4, SN08 Section 4); 92 ms for a 1025^2 map on 2 cores.
+
+use super::{bilinear, grid_coordinate, HeightField, HeightFieldError};
+use rayon::prelude::*;
+
+/// Most pyramid levels a query supports (the per-query cache of receiver heights is
+/// a stack array of this size, so queries never allocate).
+pub const MAX_LEVELS: usize = 384;
+/// Most march steps per direction (the per-direction scale samples live in a stack
+/// array of this size).
+pub const MAX_STEPS: usize = 512;
+
+/// SN08 Eq. 2's `l`: step distance in units of the level's sample spacing. SN08 uses 1.
+const DISTANCE_IN_SPACINGS: f64 = 1.0;
+/// The step table reaches this many map diagonals (see the module doc).
+const REACH_IN_DIAGONALS: f64 = 16.0;
+
+/// How a pyramid level is read between its samples.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LevelReconstruction {
+    /// Bicubic uniform B-spline of the level's samples (SN08 Section 4 and Figure 9:
+    /// smooth reconstruction is needed to avoid shadow artifacts). 16 taps.
+    BicubicBSpline,
+    /// Bilinear interpolation of the level's samples. 4 taps; cheaper, C0 only.
+    Bilinear,
+}
+
+/// How the horizon is taken over scale.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ScaleMax {
+    /// Maximum of the cubic B-spline through the per-step angles (SN08 Eq. 4-5),
+    /// sampled at knots and midpoints (SN08 Section 6).
+    BSpline,
+    /// Maximum over the steps only, one arctangent per direction (SN08 Section 6's
+    /// speed-up for environment lighting).
+    Steps,
+}
+
+/// Knobs of the horizon search. Defaults are chosen by measurement: see the table
+/// on [`HorizonSettings::default`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct HorizonSettings {
+    /// W: number of azimuths `phi_k = 2 pi k / W` (paper 000 Section 4.1; SN08 uses
+    /// 16-32 for environment light). 1..=1024.
+    pub directions: usize,
+    /// k: levels per halving of resolution, `b = 2^(1/k)` (SN08 Section 4). 0.5..=16.
+    pub level_step: f64,
+    /// o: level offset; step `j` reads level `j - ceil(k o)`, i.e. a level `2^o` times
+    /// finer than its distance calls for (SN08 Section 4). Larger is sharper and
+    /// closer to the exact horizon, at no extra steps but less prefiltering. 0..=16.
+    pub level_offset: f64,
+    /// Distance of the first march step, in level-0 sample spacings, snapped to the
+    /// step grid `b^j`. SN08 starts at one spacing (Eq. 2 with `l = 1` at the finest
+    /// level); starting below it resolves horizons closer than one cell (ridges,
+    /// peaks) at `k log2(1/first_step)` extra steps per direction. 1/64..=8.
+    pub first_step: f64,
+    /// How a level is read between its samples.
+    pub reconstruction: LevelReconstruction,
+    /// How the maximum over scale is taken.
+    pub scale_max: ScaleMax,
+}
+
+impl Default for HorizonSettings {
+    /// W = 16, k = 4, o = 3, first step 1/2 spacing, bicubic B-spline levels, max
+    /// over steps.
+    ///
+    /// Chosen from `measure_error_vs_settings` in `tests/heightfield.rs`
+    /// (`cargo test --release --test heightfield -- --ignored --nocapture measure`):
+    /// horizon error against [`super::brute_force_horizon`] in radians at 16
+    /// azimuths, on four 65^2-129^2 scenes (rough terrain of RMS slope ~1 with points
+    /// on and 0.1 above it, a cone, a sine grating, one-sample-thick walls). Mean
+    /// |error| (all scenes are biased low, by about the mean), steps per direction:
+    ///
+    /// | setting                              | rough | cone  | grating | walls | steps |
+    /// |--------------------------------------|-------|-------|---------|-------|-------|
+    /// | SN08 typical: k 4, o 2, f 1, spline  | 0.082 | 0.019 | 0.024   | 0.147 | 33    |
+    /// | **default**: k 4, o 3, f 1/2, steps  | 0.046 | 0.007 | 0.009   | 0.115 | 37    |
+    /// | k 2, o 2, f 1, bilinear, steps       | 0.066 | 0.014 | 0.019   | 0.136 | 17    |
+    /// | k 4, o 3, f 1/2, bilinear, steps     | 0.032 | 0.005 | 0.006   | 0.098 | 37    |
+    /// | k 8, o 4, f 1/4, steps               | 0.030 | 0.004 | 0.004   | 0.090 | 80    |
+    ///
+    /// - o: error falls with o on every scene at no extra steps (o 2 -> 3: -25..-55 %);
+    ///   at o = 4 the walls scene's "wobble" (error variation as the receiver slides,
+    ///   the aliasing SN08 Figure 3 warns of) rises by 15 %, so o = 3.
+    /// - k: k = 8 halves little more error at twice the steps; k <= 2 is worse at
+    ///   equal o (k = 1 misses features between its octave-spaced steps).
+    /// - first step 1/2 (4 extra steps) cuts the worst case on rough terrain from
+    ///   0.73 to 0.53 rad (horizons closer than one cell: ridges and peaks).
+    /// - Max over steps instead of the B-spline over scale: lower error (the spline
+    ///   lies below its largest sample) and 25 % faster, as SN08 Section 6 advises
+    ///   for environment light, which is what this tool shades.
+    /// - Bilinear levels are more accurate still in these means and 1.4x faster, but
+    ///   wobble more on thin walls (+15 %), SN08 Figure 9's artifact; bicubic stays
+    ///   the default and bilinear is the cheaper choice.
+    /// - W: linear interpolation between azimuths (paper 000 Eq. 19) alone costs
+    ///   0.024 / 0.013 / 0.003 / 0.026 rad mean at W = 16 (0.051 / 0.042 / 0.012 /
+    ///   0.047 at W = 8), below the march's own error, so more azimuths buy little
+    ///   until the march is finer; W = 16 is SN08's low end for environment light.
+    fn default() -> Self {
+        Self {
+            directions: 16,
+            level_step: 4.0,
+            level_offset: 3.0,
+            first_step: 0.5,
+            reconstruction: LevelReconstruction::BicubicBSpline,
+            scale_max: ScaleMax::Steps,
+        }
+    }
+}
+
+impl HorizonSettings {
+    /// Checks every field's range.
+    pub fn validate(&self) -> Result<(), HeightFieldError> {
+        if !(1..=1024).contains(&self.directions) {
+            return Err(HeightFieldError::BadSetting {
+                name: "directions",
+                value: self.directions as f64,
+                expected: "an integer in 1..=1024",
+            });
+        }
+        if !(self.level_step.is_finite() && (0.5..=16.0).contains(&self.level_step)) {
+            return Err(HeightFieldError::BadSetting {
+                name: "level_step",
+                value: self.level_step,
+                expected: "a number in 0.5..=16",
+            });
+        }
+        if !(self.level_offset.is_finite() && (0.0..=16.0).contains(&self.level_offset)) {
+            return Err(HeightFieldError::BadSetting {
+                name: "level_offset",
+                value: self.level_offset,
+                expected: "a number in 0..=16",
+            });
+        }
+        if !(self.first_step.is_finite() && (1.0 / 64.0..=8.0).contains(&self.first_step)) {
+            return Err(HeightFieldError::BadSetting {
+                name: "first_step",
+                value: self.first_step,
+                expected: "a number in 1/64..=8",
+            });
+        }
+        Ok(())
+    }
+}
+
+/// One pyramid level: a corner-registered grid over the field's rectangle.
+#[derive(Clone, Debug)]
+pub struct PyramidLevel {
+    /// Samples along x.
+    pub columns: usize,
+    /// Samples along y.
+    pub rows: usize,
+    /// World distance between samples along x and y (0 on an axis with one sample).
+    pub spacing: [f64; 2],
+    /// Row-major heights, first row at `min.y`.
+    pub heights: Vec<f32>,
+}
+
+/// One entry of the march's constant step table (SN08 Section 6 keeps `d_i`, `1/d_i`
+/// in constant arrays the same way).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MarchStep {
+    /// World distance from the query point, `d_j`.
+    pub distance: f64,
+    /// `1 / d_j`.
+    pub inv_distance: f64,
+    /// Pyramid level read at this step, `L(j)`.
+    pub level: usize,
+}
+
+/// The multi-resolution pyramid of one height field plus the march tables.
+#[derive(Clone, Debug)]
+pub struct HorizonPyramid {
+    settings: HorizonSettings,
+    min: [f64; 2],
+    max: [f64; 2],
+    levels: Vec<PyramidLevel>,
+    steps: Vec<MarchStep>,
+    /// `(cos phi_k, sin phi_k)`.
+    directions: Vec<[f64; 2]>,
+}
+
+impl HorizonPyramid {
+    /// Builds the pyramid levels and step table (module doc, "What is built").
+    /// Cost: about `4 n_x n_y` multiply-adds per level, levels built in parallel.
+    pub fn new(field: &HeightField, settings: HorizonSettings) -> Result<Self, HeightFieldError> {
+        settings.validate()?;
+        let n = [field.columns(), field.rows()];
+        let (min, max) = (field.min(), field.max());
+        let spacing0 = field.spacing();
+        let b = 2f64.powf(1.0 / settings.level_step);
+
+        // Level sizes: ceil((n - 1)/b^j) + 1, at least 2, until 2 on every moving axis.
+        let mut sizes: Vec<[usize; 2]> = vec![n];
+        while sizes.last().is_some_and(|s| (0..2).any(|a| s[a] > 2)) {
+            let j = sizes.len() as i32;
+            let scale = b.powi(j);
+            let size: [usize; 2] = std::array::from_fn(|a| {
+                if n[a] <= 2 {
+                    n[a]
+                } else {
+                    (((n[a] - 1) as f64 / scale - 1e-9).ceil() as usize + 1).max(2)
+                }
+            });
+            sizes.push(size);
+            if sizes.len() > MAX_LEVELS {
+                return Err(HeightFieldError::TooLarge {
+                    what: "pyramid levels",
+                    needed: sizes.len(),
+                    limit: MAX_LEVELS,
+                });
+            }
+        }
+
+        let levels: Vec<PyramidLevel> = sizes
+            .par_iter()
+            .enumerate()
+            .map(|(j, &size)| {
+                let spacing: [f64; 2] =
+                    std::array::from_fn(|a| if size[a] > 1 { (max[a] - min[a]) / (size[a] - 1) as f64 } else { 0.0 });
+                let heights = if j == 0 { field.heights().to_vec() } else { decimate(field.heights(), n, size) };
+                PyramidLevel { columns: size[0], rows: size[1], spacing, heights }
+            })
+            .collect();
+
+        // Step table. A 1x1 map (no moving axis) is an infinite plane: no steps.
+        let base = spacing0.iter().copied().filter(|&s| s > 0.0).fold(f64::INFINITY, f64::min);
+        let mut steps = Vec::new();
+        if base.is_finite() {
+            let diagonal = (max[0] - min[0]).hypot(max[1] - min[1]);
+            let reach = REACH_IN_DIAGONALS * diagonal;
+            let offset = (settings.level_step * settings.level_offset - 1e-9).ceil().max(0.0) as i64;
+            let first = (settings.level_step * settings.first_step.log2()).round() as i64;
+            let top = levels.len() as i64 - 1;
+            let mut j = first;
+            loop {
+                let distance = DISTANCE_IN_SPACINGS * base * b.powf(j as f64);
+                let level = (j - offset).clamp(0, top) as usize;
+                steps.push(MarchStep { distance, inv_distance: 1.0 / distance, level });
+                if distance >= reach {
+                    break;
+                }
+                j += 1;
+                if steps.len() >= MAX_STEPS {
+                    return Err(HeightFieldError::TooLarge {
+                        what: "march steps",
+                        needed: steps.len() + 1,
+                        limit: MAX_STEPS,
+                    });
+                }
+            }
+        }
+
+        let w = settings.directions;
+        let directions = (0..w)
+            .map(|k| {
+                let phi = std::f64::consts::TAU * k as f64 / w as f64;
+                [phi.cos(), phi.sin()]
+            })
+            .collect();
+        Ok(Self { settings, min, max, levels, steps, directions })
+    }
+
+    /// The settings it was built with.
+    pub fn settings(&self) -> &HorizonSettings {
+        &self.settings
+    }
+
+    /// The levels, finest (the original map) first.
+    pub fn levels(&self) -> &[PyramidLevel] {
+        &self.levels
+    }
+
+    /// The march's step table, nearest first.
+    pub fn steps(&self) -> &[MarchStep] {
+        &self.steps
+    }
+
+    /// The most steps one direction can take (the length of [`Self::steps`]).
+    pub fn max_steps(&self) -> usize {
+        self.steps.len()
+    }
+
+    /// `(cos phi_k, sin phi_k)` of the W azimuths.
+    pub fn directions(&self) -> &[[f64; 2]] {
+        &self.directions
+    }
+
+    /// Level-0 (bilinear) surface height, the same as [`HeightField::height_at`].
+    pub fn height_at(&self, x: f64, y: f64) -> f64 {
+        let l0 = &self.levels[0];
+        bilinear(&l0.heights, l0.columns, l0.rows, self.min, self.max, x, y)
+    }
+
+    /// Number of march steps taken along azimuth `k` from `(x, y)`; the per-query
+    /// cost is this many level reads per direction plus one read per level.
+    pub fn steps_taken(&self, x: f64, y: f64, k: usize) -> usize {
+        let t_far = self.far_distance(x, y, self.directions[k]);
+        self.steps.iter().take_while(|s| s.distance <= t_far).count().saturating_add(1).min(self.steps.len())
+    }
+
+    /// Horizon elevations (radians, in `[0, pi/2)`) seen from world point `p` along the
+    /// W azimuths `phi_k = 2 pi k / W`, written to `out[..W]`.
+    ///
+    /// `p` is on the terrain (height-field pixels) or above it (cast shadows on other
+    /// objects, paper 000 Section 4.1); a point below the level-0 surface is treated
+    /// as lying on it (its height above is clamped at 0). A non-finite `p` gives 0
+    /// (unoccluded) everywhere rather than NaN. Allocation-free and `&self`, so it
+    /// can run per pixel under rayon.
+    ///
+    /// # Panics
+    /// If `out.len() < W`.
+    pub fn horizon_elevations(&self, p: [f64; 3], out: &mut [f64]) {
+        let w = self.settings.directions;
+        assert!(out.len() >= w, "horizon_elevations: out has {} slots but W = {}", out.len(), w);
+        let out = &mut out[..w];
+        if self.steps.is_empty() || !p.iter().all(|v| v.is_finite()) {
+            out.fill(0.0);
+            return;
+        }
+        let (x, y) = (p[0], p[1]);
+        let above = (p[2] - self.height_at(x, y)).max(0.0);
+
+        // Receiver term f_L(x) of SN08 Eq. 2, once per level, shared by all azimuths.
+        let used_levels = self.steps.last().map_or(1, |s| s.level + 1);
+        let mut receiver = [0.0f64; MAX_LEVELS];
+        for (level, r) in receiver.iter_mut().enumerate().take(used_levels) {
+            *r = self.sample_level(level, x, y);
+        }
+
+        let mut omega = [0.0f64; MAX_STEPS];
+        for (k, out_k) in out.iter_mut().enumerate() {
+            let dir = self.directions[k];
+            let t_far = self.far_distance(x, y, dir);
+            let mut max_tan = f64::NEG_INFINITY;
+            let mut m = 0;
+            for step in &self.steps {
+                let q = self.sample_level(step.level, x + step.distance * dir[0], y + step.distance * dir[1]);
+                let tangent = (q - receiver[step.level] - above) * step.inv_distance;
+                match self.settings.scale_max {
+                    ScaleMax::BSpline => omega[m] = tangent.atan(),
+                    ScaleMax::Steps => max_tan = max_tan.max(tangent),
+                }
+                m += 1;
+                if step.distance > t_far {
+                    break;
+                }
+            }
+            let horizon = match self.settings.scale_max {
+                ScaleMax::Steps => max_tan.atan(),
+                ScaleMax::BSpline => bspline_max(&omega[..m]),
+            };
+            *out_k = horizon.max(0.0);
+        }
+    }
+
+    /// Ray distance after which the clamped footprint of `(x, y) + t dir` stops
+    /// moving (see `reference.rs`).
+    fn far_distance(&self, x: f64, y: f64, dir: [f64; 2]) -> f64 {
+        let l0 = &self.levels[0];
+        let n = [l0.columns, l0.rows];
+        let p = [x, y];
+        let mut t_far: f64 = 0.0;
+        for a in 0..2 {
+            if n[a] > 1 {
+                let t = if dir[a] > 0.0 {
+                    (self.max[a] - p[a]) / dir[a]
+                } else if dir[a] < 0.0 {
+                    (self.min[a] - p[a]) / dir[a]
+                } else {
+                    0.0
+                };
+                t_far = t_far.max(t);
+            }
+        }
+        t_far
+    }
+
+    /// Reads level `level` at world `(x, y)` with the configured reconstruction and
+    /// the flat continuation.
+    #[inline]
+    fn sample_level(&self, level: usize, x: f64, y: f64) -> f64 {
+        let l = &self.levels[level];
+        match self.settings.reconstruction {
+            LevelReconstruction::Bilinear => bilinear(&l.heights, l.columns, l.rows, self.min, self.max, x, y),
+            LevelReconstruction::BicubicBSpline => {
+                let u = grid_coordinate(x, self.min[0], self.max[0], l.columns);
+                let v = grid_coordinate(y, self.min[1], self.max[1], l.rows);
+                let (ix, wx) = bspline_taps(u, l.columns);
+                let (iy, wy) = bspline_taps(v, l.rows);
+                let mut sum = 0.0;
+                for (r, &row) in iy.iter().enumerate() {
+                    let line = &l.heights[row * l.columns..(row + 1) * l.columns];
+                    let mut s = 0.0;
+                    for (c, &col) in ix.iter().enumerate() {
+                        s += wx[c] * f64::from(line[col]);
+                    }
+                    sum += wy[r] * s;
+                }
+                sum
+            }
+        }
+    }
+}
+
+/// Uniform cubic B-spline basis at fraction `t` (SN08 Section 4, after Eq. 4).
+#[inline]
+fn bspline_weights(t: f64) -> [f64; 4] {
+    let t2 = t * t;
+    let t3 = t2 * t;
+    let s = 1.0 - t;
+    [s * s * s / 6.0, (3.0 * t3 - 6.0 * t2 + 4.0) / 6.0, (-3.0 * t3 + 3.0 * t2 + 3.0 * t + 1.0) / 6.0, t3 / 6.0]
+}
+
+/// Clamped sample indices and weights of the cubic B-spline at grid coordinate `u`
+/// (already clamped to `[0, n - 1]`); replicating edge samples makes the surface
+/// constant beyond the edge.
+#[inline]
+fn bspline_taps(u: f64, n: usize) -> ([usize; 4], [f64; 4]) {
+    if n <= 1 {
+        return ([0; 4], [0.25; 4]);
+    }
+    let i = u.floor();
+    let w = bspline_weights(u - i);
+    let i = i as isize;
+    let last = (n - 1) as isize;
+    (std::array::from_fn(|t| (i - 1 + t as isize).clamp(0, last) as usize), w)
+}
+
+/// Maximum over `tau in [0, m - 1]` of the cubic B-spline through `omega` (SN08 Eq.
+/// 4-5), sampled at the knots and at the midpoints between knots (SN08 Section 6),
+/// with end values replicated. This approximates (from below) the spline's true
+/// maximum; the spline itself lies below the largest sample, which is part of
+/// SN08's filtering bias.
+fn bspline_max(omega: &[f64]) -> f64 {
+    let m = omega.len();
+    let at = |i: isize| omega[i.clamp(0, m as isize - 1) as usize];
+    let mut best = f64::NEG_INFINITY;
+    for i in 0..m as isize {
+        let knot = (at(i - 1) + 4.0 * at(i) + at(i + 1)) / 6.0;
+        best = best.max(knot);
+        if i + 1 < m as isize {
+            let mid = (at(i - 1) + 23.0 * (at(i) + at(i + 1)) + at(i + 2)) / 48.0;
+            best = best.max(mid);
+        }
+    }
+    best
+}
+
+/// Level samples of size `size` from the level-0 samples (size `n`): separable tent
+/// prefilter of radius one output spacing, clamp-to-edge (module doc).
+fn decimate(heights: &[f32], n: [usize; 2], size: [usize; 2]) -> Vec<f32> {
+    let wx = tent_weights(n[0], size[0]);
+    let wy = tent_weights(n[1], size[1]);
+    // Pass 1 along x: n[1] rows of size[0].
+    let mut tmp = vec![0.0f64; n[1] * size[0]];
+    tmp.par_chunks_mut(size[0]).enumerate().for_each(|(row, out)| {
+        let line = &heights[row * n[0]..(row + 1) * n[0]];
+        for (o, taps) in out.iter_mut().zip(&wx) {
+            *o = taps.iter().map(|&(i, w)| w * f64::from(line[i])).sum();
+        }
+    });
+    // Pass 2 along y.
+    let mut out = vec![0.0f32; size[0] * size[1]];
+    out.par_chunks_mut(size[0]).zip(wy.par_iter()).for_each(|(line, taps)| {
+        for (c, o) in line.iter_mut().enumerate() {
+            *o = taps.iter().map(|&(r, w)| w * tmp[r * size[0] + c]).sum::<f64>() as f32;
+        }
+    });
+    out
+}
+
+/// Per output sample, the (input index, weight) taps of a tent of radius one output
+/// spacing, in input-index units, clamped to the input, normalised.
+fn tent_weights(n_in: usize, n_out: usize) -> Vec<Vec<(usize, f64)>> {
+    if n_out <= 1 || n_in <= 1 {
+        return vec![vec![(0, 1.0)]; n_out.max(1)];
+    }
+    let ratio = (n_in - 1) as f64 / (n_out - 1) as f64;
+    let last = (n_in - 1) as isize;
+    (0..n_out)
+        .map(|i| {
+            let c = i as f64 * ratio;
+            let lo = (c - ratio).ceil() as isize;
+            let hi = (c + ratio).floor() as isize;
+            let mut taps: Vec<(usize, f64)> = (lo..=hi)
+                .filter_map(|m| {
+                    let w = 1.0 - (m as f64 - c).abs() / ratio;
+                    (w > 1e-12).then(|| (m.clamp(0, last) as usize, w))
+                })
+                .collect();
+            let total: f64 = taps.iter().map(|t| t.1).sum();
+            for t in &mut taps {
+                t.1 /= total;
+            }
+            taps
+        })
+        .collect()
+}

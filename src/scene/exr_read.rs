@@ -1,0 +1,149 @@
+//! Reading every channel of an EXR file by its full dotted name, in both layouts
+//! Blender writes.
+//!
+//! - Blender 4 (and any single-part file): one part without a name, channel names carry
+//!   the whole path, `ViewLayer.Position.X`.
+//! - Blender 5 writes multilayer files as multi-part files, one part per pass
+//!   (`IMB_exr_write_pass` / `IMB_exr_write_end` in Blender's
+//!   `source/blender/imbuf/intern/openexr/openexr_api.cc`): the part's `name` attribute is
+//!   the layer and pass, `ViewLayer.Position` (with `-<view>` appended for stereo views),
+//!   and the channels inside keep their full names, `ViewLayer.Position.X`. Other writers
+//!   (Nuke style) name the channels inside a part without the prefix (`X`).
+//!
+//! The `exr` crate exposes each part as a `Layer` whose `attributes.layer_name` holds the
+//! part name and whose `channel_data.list[i].name` holds the channel name as stored. The
+//! full name of a channel is therefore the stored name when it already starts with
+//! `<part name>.`, and `<part name>.<channel>` otherwise; the stored name is also kept
+//! as an alias (first part wins), so that `R` finds an environment map's red channel in
+//! any layout.
+
+use super::error::{check_image_size, SceneError};
+use exr::prelude::{read, FlatSamples, ReadChannels, ReadLayers};
+use std::collections::HashMap;
+use std::path::Path;
+
+/// The channels of one EXR file as f32, all of the same size.
+pub(crate) struct ExrChannels {
+    pub width: usize,
+    pub height: usize,
+    /// Full dotted names in file order (without aliases), for error messages.
+    pub names: Vec<String>,
+    channels: HashMap<String, usize>,
+    data: Vec<Vec<f32>>,
+    sizes: Vec<[usize; 2]>,
+}
+
+impl ExrChannels {
+    /// Reads every channel of every part. The size of every part is checked against the
+    /// limits before its pixels are allocated.
+    pub fn read(file: &Path, what: &str) -> Result<Self, SceneError> {
+        let meta = exr::meta::MetaData::read_from_file(file, false).map_err(|e| exr_error(file, what, e))?;
+        if meta.headers.is_empty() {
+            return Err(SceneError::Image { file: file.to_path_buf(), message: "the file has no image parts".into() });
+        }
+        for header in meta.headers.iter() {
+            check_image_size(file, header.layer_size.0, header.layer_size.1)?;
+            if header.deep {
+                return Err(SceneError::Image {
+                    file: file.to_path_buf(),
+                    message: "deep EXR data is not supported".into(),
+                });
+            }
+        }
+        let image = read()
+            .no_deep_data()
+            .largest_resolution_level()
+            .all_channels()
+            .all_layers()
+            .all_attributes()
+            .from_file(file)
+            .map_err(|e| exr_error(file, what, e))?;
+
+        let mut out = ExrChannels {
+            width: 0,
+            height: 0,
+            names: Vec::new(),
+            channels: HashMap::new(),
+            data: Vec::new(),
+            sizes: Vec::new(),
+        };
+        let mut aliases: Vec<(String, usize)> = Vec::new();
+        for layer in image.layer_data.iter() {
+            let part = layer.attributes.layer_name.as_ref().map(|t| t.to_string());
+            let size = [layer.size.0, layer.size.1];
+            for channel in layer.channel_data.list.iter() {
+                let stored = channel.name.to_string();
+                let full = match &part {
+                    Some(p) if !p.is_empty() && !stored.starts_with(&format!("{p}.")) => format!("{p}.{stored}"),
+                    _ => stored.clone(),
+                };
+                let values: Vec<f32> = match &channel.sample_data {
+                    FlatSamples::F16(v) => v.iter().map(|h| h.to_f32()).collect(),
+                    FlatSamples::F32(v) => v.clone(),
+                    FlatSamples::U32(v) => v.iter().map(|&u| u as f32).collect(),
+                };
+                let index = out.data.len();
+                out.data.push(values);
+                out.sizes.push(size);
+                if !out.channels.contains_key(&full) {
+                    out.channels.insert(full.clone(), index);
+                    out.names.push(full.clone());
+                }
+                if stored != full {
+                    aliases.push((stored, index));
+                }
+            }
+        }
+        for (alias, index) in aliases {
+            out.channels.entry(alias).or_insert(index);
+        }
+        if let Some(first) = out.sizes.first() {
+            out.width = first[0];
+            out.height = first[1];
+        }
+        Ok(out)
+    }
+
+    pub fn has(&self, name: &str) -> bool {
+        self.channels.contains_key(name)
+    }
+
+    /// The channel's values, row after row from the top row of the image. All channels
+    /// taken from one file must have the size of the first one taken, which becomes
+    /// `width` x `height`.
+    pub fn take(&mut self, file: &Path, name: &str) -> Result<Vec<f32>, SceneError> {
+        let Some(&index) = self.channels.get(name) else {
+            return Err(SceneError::MissingChannel {
+                file: file.to_path_buf(),
+                channel: name.to_string(),
+                found: self.names.clone(),
+            });
+        };
+        let size = self.sizes[index];
+        if size != [self.width, self.height] {
+            return Err(SceneError::invalid(
+                file,
+                format!(
+                    "channel \"{name}\" is {}x{} but the other channels are {}x{}",
+                    size[0], size[1], self.width, self.height
+                ),
+            ));
+        }
+        Ok(self.data[index].clone())
+    }
+
+    /// Makes the size of `name`'s part the reference size for later `take` calls.
+    pub fn use_size_of(&mut self, name: &str) {
+        if let Some(&index) = self.channels.get(name) {
+            self.width = self.sizes[index][0];
+            self.height = self.sizes[index][1];
+        }
+    }
+}
+
+fn exr_error(file: &Path, what: &str, e: exr::error::Error) -> SceneError {
+    match e {
+        exr::error::Error::Io(io) => SceneError::io(file, what, io),
+        other => SceneError::Image { file: file.to_path_buf(), message: other.to_string() },
+    }
+}

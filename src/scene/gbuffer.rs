@@ -1,0 +1,174 @@
+//! G-buffer EXR files: world position, normal, UV and material index per pixel.
+//!
+//! Both layouts Blender writes are read (see the `exr_read` notes): Blender 5's one part
+//! per pass (part `ViewLayer.Position`, channels `ViewLayer.Position.X` ...) and Blender
+//! 4's single part with dotted names. Channels are looked up by full dotted name.
+//!
+//! Pixel order: row-major, row 0 is the top row of the image (the first scan line of the
+//! EXR file), the same order the output images are written in.
+//!
+//! Per-pixel checks, each an error naming the file, the pixel `(x, y)` and the value:
+//! - the material index must lie within 1e-3 of a whole number, be `>= 0`, and be 0
+//!   (background) or a key of the material table; it is rounded to that whole number;
+//! - on every non-background pixel, position and normal must be finite. Background
+//!   pixels are not checked (their position and normal are never read).
+
+use super::error::SceneError;
+use super::exr_read::ExrChannels;
+use super::Material;
+use serde::Deserialize;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+/// The `"channels"` object of `scene.json`; every key optional.
+#[derive(Clone, Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ChannelOverrides {
+    pub position: Option<[String; 3]>,
+    pub normal: Option<[String; 3]>,
+    pub uv: Option<[String; 2]>,
+    pub material_index: Option<String>,
+}
+
+/// The full channel names the G-buffer reader looks up.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct ChannelNames {
+    pub position: [String; 3],
+    pub normal: [String; 3],
+    pub uv: [String; 2],
+    /// True when `uv` came from an override, which makes the UV channels required.
+    pub uv_required: bool,
+    /// Tried in order; the first present is used.
+    pub material_index: Vec<String>,
+}
+
+/// Blender's default channel names for view layer `ViewLayer`.
+pub const POSITION: [&str; 3] = ["ViewLayer.Position.X", "ViewLayer.Position.Y", "ViewLayer.Position.Z"];
+pub const NORMAL: [&str; 3] = ["ViewLayer.Normal.X", "ViewLayer.Normal.Y", "ViewLayer.Normal.Z"];
+pub const UV: [&str; 2] = ["ViewLayer.UV.U", "ViewLayer.UV.V"];
+/// Blender 5 name of the material index pass.
+pub const MATERIAL_INDEX_BLENDER5: &str = "ViewLayer.Material Index.X";
+/// Blender 4 name of the material index pass.
+pub const MATERIAL_INDEX_BLENDER4: &str = "ViewLayer.IndexMA.X";
+
+impl Default for ChannelNames {
+    fn default() -> Self {
+        Self::from_overrides(None)
+    }
+}
+
+impl ChannelNames {
+    pub fn from_overrides(o: Option<&ChannelOverrides>) -> Self {
+        let o = o.cloned().unwrap_or_default();
+        let owned = |a: &[&str]| -> Vec<String> { a.iter().map(|s| s.to_string()).collect() };
+        let three = |a: [&str; 3]| -> [String; 3] { owned(&a).try_into().expect("three names") };
+        Self {
+            position: o.position.unwrap_or_else(|| three(POSITION)),
+            normal: o.normal.unwrap_or_else(|| three(NORMAL)),
+            uv_required: o.uv.is_some(),
+            uv: o.uv.unwrap_or_else(|| owned(&UV).try_into().expect("two names")),
+            material_index: match o.material_index {
+                Some(m) => vec![m],
+                None => owned(&[MATERIAL_INDEX_BLENDER5, MATERIAL_INDEX_BLENDER4]),
+            },
+        }
+    }
+}
+
+/// One G-buffer, validated.
+#[derive(Clone, Debug, PartialEq)]
+pub struct GBuffer {
+    /// The file it was read from.
+    pub file: PathBuf,
+    pub width: usize,
+    pub height: usize,
+    /// World position (Blender world: Z up), row-major from the top row.
+    pub position: Vec<[f32; 3]>,
+    /// World normal as stored (not renormalised).
+    pub normal: Vec<[f32; 3]>,
+    /// `None` when the file has no UV channels (UV is not used by shading).
+    pub uv: Option<Vec<[f32; 2]>>,
+    /// Material index, 0 = background.
+    pub material: Vec<u32>,
+}
+
+impl GBuffer {
+    /// Index of pixel `(x, y)`, `y = 0` at the top.
+    pub fn index(&self, x: usize, y: usize) -> usize {
+        y * self.width + x
+    }
+
+    /// Reads and validates a G-buffer file.
+    pub fn read(file: &Path, names: &ChannelNames, materials: &BTreeMap<u32, Material>) -> Result<GBuffer, SceneError> {
+        let mut exr = ExrChannels::read(file, "a G-buffer")?;
+        exr.use_size_of(&names.position[0]);
+        let (width, height) = (exr.width, exr.height);
+        let take3 = |exr: &mut ExrChannels, n: &[String; 3]| -> Result<Vec<[f32; 3]>, SceneError> {
+            let x = exr.take(file, &n[0])?;
+            let y = exr.take(file, &n[1])?;
+            let z = exr.take(file, &n[2])?;
+            Ok((0..x.len()).map(|i| [x[i], y[i], z[i]]).collect())
+        };
+        let position = take3(&mut exr, &names.position)?;
+        let normal = take3(&mut exr, &names.normal)?;
+        let uv = if names.uv_required || exr.has(&names.uv[0]) || exr.has(&names.uv[1]) {
+            let u = exr.take(file, &names.uv[0])?;
+            let v = exr.take(file, &names.uv[1])?;
+            Some(u.iter().zip(&v).map(|(&u, &v)| [u, v]).collect())
+        } else {
+            None
+        };
+        let index_name = names.material_index.iter().find(|n| exr.has(n)).unwrap_or(&names.material_index[0]).clone();
+        let raw_index = exr.take(file, &index_name)?;
+
+        let mut material = Vec::with_capacity(raw_index.len());
+        for (i, &value) in raw_index.iter().enumerate() {
+            let (x, y) = (i % width, i / width);
+            let bad = |reason: &str| SceneError::MaterialIndex {
+                file: file.to_path_buf(),
+                x,
+                y,
+                value,
+                reason: reason.to_string(),
+            };
+            if !value.is_finite() {
+                return Err(bad("is not a finite number"));
+            }
+            let rounded = value.round();
+            if (value - rounded).abs() > 1e-3 {
+                return Err(bad("is not a whole number"));
+            }
+            if rounded < 0.0 {
+                return Err(bad("is negative"));
+            }
+            if rounded > u32::MAX as f32 {
+                return Err(bad("is too large"));
+            }
+            let m = rounded as u32;
+            if m != 0 && !materials.contains_key(&m) {
+                let known: Vec<String> = materials.keys().map(|k| k.to_string()).collect();
+                return Err(bad(&format!(
+                    "is not in the material table of scene.json (defined: {})",
+                    if known.is_empty() { "none".to_string() } else { known.join(", ") }
+                )));
+            }
+            if m != 0 {
+                let (p, n) = (position[i], normal[i]);
+                if p.iter().any(|v| !v.is_finite()) {
+                    return Err(SceneError::NonFinite {
+                        file: file.to_path_buf(),
+                        what: format!("position {p:?} of pixel ({x}, {y})"),
+                    });
+                }
+                if n.iter().any(|v| !v.is_finite()) {
+                    return Err(SceneError::NonFinite {
+                        file: file.to_path_buf(),
+                        what: format!("normal {n:?} of pixel ({x}, {y})"),
+                    });
+                }
+            }
+            material.push(m);
+        }
+        Ok(GBuffer { file: file.to_path_buf(), width, height, position, normal, uv, material })
+    }
+}

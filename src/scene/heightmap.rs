@@ -1,0 +1,117 @@
+//! The height map of the terrain, read raw and validated; horizons are built elsewhere.
+//!
+//! Layout (`DESIGN.md`): sample `(i, j)` (column `i`, row `j`) of a `columns x rows` map
+//! lies at `min + (max - min) * (i / (columns - 1), j / (rows - 1))` (corner-registered);
+//! row 0 is the first scan line of the EXR file and lies at `min.y`. Beyond the
+//! rectangle the terrain continues flat at the height of its nearest edge sample.
+
+use super::error::SceneError;
+use super::exr_read::ExrChannels;
+use std::path::Path;
+
+/// A corner-registered height map over the rectangle `min..max` in world XY.
+#[derive(Clone, Debug, PartialEq)]
+pub struct HeightMap {
+    /// `heights[row * columns + column]`, world Z.
+    pub heights: Vec<f32>,
+    pub columns: usize,
+    pub rows: usize,
+    pub min: [f64; 2],
+    pub max: [f64; 2],
+}
+
+impl HeightMap {
+    /// Reads a one-channel EXR, or the channel `channel` of any EXR. Every sample must be
+    /// finite, `min < max` on both axes, and the map at least 2 x 2.
+    pub fn read(file: &Path, channel: Option<&str>, min: [f64; 2], max: [f64; 2]) -> Result<HeightMap, SceneError> {
+        let mut exr = ExrChannels::read(file, "the height map")?;
+        let name = match channel {
+            Some(c) => c.to_string(),
+            None => {
+                if exr.names.len() != 1 {
+                    return Err(SceneError::invalid(
+                        file,
+                        format!(
+                            "the height map has {} channels ({}); name one with \"channel\" in the heightfield object",
+                            exr.names.len(),
+                            exr.names.join(", ")
+                        ),
+                    ));
+                }
+                exr.names[0].clone()
+            }
+        };
+        exr.use_size_of(&name);
+        let heights = exr.take(file, &name)?;
+        let map = HeightMap { heights, columns: exr.width, rows: exr.height, min, max };
+        map.validate(file)?;
+        Ok(map)
+    }
+
+    fn validate(&self, file: &Path) -> Result<(), SceneError> {
+        if self.columns < 2 || self.rows < 2 {
+            return Err(SceneError::invalid(
+                file,
+                format!("the height map is {}x{}; it needs at least 2x2 samples", self.columns, self.rows),
+            ));
+        }
+        if !(self.min[0] < self.max[0] && self.min[1] < self.max[1]) {
+            return Err(SceneError::invalid(file, format!("min {:?} must be below max {:?}", self.min, self.max)));
+        }
+        if let Some(i) = self.heights.iter().position(|h| !h.is_finite()) {
+            return Err(SceneError::NonFinite {
+                file: file.to_path_buf(),
+                what: format!("height sample (column {}, row {})", i % self.columns, i / self.columns),
+            });
+        }
+        Ok(())
+    }
+
+    /// Samples `f(x, y)` on the corner-registered grid.
+    pub fn from_fn(columns: usize, rows: usize, min: [f64; 2], max: [f64; 2], f: impl Fn(f64, f64) -> f64) -> HeightMap {
+        let mut heights = Vec::with_capacity(columns * rows);
+        for j in 0..rows {
+            for i in 0..columns {
+                let (x, y) = Self::sample_xy(columns, rows, min, max, i, j);
+                heights.push(f(x, y) as f32);
+            }
+        }
+        HeightMap { heights, columns, rows, min, max }
+    }
+
+    fn sample_xy(columns: usize, rows: usize, min: [f64; 2], max: [f64; 2], i: usize, j: usize) -> (f64, f64) {
+        (
+            min[0] + (max[0] - min[0]) * i as f64 / (columns - 1) as f64,
+            min[1] + (max[1] - min[1]) * j as f64 / (rows - 1) as f64,
+        )
+    }
+
+    /// Spacing of the samples in x and y.
+    pub fn cell_size(&self) -> [f64; 2] {
+        [
+            (self.max[0] - self.min[0]) / (self.columns - 1) as f64,
+            (self.max[1] - self.min[1]) / (self.rows - 1) as f64,
+        ]
+    }
+
+    /// Bilinear height at world `(x, y)`, clamped to the edge beyond the rectangle.
+    pub fn height_at(&self, x: f64, y: f64) -> f64 {
+        let fx = ((x - self.min[0]) / (self.max[0] - self.min[0]) * (self.columns - 1) as f64)
+            .clamp(0.0, (self.columns - 1) as f64);
+        let fy =
+            ((y - self.min[1]) / (self.max[1] - self.min[1]) * (self.rows - 1) as f64).clamp(0.0, (self.rows - 1) as f64);
+        let (i0, j0) = ((fx as usize).min(self.columns - 2), (fy as usize).min(self.rows - 2));
+        let (tx, ty) = (fx - i0 as f64, fy - j0 as f64);
+        let h = |i: usize, j: usize| self.heights[j * self.columns + i] as f64;
+        let a = h(i0, j0) * (1.0 - tx) + h(i0 + 1, j0) * tx;
+        let b = h(i0, j0 + 1) * (1.0 - tx) + h(i0 + 1, j0 + 1) * tx;
+        a * (1.0 - ty) + b * ty
+    }
+
+    /// Lowest and highest sample.
+    pub fn range(&self) -> (f64, f64) {
+        let lo = self.heights.iter().fold(f32::INFINITY, |a, &b| a.min(b)) as f64;
+        let hi = self.heights.iter().fold(f32::NEG_INFINITY, |a, &b| a.max(b)) as f64;
+        (lo, hi)
+    }
+}

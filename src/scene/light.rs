@@ -1,0 +1,323 @@
+//! The light: an environment map, a constant colour, or SH coefficients.
+//!
+//! # Environment map orientation
+//!
+//! Maps are equirectangular and oriented exactly as a Blender World's Environment Texture
+//! with default mapping, so that results compare with Cycles. Cycles maps a world
+//! direction `d` to texture coordinates with `direction_to_equirectangular` in
+//! `intern/cycles/kernel/camera/projection.h` (blender/blender):
+//! `direction_to_equirectangular_range(d, (-2 pi, pi, -pi, pi))`, i.e.
+//!
+//! ```text
+//! u = (atan2(d.y, d.x) - pi) / (-2 pi) = 0.5 - atan2(d.y, d.x) / (2 pi)
+//! v = (acos(d.z / |d|) - pi) / (-pi)   = 1 - acos(d.z) / pi
+//! ```
+//!
+//! and the environment texture node looks the image up at `(u, v)` with `v = 0` at the
+//! bottom of the image (Blender stores images bottom-up, flipping EXR files on load). So:
+//! - the **first scan line of the file (top row) is the zenith** (+Z), the last the nadir;
+//! - the centre column (`u = 0.5`) looks along +X, `u = 0.25` along +Y, `u = 0.75` along
+//!   -Y, and the left and right edges along -X; in the image, azimuth increases to the
+//!   left.
+//!
+//! Texel `(i, j)` (column `i`, row `j` from the top) of a `W x H` map is centred at
+//! `u = (i + 0.5) / W`, `v = 1 - (j + 0.5) / H` and covers the exact solid angle
+//! `(2 pi / W) (cos(pi j / H) - cos(pi (j + 1) / H))`. Lookups are bilinear between texel
+//! centres, periodic in `u` and clamped in `v`.
+
+use super::error::{check_image_size, SceneError};
+use super::exr_read::ExrChannels;
+use crate::sh::eval_basis;
+use crate::sh::quadrature::gauss_legendre_on;
+use rayon::prelude::*;
+use std::f64::consts::PI;
+use std::path::{Path, PathBuf};
+
+/// Cycles' `direction_to_equirectangular` (see the module doc): `(u, v)` of a direction,
+/// `u` in `[0, 1]` left to right, `v` in `[0, 1]` bottom to top.
+pub fn direction_to_equirectangular(dir: [f64; 3]) -> [f64; 2] {
+    let len = (dir[0] * dir[0] + dir[1] * dir[1] + dir[2] * dir[2]).sqrt();
+    if len == 0.0 {
+        return [0.0, 0.0];
+    }
+    let u = (dir[1].atan2(dir[0]) - PI) / (-2.0 * PI);
+    let v = ((dir[2] / len).clamp(-1.0, 1.0).acos() - PI) / (-PI);
+    [u, v]
+}
+
+/// Inverse of [`direction_to_equirectangular`] (Cycles' `equirectangular_to_direction`).
+pub fn equirectangular_to_direction(u: f64, v: f64) -> [f64; 3] {
+    let phi = -2.0 * PI * u + PI;
+    let theta = -PI * v + PI;
+    [theta.sin() * phi.cos(), theta.sin() * phi.sin(), theta.cos()]
+}
+
+/// An equirectangular radiance map in linear RGB.
+#[derive(Clone, Debug, PartialEq)]
+pub struct EnvironmentMap {
+    pub file: PathBuf,
+    pub width: usize,
+    pub height: usize,
+    /// `texels[row * width + column]`, row 0 the top (zenith) row.
+    pub texels: Vec<[f32; 3]>,
+}
+
+impl EnvironmentMap {
+    /// Reads an EXR (channels `R`, `G`, `B` in any part, or `<layer>.R/G/B` of a single
+    /// layer, or one single channel as grey) or, for a `.hdr` file, a Radiance HDR image.
+    /// Every texel must be finite and `>= 0`.
+    pub fn read(file: &Path) -> Result<EnvironmentMap, SceneError> {
+        let is_hdr = file.extension().and_then(|e| e.to_str()).is_some_and(|e| e.eq_ignore_ascii_case("hdr"));
+        let map = if is_hdr { Self::read_hdr(file)? } else { Self::read_exr(file)? };
+        for (i, t) in map.texels.iter().enumerate() {
+            if t.iter().any(|v| !v.is_finite()) {
+                return Err(SceneError::NonFinite {
+                    file: file.to_path_buf(),
+                    what: format!("texel ({}, {})", i % map.width, i / map.width),
+                });
+            }
+            if t.iter().any(|&v| v < 0.0) {
+                return Err(SceneError::invalid(
+                    file,
+                    format!("texel ({}, {}) has negative radiance {t:?}", i % map.width, i / map.width),
+                ));
+            }
+        }
+        Ok(map)
+    }
+
+    fn read_exr(file: &Path) -> Result<EnvironmentMap, SceneError> {
+        let mut exr = ExrChannels::read(file, "the environment map")?;
+        let names: [String; 3] = if exr.has("R") && exr.has("G") && exr.has("B") {
+            ["R".into(), "G".into(), "B".into()]
+        } else {
+            let prefixes: Vec<&str> = exr.names.iter().filter_map(|n| n.strip_suffix(".R")).collect();
+            let with_rgb: Vec<&str> =
+                prefixes.into_iter().filter(|p| exr.has(&format!("{p}.G")) && exr.has(&format!("{p}.B"))).collect();
+            match with_rgb.as_slice() {
+                [p] => [format!("{p}.R"), format!("{p}.G"), format!("{p}.B")],
+                [] if exr.names.len() == 1 => {
+                    let n = exr.names[0].clone();
+                    [n.clone(), n.clone(), n]
+                }
+                _ => {
+                    return Err(SceneError::MissingChannel {
+                        file: file.to_path_buf(),
+                        channel: "R\", \"G\", \"B".into(),
+                        found: exr.names.clone(),
+                    })
+                }
+            }
+        };
+        exr.use_size_of(&names[0]);
+        let r = exr.take(file, &names[0])?;
+        let g = exr.take(file, &names[1])?;
+        let b = exr.take(file, &names[2])?;
+        let texels = (0..r.len()).map(|i| [r[i], g[i], b[i]]).collect();
+        Ok(EnvironmentMap { file: file.to_path_buf(), width: exr.width, height: exr.height, texels })
+    }
+
+    fn read_hdr(file: &Path) -> Result<EnvironmentMap, SceneError> {
+        let f = std::fs::File::open(file).map_err(|e| SceneError::io(file, "the environment map", e))?;
+        let bad = |e: image::ImageError| SceneError::Image { file: file.to_path_buf(), message: e.to_string() };
+        let decoder = image::codecs::hdr::HdrDecoder::new(std::io::BufReader::new(f)).map_err(bad)?;
+        let meta = decoder.metadata();
+        check_image_size(file, meta.width as usize, meta.height as usize)?;
+        let img = image::DynamicImage::from_decoder(decoder).map_err(bad)?.to_rgb32f();
+        let (width, height) = (img.width() as usize, img.height() as usize);
+        let texels = img.pixels().map(|p| [p[0], p[1], p[2]]).collect();
+        Ok(EnvironmentMap { file: file.to_path_buf(), width, height, texels })
+    }
+
+    /// Unit direction at the centre of texel `(column, row)`.
+    pub fn texel_direction(&self, column: usize, row: usize) -> [f64; 3] {
+        equirectangular_to_direction(
+            (column as f64 + 0.5) / self.width as f64,
+            1.0 - (row as f64 + 0.5) / self.height as f64,
+        )
+    }
+
+    /// Exact solid angle of a texel of row `row`.
+    pub fn texel_solid_angle(&self, row: usize) -> f64 {
+        let t0 = PI * row as f64 / self.height as f64;
+        let t1 = PI * (row + 1) as f64 / self.height as f64;
+        2.0 * PI / self.width as f64 * (t0.cos() - t1.cos())
+    }
+
+    /// Bilinear lookup in direction `dir` (need not be unit).
+    pub fn lookup(&self, dir: [f64; 3]) -> [f32; 3] {
+        let [u, v] = direction_to_equirectangular(dir);
+        let x = u * self.width as f64 - 0.5;
+        let y = ((1.0 - v) * self.height as f64 - 0.5).clamp(0.0, (self.height - 1) as f64);
+        let (x0, y0) = (x.floor(), y.floor());
+        let (tx, ty) = ((x - x0) as f32, (y - y0) as f32);
+        let w = self.width as i64;
+        let col = |c: i64| c.rem_euclid(w) as usize;
+        let (c0, c1) = (col(x0 as i64), col(x0 as i64 + 1));
+        let r0 = y0 as usize;
+        let r1 = (r0 + 1).min(self.height - 1);
+        let t = |c: usize, r: usize| self.texels[r * self.width + c];
+        let mut out = [0.0f32; 3];
+        for (k, o) in out.iter_mut().enumerate() {
+            let a = t(c0, r0)[k] * (1.0 - tx) + t(c1, r0)[k] * tx;
+            let b = t(c0, r1)[k] * (1.0 - tx) + t(c1, r1)[k] * tx;
+            *o = a * (1.0 - ty) + b * ty;
+        }
+        out
+    }
+}
+
+/// The scene's light, ready to be projected or evaluated.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Light {
+    /// Map radiance times `strength`.
+    Environment { map: EnvironmentMap, strength: f32 },
+    /// The same radiance from every direction.
+    Constant([f32; 3]),
+    /// Coefficients in the crate's SH convention (`crate::sh::basis`), order^2 of them.
+    Sh(Vec<[f64; 3]>),
+}
+
+impl Light {
+    /// Order-`order` SH projection (`order * order` RGB coefficients) of the radiance.
+    ///
+    /// - Map: each texel is taken as constant over its exact extent and the basis is
+    ///   integrated over that extent (see [`project_texels`]), times `strength`.
+    /// - Constant `c`: only the DC term, `c * 2 sqrt(pi)`.
+    /// - `sh`: the given coefficients, truncated or padded with zeros.
+    pub fn sh_coefficients(&self, order: usize) -> Vec<[f64; 3]> {
+        let count = order * order;
+        match self {
+            Light::Constant(c) => {
+                let mut out = vec![[0.0; 3]; count];
+                if count > 0 {
+                    let k = 2.0 * PI.sqrt();
+                    out[0] = [c[0] as f64 * k, c[1] as f64 * k, c[2] as f64 * k];
+                }
+                out
+            }
+            Light::Sh(v) => (0..count).map(|i| v.get(i).copied().unwrap_or([0.0; 3])).collect(),
+            Light::Environment { map, strength } => {
+                let mut out = project_texels(map, order);
+                for c in &mut out {
+                    for v in c.iter_mut() {
+                        *v *= *strength as f64;
+                    }
+                }
+                out
+            }
+        }
+    }
+
+    /// Radiance arriving from direction `dir` (pointing away from the receiver, towards
+    /// the sky), for background pixels: bilinear map lookup times strength, the constant,
+    /// or the SH expansion clamped to `>= 0`.
+    pub fn radiance(&self, dir: [f64; 3]) -> [f32; 3] {
+        match self {
+            Light::Constant(c) => *c,
+            Light::Environment { map, strength } => {
+                let l = map.lookup(dir);
+                [l[0] * strength, l[1] * strength, l[2] * strength]
+            }
+            Light::Sh(v) => {
+                let order = (v.len() as f64).sqrt().round() as usize;
+                let len = (dir[0] * dir[0] + dir[1] * dir[1] + dir[2] * dir[2]).sqrt();
+                let d = [dir[0] / len, dir[1] / len, dir[2] / len];
+                let mut y = vec![0.0f64; order * order];
+                eval_basis(order, d, &mut y);
+                let mut out = [0.0f32; 3];
+                for (k, o) in out.iter_mut().enumerate() {
+                    let s: f64 = v.iter().zip(&y).map(|(c, b)| c[k] * b).sum();
+                    *o = s.max(0.0) as f32;
+                }
+                out
+            }
+        }
+    }
+}
+
+/// Gauss-Legendre nodes per texel row for the integral in `z = cos(theta)`: exact for
+/// the polynomial part of the basis through order 16; for odd `m` the factor
+/// `sin^m(theta)` makes the pole rows slightly inexact (relative error below 1e-6 at
+/// 32 rows).
+const ROW_NODES: usize = 8;
+
+/// Order-`order` projection of a map whose texels are constant over their extent:
+/// `c_lm = sum over texels of L * integral over the texel of y_lm`.
+///
+/// The basis separates, `y_lm(z, phi) = Z_l^|m|(z) * {cos(m phi), 1, sin(|m| phi)}` for
+/// `m > 0, = 0, < 0`, with `Z_l^|m|` the basis evaluated at `phi = 0`; so each texel's
+/// integral is a row integral in `z` (Gauss-Legendre) times a column integral in `phi`
+/// (closed form). Cost per row: `O(width * order + order^2)`. A constant map projects to
+/// its DC term alone, to rounding.
+pub fn project_texels(map: &EnvironmentMap, order: usize) -> Vec<[f64; 3]> {
+    let count = order * order;
+    let w = map.width;
+    // Column c spans u in [c/W, (c+1)/W], i.e. phi = pi - 2 pi u in [pi - 2 pi (c+1)/W, pi - 2 pi c/W].
+    let phi_edge = |c: usize| PI - 2.0 * PI * c as f64 / w as f64;
+    // col_int[c][m] = integral of cos(m phi) (m >= 0) and sin(m phi) (m >= 1).
+    let mut cos_int = vec![vec![0.0f64; order]; w];
+    let mut sin_int = vec![vec![0.0f64; order]; w];
+    for c in 0..w {
+        let (lo, hi) = (phi_edge(c + 1), phi_edge(c));
+        cos_int[c][0] = hi - lo;
+        for m in 1..order {
+            let mf = m as f64;
+            cos_int[c][m] = ((mf * hi).sin() - (mf * lo).sin()) / mf;
+            sin_int[c][m] = ((mf * lo).cos() - (mf * hi).cos()) / mf;
+        }
+    }
+    (0..map.height)
+        .into_par_iter()
+        .map(|row| {
+            // Row r spans theta in [pi r / H, pi (r+1) / H], z from cos(top) down to cos(bottom).
+            let z_hi = (PI * row as f64 / map.height as f64).cos();
+            let z_lo = (PI * (row + 1) as f64 / map.height as f64).cos();
+            let mut zint = vec![0.0f64; count];
+            let mut y = vec![0.0f64; count];
+            for (z, wz) in gauss_legendre_on(ROW_NODES, z_lo, z_hi) {
+                eval_basis(order, [(1.0 - z * z).max(0.0).sqrt(), 0.0, z], &mut y);
+                for (a, b) in zint.iter_mut().zip(&y) {
+                    *a += wz * b;
+                }
+            }
+            // sums[m] = sum over columns of L * phi-integral, cosine (m >= 0) and sine parts.
+            let mut cos_sum = vec![[0.0f64; 3]; order];
+            let mut sin_sum = vec![[0.0f64; 3]; order];
+            for c in 0..w {
+                let l = map.texels[row * w + c];
+                if l == [0.0; 3] {
+                    continue;
+                }
+                for m in 0..order {
+                    for k in 0..3 {
+                        cos_sum[m][k] += l[k] as f64 * cos_int[c][m];
+                        sin_sum[m][k] += l[k] as f64 * sin_int[c][m];
+                    }
+                }
+            }
+            let mut acc = vec![[0.0f64; 3]; count];
+            for l in 0..order {
+                for m in -(l as i32)..=(l as i32) {
+                    let i = (l * (l + 1)) as i64 + m as i64;
+                    let zpart = zint[(l * (l + 1)) + m.unsigned_abs() as usize];
+                    let sums = if m < 0 { &sin_sum } else { &cos_sum };
+                    for k in 0..3 {
+                        acc[i as usize][k] = zpart * sums[m.unsigned_abs() as usize][k];
+                    }
+                }
+            }
+            acc
+        })
+        .reduce(
+            || vec![[0.0f64; 3]; count],
+            |mut a, b| {
+                for (x, y) in a.iter_mut().zip(&b) {
+                    for k in 0..3 {
+                        x[k] += y[k];
+                    }
+                }
+                a
+            },
+        )
+}

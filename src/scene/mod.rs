@@ -1,0 +1,710 @@
+//! Reader of scene format v1 (the contract in `DESIGN.md`, "Scene format v1"), and the
+//! writers of output images.
+//!
+//! A scene is a directory with `scene.json`. [`Scene::load`] parses and validates it and
+//! reads what is the same for every frame (the light, a height map whose path has no
+//! `#`); [`Scene::frame`] reads one frame's G-buffers, camera and blockers.
+//!
+//! # Rules enforced while reading
+//!
+//! - Every JSON object denies unknown keys; the error names the key, the file, the line
+//!   and the column. `version` must be 1 (checked before anything else, so a newer file
+//!   says "unsupported version" rather than "unknown key").
+//! - Paths are relative to the scene directory. A run of `#` is the frame number,
+//!   zero-padded to the run's length (`####` and frame 7 give `0007`); a path without `#`
+//!   is shared by all frames.
+//! - Materials: keys are material indices as decimal strings, at least 1 (0 is the
+//!   background). Types and their keys: `heightfield` {`albedo`}, `water` {`tint`},
+//!   `diffuse` {`albedo`}, `phong` {`albedo`, `specular`, `exponent`}; every key of the
+//!   type is required, colours are three finite numbers `>= 0`, `exponent > 0`.
+//! - Light: exactly one of `{"environment": path, "strength": s}` (`strength` optional,
+//!   default 1, finite and `>= 0`), `{"constant": [r, g, b]}` or `{"sh": [[r, g, b], ...]}`
+//!   with a perfect-square count of triples. See [`light`] for the map orientation.
+//! - G-buffers: see [`gbuffer`] for channel names, layouts and per-pixel checks.
+//!
+//! # Channel-name overrides
+//!
+//! `scene.json` may hold `"channels"`, an object with any of these keys (each one
+//! replaces the default for both the G-buffer and the reflection G-buffer):
+//!
+//! ```json
+//! "channels": {
+//!   "position": ["P.X", "P.Y", "P.Z"],
+//!   "normal": ["N.X", "N.Y", "N.Z"],
+//!   "uv": ["UV.U", "UV.V"],
+//!   "material_index": "IndexMA.X"
+//! }
+//! ```
+//!
+//! Names are full dotted names (`<part name>.<channel>` for multi-part files, see
+//! [`gbuffer`]). Defaults: `ViewLayer.Position.{X,Y,Z}`, `ViewLayer.Normal.{X,Y,Z}`,
+//! `ViewLayer.UV.{U,V}` and `ViewLayer.Material Index.X`, falling back to
+//! `ViewLayer.IndexMA.X` (Blender 4). The default UV channels are optional (UV is not
+//! used by shading; absent, [`GBuffer::uv`] is `None`); UV channels named in an override
+//! are required.
+//!
+//! # Outputs
+//!
+//! [`output`] writes linear EXR and sRGB PNG files atomically. Before writing, call
+//! [`Scene::check_output_path`]: it refuses any path that is, or for some frame would be,
+//! one of the scene's inputs.
+
+pub mod camera;
+pub mod error;
+mod exr_read;
+pub mod gbuffer;
+pub mod heightmap;
+pub mod light;
+pub mod output;
+
+pub use camera::{Camera, Sphere};
+pub use error::{SceneError, MAX_IMAGE_PIXELS, MAX_IMAGE_SIDE};
+pub use gbuffer::{ChannelNames, GBuffer};
+pub use heightmap::HeightMap;
+pub use light::{EnvironmentMap, Light};
+
+use serde::Deserialize;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+/// Name of the scene description inside a scene directory.
+pub const SCENE_FILE: &str = "scene.json";
+
+/// A material of the table in `scene.json`; see `DESIGN.md` for what each type means.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Material {
+    /// Diffuse, on the height-field surface, with its self-shadowing.
+    Heightfield { albedo: [f32; 3] },
+    /// Shaded as the point of the reflection G-buffer, times `tint`.
+    Water { tint: [f32; 3] },
+    /// Lambertian.
+    Diffuse { albedo: [f32; 3] },
+    /// Diffuse `albedo` plus a normalised Phong lobe (paper 000, Eq. 27).
+    Phong { albedo: [f32; 3], specular: [f32; 3], exponent: f32 },
+}
+
+impl Material {
+    /// The type name used in `scene.json`.
+    pub fn type_name(&self) -> &'static str {
+        match self {
+            Material::Heightfield { .. } => "heightfield",
+            Material::Water { .. } => "water",
+            Material::Diffuse { .. } => "diffuse",
+            Material::Phong { .. } => "phong",
+        }
+    }
+}
+
+/// Inclusive frame range from `"frames"`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FrameRange {
+    pub start: i64,
+    pub end: i64,
+}
+
+/// A path of `scene.json`, possibly with `#` runs standing for the frame number.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct PathTemplate(pub String);
+
+impl PathTemplate {
+    /// True when the path changes with the frame.
+    pub fn is_per_frame(&self) -> bool {
+        self.0.contains('#')
+    }
+
+    /// The path of `frame`: each run of `#` becomes the frame number zero-padded to the
+    /// run's length (a longer number is written in full; a negative one keeps its sign
+    /// within the width).
+    pub fn for_frame(&self, frame: i64) -> String {
+        let mut out = String::new();
+        let mut chars = self.0.chars().peekable();
+        while let Some(c) = chars.next() {
+            if c == '#' {
+                let mut width = 1;
+                while chars.peek() == Some(&'#') {
+                    chars.next();
+                    width += 1;
+                }
+                out.push_str(&format!("{frame:0width$}"));
+            } else {
+                out.push(c);
+            }
+        }
+        out
+    }
+
+    /// The file of `frame` inside `dir`.
+    pub fn resolve(&self, dir: &Path, frame: i64) -> PathBuf {
+        dir.join(self.for_frame(frame))
+    }
+
+    /// True when `candidate` (a path relative to the scene directory, components already
+    /// normalised) is this template for some frame number.
+    fn matches_any_frame(&self, candidate: &str) -> bool {
+        fn go(t: &[char], c: &[char]) -> bool {
+            match t.first() {
+                None => c.is_empty(),
+                Some('#') => {
+                    let run = t.iter().take_while(|&&ch| ch == '#').count();
+                    let rest = &t[run..];
+                    let mut start = 0;
+                    if c.first() == Some(&'-') {
+                        start = 1;
+                    }
+                    let digits = c[start..].iter().take_while(|ch| ch.is_ascii_digit()).count();
+                    (1..=digits).any(|n| start + n >= run && go(rest, &c[start + n..]))
+                }
+                Some(&ch) => c.first() == Some(&ch) && go(&t[1..], &c[1..]),
+            }
+        }
+        let t: Vec<char> = self.0.chars().collect();
+        let c: Vec<char> = candidate.chars().collect();
+        go(&t, &c)
+    }
+}
+
+/// The `heightfield` object of `scene.json`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct HeightfieldSpec {
+    pub heights: PathTemplate,
+    pub min: [f64; 2],
+    pub max: [f64; 2],
+    pub channel: Option<String>,
+}
+
+/// The `light` object of `scene.json`, before any file is read.
+#[derive(Clone, Debug, PartialEq)]
+pub enum LightSpec {
+    Environment { path: PathTemplate, strength: f32 },
+    Constant([f32; 3]),
+    Sh(Vec<[f64; 3]>),
+}
+
+/// One frame's data, everything the shading of that frame reads.
+#[derive(Clone, Debug)]
+pub struct Frame {
+    pub number: i64,
+    pub gbuffer: GBuffer,
+    /// Present when `scene.json` has `reflection_gbuffer`.
+    pub reflection: Option<GBuffer>,
+    /// Present when `scene.json` has `camera`.
+    pub camera: Option<Camera>,
+    /// Empty when `scene.json` has no `blockers`.
+    pub blockers: Vec<Sphere>,
+    pub height_map: Option<Arc<HeightMap>>,
+    pub light: Arc<Light>,
+}
+
+/// A loaded and validated `scene.json`.
+#[derive(Clone, Debug)]
+pub struct Scene {
+    /// The scene directory.
+    pub dir: PathBuf,
+    pub frames: Option<FrameRange>,
+    pub gbuffer: PathTemplate,
+    pub reflection_gbuffer: Option<PathTemplate>,
+    pub camera: Option<PathTemplate>,
+    pub blockers: Option<PathTemplate>,
+    pub heightfield: Option<HeightfieldSpec>,
+    /// Material table by index (all `>= 1`).
+    pub materials: BTreeMap<u32, Material>,
+    pub light_spec: LightSpec,
+    pub channels: ChannelNames,
+    static_light: Option<Arc<Light>>,
+    static_height_map: Option<Arc<HeightMap>>,
+}
+
+// ---- the JSON schema of scene.json ------------------------------------------------
+
+#[derive(Deserialize)]
+struct VersionProbe {
+    version: Option<serde_json::Value>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SceneFile {
+    #[allow(dead_code)]
+    version: u32,
+    frames: Option<FrameRange>,
+    gbuffer: String,
+    reflection_gbuffer: Option<String>,
+    camera: Option<String>,
+    blockers: Option<String>,
+    heightfield: Option<HeightfieldFile>,
+    materials: BTreeMap<String, MaterialFile>,
+    light: LightFile,
+    channels: Option<gbuffer::ChannelOverrides>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct HeightfieldFile {
+    heights: String,
+    min: [f64; 2],
+    max: [f64; 2],
+    channel: Option<String>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct MaterialFile {
+    #[serde(rename = "type")]
+    kind: String,
+    albedo: Option<[f64; 3]>,
+    tint: Option<[f64; 3]>,
+    specular: Option<[f64; 3]>,
+    exponent: Option<f64>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct LightFile {
+    environment: Option<String>,
+    strength: Option<f64>,
+    constant: Option<[f64; 3]>,
+    sh: Option<Vec<[f64; 3]>>,
+}
+
+/// Reads a JSON file into `T`, mapping every failure to a [`SceneError`] that names the
+/// file (and the line, for syntax and schema errors).
+pub(crate) fn read_json<T: serde::de::DeserializeOwned>(file: &Path, what: &str) -> Result<T, SceneError> {
+    let text = std::fs::read_to_string(file).map_err(|e| SceneError::io(file, what, e))?;
+    serde_json::from_str(&text).map_err(|e| SceneError::json(file, e))
+}
+
+fn colour(file: &Path, what: &str, c: [f64; 3]) -> Result<[f32; 3], SceneError> {
+    for v in c {
+        if !v.is_finite() {
+            return Err(SceneError::NonFinite { file: file.to_path_buf(), what: what.to_string() });
+        }
+        if v < 0.0 {
+            return Err(SceneError::invalid(file, format!("{what} has a negative component {v}; colours must be >= 0")));
+        }
+    }
+    Ok([c[0] as f32, c[1] as f32, c[2] as f32])
+}
+
+fn parse_material(file: &Path, key: &str, m: &MaterialFile) -> Result<(u32, Material), SceneError> {
+    let index: u32 = key.trim().parse().map_err(|_| {
+        SceneError::invalid(file, format!("material key \"{key}\" is not a material index (a whole number >= 1)"))
+    })?;
+    if index == 0 {
+        return Err(SceneError::invalid(file, "material index 0 is the background and cannot be defined"));
+    }
+    let name = format!("material {index}");
+    let allowed: &[&str] = match m.kind.as_str() {
+        "heightfield" | "diffuse" => &["albedo"],
+        "water" => &["tint"],
+        "phong" => &["albedo", "specular", "exponent"],
+        other => {
+            return Err(SceneError::invalid(
+                file,
+                format!("{name}: unknown type \"{other}\" (expected heightfield, water, diffuse or phong)"),
+            ))
+        }
+    };
+    let present = [
+        ("albedo", m.albedo.is_some()),
+        ("tint", m.tint.is_some()),
+        ("specular", m.specular.is_some()),
+        ("exponent", m.exponent.is_some()),
+    ];
+    for (k, is) in present {
+        if is && !allowed.contains(&k) {
+            return Err(SceneError::invalid(file, format!("{name}: key \"{k}\" does not belong to type {}", m.kind)));
+        }
+        if !is && allowed.contains(&k) {
+            return Err(SceneError::invalid(file, format!("{name}: type {} needs key \"{k}\"", m.kind)));
+        }
+    }
+    let get = |k: &str, v: Option<[f64; 3]>| colour(file, &format!("{name} {k}"), v.expect("checked above"));
+    let material = match m.kind.as_str() {
+        "heightfield" => Material::Heightfield { albedo: get("albedo", m.albedo)? },
+        "diffuse" => Material::Diffuse { albedo: get("albedo", m.albedo)? },
+        "water" => Material::Water { tint: get("tint", m.tint)? },
+        _ => {
+            let exponent = m.exponent.expect("checked above");
+            if !exponent.is_finite() {
+                return Err(SceneError::NonFinite { file: file.to_path_buf(), what: format!("{name} exponent") });
+            }
+            if exponent <= 0.0 {
+                return Err(SceneError::invalid(file, format!("{name}: exponent {exponent} must be > 0")));
+            }
+            Material::Phong {
+                albedo: get("albedo", m.albedo)?,
+                specular: get("specular", m.specular)?,
+                exponent: exponent as f32,
+            }
+        }
+    };
+    Ok((index, material))
+}
+
+fn parse_light(file: &Path, l: &LightFile) -> Result<LightSpec, SceneError> {
+    let count = l.environment.is_some() as u8 + l.constant.is_some() as u8 + l.sh.is_some() as u8;
+    if count != 1 {
+        return Err(SceneError::invalid(
+            file,
+            "light must have exactly one of \"environment\", \"constant\" or \"sh\"",
+        ));
+    }
+    if l.strength.is_some() && l.environment.is_none() {
+        return Err(SceneError::invalid(file, "light: \"strength\" goes only with \"environment\""));
+    }
+    if let Some(path) = &l.environment {
+        let strength = l.strength.unwrap_or(1.0);
+        if !strength.is_finite() {
+            return Err(SceneError::NonFinite { file: file.to_path_buf(), what: "light strength".into() });
+        }
+        if strength < 0.0 {
+            return Err(SceneError::invalid(file, format!("light strength {strength} must be >= 0")));
+        }
+        return Ok(LightSpec::Environment { path: PathTemplate(path.clone()), strength: strength as f32 });
+    }
+    if let Some(c) = l.constant {
+        return Ok(LightSpec::Constant(colour(file, "light constant", c)?));
+    }
+    let sh = l.sh.as_ref().expect("one of the three is present");
+    let n = (sh.len() as f64).sqrt().round() as usize;
+    if sh.is_empty() || n * n != sh.len() {
+        return Err(SceneError::invalid(
+            file,
+            format!("light sh has {} coefficients; it needs order^2 (1, 4, 9, 16, ...)", sh.len()),
+        ));
+    }
+    for (i, c) in sh.iter().enumerate() {
+        if c.iter().any(|v| !v.is_finite()) {
+            return Err(SceneError::NonFinite { file: file.to_path_buf(), what: format!("light sh coefficient {i}") });
+        }
+    }
+    Ok(LightSpec::Sh(sh.clone()))
+}
+
+impl Scene {
+    /// Reads and validates `dir/scene.json`, and the light and height map when they are
+    /// the same for every frame.
+    pub fn load(dir: &Path) -> Result<Scene, SceneError> {
+        let file = dir.join(SCENE_FILE);
+        let text = std::fs::read_to_string(&file).map_err(|e| SceneError::io(&file, "the scene description", e))?;
+        let probe: VersionProbe = serde_json::from_str(&text).map_err(|e| SceneError::json(&file, e))?;
+        match &probe.version {
+            None => return Err(SceneError::invalid(&file, "missing key \"version\" (this logsh reads version 1)")),
+            Some(v) if v.as_u64() == Some(1) => {}
+            Some(v) => return Err(SceneError::Version { file: file.clone(), found: v.to_string() }),
+        }
+        let raw: SceneFile = serde_json::from_str(&text).map_err(|e| SceneError::json(&file, e))?;
+
+        if let Some(f) = raw.frames {
+            if f.start > f.end {
+                return Err(SceneError::invalid(&file, format!("frames: start {} is after end {}", f.start, f.end)));
+            }
+        }
+        let mut materials = BTreeMap::new();
+        for (key, m) in &raw.materials {
+            let (index, material) = parse_material(&file, key, m)?;
+            if materials.insert(index, material).is_some() {
+                return Err(SceneError::invalid(&file, format!("material {index} is defined twice")));
+            }
+        }
+        let heightfield = match raw.heightfield {
+            None => None,
+            Some(h) => {
+                for v in h.min.iter().chain(h.max.iter()) {
+                    if !v.is_finite() {
+                        return Err(SceneError::NonFinite { file: file.clone(), what: "heightfield min/max".into() });
+                    }
+                }
+                if !(h.min[0] < h.max[0] && h.min[1] < h.max[1]) {
+                    return Err(SceneError::invalid(
+                        &file,
+                        format!("heightfield: min {:?} must be below max {:?} in x and y", h.min, h.max),
+                    ));
+                }
+                Some(HeightfieldSpec { heights: PathTemplate(h.heights), min: h.min, max: h.max, channel: h.channel })
+            }
+        };
+        let light_spec = parse_light(&file, &raw.light)?;
+        let channels = ChannelNames::from_overrides(raw.channels.as_ref());
+
+        let mut scene = Scene {
+            dir: dir.to_path_buf(),
+            frames: raw.frames,
+            gbuffer: PathTemplate(raw.gbuffer),
+            reflection_gbuffer: raw.reflection_gbuffer.map(PathTemplate),
+            camera: raw.camera.map(PathTemplate),
+            blockers: raw.blockers.map(PathTemplate),
+            heightfield,
+            materials,
+            light_spec,
+            channels,
+            static_light: None,
+            static_height_map: None,
+        };
+        let frame = scene.default_frame();
+        if !matches!(&scene.light_spec, LightSpec::Environment { path, .. } if path.is_per_frame()) {
+            scene.static_light = Some(Arc::new(scene.read_light(frame)?));
+        }
+        if let Some(h) = &scene.heightfield {
+            if !h.heights.is_per_frame() {
+                scene.static_height_map = Some(Arc::new(scene.read_height_map(frame)?));
+            }
+        }
+        Ok(scene)
+    }
+
+    /// Path of `scene.json`.
+    pub fn scene_file(&self) -> PathBuf {
+        self.dir.join(SCENE_FILE)
+    }
+
+    /// The frame to shade when none is given: `frames.start`, or 1.
+    pub fn default_frame(&self) -> i64 {
+        self.frames.map_or(1, |f| f.start)
+    }
+
+    /// Frame numbers of the scene's range, or just the default frame.
+    pub fn frame_numbers(&self) -> std::ops::RangeInclusive<i64> {
+        match self.frames {
+            Some(f) => f.start..=f.end,
+            None => self.default_frame()..=self.default_frame(),
+        }
+    }
+
+    fn check_frame(&self, frame: i64) -> Result<(), SceneError> {
+        if let Some(f) = self.frames {
+            if frame < f.start || frame > f.end {
+                return Err(SceneError::FrameOutOfRange { file: self.scene_file(), frame, start: f.start, end: f.end });
+            }
+        }
+        Ok(())
+    }
+
+    /// The light of `frame` (shared when its path has no `#`).
+    pub fn light(&self, frame: i64) -> Result<Arc<Light>, SceneError> {
+        match &self.static_light {
+            Some(l) => Ok(l.clone()),
+            None => {
+                self.check_frame(frame)?;
+                Ok(Arc::new(self.read_light(frame)?))
+            }
+        }
+    }
+
+    /// The height map of `frame`, if the scene has a height field.
+    pub fn height_map(&self, frame: i64) -> Result<Option<Arc<HeightMap>>, SceneError> {
+        if let Some(h) = &self.static_height_map {
+            return Ok(Some(h.clone()));
+        }
+        if self.heightfield.is_none() {
+            return Ok(None);
+        }
+        self.check_frame(frame)?;
+        Ok(Some(Arc::new(self.read_height_map(frame)?)))
+    }
+
+    fn read_light(&self, frame: i64) -> Result<Light, SceneError> {
+        match &self.light_spec {
+            LightSpec::Environment { path, strength } => {
+                let map = EnvironmentMap::read(&path.resolve(&self.dir, frame))?;
+                Ok(Light::Environment { map, strength: *strength })
+            }
+            LightSpec::Constant(c) => Ok(Light::Constant(*c)),
+            LightSpec::Sh(v) => Ok(Light::Sh(v.clone())),
+        }
+    }
+
+    fn read_height_map(&self, frame: i64) -> Result<HeightMap, SceneError> {
+        let h = self.heightfield.as_ref().expect("caller checked");
+        HeightMap::read(&h.heights.resolve(&self.dir, frame), h.channel.as_deref(), h.min, h.max)
+    }
+
+    /// Reads and validates everything of `frame`.
+    ///
+    /// Checks, beyond those of each file: the frame lies in `frames`; the reflection
+    /// G-buffer has the G-buffer's size; the camera's `resolution` equals the G-buffer
+    /// size; a water pixel needs a reflection G-buffer.
+    pub fn frame(&self, frame: i64) -> Result<Frame, SceneError> {
+        self.check_frame(frame)?;
+        let gfile = self.gbuffer.resolve(&self.dir, frame);
+        let gbuffer = GBuffer::read(&gfile, &self.channels, &self.materials)?;
+        let reflection = match &self.reflection_gbuffer {
+            None => None,
+            Some(t) => {
+                let rfile = t.resolve(&self.dir, frame);
+                let r = GBuffer::read(&rfile, &self.channels, &self.materials)?;
+                if [r.width, r.height] != [gbuffer.width, gbuffer.height] {
+                    return Err(SceneError::SizeMismatch {
+                        file: rfile,
+                        found: [r.width, r.height],
+                        expected: [gbuffer.width, gbuffer.height],
+                        reference: gfile,
+                    });
+                }
+                Some(r)
+            }
+        };
+        if reflection.is_none() {
+            let water: Vec<u32> = self
+                .materials
+                .iter()
+                .filter(|(_, m)| matches!(m, Material::Water { .. }))
+                .map(|(&i, _)| i)
+                .collect();
+            if let Some(p) = gbuffer.material.iter().position(|m| water.contains(m)) {
+                return Err(SceneError::invalid(
+                    &gfile,
+                    format!(
+                        "pixel ({}, {}) is water (material {}) but scene.json has no \"reflection_gbuffer\"",
+                        p % gbuffer.width,
+                        p / gbuffer.width,
+                        gbuffer.material[p]
+                    ),
+                ));
+            }
+        }
+        let camera = match &self.camera {
+            None => None,
+            Some(t) => {
+                let cfile = t.resolve(&self.dir, frame);
+                let c = Camera::read(&cfile, frame)?;
+                let res = [c.resolution[0] as usize, c.resolution[1] as usize];
+                if res != [gbuffer.width, gbuffer.height] {
+                    return Err(SceneError::SizeMismatch {
+                        file: cfile,
+                        found: res,
+                        expected: [gbuffer.width, gbuffer.height],
+                        reference: gfile,
+                    });
+                }
+                Some(c)
+            }
+        };
+        let blockers = match &self.blockers {
+            None => Vec::new(),
+            Some(t) => camera::read_blockers(&t.resolve(&self.dir, frame), frame)?,
+        };
+        Ok(Frame {
+            number: frame,
+            gbuffer,
+            reflection,
+            camera,
+            blockers,
+            height_map: self.height_map(frame)?,
+            light: self.light(frame)?,
+        })
+    }
+
+    /// Every file `frame` reads, `scene.json` included.
+    pub fn input_paths(&self, frame: i64) -> Vec<PathBuf> {
+        self.templates().into_iter().map(|t| t.resolve(&self.dir, frame)).chain([self.scene_file()]).collect()
+    }
+
+    fn templates(&self) -> Vec<&PathTemplate> {
+        let mut t = vec![&self.gbuffer];
+        t.extend(self.reflection_gbuffer.iter());
+        t.extend(self.camera.iter());
+        t.extend(self.blockers.iter());
+        t.extend(self.heightfield.iter().map(|h| &h.heights));
+        if let LightSpec::Environment { path, .. } = &self.light_spec {
+            t.push(path);
+        }
+        t
+    }
+
+    /// Refuses an output path that is `scene.json` or any input of any frame (a templated
+    /// input matches every frame number, inside or outside `frames`). Paths are compared
+    /// after resolving `.`/`..` and symbolic links of the existing part.
+    pub fn check_output_path(&self, path: &Path) -> Result<(), SceneError> {
+        let out = normalise(path);
+        if out == normalise(&self.scene_file()) {
+            return Err(SceneError::OutputIsInput { file: path.to_path_buf(), what: "the scene description".into() });
+        }
+        let dir = normalise(&self.dir);
+        for t in self.templates() {
+            let resolved = normalise(&self.dir.join(&t.0));
+            let hit = if t.is_per_frame() {
+                out.strip_prefix(&dir).ok().and_then(|rel| rel.to_str()).is_some_and(|rel| {
+                    let template = normalise_relative(&t.0);
+                    PathTemplate(template).matches_any_frame(&rel.replace('\\', "/"))
+                })
+            } else {
+                out == resolved
+            };
+            if hit {
+                return Err(SceneError::OutputIsInput { file: path.to_path_buf(), what: format!("input \"{}\"", t.0) });
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Absolute, lexically normalised path with the existing ancestor canonicalised.
+fn normalise(path: &Path) -> PathBuf {
+    let abs = if path.is_absolute() {
+        path.to_path_buf()
+    } else {
+        std::env::current_dir().unwrap_or_default().join(path)
+    };
+    let mut clean = PathBuf::new();
+    for c in abs.components() {
+        match c {
+            std::path::Component::ParentDir => {
+                clean.pop();
+            }
+            std::path::Component::CurDir => {}
+            other => clean.push(other),
+        }
+    }
+    // Canonicalise the longest existing prefix (resolves symlinks), keep the rest.
+    let mut existing = clean.clone();
+    let mut rest = Vec::new();
+    while !existing.exists() {
+        match (existing.file_name().map(|n| n.to_os_string()), existing.parent()) {
+            (Some(name), Some(parent)) => {
+                rest.push(name);
+                existing = parent.to_path_buf();
+            }
+            _ => break,
+        }
+    }
+    let mut out = existing.canonicalize().unwrap_or(existing);
+    for name in rest.into_iter().rev() {
+        out.push(name);
+    }
+    out
+}
+
+fn normalise_relative(path: &str) -> String {
+    let mut parts: Vec<&str> = Vec::new();
+    for p in path.split(['/', '\\']) {
+        match p {
+            "" | "." => {}
+            ".." => {
+                parts.pop();
+            }
+            other => parts.push(other),
+        }
+    }
+    parts.join("/")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn templates_pad_and_match() {
+        let t = PathTemplate("gbuffer.####.exr".into());
+        assert_eq!(t.for_frame(7), "gbuffer.0007.exr");
+        assert_eq!(t.for_frame(12345), "gbuffer.12345.exr");
+        assert_eq!(PathTemplate("a_#.exr".into()).for_frame(3), "a_3.exr");
+        assert_eq!(PathTemplate("sky.exr".into()).for_frame(3), "sky.exr");
+        assert!(t.matches_any_frame("gbuffer.0007.exr"));
+        assert!(t.matches_any_frame("gbuffer.12345.exr"));
+        assert!(!t.matches_any_frame("gbuffer.007.exr"));
+        assert!(!t.matches_any_frame("gbuffer.0007.png"));
+    }
+}

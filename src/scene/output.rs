@@ -1,0 +1,136 @@
+//! Writing output images: linear float EXR and an sRGB 8-bit PNG preview.
+//!
+//! Every write is atomic: the image goes to a temporary file in the destination's
+//! directory (`.<name>.<pid>.<n>.tmp`), which is then renamed over the destination, so a
+//! reader never sees half a file and a failed write leaves the old file in place. These
+//! functions do not know the scene; call [`super::Scene::check_output_path`] first so
+//! that no input is ever overwritten.
+
+use exr::prelude::{AnyChannel, AnyChannels, Blocks, Compression, Encoding, FlatSamples, Image, Layer, LayerAttributes, LineOrder, WritableImage};
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
+
+/// Why an output image could not be written.
+#[derive(Debug, thiserror::Error)]
+pub enum OutputError {
+    #[error("{}: cannot write: {source}", .file.display())]
+    Io { file: PathBuf, source: std::io::Error },
+    #[error("{}: cannot encode the image: {message}", .file.display())]
+    Encode { file: PathBuf, message: String },
+    #[error("{}: {count} pixel values given for a {width}x{height} image", .file.display())]
+    SizeMismatch { file: PathBuf, width: usize, height: usize, count: usize },
+}
+
+static COUNTER: AtomicU64 = AtomicU64::new(0);
+
+/// Writes through `write(temp_path)` and renames the temporary file onto `path`.
+pub fn write_atomically<E>(
+    path: &Path,
+    write: impl FnOnce(&Path) -> Result<(), E>,
+    wrap: impl FnOnce(E) -> OutputError,
+) -> Result<(), OutputError> {
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| "output".into());
+    let n = COUNTER.fetch_add(1, Ordering::Relaxed);
+    let temp = dir.join(format!(".{name}.{}.{n}.tmp", std::process::id()));
+    if let Err(e) = write(&temp) {
+        let _ = std::fs::remove_file(&temp);
+        return Err(wrap(e));
+    }
+    std::fs::rename(&temp, path).map_err(|source| {
+        let _ = std::fs::remove_file(&temp);
+        OutputError::Io { file: path.to_path_buf(), source }
+    })
+}
+
+fn check_len(path: &Path, width: usize, height: usize, count: usize) -> Result<(), OutputError> {
+    if width.checked_mul(height) != Some(count) || width == 0 || height == 0 {
+        return Err(OutputError::SizeMismatch { file: path.to_path_buf(), width, height, count });
+    }
+    Ok(())
+}
+
+/// Writes linear RGBA as a float EXR with channels `R`, `G`, `B`, `A` (ZIP compression),
+/// row 0 the top row.
+pub fn write_exr_rgba(path: &Path, width: usize, height: usize, rgba: &[[f32; 4]]) -> Result<(), OutputError> {
+    check_len(path, width, height, rgba.len())?;
+    let channel = |k: usize| rgba.iter().map(|p| p[k]).collect::<Vec<f32>>();
+    let (r, g, b, a) = (channel(0), channel(1), channel(2), channel(3));
+    write_exr_channels(path, width, height, &[("R", &r), ("G", &g), ("B", &b), ("A", &a)])
+}
+
+/// Writes any named f32 channels into one single-part EXR (ZIP compression); names may
+/// be dotted (`shadow.R`) for multi-layer outputs.
+pub fn write_exr_channels(
+    path: &Path,
+    width: usize,
+    height: usize,
+    channels: &[(&str, &[f32])],
+) -> Result<(), OutputError> {
+    for (_, data) in channels {
+        check_len(path, width, height, data.len())?;
+    }
+    let list: Vec<AnyChannel<FlatSamples>> = channels
+        .iter()
+        .map(|(name, data)| AnyChannel::new(*name, FlatSamples::F32(data.to_vec())))
+        .collect();
+    let layer = Layer::new(
+        (width, height),
+        LayerAttributes::default(),
+        Encoding {
+            compression: Compression::ZIP16,
+            blocks: Blocks::ScanLines,
+            line_order: LineOrder::Increasing,
+        },
+        AnyChannels::sort(list.into_iter().collect()),
+    );
+    let image = Image::from_layer(layer);
+    write_atomically(
+        path,
+        |temp| image.write().to_file(temp),
+        |e| OutputError::Encode { file: path.to_path_buf(), message: e.to_string() },
+    )
+}
+
+/// The sRGB transfer function (IEC 61966-2-1) of a linear value in `[0, 1]`.
+pub fn linear_to_srgb(x: f32) -> f32 {
+    let x = if x.is_nan() { 0.0 } else { x.clamp(0.0, 1.0) };
+    if x <= 0.003_130_8 {
+        12.92 * x
+    } else {
+        1.055 * x.powf(1.0 / 2.4) - 0.055
+    }
+}
+
+/// Writes an 8-bit RGBA PNG: colour through the sRGB transfer function (clamped to
+/// `[0, 1]`), alpha kept linear.
+pub fn write_png_preview(path: &Path, width: usize, height: usize, rgba: &[[f32; 4]]) -> Result<(), OutputError> {
+    check_len(path, width, height, rgba.len())?;
+    let q = |v: f32| (v * 255.0 + 0.5).clamp(0.0, 255.0) as u8;
+    let mut bytes = Vec::with_capacity(rgba.len() * 4);
+    for p in rgba {
+        bytes.extend_from_slice(&[
+            q(linear_to_srgb(p[0])),
+            q(linear_to_srgb(p[1])),
+            q(linear_to_srgb(p[2])),
+            q(if p[3].is_nan() { 0.0 } else { p[3].clamp(0.0, 1.0) }),
+        ]);
+    }
+    write_atomically(
+        path,
+        |temp| {
+            image::save_buffer_with_format(
+                temp,
+                &bytes,
+                width as u32,
+                height as u32,
+                image::ExtendedColorType::Rgba8,
+                image::ImageFormat::Png,
+            )
+        },
+        |e| OutputError::Encode { file: path.to_path_buf(), message: e.to_string() },
+    )
+}

@@ -1,0 +1,155 @@
+//! Shading a whole frame on the CPU: material lookup, water through the reflection
+//! G-buffer, background from the light, parallel over rows with rayon.
+
+use super::kernel::{Occluders, ShadingKernel, SurfacePoint};
+use super::settings::ShadingSettings;
+use crate::heightfield::{HeightField, HeightFieldError, HorizonPyramid};
+use crate::scene::{Frame, GBuffer, Material, Scene};
+use crate::sh::Real;
+use rayon::prelude::*;
+
+/// A shaded frame: linear RGBA, row-major from the top row. Alpha is 1 where a surface
+/// was shaded and 0 on the background.
+#[derive(Clone, Debug)]
+pub struct ShadedFrame {
+    pub width: usize,
+    pub height: usize,
+    pub rgba: Vec<[f32; 4]>,
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum ShadeError {
+    #[error("{0}")]
+    Settings(String),
+    #[error("height field of {file}: {source}")]
+    HeightField { file: String, source: HeightFieldError },
+    #[error("{file}: {count} pixel(s) have water materials but scene.json has no \"reflection_gbuffer\" to shade them with")]
+    WaterWithoutReflection { file: String, count: usize },
+    #[error("{file}: material {material} is phong but scene.json has no \"camera\" to take the view direction from")]
+    PhongWithoutCamera { file: String, material: u32 },
+    #[error("{file}: pixel ({x}, {y}) reflects material {material}, which is water; water seen in water is not supported")]
+    WaterInWater { file: String, x: usize, y: usize, material: u32 },
+}
+
+/// Shades one frame of `scene` with `settings`.
+pub fn shade_frame(scene: &Scene, frame: &Frame, settings: &ShadingSettings) -> Result<ShadedFrame, ShadeError> {
+    settings.validate().map_err(ShadeError::Settings)?;
+    check_frame(scene, frame)?;
+    let pyramid = match &frame.height_map {
+        Some(map) => {
+            let file = scene.heightfield.as_ref().map(|h| h.heights.0.clone()).unwrap_or_default();
+            let field = HeightField::new(map.heights.clone(), map.columns, map.rows, map.min, map.max)
+                .map_err(|source| ShadeError::HeightField { file: file.clone(), source })?;
+            Some(HorizonPyramid::new(&field, settings.horizon).map_err(|source| ShadeError::HeightField { file, source })?)
+        }
+        None => None,
+    };
+    let light = frame.light.sh_coefficients(settings.order);
+    let occluders = Occluders { blockers: &frame.blockers, horizons: pyramid.as_ref() };
+    Ok(if settings.double_precision {
+        let kernel = ShadingKernel::<f64>::new(settings, &scene.materials, &light, pyramid.is_some());
+        shade_pixels(&kernel, occluders, frame)
+    } else {
+        let kernel = ShadingKernel::<f32>::new(settings, &scene.materials, &light, pyramid.is_some());
+        shade_pixels(&kernel, occluders, frame)
+    })
+}
+
+/// What the materials present in the frame need from the scene.
+fn check_frame(scene: &Scene, frame: &Frame) -> Result<(), ShadeError> {
+    let g = &frame.gbuffer;
+    let file = g.file.display().to_string();
+    let water = g.material.iter().filter(|&&m| matches!(scene.materials.get(&m), Some(Material::Water { .. }))).count();
+    if water > 0 && frame.reflection.is_none() {
+        return Err(ShadeError::WaterWithoutReflection { file, count: water });
+    }
+    if frame.camera.is_none() {
+        let seen = g.material.iter().chain(frame.reflection.iter().flat_map(|r| r.material.iter()));
+        for &m in seen {
+            if matches!(scene.materials.get(&m), Some(Material::Phong { .. })) {
+                return Err(ShadeError::PhongWithoutCamera { file, material: m });
+            }
+        }
+    }
+    if let Some(reflection) = &frame.reflection {
+        for (i, &m) in reflection.material.iter().enumerate() {
+            let is_water_pixel = matches!(scene.materials.get(&g.material[i]), Some(Material::Water { .. }));
+            if is_water_pixel && matches!(scene.materials.get(&m), Some(Material::Water { .. })) {
+                let file = reflection.file.display().to_string();
+                return Err(ShadeError::WaterInWater { file, x: i % g.width, y: i / g.width, material: m });
+            }
+        }
+    }
+    Ok(())
+}
+
+fn unit_or_up(n: [f32; 3]) -> [f64; 3] {
+    let n = n.map(f64::from);
+    let length = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+    if length > 1e-12 {
+        n.map(|c| c / length)
+    } else {
+        [0.0, 0.0, 1.0]
+    }
+}
+
+fn shade_pixels<T: Real>(kernel: &ShadingKernel<T>, occluders: Occluders, frame: &Frame) -> ShadedFrame {
+    let g = &frame.gbuffer;
+    let (width, height) = (g.width, g.height);
+    let mut rgba = vec![[0.0f32; 4]; width * height];
+    rgba.par_chunks_mut(width).enumerate().for_each(|(y, row)| {
+        for (x, out) in row.iter_mut().enumerate() {
+            *out = shade_pixel(kernel, occluders, frame, x, y);
+        }
+    });
+    ShadedFrame { width, height, rgba }
+}
+
+/// The eye position, or a point far along the normal when the scene has no camera (only
+/// diffuse shading is possible then, and it ignores the eye).
+fn eye(frame: &Frame, p: [f64; 3], n: [f64; 3]) -> [f64; 3] {
+    match &frame.camera {
+        Some(camera) => camera.position,
+        None => [p[0] + n[0], p[1] + n[1], p[2] + n[2]],
+    }
+}
+
+fn surface_at(buffer: &GBuffer, i: usize, view_origin: Option<[f64; 3]>, frame: &Frame) -> SurfacePoint {
+    let position = buffer.position[i].map(f64::from);
+    let normal = unit_or_up(buffer.normal[i]);
+    SurfacePoint {
+        position,
+        normal,
+        view_origin: view_origin.unwrap_or_else(|| eye(frame, position, normal)),
+        material: buffer.material[i],
+    }
+}
+
+fn shade_pixel<T: Real>(kernel: &ShadingKernel<T>, occluders: Occluders, frame: &Frame, x: usize, y: usize) -> [f32; 4] {
+    let g = &frame.gbuffer;
+    let i = g.index(x, y);
+    let with_alpha = |c: [f32; 3]| [c[0], c[1], c[2], 1.0];
+    match g.material[i] {
+        0 => {
+            let sky = match &frame.camera {
+                Some(camera) => frame.light.radiance(camera.ray_direction(x as f64 + 0.5, y as f64 + 0.5)),
+                None => [0.0; 3],
+            };
+            [sky[0], sky[1], sky[2], 0.0]
+        }
+        m => match kernel.material(m) {
+            Some(Material::Water { tint }) => {
+                let reflection = frame.reflection.as_ref().expect("checked before shading");
+                let water = surface_at(g, i, None, frame);
+                let seen = if reflection.material[i] == 0 {
+                    let mirror = super::kernel::reflect_view(water.view_origin, water.position, water.normal);
+                    frame.light.radiance(mirror)
+                } else {
+                    kernel.shade(occluders, &surface_at(reflection, i, Some(water.position), frame))
+                };
+                with_alpha([0, 1, 2].map(|c| tint[c] * seen[c]))
+            }
+            _ => with_alpha(kernel.shade(occluders, &surface_at(g, i, None, frame))),
+        },
+    }
+}

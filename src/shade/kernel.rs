@@ -1,0 +1,232 @@
+//! The per-pixel shading kernel: sum log vectors, exponentiate, dot with the light
+//! (paper 000, Sections 4-5 and Eq. 9). The CPU executor of the pipeline; the tables it
+//! holds are the ones a GPU executor uploads.
+
+use super::settings::ShadingSettings;
+use crate::heightfield::HorizonPyramid;
+use crate::logsh::{cap_log_zh, lobe_log_zh_as, nlp_slice, view_blocker, BlockerView, Lobe, WedgeOperator};
+use crate::scene::{Material, Sphere};
+use crate::sh::exp::{exp_hyb_with, exp_series, ExactExp, OlTable};
+use crate::sh::{add_rotated_zonal, coefficient_count, ExpMethod, Real, TriplingTensor, MAX_COEFFICIENTS};
+use std::collections::BTreeMap;
+use std::f64::consts::FRAC_PI_2;
+
+/// Most azimuthal directions a kernel accepts (per-pixel buffers are on the stack).
+pub const MAX_DIRECTIONS: usize = 64;
+
+/// `exp*` with the tables its method needs, built once per frame setting.
+pub struct Exponentiator {
+    method: ExpMethod,
+    exact: Option<ExactExp>,
+    tensor: Option<TriplingTensor>,
+    ol: Option<OlTable>,
+    hyb_threshold: f64,
+}
+
+/// Training vectors for the OL fit: 256 of them, a fixed seed (the table is the same on
+/// every run).
+const OL_TRAINING_COUNT: usize = 256;
+const OL_TRAINING_SEED: u64 = 0x1065_5a11;
+
+impl Exponentiator {
+    pub fn new(order: usize, method: ExpMethod, hyb_threshold: f64) -> Self {
+        let needs_tensor = matches!(method, ExpMethod::Series | ExpMethod::Hyb);
+        let needs_ol = matches!(method, ExpMethod::Ol | ExpMethod::Hyb);
+        Self {
+            method,
+            exact: (method == ExpMethod::Exact).then(|| ExactExp::new(order)),
+            tensor: needs_tensor.then(|| TriplingTensor::new(order)),
+            ol: needs_ol.then(|| {
+                OlTable::fit(order, &crate::logsh::training_log_vectors(order, OL_TRAINING_COUNT, OL_TRAINING_SEED))
+            }),
+            hyb_threshold,
+        }
+    }
+
+    pub fn method(&self) -> ExpMethod {
+        self.method
+    }
+
+    pub fn exp<T: Real>(&self, f: &[T], out: &mut [T]) {
+        match self.method {
+            ExpMethod::Exact => self.exact.as_ref().expect("built with its table").exp(f, out),
+            ExpMethod::Series => exp_series(self.tensor.as_ref().expect("built with its table"), f, out),
+            ExpMethod::Ol => self.ol.as_ref().expect("built with its table").exp(f, out),
+            ExpMethod::Hyb => exp_hyb_with(
+                self.tensor.as_ref().expect("built with its table"),
+                self.ol.as_ref().expect("built with its table"),
+                self.hyb_threshold,
+                f,
+                out,
+            ),
+        }
+    }
+}
+
+/// The BRDF lobes of one material, as log-ZH tables.
+#[derive(Clone, Debug)]
+struct MaterialLobes<T> {
+    material: Material,
+    /// Phong lobe (Eq. 27) for `phong` materials.
+    phong: Option<Vec<T>>,
+}
+
+/// What occludes a frame: its sphere blockers and its height-field pyramid.
+#[derive(Clone, Copy)]
+pub struct Occluders<'a> {
+    pub blockers: &'a [Sphere],
+    pub horizons: Option<&'a HorizonPyramid>,
+}
+
+/// A point to shade: where, which way it faces, from where it is seen, what it is made of.
+#[derive(Clone, Copy, Debug)]
+pub struct SurfacePoint {
+    pub position: [f64; 3],
+    /// Unit normal.
+    pub normal: [f64; 3],
+    /// The eye (or, for a point seen in water, the water surface point).
+    pub view_origin: [f64; 3],
+    pub material: u32,
+}
+
+/// Tables and settings for one frame's shading at precision `T`.
+pub struct ShadingKernel<T> {
+    order: usize,
+    log_epsilon: T,
+    ratio_attenuation: bool,
+    tangent_occlusion: bool,
+    exp: Exponentiator,
+    wedge: Option<WedgeOperator>,
+    diffuse: Vec<T>,
+    /// Log-ZH of the hemisphere behind the tangent plane, around -Z before rotation.
+    tangent: Vec<T>,
+    materials: BTreeMap<u32, MaterialLobes<T>>,
+    /// Light SH coefficients per colour channel.
+    light: [Vec<T>; 3],
+}
+
+impl<T: Real> ShadingKernel<T> {
+    /// Builds the tables. `light` holds `order^2` RGB coefficients; `has_heightfield`
+    /// decides whether the wedge operator is built at all.
+    pub fn new(settings: &ShadingSettings, materials: &BTreeMap<u32, Material>, light: &[[f64; 3]], has_heightfield: bool) -> Self {
+        let order = settings.order;
+        let epsilon = settings.epsilon;
+        let mut tangent = vec![T::zero(); order];
+        cap_log_zh(order, T::of(epsilon.ln()), T::of(FRAC_PI_2), &mut tangent);
+        let materials = materials
+            .iter()
+            .map(|(&index, material)| {
+                let phong = match material {
+                    Material::Phong { exponent, .. } => {
+                        Some(lobe_log_zh_as(order, Lobe::Phong { exponent: *exponent as f64 }, epsilon))
+                    }
+                    _ => None,
+                };
+                (index, MaterialLobes { material: material.clone(), phong })
+            })
+            .collect();
+        let channel = |c: usize| light.iter().map(|rgb| T::of(rgb[c])).collect::<Vec<T>>();
+        Self {
+            order,
+            log_epsilon: T::of(epsilon.ln()),
+            ratio_attenuation: settings.ratio_attenuation,
+            tangent_occlusion: settings.tangent_occlusion,
+            exp: Exponentiator::new(order, settings.exp, settings.hyb_threshold),
+            wedge: has_heightfield.then(|| WedgeOperator::new(order, settings.horizon.directions)),
+            diffuse: lobe_log_zh_as(order, Lobe::Diffuse, epsilon),
+            tangent,
+            materials,
+            light: [channel(0), channel(1), channel(2)],
+        }
+    }
+
+    pub fn order(&self) -> usize {
+        self.order
+    }
+
+    pub fn material(&self, index: u32) -> Option<&Material> {
+        self.materials.get(&index).map(|m| &m.material)
+    }
+
+    /// Log visibility at `p` with unit normal `n` (Eq. 9 before exponentiation): the
+    /// height field's wedges, every sphere cap in front of the tangent plane, and the
+    /// hemisphere behind the tangent plane.
+    pub fn add_visibility(&self, occluders: Occluders, p: [f64; 3], n: [f64; 3], acc: &mut [T]) {
+        let order = self.order;
+        let nt = n.map(T::of);
+        if self.tangent_occlusion {
+            add_rotated_zonal(order, &self.tangent, T::one(), nt.map(|c| -c), acc);
+        }
+        if let (Some(pyramid), Some(wedge)) = (occluders.horizons, &self.wedge) {
+            let directions = wedge.directions;
+            let mut sigmas = [0.0f64; MAX_DIRECTIONS];
+            pyramid.horizon_elevations(p, &mut sigmas[..directions]);
+            let mut slices = [T::zero(); MAX_DIRECTIONS * crate::sh::MAX_ORDER];
+            for (k, sigma) in sigmas[..directions].iter().enumerate() {
+                nlp_slice(order, self.log_epsilon, T::of(*sigma), &mut slices[k * order..(k + 1) * order]);
+            }
+            wedge.accumulate(&slices[..directions * order], acc);
+        }
+        let pt = p.map(T::of);
+        let mut zonal = [T::zero(); crate::sh::MAX_ORDER];
+        for sphere in occluders.blockers {
+            let view = view_blocker(pt, nt, sphere.center.map(T::of), T::of(sphere.radius), self.ratio_attenuation);
+            if let BlockerView::Cap { direction, alpha, weight } = view {
+                cap_log_zh(order, self.log_epsilon, alpha, &mut zonal[..order]);
+                add_rotated_zonal(order, &zonal[..order], weight, direction, acc);
+            }
+        }
+    }
+
+    /// `exp*(visibility + lobe) . light` per colour channel, clamped at 0 (ringing of a
+    /// band-limited product can dip below it).
+    fn lit(&self, visibility: &[T], lobe: &[T], axis: [f64; 3]) -> [T; 3] {
+        let count = coefficient_count(self.order);
+        let mut f = [T::zero(); MAX_COEFFICIENTS];
+        f[..count].copy_from_slice(&visibility[..count]);
+        add_rotated_zonal(self.order, lobe, T::one(), axis.map(T::of), &mut f[..count]);
+        let mut e = [T::zero(); MAX_COEFFICIENTS];
+        self.exp.exp(&f[..count], &mut e[..count]);
+        let dot = |light: &[T]| light.iter().zip(&e[..count]).fold(T::zero(), |acc, (&l, &v)| acc + l * v).max(T::zero());
+        [dot(&self.light[0]), dot(&self.light[1]), dot(&self.light[2])]
+    }
+
+    /// Outgoing radiance of a surface point (DESIGN.md, material types). Water is not a
+    /// surface material here: the caller shades the reflected point instead.
+    pub fn shade(&self, occluders: Occluders, point: &SurfacePoint) -> [f32; 3] {
+        let count = coefficient_count(self.order);
+        let mut visibility = [T::zero(); MAX_COEFFICIENTS];
+        self.add_visibility(occluders, point.position, point.normal, &mut visibility[..count]);
+        let Some(lobes) = self.materials.get(&point.material) else {
+            return [0.0; 3];
+        };
+        let n = point.normal;
+        let scale = |c: [T; 3], k: [f32; 3]| [0, 1, 2].map(|i| c[i].to_f32().unwrap_or(0.0) * k[i]);
+        match &lobes.material {
+            Material::Diffuse { albedo } | Material::Heightfield { albedo } => {
+                scale(self.lit(&visibility, &self.diffuse, n), *albedo)
+            }
+            Material::Phong { albedo, specular, .. } => {
+                let diffuse = scale(self.lit(&visibility, &self.diffuse, n), *albedo);
+                let phong = lobes.phong.as_ref().expect("phong materials carry their lobe");
+                let reflected = reflect_view(point.view_origin, point.position, n);
+                let glossy = scale(self.lit(&visibility, phong, reflected), *specular);
+                [0, 1, 2].map(|i| diffuse[i] + glossy[i])
+            }
+            Material::Water { .. } => [0.0; 3],
+        }
+    }
+}
+
+/// The view direction mirrored about `n`: `R = 2 (n . V) n - V`, `V` from `p` towards
+/// the eye. Falls back to `n` when the eye sits on `p`.
+pub fn reflect_view(eye: [f64; 3], p: [f64; 3], n: [f64; 3]) -> [f64; 3] {
+    let v = [eye[0] - p[0], eye[1] - p[1], eye[2] - p[2]];
+    let length = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+    if !(length > 0.0) {
+        return n;
+    }
+    let v = v.map(|c| c / length);
+    let d = 2.0 * (n[0] * v[0] + n[1] * v[1] + n[2] * v[2]);
+    [d * n[0] - v[0], d * n[1] - v[1], d * n[2] - v[2]]
+}

@@ -1,0 +1,9 @@
+//! Per-pixel shading on the CPU: the oracle the GPU pass is compared with and the
+//! fallback on machines without a GPU adapter.
+pub mod frame;
+pub mod kernel;
+pub mod settings;
+
+pub use frame::{shade_frame, ShadeError, ShadedFrame};
+pub use kernel::{Exponentiator, Occluders, ShadingKernel, SurfacePoint};
+pub use settings::{default_epsilon, ShadingSettings};

@@ -1,0 +1,91 @@
+//! What a user chooses: order, clamp, exponentiation, attenuation and the height-field
+//! march, with defaults chosen by measurement.
+
+use crate::heightfield::HorizonSettings;
+use crate::sh::{ExpMethod, MAX_ORDER, MIN_ORDER};
+
+/// The knobs of one shading run.
+#[derive(Clone, Copy, Debug)]
+pub struct ShadingSettings {
+    /// SH order n: n^2 coefficients per log vector.
+    pub order: usize,
+    /// The log clamp eps (paper 000, Eq. 2 and 7), relative to each lobe's peak.
+    pub epsilon: f64,
+    /// How `exp*` is computed.
+    pub exp: ExpMethod,
+    /// HYB's scaling threshold on `|f^|`.
+    pub hyb_threshold: f64,
+    /// Scale each sphere's log vector by `r / |c - p|` (paper 000, Section 4.2).
+    pub ratio_attenuation: bool,
+    /// Add the log visibility of the hemisphere behind each receiver's tangent plane:
+    /// no light reaches an opaque surface from behind it, and leaving that hemisphere
+    /// unclamped lets the band-limited lobe overshoot (an unoccluded plane comes out
+    /// 1.20 instead of 1.03 at order 4, eps 0.1).
+    pub tangent_occlusion: bool,
+    /// Height-field march: W, k, o.
+    pub horizon: HorizonSettings,
+    /// Run the kernel in f64 instead of f32.
+    pub double_precision: bool,
+}
+
+/// Default eps per order, chosen by minimising the mean absolute error on the
+/// sphere-over-plane analytic scenes with the default exponentiation (see
+/// `examples/choose_epsilon.rs`, which prints the table it comes from).
+pub fn default_epsilon(order: usize) -> f64 {
+    match order {
+        0..=3 => 0.1,
+        4 => 0.1,
+        5 | 6 => 0.1,
+        _ => 0.05,
+    }
+}
+
+/// Default HYB threshold: each halving costs one SH product per pixel and lowers HYB's
+/// error against exact exponentiation (`examples/exp_accuracy.rs`).
+pub const DEFAULT_HYB_THRESHOLD: f64 = 0.25;
+
+impl ShadingSettings {
+    /// Defaults at a given order.
+    pub fn for_order(order: usize) -> Self {
+        Self {
+            order,
+            epsilon: default_epsilon(order),
+            exp: ExpMethod::Hyb,
+            hyb_threshold: DEFAULT_HYB_THRESHOLD,
+            ratio_attenuation: false,
+            tangent_occlusion: true,
+            horizon: HorizonSettings::default(),
+            double_precision: false,
+        }
+    }
+
+    /// Checks the rules that span the whole settings, with a message naming the flag.
+    pub fn validate(&self) -> Result<(), String> {
+        if !(MIN_ORDER..=MAX_ORDER).contains(&self.order) {
+            return Err(format!("--order {} is outside {MIN_ORDER}..={MAX_ORDER}", self.order));
+        }
+        if !(self.epsilon > 0.0 && self.epsilon < 1.0) {
+            return Err(format!("--epsilon {} must lie strictly between 0 and 1", self.epsilon));
+        }
+        if !(self.hyb_threshold > 0.0 && self.hyb_threshold.is_finite()) {
+            return Err(format!("HYB threshold {} must be positive", self.hyb_threshold));
+        }
+        let w = self.horizon.directions;
+        if !(3..=super::kernel::MAX_DIRECTIONS).contains(&w) {
+            return Err(format!("--directions {w} is outside 3..={}", super::kernel::MAX_DIRECTIONS));
+        }
+        if !(self.horizon.level_step > 0.0 && self.horizon.level_step.is_finite()) {
+            return Err(format!("--level-step {} must be positive", self.horizon.level_step));
+        }
+        if !(self.horizon.level_offset >= 0.0 && self.horizon.level_offset.is_finite()) {
+            return Err(format!("--level-offset {} must be zero or positive", self.horizon.level_offset));
+        }
+        Ok(())
+    }
+}
+
+impl Default for ShadingSettings {
+    fn default() -> Self {
+        Self::for_order(4)
+    }
+}

@@ -1,0 +1,445 @@
+//! Scene format v1: every bad input gives the documented error naming the file and the
+//! problem; the light follows Blender's environment orientation; outputs are written
+//! atomically and never over an input.
+
+use exr::prelude::{AnyChannel, AnyChannels, Encoding, FlatSamples, Image, Layer, LayerAttributes, WritableImage};
+use logsh::scene::light::{direction_to_equirectangular, equirectangular_to_direction};
+use logsh::scene::output::{write_exr_rgba, write_png_preview};
+use logsh::scene::{EnvironmentMap, Light, Scene, SceneError};
+use logsh::synth::{self, GBufferLayout, SphereOverPlane};
+use std::f64::consts::PI;
+use std::path::Path;
+
+/// A valid 32x18 sphere-over-plane scene (materials 1 and 2) to break.
+fn base_scene() -> tempfile::TempDir {
+    let dir = tempfile::tempdir().unwrap();
+    let spec = SphereOverPlane { width: 32, height: 18, layout: GBufferLayout::Blender5, ..SphereOverPlane::default() };
+    synth::sphere_over_plane(dir.path(), &spec).unwrap();
+    dir
+}
+
+fn edit_json(path: &Path, f: impl FnOnce(&mut serde_json::Value)) {
+    let mut v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap();
+    f(&mut v);
+    std::fs::write(path, serde_json::to_string_pretty(&v).unwrap()).unwrap();
+}
+
+/// A single-part EXR with the given f32 channels.
+fn write_raw_exr(path: &Path, width: usize, height: usize, channels: Vec<(&str, Vec<f32>)>) {
+    let list: Vec<AnyChannel<FlatSamples>> =
+        channels.into_iter().map(|(n, d)| AnyChannel::new(n, FlatSamples::F32(d))).collect();
+    let layer = Layer::new((width, height), LayerAttributes::default(), Encoding::SMALL_LOSSLESS, AnyChannels::sort(list.into_iter().collect()));
+    Image::from_layer(layer).write().to_file(path).unwrap();
+}
+
+/// G-buffer channels of a plane seen from above: index `index(x, y)` per pixel.
+fn gbuffer_channels(w: usize, h: usize, index: impl Fn(usize, usize) -> f32) -> Vec<(&'static str, Vec<f32>)> {
+    let n = w * h;
+    vec![
+        ("ViewLayer.Position.X", vec![0.0; n]),
+        ("ViewLayer.Position.Y", vec![0.0; n]),
+        ("ViewLayer.Position.Z", vec![0.0; n]),
+        ("ViewLayer.Normal.X", vec![0.0; n]),
+        ("ViewLayer.Normal.Y", vec![0.0; n]),
+        ("ViewLayer.Normal.Z", vec![1.0; n]),
+        ("ViewLayer.IndexMA.X", (0..n).map(|i| index(i % w, i / w)).collect()),
+    ]
+}
+
+fn frame_error(dir: &Path) -> SceneError {
+    Scene::load(dir).and_then(|s| s.frame(1)).expect_err("the frame must be refused")
+}
+
+fn assert_mentions(err: &SceneError, parts: &[&str]) {
+    let text = err.to_string();
+    for p in parts {
+        assert!(text.contains(p), "error {text:?} should mention {p:?}");
+    }
+}
+
+#[test]
+fn missing_file_is_named() {
+    let dir = base_scene();
+    std::fs::remove_file(dir.path().join("gbuffer.0001.exr")).unwrap();
+    let err = frame_error(dir.path());
+    assert!(matches!(err, SceneError::MissingFile { .. }), "{err:?}");
+    assert_mentions(&err, &["gbuffer.0001.exr", "file not found"]);
+
+    std::fs::remove_file(dir.path().join("scene.json")).unwrap();
+    let err = Scene::load(dir.path()).unwrap_err();
+    assert_mentions(&err, &["scene.json", "file not found"]);
+}
+
+#[test]
+fn missing_channel_lists_what_was_found() {
+    let dir = base_scene();
+    let mut channels = gbuffer_channels(32, 18, |_, _| 1.0);
+    channels.retain(|(n, _)| *n != "ViewLayer.Normal.Y");
+    write_raw_exr(&dir.path().join("gbuffer.0001.exr"), 32, 18, channels);
+    let err = frame_error(dir.path());
+    assert!(matches!(err, SceneError::MissingChannel { .. }), "{err:?}");
+    assert_mentions(&err, &["gbuffer.0001.exr", "missing channel \"ViewLayer.Normal.Y\"", "found:", "\"ViewLayer.Normal.X\""]);
+}
+
+#[test]
+fn blender4_index_name_and_channel_overrides() {
+    let dir = base_scene();
+    // Blender 4 naming is found without configuration.
+    write_raw_exr(&dir.path().join("gbuffer.0001.exr"), 32, 18, gbuffer_channels(32, 18, |x, _| (x % 2) as f32));
+    let f = Scene::load(dir.path()).unwrap().frame(1).unwrap();
+    assert_eq!(&f.gbuffer.material[..4], &[0, 1, 0, 1]);
+    assert!(f.gbuffer.uv.is_none(), "no UV channels: uv is None");
+
+    // Overrides: custom names, and UV named in an override is required.
+    let n = 32 * 18;
+    let custom = vec![
+        ("P.X", vec![0.0; n]), ("P.Y", vec![0.0; n]), ("P.Z", vec![0.0; n]),
+        ("N.X", vec![0.0; n]), ("N.Y", vec![0.0; n]), ("N.Z", vec![1.0; n]),
+        ("idx", vec![2.0; n]),
+    ];
+    write_raw_exr(&dir.path().join("gbuffer.0001.exr"), 32, 18, custom);
+    edit_json(&dir.path().join("scene.json"), |v| {
+        v["channels"] = serde_json::json!({"position": ["P.X", "P.Y", "P.Z"], "normal": ["N.X", "N.Y", "N.Z"], "material_index": "idx"});
+    });
+    let f = Scene::load(dir.path()).unwrap().frame(1).unwrap();
+    assert!(f.gbuffer.material.iter().all(|&m| m == 2));
+    edit_json(&dir.path().join("scene.json"), |v| v["channels"]["uv"] = serde_json::json!(["T.U", "T.V"]));
+    assert_mentions(&frame_error(dir.path()), &["missing channel \"T.U\""]);
+    edit_json(&dir.path().join("scene.json"), |v| v["channels"]["colour"] = serde_json::json!("x"));
+    assert_mentions(&Scene::load(dir.path()).unwrap_err(), &["scene.json", "unknown field `colour`"]);
+}
+
+#[test]
+fn size_mismatch_between_buffers() {
+    let dir = base_scene();
+    let small = SphereOverPlane { width: 16, height: 9, ..SphereOverPlane::default() };
+    let s = small.scene();
+    let (g, _) = s.render_frame(&s.frames[0]);
+    synth::write_gbuffer_exr(&dir.path().join("reflection.0001.exr"), &g, GBufferLayout::Blender5).unwrap();
+    edit_json(&dir.path().join("scene.json"), |v| v["reflection_gbuffer"] = serde_json::json!("reflection.####.exr"));
+    let err = frame_error(dir.path());
+    assert!(matches!(err, SceneError::SizeMismatch { .. }), "{err:?}");
+    assert_mentions(&err, &["reflection.0001.exr", "16x9", "32x18", "gbuffer.0001.exr"]);
+
+    // The camera's resolution must match too.
+    let dir = base_scene();
+    edit_json(&dir.path().join("camera.0001.json"), |v| v["resolution"] = serde_json::json!([64, 36]));
+    assert_mentions(&frame_error(dir.path()), &["camera.0001.json", "64x36", "32x18"]);
+}
+
+#[test]
+fn malformed_json_gives_file_and_line() {
+    let dir = base_scene();
+    std::fs::write(dir.path().join("scene.json"), "{\n  \"version\": 1,\n  \"gbuffer\": \"g.exr\" \"oops\"\n}\n").unwrap();
+    let err = Scene::load(dir.path()).unwrap_err();
+    match &err {
+        SceneError::Json { line, .. } => assert_eq!(*line, 3),
+        other => panic!("{other:?}"),
+    }
+    assert_mentions(&err, &["scene.json:3:"]);
+}
+
+#[test]
+fn unknown_keys_are_named() {
+    let dir = base_scene();
+    edit_json(&dir.path().join("scene.json"), |v| v["frobnicate"] = serde_json::json!(1));
+    assert_mentions(&Scene::load(dir.path()).unwrap_err(), &["scene.json", "unknown field `frobnicate`"]);
+
+    let dir = base_scene();
+    edit_json(&dir.path().join("scene.json"), |v| v["materials"]["1"]["albdo"] = serde_json::json!([1, 1, 1]));
+    assert_mentions(&Scene::load(dir.path()).unwrap_err(), &["unknown field `albdo`"]);
+
+    let dir = base_scene();
+    edit_json(&dir.path().join("scene.json"), |v| v["materials"]["1"]["tint"] = serde_json::json!([1, 1, 1]));
+    assert_mentions(&Scene::load(dir.path()).unwrap_err(), &["material 1", "\"tint\" does not belong to type diffuse"]);
+
+    let dir = base_scene();
+    edit_json(&dir.path().join("camera.0001.json"), |v| v["fov"] = serde_json::json!(40));
+    assert_mentions(&frame_error(dir.path()), &["camera.0001.json", "unknown field `fov`"]);
+
+    let dir = base_scene();
+    edit_json(&dir.path().join("blockers.0001.json"), |v| v["spheres"][0]["radus"] = serde_json::json!(1));
+    assert_mentions(&frame_error(dir.path()), &["blockers.0001.json", "unknown field `radus`"]);
+}
+
+#[test]
+fn scene_level_validation() {
+    type Edit = Box<dyn Fn(&mut serde_json::Value)>;
+    let cases: Vec<(Edit, &[&str])> = vec![
+        (Box::new(|v| v["version"] = serde_json::json!(2)), &["unsupported scene format version 2"]),
+        (Box::new(|v| v["materials"]["0"] = serde_json::json!({"type": "diffuse", "albedo": [1, 1, 1]})), &["material index 0"]),
+        (Box::new(|v| v["materials"]["x"] = serde_json::json!({"type": "diffuse", "albedo": [1, 1, 1]})), &["material key \"x\""]),
+        (Box::new(|v| v["materials"]["3"] = serde_json::json!({"type": "phong", "albedo": [0, 0, 0], "specular": [1, 1, 1], "exponent": 0})), &["material 3", "exponent 0 must be > 0"]),
+        (Box::new(|v| v["materials"]["3"] = serde_json::json!({"type": "phong", "albedo": [0, 0, 0], "specular": [1, 1, 1]})), &["needs key \"exponent\""]),
+        (Box::new(|v| v["materials"]["3"] = serde_json::json!({"type": "diffuse", "albedo": [1, -1, 1]})), &["negative"]),
+        (Box::new(|v| v["materials"]["3"] = serde_json::json!({"type": "metal", "albedo": [1, 1, 1]})), &["unknown type \"metal\""]),
+        (Box::new(|v| v["light"] = serde_json::json!({"sh": [[1, 1, 1], [0, 0, 0], [0, 0, 0]]})), &["3 coefficients"]),
+        (Box::new(|v| v["light"] = serde_json::json!({"constant": [1, 1, 1], "sh": [[1, 1, 1]]})), &["exactly one of"]),
+        (Box::new(|v| v["light"] = serde_json::json!({"environment": "nope.exr"})), &["nope.exr", "file not found"]),
+        (Box::new(|v| v["frames"] = serde_json::json!({"start": 5, "end": 1})), &["start 5 is after end 1"]),
+        (Box::new(|v| v["heightfield"] = serde_json::json!({"heights": "h.exr", "min": [0, 0], "max": [0, 1]})), &["min", "below max"]),
+    ];
+    for (edit, parts) in cases {
+        let dir = base_scene();
+        edit_json(&dir.path().join("scene.json"), |v| edit(v));
+        let err = Scene::load(dir.path()).unwrap_err();
+        assert_mentions(&err, parts);
+    }
+}
+
+#[test]
+fn frames_outside_the_range_are_refused() {
+    let dir = base_scene();
+    let scene = Scene::load(dir.path()).unwrap();
+    let err = scene.frame(2).unwrap_err();
+    assert!(matches!(err, SceneError::FrameOutOfRange { frame: 2, start: 1, end: 1, .. }), "{err:?}");
+    edit_json(&dir.path().join("scene.json"), |v| {
+        v.as_object_mut().unwrap().remove("frames");
+    });
+    assert_eq!(Scene::load(dir.path()).unwrap().default_frame(), 1);
+}
+
+#[test]
+fn negative_radius_and_non_finite_blockers() {
+    let dir = base_scene();
+    edit_json(&dir.path().join("blockers.0001.json"), |v| v["spheres"][0]["radius"] = serde_json::json!(-1.0));
+    let err = frame_error(dir.path());
+    assert_mentions(&err, &["blockers.0001.json", "sphere 0", "negative radius -1"]);
+
+    // JSON has no NaN: the file is malformed, and the error points at the line.
+    let dir = base_scene();
+    let path = dir.path().join("blockers.0001.json");
+    std::fs::write(&path, "{\"frame\": 1,\n \"spheres\": [{\"center\": [0, 0, 2],\n   \"radius\": NaN}]}").unwrap();
+    let err = frame_error(dir.path());
+    assert!(matches!(err, SceneError::Json { line: 3, .. }), "{err:?}");
+    assert_mentions(&err, &["blockers.0001.json:3:"]);
+
+    // Overflowing numbers are refused too.
+    std::fs::write(&path, "{\"frame\": 1, \"spheres\": [{\"center\": [0, 1e999, 2], \"radius\": 1}]}").unwrap();
+    assert_mentions(&frame_error(dir.path()), &["blockers.0001.json"]);
+
+    std::fs::write(&path, "{\"frame\": 2, \"spheres\": []}").unwrap();
+    assert_mentions(&frame_error(dir.path()), &["says frame 2 but was read for frame 1"]);
+}
+
+#[test]
+fn fractional_and_unknown_material_indices() {
+    let dir = base_scene();
+    let g = dir.path().join("gbuffer.0001.exr");
+    write_raw_exr(&g, 32, 18, gbuffer_channels(32, 18, |x, y| if (x, y) == (3, 2) { 1.5 } else { 1.0 }));
+    let err = frame_error(dir.path());
+    assert!(matches!(err, SceneError::MaterialIndex { x: 3, y: 2, .. }), "{err:?}");
+    assert_mentions(&err, &["gbuffer.0001.exr", "pixel (3, 2)", "1.5", "not a whole number"]);
+
+    // Within 1e-3 of a whole number is accepted and rounded.
+    write_raw_exr(&g, 32, 18, gbuffer_channels(32, 18, |_, _| 2.0004));
+    assert!(Scene::load(dir.path()).unwrap().frame(1).unwrap().gbuffer.material.iter().all(|&m| m == 2));
+
+    write_raw_exr(&g, 32, 18, gbuffer_channels(32, 18, |x, y| if (x, y) == (5, 7) { 7.0 } else { 0.0 }));
+    assert_mentions(&frame_error(dir.path()), &["pixel (5, 7)", "material index 7", "not in the material table", "1, 2"]);
+
+    write_raw_exr(&g, 32, 18, gbuffer_channels(32, 18, |_, _| -1.0));
+    assert_mentions(&frame_error(dir.path()), &["pixel (0, 0)", "is negative"]);
+}
+
+#[test]
+fn non_finite_position_on_a_surface_pixel() {
+    let dir = base_scene();
+    let mut channels = gbuffer_channels(32, 18, |x, _| if x < 4 { 0.0 } else { 1.0 });
+    channels[0].1[1] = f32::NAN; // pixel (1, 0) is background: ignored
+    channels[0].1[32 + 6] = f32::INFINITY; // pixel (6, 1) is a surface
+    write_raw_exr(&dir.path().join("gbuffer.0001.exr"), 32, 18, channels);
+    let err = frame_error(dir.path());
+    assert!(matches!(err, SceneError::NonFinite { .. }), "{err:?}");
+    assert_mentions(&err, &["gbuffer.0001.exr", "position", "pixel (6, 1)"]);
+}
+
+#[test]
+fn absurd_sizes_are_refused_before_allocation() {
+    let dir = base_scene();
+    let w = 16385;
+    write_raw_exr(&dir.path().join("gbuffer.0001.exr"), w, 1, vec![("ViewLayer.Position.X", vec![0.0; w])]);
+    let err = frame_error(dir.path());
+    assert!(matches!(err, SceneError::TooLarge { width: 16385, height: 1, .. }), "{err:?}");
+    assert_mentions(&err, &["gbuffer.0001.exr", "16385 x 1", "too large"]);
+}
+
+#[test]
+fn water_pixels_need_a_reflection_buffer() {
+    let dir = base_scene();
+    edit_json(&dir.path().join("scene.json"), |v| v["materials"]["2"] = serde_json::json!({"type": "water", "tint": [1, 1, 1]}));
+    assert_mentions(&frame_error(dir.path()), &["is water (material 2)", "reflection_gbuffer"]);
+}
+
+// ---- light -------------------------------------------------------------------------
+
+/// Independent statement of Blender's mapping (Cycles `direction_to_equirectangular`,
+/// `v = 0` at the bottom row): the texel of the file (row 0 on top) that direction `d`
+/// falls in.
+fn blender_texel(d: [f64; 3], w: usize, h: usize) -> (usize, usize) {
+    let u = 0.5 - d[1].atan2(d[0]) / (2.0 * PI);
+    let v = 1.0 - d[2].acos() / PI;
+    (((u * w as f64) as usize).min(w - 1), (((1.0 - v) * h as f64) as usize).min(h - 1))
+}
+
+#[test]
+fn equirectangular_mapping_is_blenders() {
+    // Zenith on the top row, +X in the centre column, +Y at a quarter, -Y at three quarters.
+    assert!(direction_to_equirectangular([0.0, 0.0, 1.0])[1] > 0.999);
+    assert_eq!(direction_to_equirectangular([1.0, 0.0, 0.0]), [0.5, 0.5]);
+    assert!((direction_to_equirectangular([0.0, 1.0, 0.0])[0] - 0.25).abs() < 1e-12);
+    assert!((direction_to_equirectangular([0.0, -1.0, 0.0])[0] - 0.75).abs() < 1e-12);
+    for d in [[0.3, -0.5, 0.8], [-0.7, 0.1, -0.2], [0.0, 0.6, 0.8]] {
+        let l: f64 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+        let d = d.map(|x: f64| x / l.sqrt());
+        let [u, v] = direction_to_equirectangular(d);
+        let back = equirectangular_to_direction(u, v);
+        for k in 0..3 {
+            assert!((back[k] - d[k]).abs() < 1e-12);
+        }
+    }
+}
+
+/// A map bright only in a small patch around a known direction projects to an SH vector
+/// whose band-1 part `(y_{1,1}, y_{1,-1}, y_{1,0}) ~ (x, y, z)` points that way.
+#[test]
+fn environment_orientation_through_sh() {
+    let (w, h) = (256, 128);
+    let dir = tempfile::tempdir().unwrap();
+    for target in [[0.0, 1.0, 0.0], [1.0, 0.0, 1.0], [-0.5, -0.8, 0.3], [0.2, 0.3, -0.9]] {
+        let n = (target.iter().map(|x: &f64| x * x).sum::<f64>()).sqrt();
+        let d = target.map(|x| x / n);
+        let (cx, cy) = blender_texel(d, w, h);
+        let mut texels = vec![[0.0f32; 3]; w * h];
+        for dy in 0..2 {
+            for dx in 0..2 {
+                texels[(cy + dy).min(h - 1) * w + (cx + dx) % w] = [5.0, 5.0, 5.0];
+            }
+        }
+        let path = dir.path().join("sky.exr");
+        synth::write_environment_exr(&path, w, h, &texels).unwrap();
+        let map = EnvironmentMap::read(&path).unwrap();
+        assert!(map.lookup(d)[0] > 0.5, "lookup towards {d:?} sees the bright patch");
+        let light = Light::Environment { map, strength: 2.0 };
+        let sh = light.sh_coefficients(2);
+        let band1 = [sh[3][0], sh[1][0], sh[2][0]];
+        let len = band1.iter().map(|x| x * x).sum::<f64>().sqrt();
+        let cos = (band1[0] * d[0] + band1[1] * d[1] + band1[2] * d[2]) / len;
+        // The patch's centre sits within one texel (1.4 degrees) of d.
+        assert!(cos > (3.0f64).to_radians().cos(), "target {d:?}: band 1 {band1:?}, cos {cos}");
+    }
+}
+
+#[test]
+fn constant_map_projects_to_its_dc_term() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("sky.exr");
+    synth::write_environment_exr(&path, 64, 32, &vec![[1.0, 0.5, 0.25]; 64 * 32]).unwrap();
+    let light = Light::Environment { map: EnvironmentMap::read(&path).unwrap(), strength: 1.0 };
+    let sh = light.sh_coefficients(3);
+    let dc = 2.0 * PI.sqrt();
+    // The basis is integrated exactly over each texel, so a constant map gives its DC
+    // term alone, to rounding (1e-12).
+    assert!((sh[0][0] - dc).abs() < 1e-12 && (sh[0][1] - 0.5 * dc).abs() < 1e-12, "{:?}", sh[0]);
+    for c in &sh[1..] {
+        assert!(c.iter().all(|v| v.abs() < 1e-12), "{c:?}");
+    }
+    assert_eq!(light.radiance([0.3, 0.2, -0.9]), [1.0, 0.5, 0.25]);
+}
+
+#[test]
+fn constant_light_sh_is_dc_only() {
+    let light = Light::Constant([1.0, 2.0, 0.5]);
+    let sh = light.sh_coefficients(4);
+    assert_eq!(sh.len(), 16);
+    let k = 2.0 * PI.sqrt();
+    assert!((sh[0][0] - k).abs() < 1e-12 && (sh[0][1] - 2.0 * k).abs() < 1e-12 && (sh[0][2] - 0.5 * k).abs() < 1e-12);
+    assert!(sh[1..].iter().all(|c| *c == [0.0; 3]));
+    assert_eq!(light.radiance([0.0, 0.0, 1.0]), [1.0, 2.0, 0.5]);
+}
+
+#[test]
+fn sh_light_is_padded_truncated_and_clamped() {
+    let dir = base_scene();
+    let coeffs = serde_json::json!([[1, 1, 1], [0, 0, 0], [0.5, 0.5, 0.5], [0, 0, 0]]);
+    edit_json(&dir.path().join("scene.json"), |v| v["light"] = serde_json::json!({"sh": coeffs}));
+    let scene = Scene::load(dir.path()).unwrap();
+    let light = scene.light(1).unwrap();
+    let sh = light.sh_coefficients(3);
+    assert_eq!(sh.len(), 9);
+    assert_eq!(sh[2], [0.5; 3]);
+    assert!(sh[4..].iter().all(|c| *c == [0.0; 3]));
+    assert_eq!(light.sh_coefficients(1), vec![[1.0; 3]]);
+    // 1 * y00 + 0.5 * y10(z): y00 = 0.2821, y10 at +Z = 0.4886, at -Z = -0.4886.
+    let up = light.radiance([0.0, 0.0, 1.0])[0] as f64;
+    let y00 = 0.5 / PI.sqrt();
+    let y10 = (3.0 / (4.0 * PI)).sqrt();
+    assert!((up - (y00 + 0.5 * y10)).abs() < 1e-6, "{up}");
+    let strong_down = Light::Sh(vec![[0.1; 3], [0.0; 3], [1.0; 3], [0.0; 3]]);
+    assert_eq!(strong_down.radiance([0.0, 0.0, -1.0]), [0.0; 3], "clamped to >= 0");
+}
+
+// ---- outputs -----------------------------------------------------------------------
+
+#[test]
+fn outputs_round_trip_atomically() {
+    let dir = tempfile::tempdir().unwrap();
+    let rgba: Vec<[f32; 4]> = (0..6).map(|i| [i as f32 * 0.2, 0.5, 2.0, 0.5]).collect();
+    let exr_path = dir.path().join("out.exr");
+    write_exr_rgba(&exr_path, 3, 2, &rgba).unwrap();
+    let img = exr::prelude::read_first_flat_layer_from_file(&exr_path).unwrap();
+    let names: Vec<String> = img.layer_data.channel_data.list.iter().map(|c| c.name.to_string()).collect();
+    assert_eq!(names, ["A", "B", "G", "R"]);
+    match &img.layer_data.channel_data.list[3].sample_data {
+        FlatSamples::F32(v) => assert_eq!(v, &rgba.iter().map(|p| p[0]).collect::<Vec<_>>()),
+        other => panic!("{other:?}"),
+    }
+
+    let png_path = dir.path().join("out.png");
+    write_png_preview(&png_path, 3, 2, &rgba).unwrap();
+    let png = image::open(&png_path).unwrap().to_rgba8();
+    // sRGB(0.5) = 0.7354 -> 188; 2.0 clamps to 255; alpha 0.5 -> 128 (kept linear).
+    assert_eq!(png.get_pixel(0, 0).0, [0, 188, 255, 128]);
+    let leftovers: Vec<_> = std::fs::read_dir(dir.path()).unwrap().map(|e| e.unwrap().file_name()).collect();
+    assert_eq!(leftovers.len(), 2, "no temporary files left: {leftovers:?}");
+
+    assert!(write_exr_rgba(&exr_path, 4, 2, &rgba).is_err(), "size mismatch is refused");
+}
+
+#[test]
+fn outputs_never_overwrite_inputs() {
+    let dir = base_scene();
+    let scene = Scene::load(dir.path()).unwrap();
+    let inputs = scene.input_paths(1);
+    assert!(inputs.contains(&dir.path().join("gbuffer.0001.exr")) && inputs.contains(&dir.path().join("scene.json")));
+    for bad in ["gbuffer.0001.exr", "gbuffer.0042.exr", "camera.0003.json", "scene.json", "./sub/../blockers.0001.json"] {
+        let err = scene.check_output_path(&dir.path().join(bad)).unwrap_err();
+        assert!(matches!(err, SceneError::OutputIsInput { .. }), "{bad}: {err:?}");
+    }
+    for good in ["beauty.0001.exr", "preview.png", "gbuffer.0001.png"] {
+        scene.check_output_path(&dir.path().join(good)).unwrap();
+    }
+}
+
+/// The per-texel projection against the crate's Gauss product quadrature of the same
+/// smooth function (independent method). Tolerance 2e-3: the map holds the function's
+/// value at texel centres, a piecewise-constant approximation with error of order the
+/// squared texel size (1.4 degrees) per coefficient.
+#[test]
+fn environment_projection_matches_quadrature() {
+    let f = |d: [f64; 3]| 1.0 + d[0] + 0.5 * d[1] * d[2] + 0.3 * d[1];
+    let (w, h) = (256, 128);
+    let mut texels = Vec::with_capacity(w * h);
+    for row in 0..h {
+        for col in 0..w {
+            let d = equirectangular_to_direction((col as f64 + 0.5) / w as f64, 1.0 - (row as f64 + 0.5) / h as f64);
+            texels.push([f(d) as f32; 3]);
+        }
+    }
+    let map = EnvironmentMap { file: "memory".into(), width: w, height: h, texels };
+    let ours = Light::Environment { map, strength: 1.0 }.sh_coefficients(4);
+    let reference: Vec<f64> = logsh::sh::SphereQuadrature::gauss(24).project(4, f);
+    for (i, (a, b)) in ours.iter().zip(&reference).enumerate() {
+        assert!((a[0] - b).abs() < 2e-3, "coefficient {i}: {} vs {b}", a[0]);
+    }
+}
