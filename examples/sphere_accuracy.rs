@@ -3,28 +3,16 @@
 //! no height field), per order, eps, exponentiation and tangent occlusion.
 //!
 //! `cargo run --release --example sphere_accuracy [-- --quick]`
-use logsh::scene::{Scene, Sphere};
+use logsh::scene::Scene;
 use logsh::shade::{shade_frame, ShadingSettings};
 use logsh::sh::ExpMethod;
-use logsh::synth::{sphere_over_plane, SphereOverPlane};
-
-/// Sphere placements: (centre, radius), single spheres from grazing to close, and a pair.
-pub fn placements() -> Vec<Vec<Sphere>> {
-    let s = |c: [f64; 3], r: f64| Sphere { center: c, radius: r };
-    vec![
-        vec![s([0.0, 0.0, 2.0], 1.0)],
-        vec![s([0.0, 0.0, 1.3], 1.0)],
-        vec![s([1.0, 0.5, 3.0], 1.5)],
-        vec![s([0.0, 0.0, 4.0], 0.7)],
-        vec![s([-1.5, 0.0, 1.5], 0.6), s([1.5, 0.5, 2.0], 0.9)],
-    ]
-}
+use logsh::synth::{analytic_placements, sphere_over_plane, SphereOverPlane};
 
 fn main() {
     let quick = std::env::args().any(|a| a == "--quick");
     let dir = std::env::temp_dir().join(format!("logsh-sphere-accuracy-{}", std::process::id()));
     let mut scenes = Vec::new();
-    for (i, spheres) in placements().into_iter().enumerate() {
+    for (i, spheres) in analytic_placements().into_iter().enumerate() {
         let spec = SphereOverPlane { spheres, width: 160, height: 90, ..Default::default() };
         let path = dir.join(format!("scene{i}"));
         sphere_over_plane(&path, &spec).expect("write scene");

@@ -564,3 +564,17 @@ fn dunes(options: ExampleOptions) -> SynthScene {
         frames,
     }
 }
+
+/// Sphere placements of the analytic accuracy checks (`tests/shading.rs`,
+/// `examples/sphere_accuracy.rs`): single spheres from close to the plane to small and
+/// high, a large offset one, and a pair whose shadows do not overlap.
+pub fn analytic_placements() -> Vec<Vec<Sphere>> {
+    let s = |center: [f64; 3], radius: f64| Sphere { center, radius };
+    vec![
+        vec![s([0.0, 0.0, 2.0], 1.0)],
+        vec![s([0.0, 0.0, 1.3], 1.0)],
+        vec![s([1.0, 0.5, 3.0], 1.5)],
+        vec![s([0.0, 0.0, 4.0], 0.7)],
+        vec![s([-1.5, 0.0, 1.5], 0.6), s([1.5, 0.5, 2.0], 0.9)],
+    ]
+}

@@ -1,0 +1,169 @@
+//! Whole pixels against closed-form answers on analytic scenes in format v1, shaded
+//! through the same reader and kernel as `logsh shade`.
+mod support;
+
+use logsh::scene::{Scene, Sphere};
+use logsh::shade::{shade_frame, ShadedFrame, ShadingSettings};
+use logsh::synth::{analytic_placements, example_scene, sphere_over_plane, ExampleOptions, GBufferLayout, SphereOverPlane};
+use std::path::Path;
+
+/// Writes and loads a sphere-over-plane scene; returns the scene, its frame and the
+/// closed-form value per pixel (None off the plane or where the formula does not hold).
+fn analytic_scene(dir: &Path, spec: &SphereOverPlane) -> (Scene, logsh::scene::Frame, Vec<Option<f64>>) {
+    sphere_over_plane(dir, spec).expect("write scene");
+    let scene = Scene::load(dir).expect("load scene");
+    let frame = scene.frame(1).expect("load frame");
+    let expected = spec.expected_image(&frame.gbuffer);
+    (scene, frame, expected)
+}
+
+/// Mean and max absolute error of the red channel over the pixels with an answer.
+fn errors(shaded: &ShadedFrame, expected: &[Option<f64>], scale: f64) -> (f64, f64, usize) {
+    let (mut sum, mut max, mut count) = (0.0, 0.0f64, 0);
+    for (px, e) in shaded.rgba.iter().zip(expected) {
+        if let Some(e) = e {
+            let err = (px[0] as f64 - scale * e).abs();
+            sum += err;
+            max = max.max(err);
+            count += 1;
+        }
+    }
+    (sum / count as f64, max, count)
+}
+
+/// The acceptance bounds on the mean absolute error over sphere-over-plane scenes with
+/// default settings (unoccluded value 1): 0.10 at order 4 and 0.06 at order 8. The
+/// measured values are printed (`cargo test --test shading -- --nocapture`).
+fn mean_error_bound(order: usize) -> f64 {
+    match order {
+        3 | 4 => 0.10,
+        5 | 6 => 0.08,
+        _ => 0.06,
+    }
+}
+
+#[test]
+fn sphere_over_plane_meets_the_error_bounds_at_every_order() {
+    let dir = tempfile::tempdir().unwrap();
+    let scenes: Vec<_> = analytic_placements()
+        .into_iter()
+        .enumerate()
+        .map(|(i, spheres)| {
+            let spec = SphereOverPlane { spheres, width: 96, height: 54, ..Default::default() };
+            analytic_scene(&dir.path().join(format!("s{i}")), &spec)
+        })
+        .collect();
+    for order in 3..=8 {
+        let settings = ShadingSettings::for_order(order);
+        let (mut sum, mut count, mut worst) = (0.0, 0, 0.0f64);
+        for (scene, frame, expected) in &scenes {
+            let shaded = shade_frame(scene, frame, &settings).unwrap();
+            let (mean, max, n) = errors(&shaded, expected, 1.0);
+            assert!(n > 500, "too few plane pixels with a closed form: {n}");
+            sum += mean * n as f64;
+            count += n;
+            worst = worst.max(max);
+        }
+        let mean = sum / count as f64;
+        println!("order {order}: eps {}, mean abs error {mean:.4}, max {worst:.4}", settings.epsilon);
+        assert!(mean <= mean_error_bound(order), "order {order}: mean abs error {mean:.4} > {}", mean_error_bound(order));
+    }
+}
+
+#[test]
+fn unoccluded_plane_comes_out_as_its_albedo() {
+    // No blockers: the answer is the albedo. The band-limited, clamped log lobe misses it
+    // by a few percent (DESIGN.md measured 1.03 at order 4, eps 0.1); this bound is the
+    // measured worst over orders 3-8 with default settings, rounded up.
+    const UNOCCLUDED_TOLERANCE: f64 = 0.06;
+    let dir = tempfile::tempdir().unwrap();
+    for layout in [GBufferLayout::Blender5, GBufferLayout::Blender4] {
+        let spec = SphereOverPlane { spheres: vec![], width: 32, height: 18, layout, ..Default::default() };
+        let path = dir.path().join(format!("{layout:?}"));
+        sphere_over_plane(&path, &spec).unwrap();
+        // Give the plane a coloured albedo.
+        let file = path.join("scene.json");
+        let mut json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&file).unwrap()).unwrap();
+        json["materials"]["1"]["albedo"] = serde_json::json!([0.5, 0.25, 1.0]);
+        std::fs::write(&file, serde_json::to_string_pretty(&json).unwrap()).unwrap();
+        let scene = Scene::load(&path).unwrap();
+        let frame = scene.frame(1).unwrap();
+        for order in 3..=8 {
+            let shaded = shade_frame(&scene, &frame, &ShadingSettings::for_order(order)).unwrap();
+            let plane: Vec<&[f32; 4]> = shaded.rgba.iter().zip(&frame.gbuffer.material).filter(|(_, &m)| m == 1).map(|(p, _)| p).collect();
+            assert!(!plane.is_empty());
+            let unoccluded = plane[0][2] as f64;
+            println!("{layout:?} order {order}: unoccluded {unoccluded:.4}");
+            assert!((unoccluded - 1.0).abs() <= UNOCCLUDED_TOLERANCE, "order {order}: unoccluded value {unoccluded}");
+            for px in plane {
+                assert_close!(px[..3], [0.5 * unoccluded, 0.25 * unoccluded, unoccluded], 1e-4, "albedo scaling at order {order}");
+                assert_eq!(px[3], 1.0);
+            }
+        }
+    }
+}
+
+#[test]
+fn f32_and_f64_kernels_agree() {
+    // The f32 kernel is what a GPU runs; rounding in sums of a few tens of log vectors and
+    // up to six squarings stays below this.
+    const PRECISION_TOLERANCE: f64 = 2e-3;
+    let dir = tempfile::tempdir().unwrap();
+    let spec = SphereOverPlane { spheres: analytic_placements().concat(), width: 48, height: 27, ..Default::default() };
+    let (scene, frame, _) = analytic_scene(dir.path(), &spec);
+    for order in [3, 4, 8] {
+        let mut settings = ShadingSettings::for_order(order);
+        let single = shade_frame(&scene, &frame, &settings).unwrap();
+        settings.double_precision = true;
+        let double = shade_frame(&scene, &frame, &settings).unwrap();
+        let a: Vec<f32> = single.rgba.iter().flatten().copied().collect();
+        let b: Vec<f32> = double.rgba.iter().flatten().copied().collect();
+        assert_close!(a, b, PRECISION_TOLERANCE, "f32 against f64 at order {order}");
+    }
+}
+
+#[test]
+fn receivers_inside_and_touching_blockers_stay_finite() {
+    // Spheres cutting through the plane, touching it, and one centred on it: plane pixels
+    // inside a blocker see it as a hemisphere; nothing may be NaN or blow up.
+    let dir = tempfile::tempdir().unwrap();
+    let s = |center: [f64; 3], radius: f64| Sphere { center, radius };
+    let spec = SphereOverPlane {
+        spheres: vec![s([0.0, 0.0, 0.5], 1.0), s([2.5, 0.0, 1.0], 1.0), s([-2.5, 0.0, 0.0], 0.8)],
+        width: 64,
+        height: 36,
+        ..Default::default()
+    };
+    let (scene, frame, _) = analytic_scene(dir.path(), &spec);
+    for order in [3, 8] {
+        for epsilon in [1e-6, 0.9] {
+            for ratio in [false, true] {
+                let mut settings = ShadingSettings::for_order(order);
+                settings.epsilon = epsilon;
+                settings.ratio_attenuation = ratio;
+                let shaded = shade_frame(&scene, &frame, &settings).unwrap();
+                for px in &shaded.rgba {
+                    assert!(px.iter().all(|c| c.is_finite() && *c >= 0.0 && *c < 10.0), "order {order}, eps {epsilon}: {px:?}");
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn sample_scene_with_height_field_water_and_phong_shades_finite() {
+    let dir = tempfile::tempdir().unwrap();
+    example_scene("dunes", dir.path(), ExampleOptions { width: 64, height: 36, ..Default::default() }).unwrap();
+    let scene = Scene::load(dir.path()).unwrap();
+    for number in scene.frame_numbers() {
+        let frame = scene.frame(number).unwrap();
+        let shaded = shade_frame(&scene, &frame, &ShadingSettings::default()).unwrap();
+        let mut surface = 0;
+        for (px, &m) in shaded.rgba.iter().zip(&frame.gbuffer.material) {
+            assert!(px.iter().all(|c| c.is_finite() && *c >= 0.0), "frame {number}: {px:?}");
+            assert_eq!(px[3], if m == 0 { 0.0 } else { 1.0 });
+            surface += (m != 0) as usize;
+        }
+        assert!(surface > 0);
+    }
+}
