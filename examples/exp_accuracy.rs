@@ -37,6 +37,23 @@ fn main() {
                     worst[3 + k] = worst[3 + k].max(relative_l2(&out, &reference));
                 }
             }
+            let mut coarse = String::new();
+            for nz in [order + 2, order + 4, 2 * order + 2, 2 * order + 6] {
+                let grid = ExactExp::with_grid(order, nz);
+                let mut w = 0.0f64;
+                for v in &tests {
+                    let mut f = v.clone();
+                    f[0] = 0.0;
+                    let norm = f.iter().map(|c| c * c).sum::<f64>().sqrt();
+                    f.iter_mut().for_each(|c| *c *= m / norm);
+                    let (mut reference, mut out) = (vec![0.0; count], vec![0.0; count]);
+                    fine.exp(&f, &mut reference);
+                    grid.exp(&f, &mut out);
+                    w = w.max(relative_l2(&out, &reference));
+                }
+                coarse.push_str(&format!(" nz{nz} {w:.4}"));
+            }
+            println!("order {order} |f^| {m:5.2}:{coarse}");
             println!("order {order} |f^| {m:5.2}: grid {:.1e} series {:.4} OL {:.4} HYB(1) {:.4} HYB(.5) {:.4} HYB(.25) {:.4} HYB(.125) {:.4}", worst[0], worst[1], worst[2], worst[3], worst[4], worst[5], worst[6]);
         }
     }

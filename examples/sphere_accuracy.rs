@@ -22,8 +22,8 @@ fn main() {
         scenes.push((scene, frame, expected));
     }
     let orders: Vec<usize> = if quick { vec![4, 8] } else { (3..=8).collect() };
-    let epsilons = [0.01, 0.02, 0.03, 0.05, 0.07, 0.1, 0.15, 0.2];
-    let methods = if quick { vec![ExpMethod::Hyb] } else { vec![ExpMethod::Exact, ExpMethod::Hyb, ExpMethod::Ol, ExpMethod::Series] };
+    let epsilons = [0.02, 0.03, 0.05, 0.07, 0.1, 0.15];
+    let methods = if quick { vec![ExpMethod::Quad, ExpMethod::Hyb] } else { vec![ExpMethod::Exact, ExpMethod::Quad, ExpMethod::Hyb, ExpMethod::Ol, ExpMethod::Series] };
     println!("order eps    exp     tangent  mean_abs  worst_scene_mean  max_abs");
     for order in orders {
         for &epsilon in &epsilons {

@@ -26,25 +26,28 @@ impl SplitMix {
     }
 }
 
-/// `count` log vectors at `order`, each a sum of what one pixel sees: one to eight sphere
-/// caps (angular radius 3 to 80 degrees, in random directions) plus, for half of them, a
-/// diffuse or Phong lobe (exponent 1 to 256) in a random direction, every term with its
-/// own clamp `eps` drawn log-uniformly from [0.01, 0.5].
+/// `count` log vectors at `order`, each a sum of what one pixel sees: the hemisphere
+/// behind a random tangent plane, zero to eight sphere caps (angular radius 3 to 80
+/// degrees, in random directions, weighted by a ratio attenuation in [0.2, 1] a quarter
+/// of the time) and, for three in four, a diffuse or Phong lobe (exponent 1 to 256) in a
+/// random direction; one clamp `eps` per vector, drawn log-uniformly from [0.01, 0.5].
 pub fn training_log_vectors(order: usize, count: usize, seed: u64) -> Vec<Vec<f64>> {
     let mut rng = SplitMix(seed);
     let mut zonal = vec![0.0; order];
     (0..count)
         .map(|_| {
             let mut acc = vec![0.0; coefficient_count(order)];
-            let caps = 1 + (rng.next() * 8.0) as usize;
+            let epsilon = (0.01f64.ln() + rng.next() * (0.5f64 / 0.01).ln()).exp();
+            cap_log_zh(order, epsilon.ln(), std::f64::consts::FRAC_PI_2, &mut zonal);
+            add_rotated_zonal(order, &zonal, 1.0, rng.unit_vector(), &mut acc);
+            let caps = (rng.next() * 9.0) as usize;
             for _ in 0..caps {
-                let epsilon = (0.01f64.ln() + rng.next() * (0.5f64 / 0.01).ln()).exp();
                 let alpha = (3.0 + 77.0 * rng.next()).to_radians();
+                let weight = if rng.next() < 0.25 { 0.2 + 0.8 * rng.next() } else { 1.0 };
                 cap_log_zh(order, epsilon.ln(), alpha, &mut zonal);
-                add_rotated_zonal(order, &zonal, 1.0, rng.unit_vector(), &mut acc);
+                add_rotated_zonal(order, &zonal, weight, rng.unit_vector(), &mut acc);
             }
-            if rng.next() < 0.5 {
-                let epsilon = (0.01f64.ln() + rng.next() * (0.5f64 / 0.01).ln()).exp();
+            if rng.next() < 0.75 {
                 let lobe = if rng.next() < 0.5 {
                     Lobe::Diffuse
                 } else {

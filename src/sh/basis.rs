@@ -10,8 +10,7 @@
 //!   `y_l^0 = K_l^0 P_l(cos theta)`,
 //!   `y_l^m = sqrt(2) K_l^|m| P_l^|m|(cos theta) sin(|m| phi)` for `m < 0`,
 //!   with `K_l^m = sqrt((2l + 1) / (4 pi) * (l - m)! / (l + m)!)`. Band 1 is therefore
-//!   `sqrt(3 / 4 pi) * (y, z, x)`: every basis function with `m > 0` has a positive lobe
-//!   along +X.
+//!   `sqrt(3 / 4 pi) * (y, z, x)`.
 //! - A spherical function `f` has coefficients `f_i = integral of f y_i` over the sphere
 //!   (paper 000, Eq. 3), so the constant 1 is `[2 sqrt(pi), 0, ...]` and the integral of
 //!   a product of two band-limited functions is the dot product of their vectors.

@@ -17,6 +17,7 @@ pub const MAX_DIRECTIONS: usize = 64;
 /// `exp*` with the tables its method needs, built once per frame setting.
 pub struct Exponentiator {
     method: ExpMethod,
+    /// The fine grid for `exact`, the coarse one for `quad`.
     exact: Option<ExactExp>,
     tensor: Option<TriplingTensor>,
     ol: Option<OlTable>,
@@ -34,7 +35,11 @@ impl Exponentiator {
         let needs_ol = matches!(method, ExpMethod::Ol | ExpMethod::Hyb);
         Self {
             method,
-            exact: (method == ExpMethod::Exact).then(|| ExactExp::new(order)),
+            exact: match method {
+                ExpMethod::Exact => Some(ExactExp::new(order)),
+                ExpMethod::Quad => Some(ExactExp::fast(order)),
+                _ => None,
+            },
             tensor: needs_tensor.then(|| TriplingTensor::new(order)),
             ol: needs_ol.then(|| {
                 OlTable::fit(order, &crate::logsh::training_log_vectors(order, OL_TRAINING_COUNT, OL_TRAINING_SEED))
@@ -49,7 +54,7 @@ impl Exponentiator {
 
     pub fn exp<T: Real>(&self, f: &[T], out: &mut [T]) {
         match self.method {
-            ExpMethod::Exact => self.exact.as_ref().expect("built with its table").exp(f, out),
+            ExpMethod::Exact | ExpMethod::Quad => self.exact.as_ref().expect("built with its table").exp(f, out),
             ExpMethod::Series => exp_series(self.tensor.as_ref().expect("built with its table"), f, out),
             ExpMethod::Ol => self.ol.as_ref().expect("built with its table").exp(f, out),
             ExpMethod::Hyb => exp_hyb_with(
@@ -151,18 +156,36 @@ impl<T: Real> ShadingKernel<T> {
     /// Log visibility at `p` with unit normal `n` (Eq. 9 before exponentiation): the
     /// height field's wedges, every sphere cap in front of the tangent plane, and the
     /// hemisphere behind the tangent plane.
+    ///
+    /// The tangent plane is clamped once. Without a height field (or for a receiver facing
+    /// down, `n_z <= 0`) it is a hemisphere cap around `-n`. With one, every slice already
+    /// clamps everything below its horizon, which is never under the horizontal; so the
+    /// tangent plane is folded into the slices instead, raising each horizon to the plane's
+    /// own elevation along that azimuth, `atan(-(n . u_k) / n_z)`. Adding the cap on top
+    /// would clamp the overlap twice (`eps^2`), which paper 000 Section 4.2 warns about and
+    /// which measurably brightens unoccluded terrain (1.06 instead of 1.03 at order 4).
     pub fn add_visibility(&self, occluders: Occluders, p: [f64; 3], n: [f64; 3], acc: &mut [T]) {
         let order = self.order;
         let nt = n.map(T::of);
-        if self.tangent_occlusion {
+        let marched = match (occluders.horizons, &self.wedge) {
+            (Some(pyramid), Some(wedge)) => Some((pyramid, wedge)),
+            _ => None,
+        };
+        let fold_tangent = self.tangent_occlusion && marched.is_some() && n[2] > 0.0;
+        if self.tangent_occlusion && !fold_tangent {
             add_rotated_zonal(order, &self.tangent, T::one(), nt.map(|c| -c), acc);
         }
-        if let (Some(pyramid), Some(wedge)) = (occluders.horizons, &self.wedge) {
+        if let Some((pyramid, wedge)) = marched {
             let directions = wedge.directions;
             let mut sigmas = [0.0f64; MAX_DIRECTIONS];
             pyramid.horizon_elevations(p, &mut sigmas[..directions]);
             let mut slices = [T::zero(); MAX_DIRECTIONS * crate::sh::MAX_ORDER];
-            for (k, sigma) in sigmas[..directions].iter().enumerate() {
+            for (k, sigma) in sigmas[..directions].iter_mut().enumerate() {
+                if fold_tangent {
+                    let (sin, cos) = (wedge.wedge_width() * k as f64).sin_cos();
+                    let tangent_elevation = (-(n[0] * cos + n[1] * sin) / n[2]).atan();
+                    *sigma = sigma.max(tangent_elevation);
+                }
                 nlp_slice(order, self.log_epsilon, T::of(*sigma), &mut slices[k * order..(k + 1) * order]);
             }
             wedge.accumulate(&slices[..directions * order], acc);
@@ -179,7 +202,8 @@ impl<T: Real> ShadingKernel<T> {
     }
 
     /// `exp*(visibility + lobe) . light` per colour channel, clamped at 0 (ringing of a
-    /// band-limited product can dip below it).
+    /// band-limited product can dip below it; `max` also maps a NaN to 0, which the
+    /// exponentiations are built never to produce).
     fn lit(&self, visibility: &[T], lobe: &[T], axis: [f64; 3]) -> [T; 3] {
         let count = coefficient_count(self.order);
         let mut f = [T::zero(); MAX_COEFFICIENTS];

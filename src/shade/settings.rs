@@ -4,6 +4,10 @@
 use crate::heightfield::HorizonSettings;
 use crate::sh::{ExpMethod, MAX_ORDER, MIN_ORDER};
 
+/// Smallest accepted eps. `log(1e-6) = -13.8` per clamped term keeps sums of thousands of
+/// terms and their exponentials within f32's range.
+pub const MIN_EPSILON: f64 = 1e-6;
+
 /// The knobs of one shading run.
 #[derive(Clone, Copy, Debug)]
 pub struct ShadingSettings {
@@ -40,9 +44,6 @@ pub fn default_epsilon(order: usize) -> f64 {
     }
 }
 
-/// Default HYB threshold: each halving costs one SH product per pixel and lowers HYB's
-/// error against exact exponentiation (`examples/exp_accuracy.rs`).
-pub const DEFAULT_HYB_THRESHOLD: f64 = 0.25;
 
 impl ShadingSettings {
     /// Defaults at a given order.
@@ -51,7 +52,7 @@ impl ShadingSettings {
             order,
             epsilon: default_epsilon(order),
             exp: ExpMethod::Hyb,
-            hyb_threshold: DEFAULT_HYB_THRESHOLD,
+            hyb_threshold: crate::sh::exp::HYB_MAGNITUDE,
             ratio_attenuation: false,
             tangent_occlusion: true,
             horizon: HorizonSettings::default(),
@@ -64,8 +65,8 @@ impl ShadingSettings {
         if !(MIN_ORDER..=MAX_ORDER).contains(&self.order) {
             return Err(format!("--order {} is outside {MIN_ORDER}..={MAX_ORDER}", self.order));
         }
-        if !(self.epsilon > 0.0 && self.epsilon < 1.0) {
-            return Err(format!("--epsilon {} must lie strictly between 0 and 1", self.epsilon));
+        if !(self.epsilon >= MIN_EPSILON && self.epsilon < 1.0) {
+            return Err(format!("--epsilon {} must lie in [{MIN_EPSILON:e}, 1)", self.epsilon));
         }
         if !(self.hyb_threshold > 0.0 && self.hyb_threshold.is_finite()) {
             return Err(format!("HYB threshold {} must be positive", self.hyb_threshold));
