@@ -42,6 +42,13 @@ pub fn example(args: &ExampleArgs) -> Result<()> {
         ExampleName::Dunes => "dunes",
         ExampleName::Spheres => "spheres",
     };
+    let existing = args.out.join(crate::scene::SCENE_FILE);
+    if existing.exists() {
+        return Err(anyhow!(
+            "{} already holds a scene; remove it or choose another --out (an existing scene is never overwritten)",
+            args.out.display()
+        ));
+    }
     crate::synth::example_scene(
         name,
         &args.out,

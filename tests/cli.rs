@@ -1,0 +1,115 @@
+//! The command line as a black box: exit codes, outputs, and the wording of errors.
+use assert_cmd::Command;
+use std::path::Path;
+
+fn logsh() -> Command {
+    Command::cargo_bin("logsh").unwrap()
+}
+
+fn stderr_of(output: &std::process::Output) -> String {
+    String::from_utf8_lossy(&output.stderr).into_owned()
+}
+
+/// A small sphere-over-plane scene written by `logsh example`.
+fn example_scene(dir: &Path) -> std::path::PathBuf {
+    let scene = dir.join("scene");
+    logsh().args(["example", "spheres", "--width", "48", "--height", "27", "--out"]).arg(&scene).assert().success();
+    scene
+}
+
+#[test]
+fn shade_writes_exr_and_png() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = example_scene(dir.path());
+    let out = dir.path().join("out");
+    let output = logsh().arg("shade").arg(&scene).arg("--out").arg(&out).output().unwrap();
+    assert!(output.status.success(), "{}", stderr_of(&output));
+    assert!(stderr_of(&output).contains("shaded frame 1 (48x27)"));
+    assert!(out.join("beauty.0001.exr").is_file());
+    assert!(out.join("beauty.0001.png").is_file());
+    let png = image::open(out.join("beauty.0001.png")).unwrap();
+    assert_eq!((png.width(), png.height()), (48, 27));
+}
+
+#[test]
+fn every_exponentiation_and_order_runs() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = example_scene(dir.path());
+    for exp in ["hyb", "ol", "series", "quad", "exact"] {
+        for order in ["3", "8"] {
+            let out = dir.path().join(format!("out-{exp}-{order}"));
+            let output = logsh()
+                .arg("shade")
+                .arg(&scene)
+                .args(["--exp", exp, "--order", order, "--ratio-attenuation", "on", "--precision", "f64", "--out"])
+                .arg(&out)
+                .output()
+                .unwrap();
+            assert!(output.status.success(), "--exp {exp} --order {order}: {}", stderr_of(&output));
+        }
+    }
+}
+
+fn assert_fails_with(cmd: &mut Command, needles: &[&str]) {
+    let output = cmd.output().unwrap();
+    let stderr = stderr_of(&output);
+    // 2 for what clap rejects while parsing, 1 for everything found later.
+    assert!(matches!(output.status.code(), Some(1 | 2)), "exit code {:?}: {stderr}", output.status.code());
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    for needle in needles {
+        assert!(stderr.contains(needle), "expected {needle:?} in: {stderr}");
+    }
+}
+
+#[test]
+fn bad_flags_are_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = example_scene(dir.path());
+    let out = dir.path().join("out");
+    assert_fails_with(logsh().arg("shade").arg(&scene).args(["--order", "9"]).arg("--out").arg(&out), &["--order 9"]);
+    assert_fails_with(logsh().arg("shade").arg(&scene).args(["--epsilon", "0"]).arg("--out").arg(&out), &["--epsilon 0"]);
+    assert_fails_with(logsh().arg("shade").arg(&scene).args(["--directions", "2"]).arg("--out").arg(&out), &["--directions 2"]);
+    assert_fails_with(logsh().arg("shade").arg(&scene).args(["--exp", "fast"]), &["--exp"]);
+    assert!(!out.exists(), "nothing is written when the flags are wrong");
+}
+
+#[test]
+fn bad_scenes_are_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let missing = dir.path().join("nowhere");
+    assert_fails_with(logsh().arg("shade").arg(&missing), &["error:", "nowhere"]);
+
+    let scene = example_scene(dir.path());
+    let json = scene.join("scene.json");
+    let original = std::fs::read_to_string(&json).unwrap();
+
+    std::fs::write(&json, original.replacen("\"version\": 1", "\"version\": 1,\n  \"colour\": 3", 1)).unwrap();
+    assert_fails_with(logsh().arg("shade").arg(&scene), &["scene.json", "colour"]);
+
+    std::fs::write(&json, "{\n  \"version\": 1,\n  \"gbuffer\": \n}").unwrap();
+    assert_fails_with(logsh().arg("shade").arg(&scene), &["scene.json:4:1"]);
+
+    std::fs::write(&json, &original).unwrap();
+    std::fs::write(scene.join("blockers.0001.json"), r#"{"frame": 1, "spheres": [{"center": [0, 0, 2], "radius": -1}]}"#).unwrap();
+    assert_fails_with(logsh().arg("shade").arg(&scene), &["blockers.0001.json", "radius"]);
+
+    std::fs::remove_file(scene.join("gbuffer.0001.exr")).unwrap();
+    assert_fails_with(logsh().arg("shade").arg(&scene), &["gbuffer.0001.exr"]);
+}
+
+#[test]
+fn inputs_are_never_written_over() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = example_scene(dir.path());
+    // A scene whose G-buffer is named like the output: shading into its own directory
+    // must refuse rather than replace the input.
+    std::fs::rename(scene.join("gbuffer.0001.exr"), scene.join("beauty.0001.exr")).unwrap();
+    let json = scene.join("scene.json");
+    let text = std::fs::read_to_string(&json).unwrap().replace("gbuffer.####.exr", "beauty.####.exr");
+    std::fs::write(&json, text).unwrap();
+    let before = std::fs::read(scene.join("beauty.0001.exr")).unwrap();
+    assert_fails_with(logsh().arg("shade").arg(&scene).arg("--out").arg(&scene), &["beauty.0001.exr"]);
+    assert_eq!(std::fs::read(scene.join("beauty.0001.exr")).unwrap(), before);
+    // And `logsh example` does not overwrite a scene.
+    assert_fails_with(logsh().args(["example", "spheres", "--out"]).arg(&scene), &["already holds a scene"]);
+}
