@@ -2,10 +2,11 @@
 //!
 //! Camera conventions are Blender's: the camera looks down its local -Z, local +Y is up,
 //! local +X is right; `matrix_world` is the object's 4x4 world matrix written row by row
-//! (translation in the last column). The field of view is horizontal:
-//! `tan(fov / 2) = sensor_width_mm / (2 lens_mm)` (Blender's sensor fit "Auto" with a
-//! landscape image; a portrait image would fit the sensor to its height instead, which the
-//! format does not describe, so landscape or square images are assumed).
+//! (translation in the last column). The sensor fit is Blender's default, "Auto": the
+//! sensor width spans the larger image side, so `tan(fov / 2) = sensor_width_mm /
+//! (2 lens_mm)` horizontally for a landscape frame and vertically for a portrait one. The
+//! camera is used for view directions (Phong, water, background), not for positions,
+//! which come from the G-buffer.
 
 use super::error::SceneError;
 use super::read_json;
@@ -142,8 +143,11 @@ impl Camera {
     /// `(x, y)`.
     pub fn ray_direction(&self, x: f64, y: f64) -> [f64; 3] {
         let (w, h) = (self.resolution[0] as f64, self.resolution[1] as f64);
-        let half_width = 0.5 * self.sensor_width_mm / self.lens_mm;
-        let local = [(2.0 * x / w - 1.0) * half_width, (1.0 - 2.0 * y / h) * half_width * h / w, -1.0];
+        // Blender's default sensor fit (AUTO) spans the sensor width over the larger image
+        // side: the width of a landscape frame, the height of a portrait one.
+        let half_sensor = 0.5 * self.sensor_width_mm / self.lens_mm;
+        let (half_width, half_height) = if w >= h { (half_sensor, half_sensor * h / w) } else { (half_sensor * w / h, half_sensor) };
+        let local = [(2.0 * x / w - 1.0) * half_width, (1.0 - 2.0 * y / h) * half_height, -1.0];
         let m = &self.matrix_world;
         let world = [
             m[0][0] * local[0] + m[0][1] * local[1] + m[0][2] * local[2],

@@ -1,0 +1,54 @@
+//! CPU kernel costs: each SH exponentiation on a typical per-pixel log vector, and the
+//! per-pixel blocker accumulation. Compare methods as ratios within one run:
+//! `cargo bench --bench kernels`.
+use criterion::{black_box, criterion_group, criterion_main, Criterion};
+use logsh::logsh::training_log_vectors;
+use logsh::shade::Exponentiator;
+use logsh::sh::{ExpMethod, MAX_COEFFICIENTS};
+
+fn exponentiation(c: &mut Criterion) {
+    for order in [3, 4, 6, 8] {
+        let count = order * order;
+        // Training vectors are sums of what pixels see: a tangent hemisphere, caps and a lobe.
+        let vectors: Vec<Vec<f32>> = training_log_vectors(order, 16, 42).into_iter().map(|v| v.into_iter().map(|c| c as f32).collect()).collect();
+        for method in [ExpMethod::Ol, ExpMethod::Hyb, ExpMethod::Series, ExpMethod::Quad, ExpMethod::Exact] {
+            let exp = Exponentiator::new(order, method, logsh::sh::exp::HYB_MAGNITUDE);
+            let mut out = [0.0f32; MAX_COEFFICIENTS];
+            c.bench_function(&format!("exp/{method:?}/order{order}"), |b| {
+                b.iter(|| {
+                    for v in &vectors {
+                        exp.exp(black_box(&v[..count]), &mut out[..count]);
+                    }
+                })
+            });
+        }
+    }
+}
+
+fn blockers(c: &mut Criterion) {
+    use logsh::logsh::{cap_log_zh, view_blocker, BlockerView};
+    use logsh::sh::add_rotated_zonal;
+    for order in [4, 8] {
+        let spheres: Vec<([f32; 3], f32)> = (0..50).map(|i| ([i as f32 * 0.3 - 7.0, (i % 7) as f32, 2.0 + (i % 3) as f32], 0.5)).collect();
+        c.bench_function(&format!("blockers50/order{order}"), |b| {
+            b.iter(|| {
+                let mut acc = [0.0f32; MAX_COEFFICIENTS];
+                let mut zonal = [0.0f32; 8];
+                for (centre, radius) in &spheres {
+                    if let BlockerView::Cap { direction, alpha, weight } = view_blocker([0.0; 3], [0.0, 0.0, 1.0], *centre, *radius, false) {
+                        cap_log_zh(order, 0.1f32.ln(), alpha, &mut zonal[..order]);
+                        add_rotated_zonal(order, &zonal[..order], weight, direction, &mut acc[..order * order]);
+                    }
+                }
+                black_box(acc)
+            })
+        });
+    }
+}
+
+criterion_group! {
+    name = benches;
+    config = Criterion::default().sample_size(20).measurement_time(std::time::Duration::from_secs(1)).warm_up_time(std::time::Duration::from_millis(300));
+    targets = exponentiation, blockers
+}
+criterion_main!(benches);
