@@ -1,7 +1,8 @@
 //! CPU kernel costs: each SH exponentiation on a typical per-pixel log vector, and the
 //! per-pixel blocker accumulation. Compare methods as ratios within one run:
 //! `cargo bench --bench kernels`.
-use criterion::{black_box, criterion_group, criterion_main, Criterion};
+use criterion::{criterion_group, criterion_main, Criterion};
+use std::hint::black_box;
 use logsh::logsh::training_log_vectors;
 use logsh::shade::Exponentiator;
 use logsh::sh::{ExpMethod, MAX_COEFFICIENTS};
@@ -17,7 +18,7 @@ fn exponentiation(c: &mut Criterion) {
             c.bench_function(&format!("exp/{method:?}/order{order}"), |b| {
                 b.iter(|| {
                     for v in &vectors {
-                        exp.exp(black_box(&v[..count]), &mut out[..count]);
+                        exp.exp(black_box(&v[..count]), logsh::sh::exp::MAX_LOG_VALUE, &mut out[..count]);
                     }
                 })
             });

@@ -38,14 +38,14 @@ pub struct ShadeArgs {
 
 #[derive(Clone, Copy, Debug, ValueEnum, PartialEq, Eq)]
 pub enum ExpArg {
-    /// Scale until small, optimal linear, square back (paper 000's choice).
+    /// Quadrature on a coarse (2n+2)-node grid: within 1e-5 of exact.
+    Quad,
+    /// Scale until small, optimal linear, square back (the paper's choice); 2-4x faster than quad, less accurate.
     Hyb,
     /// Optimal linear only: fastest, least accurate at large magnitudes.
     Ol,
     /// DC isolation and the product series.
     Series,
-    /// Quadrature on a coarse (2n+2)-node grid: about HYB's cost, far more accurate.
-    Quad,
     /// Quadrature on a fine grid: reference quality, slow.
     Exact,
 }
@@ -68,7 +68,7 @@ pub struct ShadingArgs {
     /// SH order n (n^2 coefficients), 3 to 8. Higher is sharper and slower.
     #[arg(long, default_value_t = 4)]
     pub order: usize,
-    /// Log clamp eps, relative to each lobe's peak, in (0, 1) [default: 0.1 for orders 3-6, 0.05 for 7-8, chosen by measurement].
+    /// Log clamp eps, relative to each lobe's peak, in [1e-6, 1) [default per order, chosen by measurement: 0.15 at order 3, 0.1 at 4, 0.07 at 5-8].
     #[arg(long)]
     pub epsilon: Option<f64>,
     /// Height field: number of azimuthal directions W.
@@ -81,9 +81,9 @@ pub struct ShadingArgs {
     #[arg(long, default_value_t = HorizonSettings::default().level_offset)]
     pub level_offset: f64,
     /// SH exponentiation method.
-    #[arg(long, value_enum, default_value_t = ExpArg::Hyb)]
+    #[arg(long, value_enum, default_value_t = ExpArg::Quad)]
     pub exp: ExpArg,
-    /// Scale each sphere's log visibility by r/|c-p| (paper 000, Section 4.2).
+    /// Scale each sphere's log visibility by r/|c-p| (the paper's Section 4.2).
     #[arg(long, value_enum, default_value_t = Switch::Off)]
     pub ratio_attenuation: Switch,
     /// Clamp the hemisphere behind each receiver's tangent plane in log space.

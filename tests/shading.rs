@@ -31,14 +31,16 @@ fn errors(shaded: &ShadedFrame, expected: &[Option<f64>], scale: f64) -> (f64, f
     (sum / count as f64, max, count)
 }
 
-/// The acceptance bounds on the mean absolute error over sphere-over-plane scenes with
-/// default settings (unoccluded value 1): 0.10 at order 4 and 0.06 at order 8. The
-/// measured values are printed (`cargo test --test shading -- --nocapture`).
+/// Bounds on the mean absolute error over sphere-over-plane scenes with default settings
+/// (unoccluded value 1): the acceptance bounds, 0.10 at order 4 and 0.06 at order 8, and
+/// the same at the neighbouring orders. Measured (`examples/sphere_accuracy.rs`): 0.021,
+/// 0.017, 0.025, 0.011, 0.008, 0.007 for orders 3 to 8; `cargo test --test shading --
+/// --nocapture` prints this test's own figures.
 fn mean_error_bound(order: usize) -> f64 {
-    match order {
-        3 | 4 => 0.10,
-        5 | 6 => 0.08,
-        _ => 0.06,
+    if order <= 4 {
+        0.10
+    } else {
+        0.06
     }
 }
 
@@ -73,9 +75,10 @@ fn sphere_over_plane_meets_the_error_bounds_at_every_order() {
 #[test]
 fn unoccluded_plane_comes_out_as_its_albedo() {
     // No blockers: the answer is the albedo. The band-limited, clamped log lobe misses it
-    // by a few percent (DESIGN.md measured 1.03 at order 4, eps 0.1); this bound is the
-    // measured worst over orders 3-8 with default settings, rounded up.
-    const UNOCCLUDED_TOLERANCE: f64 = 0.06;
+    // by a few percent (DESIGN.md measured 1.03 at order 4, eps 0.1). Measured with the
+    // defaults: 0.983, 1.026, 1.040, 1.009, 1.013, 1.019 for orders 3 to 8 (this test prints
+    // them with --nocapture); the bound is the worst, rounded up.
+    let unoccluded_tolerance = |_order: usize| 0.05;
     let dir = tempfile::tempdir().unwrap();
     for layout in [GBufferLayout::Blender5, GBufferLayout::Blender4] {
         let spec = SphereOverPlane { spheres: vec![], width: 32, height: 18, layout, ..Default::default() };
@@ -94,7 +97,7 @@ fn unoccluded_plane_comes_out_as_its_albedo() {
             assert!(!plane.is_empty());
             let unoccluded = plane[0][2] as f64;
             println!("{layout:?} order {order}: unoccluded {unoccluded:.4}");
-            assert!((unoccluded - 1.0).abs() <= UNOCCLUDED_TOLERANCE, "order {order}: unoccluded value {unoccluded}");
+            assert!((unoccluded - 1.0).abs() <= unoccluded_tolerance(order), "order {order}: unoccluded value {unoccluded}");
             for px in plane {
                 assert_close!(px[..3], [0.5 * unoccluded, 0.25 * unoccluded, unoccluded], 1e-4, "albedo scaling at order {order}");
                 assert_eq!(px[3], 1.0);

@@ -31,6 +31,11 @@ impl Lobe {
         }
     }
 
+    /// The lobe's peak value `f_max` (along its axis).
+    pub fn peak(self) -> f64 {
+        self.shape().1
+    }
+
     /// The lobe's value at `cos theta = z` (for quadrature checks and the reference).
     pub fn value(self, z: f64) -> f64 {
         let (r, peak) = self.shape();

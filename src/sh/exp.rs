@@ -52,6 +52,10 @@ fn isolate_dc<T: Real>(f: &[T], hat: &mut [T]) -> (T, T) {
     ((f[0] * T::of(Y0)).exp(), magnitude)
 }
 
+/// Largest log value [`ExactExp::exp`] exponentiates: above the log of any lobe peak the
+/// tool forms (`log((1024 + 1) / 2 pi) = 5.1`).
+pub const MAX_LOG_VALUE: f64 = 8.0;
+
 /// Exact exponentiation by quadrature on a fixed grid, with the basis tabulated at its
 /// nodes. The default grid (`6n + 16` Gauss nodes in `cos theta`, twice as many azimuths)
 /// agrees with a grid twice as fine to 1e-10 relative for `|f^| <= 8` and to 1e-6 for
@@ -100,8 +104,20 @@ impl ExactExp {
         self.order
     }
 
-    /// `out = exp*(f)`.
+    /// `out = exp*(f)`, with node values clamped at [`MAX_LOG_VALUE`]; see
+    /// [`ExactExp::exp_below`].
     pub fn exp<T: Real>(&self, f: &[T], out: &mut [T]) {
+        self.exp_below(f, MAX_LOG_VALUE, out)
+    }
+
+    /// `out = exp*(min(f, ceiling))`: node values above `ceiling` are clamped to it before
+    /// exponentiation. When the caller knows the true function never exceeds `ceiling`
+    /// (a log visibility is at most 0, a log lobe at most the log of its peak), anything
+    /// above it is band-limiting ringing, which exponentiation would amplify without
+    /// bound (thousands of overlapping caps, or eps = 1e-6, ring past f64's range); the
+    /// clamp bounds the result by `exp(ceiling)` times the light while leaving every
+    /// node below the ceiling exact.
+    pub fn exp_below<T: Real>(&self, f: &[T], ceiling: f64, out: &mut [T]) {
         let count = coefficient_count(self.order);
         let mut acc = [0.0f64; MAX_COEFFICIENTS];
         let mut f64s = [0.0f64; MAX_COEFFICIENTS];
@@ -111,7 +127,7 @@ impl ExactExp {
         for (node, w) in self.weights.iter().enumerate() {
             let y = &self.basis[node * count..(node + 1) * count];
             let value: f64 = y.iter().zip(&f64s[..count]).map(|(a, b)| a * b).sum();
-            let e = w * value.exp();
+            let e = w * value.min(ceiling).exp();
             for (a, b) in acc.iter_mut().zip(y) {
                 *a += e * b;
             }

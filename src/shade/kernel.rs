@@ -52,9 +52,12 @@ impl Exponentiator {
         self.method
     }
 
-    pub fn exp<T: Real>(&self, f: &[T], out: &mut [T]) {
+    /// `out = exp*(f)` for a log function known never to exceed `ceiling` (the log of the
+    /// lobe's peak); the quadrature methods clamp their nodes there
+    /// ([`ExactExp::exp_below`]), the SH-space ones cannot.
+    pub fn exp<T: Real>(&self, f: &[T], ceiling: f64, out: &mut [T]) {
         match self.method {
-            ExpMethod::Exact | ExpMethod::Quad => self.exact.as_ref().expect("built with its table").exp(f, out),
+            ExpMethod::Exact | ExpMethod::Quad => self.exact.as_ref().expect("built with its table").exp_below(f, ceiling, out),
             ExpMethod::Series => exp_series(self.tensor.as_ref().expect("built with its table"), f, out),
             ExpMethod::Ol => self.ol.as_ref().expect("built with its table").exp(f, out),
             ExpMethod::Hyb => exp_hyb_with(
@@ -68,12 +71,25 @@ impl Exponentiator {
     }
 }
 
-/// The BRDF lobes of one material, as log-ZH tables.
+/// A lobe's log-ZH table and the log of its peak (the most its log function reaches).
+#[derive(Clone, Debug)]
+struct LobeTable<T> {
+    zonal: Vec<T>,
+    log_peak: f64,
+}
+
+impl<T: Real> LobeTable<T> {
+    fn new(order: usize, lobe: Lobe, epsilon: f64) -> Self {
+        Self { zonal: lobe_log_zh_as(order, lobe, epsilon), log_peak: lobe.peak().ln() }
+    }
+}
+
+/// The BRDF lobes of one material.
 #[derive(Clone, Debug)]
 struct MaterialLobes<T> {
     material: Material,
     /// Phong lobe (Eq. 27) for `phong` materials.
-    phong: Option<Vec<T>>,
+    phong: Option<LobeTable<T>>,
 }
 
 /// What occludes a frame: its sphere blockers and its height-field pyramid.
@@ -102,7 +118,7 @@ pub struct ShadingKernel<T> {
     tangent_occlusion: bool,
     exp: Exponentiator,
     wedge: Option<WedgeOperator>,
-    diffuse: Vec<T>,
+    diffuse: LobeTable<T>,
     /// Log-ZH of the hemisphere behind the tangent plane, around -Z before rotation.
     tangent: Vec<T>,
     materials: BTreeMap<u32, MaterialLobes<T>>,
@@ -123,7 +139,7 @@ impl<T: Real> ShadingKernel<T> {
             .map(|(&index, material)| {
                 let phong = match material {
                     Material::Phong { exponent, .. } => {
-                        Some(lobe_log_zh_as(order, Lobe::Phong { exponent: *exponent as f64 }, epsilon))
+                        Some(LobeTable::new(order, Lobe::Phong { exponent: *exponent as f64 }, epsilon))
                     }
                     _ => None,
                 };
@@ -138,7 +154,7 @@ impl<T: Real> ShadingKernel<T> {
             tangent_occlusion: settings.tangent_occlusion,
             exp: Exponentiator::new(order, settings.exp, settings.hyb_threshold),
             wedge: has_heightfield.then(|| WedgeOperator::new(order, settings.horizon.directions)),
-            diffuse: lobe_log_zh_as(order, Lobe::Diffuse, epsilon),
+            diffuse: LobeTable::new(order, Lobe::Diffuse, epsilon),
             tangent,
             materials,
             light: [channel(0), channel(1), channel(2)],
@@ -204,13 +220,13 @@ impl<T: Real> ShadingKernel<T> {
     /// `exp*(visibility + lobe) . light` per colour channel, clamped at 0 (ringing of a
     /// band-limited product can dip below it; `max` also maps a NaN to 0, which the
     /// exponentiations are built never to produce).
-    fn lit(&self, visibility: &[T], lobe: &[T], axis: [f64; 3]) -> [T; 3] {
+    fn lit(&self, visibility: &[T], lobe: &LobeTable<T>, axis: [f64; 3]) -> [T; 3] {
         let count = coefficient_count(self.order);
         let mut f = [T::zero(); MAX_COEFFICIENTS];
         f[..count].copy_from_slice(&visibility[..count]);
-        add_rotated_zonal(self.order, lobe, T::one(), axis.map(T::of), &mut f[..count]);
+        add_rotated_zonal(self.order, &lobe.zonal, T::one(), axis.map(T::of), &mut f[..count]);
         let mut e = [T::zero(); MAX_COEFFICIENTS];
-        self.exp.exp(&f[..count], &mut e[..count]);
+        self.exp.exp(&f[..count], lobe.log_peak, &mut e[..count]);
         let dot = |light: &[T]| light.iter().zip(&e[..count]).fold(T::zero(), |acc, (&l, &v)| acc + l * v).max(T::zero());
         [dot(&self.light[0]), dot(&self.light[1]), dot(&self.light[2])]
     }
