@@ -4,7 +4,8 @@
 //!
 //! `cargo run --release --example sphere_accuracy [-- --quick]`: `--quick` runs only the
 //! defaults' method and tangent setting (`quad`, tangent occlusion on) over every order and
-//! eps, a minute instead of an hour.
+//! eps, a minute instead of an hour; `--defaults` runs every method at each order's
+//! default eps.
 use logsh::scene::Scene;
 use logsh::shade::{shade_frame, ShadingSettings};
 use logsh::sh::ExpMethod;
@@ -12,6 +13,7 @@ use logsh::synth::{analytic_placements, sphere_over_plane, SphereOverPlane};
 
 fn main() {
     let quick = std::env::args().any(|a| a == "--quick");
+    let defaults = std::env::args().any(|a| a == "--defaults");
     let dir = std::env::temp_dir().join(format!("logsh-sphere-accuracy-{}", std::process::id()));
     let mut scenes = Vec::new();
     for (i, spheres) in analytic_placements().into_iter().enumerate() {
@@ -24,13 +26,14 @@ fn main() {
         scenes.push((scene, frame, expected));
     }
     let orders: Vec<usize> = (3..=8).collect();
-    let epsilons = [0.01, 0.02, 0.03, 0.05, 0.07, 0.1, 0.15, 0.2];
+    let sweep = [0.01, 0.02, 0.03, 0.05, 0.07, 0.1, 0.15, 0.2];
     let methods = if quick { vec![ExpMethod::Quad] } else { vec![ExpMethod::Exact, ExpMethod::Quad, ExpMethod::Hyb, ExpMethod::Ol, ExpMethod::Series] };
     println!("order eps    exp     tangent  mean_abs  worst_scene_mean  max_abs");
     for order in orders {
+        let epsilons = if defaults { vec![logsh::shade::default_epsilon(order)] } else { sweep.to_vec() };
         for &epsilon in &epsilons {
             for &method in &methods {
-                let tangents: &[bool] = if quick { &[true] } else { &[true, false] };
+                let tangents: &[bool] = if quick || defaults { &[true] } else { &[true, false] };
                 for &tangent in tangents {
                     let mut settings = ShadingSettings::for_order(order);
                     settings.epsilon = epsilon;
