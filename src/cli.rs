@@ -1,8 +1,7 @@
 //! Command-line options: parsed by clap into these structs, then turned into settings in
 //! a separate step that checks the rules spanning several flags.
 
-use crate::heightfield::HorizonSettings;
-use crate::shade::{default_epsilon, ShadingSettings};
+use crate::shade::{default_epsilon, Quality, ShadingSettings};
 use crate::sh::ExpMethod;
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use std::path::PathBuf;
@@ -62,27 +61,54 @@ pub enum PrecisionArg {
     F64,
 }
 
-/// The shading knobs shared by every command that shades.
+#[derive(Clone, Copy, Debug, ValueEnum, PartialEq, Eq)]
+pub enum QualityArg {
+    /// Order 3, ol exponentiation, W 8, k 2, o 2: fastest.
+    Draft,
+    /// Order 4, quad, W 16, k 4, o 3.
+    Default,
+    /// Order 6, quad, W 24, k 4, o 3.
+    High,
+    /// Order 8, quad, W 32, k 8, o 4: most accurate.
+    Ultra,
+}
+
+impl From<QualityArg> for Quality {
+    fn from(q: QualityArg) -> Self {
+        match q {
+            QualityArg::Draft => Quality::Draft,
+            QualityArg::Default => Quality::Default,
+            QualityArg::High => Quality::High,
+            QualityArg::Ultra => Quality::Ultra,
+        }
+    }
+}
+
+/// The shading knobs shared by every command that shades. A knob that is not given comes
+/// from `--quality`.
 #[derive(Args, Debug, Clone)]
 pub struct ShadingArgs {
-    /// SH order n (n^2 coefficients), 3 to 8. Higher is sharper and slower.
-    #[arg(long, default_value_t = 4)]
-    pub order: usize,
+    /// Preset of every knob below; any knob given on its own overrides it.
+    #[arg(long, value_enum, default_value_t = QualityArg::Default)]
+    pub quality: QualityArg,
+    /// SH order n (n^2 coefficients), 3 to 8. Higher is sharper and slower [default: from --quality].
+    #[arg(long)]
+    pub order: Option<usize>,
     /// Log clamp eps, relative to each lobe's peak, in [1e-6, 1) [default per order, chosen by measurement: 0.15 at order 3, 0.1 at 4, 0.07 at 5-8].
     #[arg(long)]
     pub epsilon: Option<f64>,
-    /// Height field: number of azimuthal directions W.
-    #[arg(long, default_value_t = HorizonSettings::default().directions)]
-    pub directions: usize,
-    /// Height field: pyramid level step k (levels per halving of resolution).
-    #[arg(long, default_value_t = HorizonSettings::default().level_step)]
-    pub level_step: f64,
-    /// Height field: pyramid level offset o.
-    #[arg(long, default_value_t = HorizonSettings::default().level_offset)]
-    pub level_offset: f64,
-    /// SH exponentiation method.
-    #[arg(long, value_enum, default_value_t = ExpArg::Quad)]
-    pub exp: ExpArg,
+    /// Height field: number of azimuthal directions W [default: from --quality].
+    #[arg(long)]
+    pub directions: Option<usize>,
+    /// Height field: pyramid level step k, levels per halving of resolution [default: from --quality].
+    #[arg(long)]
+    pub level_step: Option<f64>,
+    /// Height field: pyramid level offset o [default: from --quality].
+    #[arg(long)]
+    pub level_offset: Option<f64>,
+    /// SH exponentiation method [default: from --quality].
+    #[arg(long, value_enum)]
+    pub exp: Option<ExpArg>,
     /// Scale each sphere's log visibility by r/|c-p| (the paper's Section 4.2).
     #[arg(long, value_enum, default_value_t = Switch::Off)]
     pub ratio_attenuation: Switch,
@@ -97,20 +123,34 @@ pub struct ShadingArgs {
 impl ShadingArgs {
     /// The settings these flags describe, checked.
     pub fn settings(&self) -> Result<ShadingSettings, String> {
-        let mut settings = ShadingSettings::for_order(self.order);
-        settings.epsilon = self.epsilon.unwrap_or_else(|| default_epsilon(self.order));
-        settings.exp = match self.exp {
-            ExpArg::Hyb => ExpMethod::Hyb,
-            ExpArg::Ol => ExpMethod::Ol,
-            ExpArg::Series => ExpMethod::Series,
-            ExpArg::Quad => ExpMethod::Quad,
-            ExpArg::Exact => ExpMethod::Exact,
-        };
+        let mut settings = Quality::from(self.quality).settings();
+        if let Some(order) = self.order {
+            settings.order = order;
+            settings.epsilon = default_epsilon(order);
+        }
+        if let Some(epsilon) = self.epsilon {
+            settings.epsilon = epsilon;
+        }
+        if let Some(exp) = self.exp {
+            settings.exp = match exp {
+                ExpArg::Quad => ExpMethod::Quad,
+                ExpArg::Hyb => ExpMethod::Hyb,
+                ExpArg::Ol => ExpMethod::Ol,
+                ExpArg::Series => ExpMethod::Series,
+                ExpArg::Exact => ExpMethod::Exact,
+            };
+        }
         settings.ratio_attenuation = self.ratio_attenuation == Switch::On;
         settings.tangent_occlusion = self.tangent_occlusion == Switch::On;
-        settings.horizon.directions = self.directions;
-        settings.horizon.level_step = self.level_step;
-        settings.horizon.level_offset = self.level_offset;
+        if let Some(w) = self.directions {
+            settings.horizon.directions = w;
+        }
+        if let Some(k) = self.level_step {
+            settings.horizon.level_step = k;
+        }
+        if let Some(o) = self.level_offset {
+            settings.horizon.level_offset = o;
+        }
         settings.double_precision = self.precision == PrecisionArg::F64;
         settings.validate()?;
         Ok(settings)

@@ -6,4 +6,4 @@ pub mod settings;
 
 pub use frame::{shade_frame, ShadeError, ShadedFrame};
 pub use kernel::{Exponentiator, Occluders, ShadingKernel, SurfacePoint};
-pub use settings::{default_epsilon, ShadingSettings};
+pub use settings::{default_epsilon, Quality, ShadingSettings};

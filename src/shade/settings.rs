@@ -92,6 +92,49 @@ impl ShadingSettings {
 
 impl Default for ShadingSettings {
     fn default() -> Self {
-        Self::for_order(4)
+        Quality::Default.settings()
+    }
+}
+
+/// Named trade-offs between speed and accuracy. Every knob of a preset can still be set
+/// on its own; the preset only supplies what is not given.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Quality {
+    /// Order 3, `ol` exponentiation (a table lookup), W = 8, k = 2, o = 2.
+    Draft,
+    /// Order 4, `quad`, W = 16, k = 4, o = 3.
+    Default,
+    /// Order 6, `quad`, W = 24, k = 4, o = 3.
+    High,
+    /// Order 8, `quad`, W = 32, k = 8, o = 4.
+    Ultra,
+}
+
+impl Quality {
+    pub const ALL: [Quality; 4] = [Quality::Draft, Quality::Default, Quality::High, Quality::Ultra];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Quality::Draft => "draft",
+            Quality::Default => "default",
+            Quality::High => "high",
+            Quality::Ultra => "ultra",
+        }
+    }
+
+    /// The preset's settings; eps is each order's default ([`default_epsilon`]).
+    pub fn settings(self) -> ShadingSettings {
+        let (order, exp, directions, level_step, level_offset) = match self {
+            Quality::Draft => (3, ExpMethod::Ol, 8, 2.0, 2.0),
+            Quality::Default => (4, ExpMethod::Quad, 16, 4.0, 3.0),
+            Quality::High => (6, ExpMethod::Quad, 24, 4.0, 3.0),
+            Quality::Ultra => (8, ExpMethod::Quad, 32, 8.0, 4.0),
+        };
+        let mut settings = ShadingSettings::for_order(order);
+        settings.exp = exp;
+        settings.horizon.directions = directions;
+        settings.horizon.level_step = level_step;
+        settings.horizon.level_offset = level_offset;
+        settings
     }
 }
