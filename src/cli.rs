@@ -97,6 +97,9 @@ pub struct ShadingArgs {
     /// Log clamp eps, relative to each lobe's peak, in [1e-6, 1) [default per order, chosen by measurement: 0.15 at order 3, 0.1 at 4, 0.07 at 5-8].
     #[arg(long)]
     pub epsilon: Option<f64>,
+    /// Log clamp of Phong lobes [default: per exponent and order, the eps minimising the lobe's L2 error, see docs/epsilon].
+    #[arg(long)]
+    pub phong_epsilon: Option<f64>,
     /// Height field: number of azimuthal directions W [default: from --quality].
     #[arg(long)]
     pub directions: Option<usize>,
@@ -131,6 +134,7 @@ impl ShadingArgs {
         if let Some(epsilon) = self.epsilon {
             settings.epsilon = epsilon;
         }
+        settings.phong_epsilon = self.phong_epsilon;
         if let Some(exp) = self.exp {
             settings.exp = match exp {
                 ExpArg::Quad => ExpMethod::Quad,

@@ -9,8 +9,10 @@
 pub mod cli;
 pub mod heightfield;
 pub mod logsh;
+pub mod plot;
 pub mod run;
 pub mod scene;
 pub mod sh;
 pub mod shade;
+pub mod sweep;
 pub mod synth;

@@ -98,3 +98,75 @@ pub fn lobe_log_zh(order: usize, lobe: Lobe, epsilon: f64) -> Vec<f64> {
 pub fn lobe_log_zh_as<T: Real>(order: usize, lobe: Lobe, epsilon: f64) -> Vec<T> {
     lobe_log_zh(order, lobe, epsilon).into_iter().map(T::of).collect()
 }
+
+/// ZH coefficients of the lobe itself (not its log): `2 pi K_l integral f(z) P_l(z) dz`,
+/// with `z = e^t` so that sharp Phong lobes (`z^1024`) are resolved: the integrand
+/// `f_max e^((r+1) t) P_l(e^t)` is smooth on `t in [-60 / (r + 1), 0]`, beyond which it is
+/// below `e^-60`. Exact to about 1e-13.
+pub fn lobe_zh(order: usize, lobe: Lobe) -> Vec<f64> {
+    let (r, peak) = lobe.shape();
+    let mut p = vec![0.0; order];
+    let mut out = vec![0.0; order];
+    for (t, w) in gauss_legendre_on(LOBE_NODES, -60.0 / (r + 1.0), 0.0) {
+        let z = t.exp();
+        legendre(order, z, &mut p);
+        let value = peak * ((r + 1.0) * t).exp();
+        for l in 0..order {
+            out[l] += w * value * p[l];
+        }
+    }
+    (0..order).map(|l| 2.0 * PI * ((2 * l + 1) as f64 / (4.0 * PI)).sqrt() * out[l]).collect()
+}
+
+/// L2 distance between the lobe's order-n SH projection and the exact exponential of its
+/// clamped log-SH lobe (the error paper 000's Figure 6 plots, for the peak-relative
+/// clamp).
+pub fn lobe_exp_error(order: usize, lobe: Lobe, epsilon: f64, exact: &crate::sh::ExactExp) -> f64 {
+    let truth = lobe_zh(order, lobe);
+    let log_zh = lobe_log_zh(order, lobe, epsilon);
+    let mut f = vec![0.0; order * order];
+    crate::sh::rotate_zonal(order, &log_zh, [0.0, 0.0, 1.0], &mut f);
+    let mut e = vec![0.0; order * order];
+    exact.exp(&f, &mut e);
+    (0..order).map(|l| (e[crate::sh::index(l, 0)] - truth[l]).powi(2)).sum::<f64>().sqrt()
+}
+
+/// Range searched by [`optimal_lobe_epsilon`].
+pub const LOBE_EPSILON_RANGE: (f64, f64) = (1e-3, 0.9);
+
+/// The eps in [`LOBE_EPSILON_RANGE`] minimising [`lobe_exp_error`]: a scan of 25
+/// log-spaced values, then golden-section refinement around the best (the error is not
+/// unimodal over the whole range, see `docs/epsilon/`). About 40 exponentiations.
+pub fn optimal_lobe_epsilon(order: usize, lobe: Lobe, exact: &crate::sh::ExactExp) -> f64 {
+    let (lo, hi) = (LOBE_EPSILON_RANGE.0.ln(), LOBE_EPSILON_RANGE.1.ln());
+    let error = |log_eps: f64| lobe_exp_error(order, lobe, log_eps.exp(), exact);
+    let steps = 24;
+    let grid: Vec<f64> = (0..=steps).map(|k| lo + (hi - lo) * k as f64 / steps as f64).collect();
+    let errors: Vec<f64> = grid.iter().map(|&x| error(x)).collect();
+    let best = (0..grid.len()).min_by(|&a, &b| errors[a].total_cmp(&errors[b])).expect("non-empty grid");
+    let (mut a, mut b) = (grid[best.saturating_sub(1)], grid[(best + 1).min(steps)]);
+    let ratio = 0.5 * (5f64.sqrt() - 1.0);
+    let (mut c, mut d) = (b - ratio * (b - a), a + ratio * (b - a));
+    let (mut fc, mut fd) = (error(c), error(d));
+    for _ in 0..14 {
+        if fc < fd {
+            b = d;
+            d = c;
+            fd = fc;
+            c = b - ratio * (b - a);
+            fc = error(c);
+        } else {
+            a = c;
+            c = d;
+            fc = fd;
+            d = a + ratio * (b - a);
+            fd = error(d);
+        }
+    }
+    let refined = 0.5 * (a + b);
+    if error(refined) <= errors[best] {
+        refined.exp()
+    } else {
+        grid[best].exp()
+    }
+}

@@ -4,7 +4,7 @@
 
 use super::settings::ShadingSettings;
 use crate::heightfield::HorizonPyramid;
-use crate::logsh::{cap_log_zh, lobe_log_zh_as, nlp_slice, view_blocker, BlockerView, Lobe, WedgeOperator};
+use crate::logsh::{cap_log_zh, lobe_log_zh_as, nlp_slice, optimal_lobe_epsilon, view_blocker, BlockerView, Lobe, WedgeOperator};
 use crate::scene::{Material, Sphere};
 use crate::sh::exp::{exp_hyb_with, exp_series, ExactExp, OlTable};
 use crate::sh::{add_rotated_zonal, coefficient_count, ExpMethod, Real, TriplingTensor, MAX_COEFFICIENTS};
@@ -134,12 +134,20 @@ impl<T: Real> ShadingKernel<T> {
         let epsilon = settings.epsilon;
         let mut tangent = vec![T::zero(); order];
         cap_log_zh(order, T::of(epsilon.ln()), T::of(FRAC_PI_2), &mut tangent);
+        let lobe_exp = materials
+            .values()
+            .any(|m| matches!(m, Material::Phong { .. }))
+            .then(|| crate::sh::ExactExp::new(order));
         let materials = materials
             .iter()
             .map(|(&index, material)| {
                 let phong = match material {
                     Material::Phong { exponent, .. } => {
-                        Some(LobeTable::new(order, Lobe::Phong { exponent: *exponent as f64 }, epsilon))
+                        let lobe = Lobe::Phong { exponent: *exponent as f64 };
+                        let eps = settings.phong_epsilon.unwrap_or_else(|| {
+                            optimal_lobe_epsilon(order, lobe, lobe_exp.as_ref().expect("built when a phong material exists"))
+                        });
+                        Some(LobeTable::new(order, lobe, eps))
                     }
                     _ => None,
                 };
