@@ -17,8 +17,51 @@ pub struct Cli {
 pub enum Command {
     /// Shade one frame of a scene directory (format v1) into a linear EXR and a PNG preview.
     Shade(ShadeArgs),
+    /// Render the ground truth of one frame: exact visibility, light x visibility x BRDF integrated in f64, once with the full light and once with its SH projection.
+    Reference(ReferenceArgs),
+    /// Measure the speed/accuracy trade on one frame: presets and single-knob sweeps against the reference; writes CSV, JSON and an SVG plot.
+    Sweep(SweepArgs),
     /// Write a procedural sample scene in format v1 (the scenes in gbuffers/ come from here).
     Example(ExampleArgs),
+}
+
+#[derive(Args, Debug)]
+pub struct ReferenceArgs {
+    /// Scene directory holding scene.json.
+    pub scene: PathBuf,
+    /// Frame to render [default: the scene's first frame, or 1].
+    #[arg(long)]
+    pub frame: Option<i64>,
+    /// Output directory; receives reference.NNNN.{exr,png} (full light) and reference_sh.NNNN.{exr,png} (SH-projected light).
+    #[arg(long, default_value = "out")]
+    pub out: PathBuf,
+    /// Order of the SH-projected light of the second image.
+    #[arg(long, default_value_t = 4)]
+    pub sh_order: usize,
+    /// Convergence target per pixel, absolute (unoccluded white floor under a white sky = 1).
+    #[arg(long, default_value_t = 1e-3)]
+    pub tolerance: f64,
+    /// Most refinements per pixel (each doubles the azimuthal samples).
+    #[arg(long, default_value_t = 6)]
+    pub max_level: u32,
+}
+
+#[derive(Args, Debug)]
+pub struct SweepArgs {
+    /// Scene directory holding scene.json.
+    pub scene: PathBuf,
+    /// Frame to measure [default: the scene's first frame, or 1].
+    #[arg(long)]
+    pub frame: Option<i64>,
+    /// Output directory; receives sweep.csv, sweep.json, sweep.svg and the reference image.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Runs per configuration; the fastest is reported.
+    #[arg(long, default_value_t = 2)]
+    pub repeats: usize,
+    /// Convergence target of the reference, per pixel.
+    #[arg(long, default_value_t = 1e-3)]
+    pub tolerance: f64,
 }
 
 #[derive(Args, Debug)]

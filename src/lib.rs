@@ -10,6 +10,7 @@ pub mod cli;
 pub mod heightfield;
 pub mod logsh;
 pub mod plot;
+pub mod reference;
 pub mod run;
 pub mod scene;
 pub mod sh;

@@ -5,6 +5,8 @@ fn main() {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Shade(args) => logsh::run::shade(&args),
+        Command::Reference(args) => logsh::run::reference(&args),
+        Command::Sweep(args) => logsh::run::sweep(&args),
         Command::Example(args) => logsh::run::example(&args),
     };
     if let Err(error) = result {

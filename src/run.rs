@@ -1,6 +1,10 @@
 //! What each command does, between parsed options and the library.
 
-use crate::cli::{ExampleArgs, ExampleName, ShadeArgs};
+use crate::cli::{ExampleArgs, ExampleName, ReferenceArgs, ShadeArgs, SweepArgs};
+use crate::reference::{render_reference, ReferenceLight, ReferenceOptions};
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use std::io::IsTerminal;
+use std::path::Path;
 use crate::scene::{output, Scene};
 use crate::shade::shade_frame;
 use anyhow::{anyhow, Context, Result};
@@ -17,12 +21,7 @@ pub fn shade(args: &ShadeArgs) -> Result<()> {
     let elapsed = started.elapsed();
     std::fs::create_dir_all(&args.out).with_context(|| format!("cannot create output directory {}", args.out.display()))?;
     let exr = args.out.join(format!("beauty.{frame_number:04}.exr"));
-    let png = args.out.join(format!("beauty.{frame_number:04}.png"));
-    for path in [&exr, &png] {
-        scene.check_output_path(path)?;
-    }
-    output::write_exr_rgba(&exr, shaded.width, shaded.height, &shaded.rgba)?;
-    output::write_png_preview(&png, shaded.width, shaded.height, &shaded.rgba)?;
+    write_image(&scene, &args.out, &format!("beauty.{frame_number:04}"), shaded.width, shaded.height, &shaded.rgba)?;
     eprintln!(
         "shaded frame {frame_number} ({}x{}) at order {}, eps {}, {:?} in {:.2} s: {}",
         shaded.width,
@@ -32,6 +31,96 @@ pub fn shade(args: &ShadeArgs) -> Result<()> {
         settings.exp,
         elapsed.as_secs_f64(),
         exr.display()
+    );
+    Ok(())
+}
+
+/// Writes `<stem>.exr` (linear RGBA) and `<stem>.png` (sRGB preview) into `dir`, after
+/// checking that neither is one of the scene's inputs.
+fn write_image(scene: &Scene, dir: &Path, stem: &str, width: usize, height: usize, rgba: &[[f32; 4]]) -> Result<()> {
+    std::fs::create_dir_all(dir).with_context(|| format!("cannot create output directory {}", dir.display()))?;
+    let exr = dir.join(format!("{stem}.exr"));
+    let png = dir.join(format!("{stem}.png"));
+    for path in [&exr, &png] {
+        scene.check_output_path(path)?;
+    }
+    output::write_exr_rgba(&exr, width, height, rgba)?;
+    output::write_png_preview(&png, width, height, rgba)?;
+    Ok(())
+}
+
+/// A progress bar on a terminal, nothing otherwise (logs stay clean).
+fn progress_bar(total: usize, what: &str) -> ProgressBar {
+    let bar = ProgressBar::with_draw_target(
+        Some(total as u64),
+        if std::io::stderr().is_terminal() { ProgressDrawTarget::stderr() } else { ProgressDrawTarget::hidden() },
+    );
+    bar.set_style(ProgressStyle::with_template("{msg} [{bar:40}] {pos}/{len} {elapsed}<{eta}").expect("valid template"));
+    bar.set_message(what.to_string());
+    bar
+}
+
+/// `logsh reference`.
+pub fn reference(args: &ReferenceArgs) -> Result<()> {
+    let scene = Scene::load(&args.scene)?;
+    let frame_number = args.frame.unwrap_or_else(|| scene.default_frame());
+    let frame = scene.frame(frame_number)?;
+    let height = frame.gbuffer.height;
+    for (light, stem) in [
+        (ReferenceLight::EnvironmentMap, format!("reference.{frame_number:04}")),
+        (ReferenceLight::ShProjected { order: args.sh_order }, format!("reference_sh.{frame_number:04}")),
+    ] {
+        let options = ReferenceOptions { light: light.clone(), tolerance: args.tolerance, max_level: args.max_level };
+        let bar = progress_bar(height, &format!("reference ({light:?})"));
+        let started = Instant::now();
+        let image = render_reference(&scene, &frame, &options, &|rows| bar.set_position(rows as u64))?;
+        bar.finish_and_clear();
+        write_image(&scene, &args.out, &stem, image.width, image.height, &image.rgba)?;
+        eprintln!(
+            "{stem}: {:?} light, {:.1} s, {} pixel(s) above the tolerance {} (largest error estimate {:.2e})",
+            light,
+            started.elapsed().as_secs_f64(),
+            image.unconverged_pixels,
+            args.tolerance,
+            image.max_estimated_error
+        );
+    }
+    Ok(())
+}
+
+/// `logsh sweep`.
+pub fn sweep(args: &SweepArgs) -> Result<()> {
+    let scene = Scene::load(&args.scene)?;
+    let frame_number = args.frame.unwrap_or_else(|| scene.default_frame());
+    let frame = scene.frame(frame_number)?;
+    let options = ReferenceOptions { light: ReferenceLight::EnvironmentMap, tolerance: args.tolerance, ..Default::default() };
+    let bar = progress_bar(frame.gbuffer.height, "reference");
+    let reference = render_reference(&scene, &frame, &options, &|rows| bar.set_position(rows as u64))?;
+    bar.finish_and_clear();
+    write_image(&scene, &args.out, &format!("reference.{frame_number:04}"), reference.width, reference.height, &reference.rgba)?;
+    let bar = progress_bar(crate::sweep::configurations().len(), "sweep");
+    let rows = crate::sweep::run(&scene, &frame, &reference.rgba, args.repeats, &|done, _| bar.set_position(done as u64))?;
+    bar.finish_and_clear();
+    let name = args.scene.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| "scene".into());
+    let files = [
+        ("sweep.csv", crate::sweep::to_csv(&rows)),
+        ("sweep.json", serde_json::to_string_pretty(&rows)?),
+        ("sweep.svg", crate::sweep::chart(&rows, &name).to_svg()),
+    ];
+    for (file, text) in files {
+        let path = args.out.join(file);
+        scene.check_output_path(&path)?;
+        output::write_text(&path, &text)?;
+    }
+    println!("{:<18} {:<8} {:>10} {:>9} {:>9} {:>9}", "knob", "value", "ms/frame", "mean", "p99", "rmse");
+    for r in &rows {
+        println!("{:<18} {:<8} {:>10.1} {:>9.4} {:>9.4} {:>9.4}", r.knob, r.value, r.milliseconds, r.mean_abs, r.p99_abs, r.rmse);
+    }
+    eprintln!(
+        "reference: {} pixel(s) above the tolerance {}; wrote sweep.csv, sweep.json, sweep.svg to {}",
+        reference.unconverged_pixels,
+        args.tolerance,
+        args.out.display()
     );
     Ok(())
 }

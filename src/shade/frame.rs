@@ -55,8 +55,9 @@ pub fn shade_frame(scene: &Scene, frame: &Frame, settings: &ShadingSettings) -> 
     })
 }
 
-/// What the materials present in the frame need from the scene.
-fn check_frame(scene: &Scene, frame: &Frame) -> Result<(), ShadeError> {
+/// What the materials present in the frame need from the scene: the checks every
+/// shading of a frame (fast path and reference) makes first.
+pub fn check_frame(scene: &Scene, frame: &Frame) -> Result<(), ShadeError> {
     let g = &frame.gbuffer;
     let file = g.file.display().to_string();
     let water = g.material.iter().filter(|&&m| matches!(scene.materials.get(&m), Some(Material::Water { .. }))).count();
@@ -83,7 +84,8 @@ fn check_frame(scene: &Scene, frame: &Frame) -> Result<(), ShadeError> {
     Ok(())
 }
 
-fn unit_or_up(n: [f32; 3]) -> [f64; 3] {
+/// The unit normal of a G-buffer normal, or +Z where it is degenerate.
+pub fn unit_or_up(n: [f32; 3]) -> [f64; 3] {
     let n = n.map(f64::from);
     let length = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
     if length > 1e-12 {
