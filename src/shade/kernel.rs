@@ -14,10 +14,25 @@ use std::f64::consts::FRAC_PI_2;
 /// Most azimuthal directions a kernel accepts (per-pixel buffers are on the stack).
 pub const MAX_DIRECTIONS: usize = 64;
 
+/// Largest non-DC magnitude `|f^|` given to the SH-space methods; a pixel beyond it is
+/// exponentiated by `quad` instead, which the lobe's peak bounds. Pixels at the default
+/// eps carry 5 to 9 (`examples/log_magnitudes.rs`); eps below about 0.01 or hundreds of
+/// overlapping caps go far beyond, where the methods run away (`tests/extremes.rs`):
+/// OL's coefficients grow like `exp(|f^|)` (an albedo-1 receiver came out 17 at
+/// `|f^| < 16`, hence its lower limit), HYB's squarings amplify its start 2^p-fold until
+/// f32 overflows, and the series needs more than 64 terms.
+pub fn sh_space_max_magnitude(method: ExpMethod) -> f64 {
+    match method {
+        ExpMethod::Ol => 8.0,
+        _ => 16.0,
+    }
+}
+
 /// `exp*` with the tables its method needs, built once per frame setting.
 pub struct Exponentiator {
     method: ExpMethod,
-    /// The fine grid for `exact`, the coarse one for `quad`.
+    /// The fine grid for `exact`; the coarse one for `quad`, and for the other methods'
+    /// fallback beyond [`sh_space_max_magnitude`].
     exact: Option<ExactExp>,
     tensor: Option<TriplingTensor>,
     ol: Option<OlTable>,
@@ -36,11 +51,10 @@ impl Exponentiator {
         let needs_ol = matches!(method, ExpMethod::Ol | ExpMethod::Hyb);
         Self {
             method,
-            exact: match method {
-                ExpMethod::Exact => Some(ExactExp::new(order)),
-                ExpMethod::Quad => Some(ExactExp::fast(order)),
-                _ => None,
-            },
+            exact: Some(match method {
+                ExpMethod::Exact => ExactExp::new(order),
+                _ => ExactExp::fast(order),
+            }),
             tensor: needs_tensor.then(|| TriplingTensor::new(order)),
             ol: needs_ol.then(|| {
                 OlTable::fit(order, &crate::logsh::training_log_vectors(order, OL_TRAINING_COUNT, OL_TRAINING_SEED))
@@ -57,8 +71,16 @@ impl Exponentiator {
     /// lobe's peak); the quadrature methods clamp their nodes there
     /// ([`ExactExp::exp_below`]), the SH-space ones cannot.
     pub fn exp<T: Real>(&self, f: &[T], ceiling: f64, out: &mut [T]) {
+        let quadrature = self.exact.as_ref().expect("always built");
+        let sh_space = !matches!(self.method, ExpMethod::Exact | ExpMethod::Quad);
+        if sh_space {
+            let magnitude = f[1..].iter().fold(0.0f64, |acc, c| acc + c.to_f64().unwrap_or(f64::INFINITY).powi(2)).sqrt();
+            if !(magnitude <= sh_space_max_magnitude(self.method)) {
+                return quadrature.exp_below(f, ceiling, out);
+            }
+        }
         match self.method {
-            ExpMethod::Exact | ExpMethod::Quad => self.exact.as_ref().expect("built with its table").exp_below(f, ceiling, out),
+            ExpMethod::Exact | ExpMethod::Quad => quadrature.exp_below(f, ceiling, out),
             ExpMethod::Series => exp_series(self.tensor.as_ref().expect("built with its table"), f, out),
             ExpMethod::Ol => self.ol.as_ref().expect("built with its table").exp(f, out),
             ExpMethod::Hyb => exp_hyb_with(
