@@ -443,3 +443,13 @@ fn environment_projection_matches_quadrature() {
         assert!((a[0] - b).abs() < 2e-3, "coefficient {i}: {} vs {b}", a[0]);
     }
 }
+
+#[test]
+fn height_map_lookup_handles_thin_maps_built_in_memory() {
+    use logsh::scene::HeightMap;
+    let single = HeightMap { heights: vec![2.5], columns: 1, rows: 1, min: [0.0, 0.0], max: [1.0, 1.0] };
+    assert_eq!(single.height_at(0.3, 7.0), 2.5);
+    let row = HeightMap { heights: vec![0.0, 1.0, 3.0], columns: 3, rows: 1, min: [0.0, 0.0], max: [2.0, 1.0] };
+    assert_eq!(row.height_at(1.5, 0.5), 2.0);
+    assert_eq!(row.height_at(9.0, -4.0), 3.0);
+}
