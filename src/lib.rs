@@ -1,6 +1,6 @@
 //! logsh: soft environment shadows and glossy reflections for Blender G-buffers, by
 //! log-SH exponentiation (Giraud and Nowrouzezahrai, "Practical Shading of Height Fields
-//! and Meshes using Spherical Harmonic Exponentiation"; paper 000 in the design notes).
+//! and Meshes using Spherical Harmonic Exponentiation"; paper 000 in `docs/design.md`).
 //!
 //! Layout: [`sh`] is the SH core (basis, rotation, products, exponentiation), [`logsh`]
 //! the log-SH building blocks of the paper, [`heightfield`] the horizon march of SN08,

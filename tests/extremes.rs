@@ -312,7 +312,7 @@ fn exact_exponentiation_at_extreme_epsilons() {
     worst.report("exact", |_| MAX_DIFFUSE, PRECISION_TOLERANCE);
 }
 
-/// The done-when scene: 5000 overlapping blockers, most receivers inside one,
+/// The acceptance scene: 5000 overlapping blockers, most receivers inside one,
 /// grazing normals.
 fn done_when_scene(dir: &Path, width: u32, height: u32) -> (Scene, Frame) {
     let (scene, mut frame) = base_scene(dir, width, height);
@@ -628,7 +628,7 @@ fn height_fields_vertical_cliff_flat_and_single_sample() {
 
 #[test]
 fn single_sample_height_map_file_is_refused_clearly() {
-    // In memory a 1x1 map is accepted (above); the reader requires 2x2 (DESIGN.md).
+    // In memory a 1x1 map is accepted (above); the reader requires 2x2 (docs/design.md).
     let dir = tempfile::tempdir().unwrap();
     base_scene(dir.path(), 8, 4);
     let map = HeightMap { heights: vec![0.0], columns: 1, rows: 1, min: [0.0, 0.0], max: [1.0, 1.0] };

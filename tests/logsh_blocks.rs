@@ -194,7 +194,7 @@ fn peak_relative_clamp_keeps_an_unoccluded_plane_near_one() {
     // exp of the diffuse log lobe plus the log visibility of the ground (the lower
     // hemisphere), integrated against a constant white sky: 1 for the true lobe. With the
     // paper's absolute clamp and eps = 0.2 this is 1.59 at order 4; with the peak-relative
-    // clamp and eps = 0.1, 1.03 (DESIGN.md, "Measured already"; reproduced here: 1.0257).
+    // clamp and eps = 0.1, 1.03 (docs/design.md, "Measured already"; reproduced here: 1.0257).
     let order = 4;
     let epsilon: f64 = 0.1;
     let mut f = vec![0.0; 16];

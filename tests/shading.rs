@@ -75,7 +75,7 @@ fn sphere_over_plane_meets_the_error_bounds_at_every_order() {
 #[test]
 fn unoccluded_plane_comes_out_as_its_albedo() {
     // No blockers: the answer is the albedo. The band-limited, clamped log lobe misses it
-    // by a few percent (DESIGN.md measured 1.03 at order 4, eps 0.1). Measured with the
+    // by a few percent (docs/design.md measured 1.03 at order 4, eps 0.1). Measured with the
     // defaults: 0.983, 1.026, 1.040, 1.009, 1.013, 1.019 for orders 3 to 8 (this test prints
     // them with --nocapture); the bound is the worst, rounded up.
     let unoccluded_tolerance = |_order: usize| 0.05;

@@ -1,5 +1,5 @@
 //! Height-field horizons: the geometry half of the height-field log visibility
-//! (DESIGN.md, "Pipeline per pixel", step 2).
+//! (docs/design.md, "Pipeline per pixel", step 2).
 //!
 //! # Conventions
 //!
@@ -8,7 +8,7 @@
 //! - The height map holds `columns x rows` f32 samples, row-major, first row at
 //!   `min.y`, first column at `min.x`, corner-registered: sample (i = column, j = row)
 //!   sits at `min + (max - min) * (i / (columns - 1), j / (rows - 1))`
-//!   (DESIGN.md, "Scene format v1"). A map with one column (or one row) is constant
+//!   (docs/design.md, "Scene format v1"). A map with one column (or one row) is constant
 //!   across x (or y); a 1x1 map is an infinite plane.
 //! - The level-0 surface is the **bilinear** interpolant of the samples
 //!   ([`HeightField::height_at`]). Bilinear is exact at the samples, is what a
@@ -47,7 +47,7 @@ pub use reference::brute_force_horizon;
 /// What can be wrong with a height map or with horizon settings.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum HeightFieldError {
-    /// A size of zero (DESIGN.md requires at least one sample).
+    /// A size of zero (docs/design.md requires at least one sample).
     #[error("height map is {columns} x {rows}: it needs at least one column and one row")]
     EmptyMap { columns: usize, rows: usize },
     /// The sample vector does not have `columns * rows` entries.

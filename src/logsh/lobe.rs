@@ -3,7 +3,7 @@
 //!
 //! The paper clamps the lobe itself, `log(max(f, eps))`. The diffuse lobe `cos/pi` never
 //! exceeds 0.32, so with the paper's `eps = 0.2` most of it is clamped and an unoccluded
-//! plane comes out 1.59 instead of 1 at order 4 (DESIGN.md, "Measured already"). Here the
+//! plane comes out 1.59 instead of 1 at order 4 (docs/design.md, "Measured already"). Here the
 //! clamp is relative to the peak: `log(max(f / f_max, eps)) + log(f_max)`, the constant
 //! going into the DC term, so `eps` means the same thing for every lobe and every
 //! normalisation.

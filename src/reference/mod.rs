@@ -1,10 +1,10 @@
-//! Ground-truth reference renderer (DESIGN.md, "Verifying", level 2): exact visibility
+//! Ground-truth reference renderer (docs/design.md, "Verifying", level 2): exact visibility
 //! against the same spheres and height field the fast path uses, and the integral of
 //! light x visibility x BRDF over the sphere in f64, with a convergence check per pixel.
 //!
 //! # What a pixel is
 //!
-//! The materials of DESIGN.md, "Scene format v1", with the same frame walk as
+//! The materials of docs/design.md, "Scene format v1", with the same frame walk as
 //! [`crate::shade::shade_frame`]: `diffuse` and `heightfield` are `albedo * integral L V
 //! max(n.w, 0)/pi`; `phong` adds `specular * integral L V (r+1)/(2 pi) max(R.w, 0)^r`
 //! (no cosine); `water` is `tint *` the shading of the reflection G-buffer's point with

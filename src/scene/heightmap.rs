@@ -1,6 +1,6 @@
 //! The height map of the terrain, read raw and validated; horizons are built elsewhere.
 //!
-//! Layout (`DESIGN.md`): sample `(i, j)` (column `i`, row `j`) of a `columns x rows` map
+//! Layout (`docs/design.md`): sample `(i, j)` (column `i`, row `j`) of a `columns x rows` map
 //! lies at `min + (max - min) * (i / (columns - 1), j / (rows - 1))` (corner-registered);
 //! row 0 is the first scan line of the EXR file and lies at `min.y`. Beyond the
 //! rectangle the terrain continues flat at the height of its nearest edge sample.

@@ -1,4 +1,4 @@
-//! Reader of scene format v1 (the contract in `DESIGN.md`, "Scene format v1"), and the
+//! Reader of scene format v1 (the contract in `docs/design.md`, "Scene format v1"), and the
 //! writers of output images.
 //!
 //! A scene is a directory with `scene.json`. [`Scene::load`] parses and validates it and
@@ -71,7 +71,7 @@ use std::sync::Arc;
 /// Name of the scene description inside a scene directory.
 pub const SCENE_FILE: &str = "scene.json";
 
-/// A material of the table in `scene.json`; see `DESIGN.md` for what each type means.
+/// A material of the table in `scene.json`; see `docs/design.md` for what each type means.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Material {
     /// Diffuse, on the height-field surface, with its self-shadowing.

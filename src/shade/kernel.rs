@@ -262,7 +262,7 @@ impl<T: Real> ShadingKernel<T> {
         [dot(&self.light[0]), dot(&self.light[1]), dot(&self.light[2])]
     }
 
-    /// Outgoing radiance of a surface point (DESIGN.md, material types). Water is not a
+    /// Outgoing radiance of a surface point (docs/design.md, material types). Water is not a
     /// surface material here: the caller shades the reflected point instead.
     pub fn shade(&self, occluders: Occluders, point: &SurfacePoint) -> [f32; 3] {
         let count = coefficient_count(self.order);
