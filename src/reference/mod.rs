@@ -111,9 +111,9 @@ pub use integrate::{
     integrate_point, LightModel, LobeTerm, PointEstimate, ReferenceOccluders, MAX_REFERENCE_SH_ORDER, SURFACE_BAND,
 };
 
-use crate::heightfield::{HeightField, HeightFieldError};
 use crate::logsh::Lobe;
 use crate::scene::{Frame, GBuffer, Material, Scene};
+use crate::shade::frame::surface_at;
 use crate::shade::kernel::reflect_view;
 use rayon::prelude::*;
 use std::sync::Mutex;
@@ -184,9 +184,8 @@ pub struct ReferenceFrame {
 pub enum ReferenceError {
     #[error("reference options: {0}")]
     Options(String),
-    #[error("height field of {file}: {source}")]
-    HeightField { file: String, source: HeightFieldError },
-    /// What the frame lacks for its materials (the same checks as the fast path).
+    /// What the frame lacks for its materials, or a bad height field (the same checks as
+    /// the fast path).
     #[error(transparent)]
     Frame(#[from] crate::shade::ShadeError),
 }
@@ -201,16 +200,7 @@ pub fn render_reference(
 ) -> Result<ReferenceFrame, ReferenceError> {
     options.validate().map_err(ReferenceError::Options)?;
     crate::shade::frame::check_frame(scene, frame)?;
-    let field = match &frame.height_map {
-        Some(map) => {
-            let file = scene.heightfield.as_ref().map(|h| h.heights.0.clone()).unwrap_or_default();
-            Some(
-                HeightField::new(map.heights.clone(), map.columns, map.rows, map.min, map.max)
-                    .map_err(|source| ReferenceError::HeightField { file, source })?,
-            )
-        }
-        None => None,
-    };
+    let field = crate::shade::frame::height_field(scene, frame)?;
     let light = LightModel::new(&frame.light, &options.light).map_err(ReferenceError::Options)?;
     let ctx = Context {
         scene,
@@ -247,8 +237,7 @@ pub fn render_reference(
     Ok(ReferenceFrame { width, height, rgba, unconverged_pixels, max_estimated_error, estimated_error: errors })
 }
 
-/// What the materials present in the frame need from the scene (the checks of
-/// `shade::frame`).
+/// What every pixel's integration reads.
 struct Context<'a> {
     scene: &'a Scene,
     frame: &'a Frame,
@@ -266,20 +255,11 @@ impl Context<'_> {
         self.light.radiance(dir.map(|c| c / l))
     }
 
-    /// The eye, or a point along the normal without a camera (diffuse only then).
-    fn eye(&self, p: [f64; 3], n: [f64; 3]) -> [f64; 3] {
-        match &self.frame.camera {
-            Some(camera) => camera.position,
-            None => [p[0] + n[0], p[1] + n[1], p[2] + n[2]],
-        }
-    }
-
     /// Shading of G-buffer pixel `i` of `buffer`, seen from `view_origin` (the eye when
     /// `None`), times `tint`.
     fn surface(&self, buffer: &GBuffer, i: usize, view_origin: Option<[f64; 3]>, tint: [f64; 3]) -> PointEstimate {
-        let p = buffer.position[i].map(f64::from);
-        let n = crate::shade::frame::unit_or_up(buffer.normal[i]);
-        let view = view_origin.unwrap_or_else(|| self.eye(p, n));
+        let point = surface_at(buffer, i, view_origin, self.frame);
+        let (p, n, view) = (point.position, point.normal, point.view_origin);
         let scaled = |c: [f32; 3]| [0, 1, 2].map(|k| f64::from(c[k]) * tint[k]);
         let terms = match self.scene.materials.get(&buffer.material[i]) {
             Some(Material::Diffuse { albedo }) | Some(Material::Heightfield { albedo }) => {
@@ -321,14 +301,13 @@ impl Context<'_> {
             m => match self.scene.materials.get(&m) {
                 Some(Material::Water { tint }) => {
                     let reflection = self.frame.reflection.as_ref().expect("checked before rendering");
-                    let p = g.position[i].map(f64::from);
-                    let n = crate::shade::frame::unit_or_up(g.normal[i]);
+                    let water = surface_at(g, i, None, self.frame);
                     let tint = tint.map(f64::from);
                     let estimate = if reflection.material[i] == 0 {
-                        let sky = self.light_along(reflect_view(self.eye(p, n), p, n));
+                        let sky = self.light_along(reflect_view(water.view_origin, water.position, water.normal));
                         exact([0, 1, 2].map(|k| tint[k] * sky[k]))
                     } else {
-                        self.surface(reflection, i, Some(p), tint)
+                        self.surface(reflection, i, Some(water.position), tint)
                     };
                     (out(estimate.rgb, 1.0), estimate)
                 }

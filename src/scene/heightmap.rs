@@ -94,20 +94,11 @@ impl HeightMap {
         ]
     }
 
-    /// Bilinear height at world `(x, y)`, clamped to the edge beyond the rectangle.
+    /// Bilinear height at world `(x, y)`, clamped to the edge beyond the rectangle: the
+    /// same interpolant the horizon march and the reference see
+    /// ([`crate::heightfield::HeightField::height_at`]).
     pub fn height_at(&self, x: f64, y: f64) -> f64 {
-        let fx = ((x - self.min[0]) / (self.max[0] - self.min[0]) * (self.columns - 1) as f64)
-            .clamp(0.0, (self.columns - 1) as f64);
-        let fy =
-            ((y - self.min[1]) / (self.max[1] - self.min[1]) * (self.rows - 1) as f64).clamp(0.0, (self.rows - 1) as f64);
-        // Maps one sample wide (built in memory; files need 2x2) repeat that sample.
-        let (i0, j0) = ((fx as usize).min(self.columns - 1), (fy as usize).min(self.rows - 1));
-        let (i1, j1) = ((i0 + 1).min(self.columns - 1), (j0 + 1).min(self.rows - 1));
-        let (tx, ty) = (fx - i0 as f64, fy - j0 as f64);
-        let h = |i: usize, j: usize| self.heights[j * self.columns + i] as f64;
-        let a = h(i0, j0) * (1.0 - tx) + h(i1, j0) * tx;
-        let b = h(i0, j1) * (1.0 - tx) + h(i1, j1) * tx;
-        a * (1.0 - ty) + b * ty
+        crate::heightfield::bilinear(&self.heights, self.columns, self.rows, self.min, self.max, x, y)
     }
 
     /// Lowest and highest sample.

@@ -35,13 +35,11 @@ pub enum ShadeError {
 pub fn shade_frame(scene: &Scene, frame: &Frame, settings: &ShadingSettings) -> Result<ShadedFrame, ShadeError> {
     settings.validate().map_err(ShadeError::Settings)?;
     check_frame(scene, frame)?;
-    let pyramid = match &frame.height_map {
-        Some(map) => {
-            let file = scene.heightfield.as_ref().map(|h| h.heights.0.clone()).unwrap_or_default();
-            let field = HeightField::new(map.heights.clone(), map.columns, map.rows, map.min, map.max)
-                .map_err(|source| ShadeError::HeightField { file: file.clone(), source })?;
-            Some(HorizonPyramid::new(&field, settings.horizon).map_err(|source| ShadeError::HeightField { file, source })?)
-        }
+    let pyramid = match height_field(scene, frame)? {
+        Some(field) => Some(
+            HorizonPyramid::new(&field, settings.horizon)
+                .map_err(|source| ShadeError::HeightField { file: height_map_file(scene), source })?,
+        ),
         None => None,
     };
     let light = frame.light.sh_coefficients(settings.order);
@@ -53,6 +51,24 @@ pub fn shade_frame(scene: &Scene, frame: &Frame, settings: &ShadingSettings) -> 
         let kernel = ShadingKernel::<f32>::new(settings, &scene.materials, &light, pyramid.is_some());
         shade_pixels(&kernel, occluders, frame)
     })
+}
+
+/// The name of the scene's height map, for messages.
+fn height_map_file(scene: &Scene) -> String {
+    scene.heightfield.as_ref().map(|h| h.heights.0.clone()).unwrap_or_default()
+}
+
+/// The frame's height field, validated, if the scene has one (the fast path builds its
+/// pyramid on it, the reference its exact horizons).
+pub fn height_field(scene: &Scene, frame: &Frame) -> Result<Option<HeightField>, ShadeError> {
+    frame
+        .height_map
+        .as_ref()
+        .map(|map| {
+            HeightField::new(map.heights.clone(), map.columns, map.rows, map.min, map.max)
+                .map_err(|source| ShadeError::HeightField { file: height_map_file(scene), source })
+        })
+        .transpose()
 }
 
 /// What the materials present in the frame need from the scene: the checks every
@@ -116,7 +132,9 @@ fn eye(frame: &Frame, p: [f64; 3], n: [f64; 3]) -> [f64; 3] {
     }
 }
 
-fn surface_at(buffer: &GBuffer, i: usize, view_origin: Option<[f64; 3]>, frame: &Frame) -> SurfacePoint {
+/// Pixel `i` of `buffer` as a point to shade, seen from `view_origin` (the frame's eye when
+/// `None`).
+pub fn surface_at(buffer: &GBuffer, i: usize, view_origin: Option<[f64; 3]>, frame: &Frame) -> SurfacePoint {
     let position = buffer.position[i].map(f64::from);
     let normal = unit_or_up(buffer.normal[i]);
     SurfacePoint {
