@@ -2,12 +2,12 @@
 
 use crate::cli::{ExampleArgs, ExampleName, ReferenceArgs, ShadeArgs, SweepArgs};
 use crate::reference::{render_reference, ReferenceLight, ReferenceOptions};
-use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
-use std::io::IsTerminal;
-use std::path::Path;
 use crate::scene::{output, Scene};
 use crate::shade::shade_frame;
 use anyhow::{anyhow, Context, Result};
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use std::io::IsTerminal;
+use std::path::Path;
 use std::time::Instant;
 
 /// `logsh shade`.
@@ -19,9 +19,8 @@ pub fn shade(args: &ShadeArgs) -> Result<()> {
     let started = Instant::now();
     let shaded = shade_frame(&scene, &frame, &settings)?;
     let elapsed = started.elapsed();
-    std::fs::create_dir_all(&args.out).with_context(|| format!("cannot create output directory {}", args.out.display()))?;
-    let exr = args.out.join(format!("beauty.{frame_number:04}.exr"));
-    write_image(&scene, &args.out, &format!("beauty.{frame_number:04}"), shaded.width, shaded.height, &shaded.rgba)?;
+    let stem = format!("beauty.{frame_number:04}");
+    write_image(&scene, &args.out, &stem, shaded.width, shaded.height, &shaded.rgba)?;
     eprintln!(
         "shaded frame {frame_number} ({}x{}) at order {}, eps {}, {:?} in {:.2} s: {}",
         shaded.width,
@@ -30,7 +29,7 @@ pub fn shade(args: &ShadeArgs) -> Result<()> {
         settings.epsilon,
         settings.exp,
         elapsed.as_secs_f64(),
-        exr.display()
+        args.out.join(format!("{stem}.exr")).display()
     );
     Ok(())
 }
