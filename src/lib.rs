@@ -5,8 +5,9 @@
 //! Layout: [`sh`] is the SH core (basis, rotation, products, exponentiation), [`logsh`]
 //! the log-SH building blocks of the paper, [`heightfield`] the horizon march of SN08,
 //! [`scene`] the format-v1 reader and output writers, [`shade`] the per-pixel pipeline on
-//! the CPU, [`synth`] procedural scenes, [`cli`] and [`run`] the command line.
+//! the CPU, [`gpu`] the same pipeline as one wgpu compute pass, [`synth`] procedural scenes, [`cli`] and [`run`] the command line.
 pub mod cli;
+pub mod gpu;
 pub mod heightfield;
 pub mod logsh;
 pub mod plot;

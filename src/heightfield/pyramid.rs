@@ -222,6 +222,93 @@ impl HorizonSettings {
     }
 }
 
+/// A pyramid before any sample is filtered: the level sizes, the march's step table and
+/// the azimuths. [`HorizonPyramid::new`] filters the levels on the CPU; the GPU pre-pass
+/// filters them from the same plan with the same taps ([`decimation_taps`]).
+#[derive(Clone, Debug)]
+pub struct PyramidPlan {
+    /// Samples per axis of each level, level 0 (the map) first.
+    pub sizes: Vec<[usize; 2]>,
+    pub steps: Vec<MarchStep>,
+    /// `(cos phi_k, sin phi_k)`.
+    pub directions: Vec<[f64; 2]>,
+}
+
+impl PyramidPlan {
+    pub fn new(field: &HeightField, settings: HorizonSettings) -> Result<Self, HeightFieldError> {
+        settings.validate()?;
+        let n = [field.columns(), field.rows()];
+        let (min, max) = (field.min(), field.max());
+        let spacing0 = field.spacing();
+        let b = 2f64.powf(1.0 / settings.level_step);
+
+        // Level sizes: ceil((n - 1)/b^j) + 1, at least 2, until 2 on every moving axis.
+        let mut sizes: Vec<[usize; 2]> = vec![n];
+        while sizes.last().is_some_and(|s| (0..2).any(|a| s[a] > 2)) {
+            let j = sizes.len() as i32;
+            let scale = b.powi(j);
+            let size: [usize; 2] = std::array::from_fn(|a| {
+                if n[a] <= 2 {
+                    n[a]
+                } else {
+                    (((n[a] - 1) as f64 / scale - 1e-9).ceil() as usize + 1).max(2)
+                }
+            });
+            sizes.push(size);
+            if sizes.len() > MAX_LEVELS {
+                return Err(HeightFieldError::TooLarge {
+                    what: "pyramid levels",
+                    needed: sizes.len(),
+                    limit: MAX_LEVELS,
+                });
+            }
+        }
+
+        // Step table. A 1x1 map (no moving axis) is an infinite plane: no steps.
+        let base = spacing0.iter().copied().filter(|&s| s > 0.0).fold(f64::INFINITY, f64::min);
+        let mut steps = Vec::new();
+        if base.is_finite() {
+            let diagonal = (max[0] - min[0]).hypot(max[1] - min[1]);
+            let reach = REACH_IN_DIAGONALS * diagonal;
+            let offset = (settings.level_step * settings.level_offset - 1e-9).ceil().max(0.0) as i64;
+            let first = (settings.level_step * settings.first_step.log2()).round() as i64;
+            let top = sizes.len() as i64 - 1;
+            let mut j = first;
+            loop {
+                let distance = DISTANCE_IN_SPACINGS * base * b.powf(j as f64);
+                let level = (j - offset).clamp(0, top) as usize;
+                steps.push(MarchStep { distance, inv_distance: 1.0 / distance, level });
+                if distance >= reach {
+                    break;
+                }
+                j += 1;
+                if steps.len() >= MAX_STEPS {
+                    return Err(HeightFieldError::TooLarge {
+                        what: "march steps",
+                        needed: steps.len() + 1,
+                        limit: MAX_STEPS,
+                    });
+                }
+            }
+        }
+
+        let w = settings.directions;
+        let directions = (0..w)
+            .map(|k| {
+                let phi = std::f64::consts::TAU * k as f64 / w as f64;
+                [phi.cos(), phi.sin()]
+            })
+            .collect();
+        Ok(Self { sizes, steps, directions })
+    }
+}
+
+/// The tent taps of level samples along one axis: per output sample, `(level-0 index,
+/// weight)` (module doc, "What is built").
+pub fn decimation_taps(n_in: usize, n_out: usize) -> Vec<Vec<(usize, f64)>> {
+    tent_weights(n_in, n_out)
+}
+
 /// One pyramid level: a corner-registered grid over the field's rectangle.
 #[derive(Clone, Debug)]
 pub struct PyramidLevel {
@@ -263,35 +350,11 @@ impl HorizonPyramid {
     /// Builds the pyramid levels and step table (module doc, "What is built").
     /// Cost: about `4 n_x n_y` multiply-adds per level, levels built in parallel.
     pub fn new(field: &HeightField, settings: HorizonSettings) -> Result<Self, HeightFieldError> {
-        settings.validate()?;
+        let plan = PyramidPlan::new(field, settings)?;
         let n = [field.columns(), field.rows()];
         let (min, max) = (field.min(), field.max());
-        let spacing0 = field.spacing();
-        let b = 2f64.powf(1.0 / settings.level_step);
-
-        // Level sizes: ceil((n - 1)/b^j) + 1, at least 2, until 2 on every moving axis.
-        let mut sizes: Vec<[usize; 2]> = vec![n];
-        while sizes.last().is_some_and(|s| (0..2).any(|a| s[a] > 2)) {
-            let j = sizes.len() as i32;
-            let scale = b.powi(j);
-            let size: [usize; 2] = std::array::from_fn(|a| {
-                if n[a] <= 2 {
-                    n[a]
-                } else {
-                    (((n[a] - 1) as f64 / scale - 1e-9).ceil() as usize + 1).max(2)
-                }
-            });
-            sizes.push(size);
-            if sizes.len() > MAX_LEVELS {
-                return Err(HeightFieldError::TooLarge {
-                    what: "pyramid levels",
-                    needed: sizes.len(),
-                    limit: MAX_LEVELS,
-                });
-            }
-        }
-
-        let levels: Vec<PyramidLevel> = sizes
+        let levels: Vec<PyramidLevel> = plan
+            .sizes
             .par_iter()
             .enumerate()
             .map(|(j, &size)| {
@@ -301,43 +364,7 @@ impl HorizonPyramid {
                 PyramidLevel { columns: size[0], rows: size[1], spacing, heights }
             })
             .collect();
-
-        // Step table. A 1x1 map (no moving axis) is an infinite plane: no steps.
-        let base = spacing0.iter().copied().filter(|&s| s > 0.0).fold(f64::INFINITY, f64::min);
-        let mut steps = Vec::new();
-        if base.is_finite() {
-            let diagonal = (max[0] - min[0]).hypot(max[1] - min[1]);
-            let reach = REACH_IN_DIAGONALS * diagonal;
-            let offset = (settings.level_step * settings.level_offset - 1e-9).ceil().max(0.0) as i64;
-            let first = (settings.level_step * settings.first_step.log2()).round() as i64;
-            let top = levels.len() as i64 - 1;
-            let mut j = first;
-            loop {
-                let distance = DISTANCE_IN_SPACINGS * base * b.powf(j as f64);
-                let level = (j - offset).clamp(0, top) as usize;
-                steps.push(MarchStep { distance, inv_distance: 1.0 / distance, level });
-                if distance >= reach {
-                    break;
-                }
-                j += 1;
-                if steps.len() >= MAX_STEPS {
-                    return Err(HeightFieldError::TooLarge {
-                        what: "march steps",
-                        needed: steps.len() + 1,
-                        limit: MAX_STEPS,
-                    });
-                }
-            }
-        }
-
-        let w = settings.directions;
-        let directions = (0..w)
-            .map(|k| {
-                let phi = std::f64::consts::TAU * k as f64 / w as f64;
-                [phi.cos(), phi.sin()]
-            })
-            .collect();
-        Ok(Self { settings, min, max, levels, steps, directions })
+        Ok(Self { settings, min, max, levels, steps: plan.steps, directions: plan.directions })
     }
 
     /// The settings it was built with.

@@ -104,6 +104,16 @@ impl ExactExp {
         self.order
     }
 
+    /// Quadrature weights, one per node.
+    pub fn weights(&self) -> &[f64] {
+        &self.weights
+    }
+
+    /// The basis at the nodes, node-major: `order^2` values per node.
+    pub fn basis(&self) -> &[f64] {
+        &self.basis
+    }
+
     /// `out = exp*(f)`, with node values clamped at [`MAX_LOG_VALUE`]; see
     /// [`ExactExp::exp_below`].
     pub fn exp<T: Real>(&self, f: &[T], out: &mut [T]) {
@@ -227,7 +237,8 @@ fn ol_node_magnitude(node: usize) -> f64 {
     }
 }
 
-fn ol_node_count() -> usize {
+/// Number of magnitudes the OL table holds.
+pub fn ol_node_count() -> usize {
     OL_FINE_NODES + ((OL_MAX_MAGNITUDE - 1.0) / OL_COARSE_STEP).round() as usize + 1
 }
 

@@ -58,6 +58,11 @@ impl TriplingTensor {
     }
 
     /// Number of stored entries (with `j <= k`).
+    /// Per output coefficient `i`, the entries `(j, k, gamma_ijk)` with `j <= k`.
+    pub fn rows(&self) -> &[Vec<(u16, u16, f64)>] {
+        &self.rows
+    }
+
     pub fn entry_count(&self) -> usize {
         self.rows.iter().map(Vec::len).sum()
     }

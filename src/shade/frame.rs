@@ -7,6 +7,7 @@ use crate::heightfield::{HeightField, HeightFieldError, HorizonPyramid};
 use crate::scene::{Frame, GBuffer, Material, Scene};
 use crate::sh::Real;
 use rayon::prelude::*;
+use std::collections::BTreeMap;
 
 /// A shaded frame: linear RGBA, row-major from the top row. Alpha is 1 where a surface
 /// was shaded and 0 on the background.
@@ -145,31 +146,54 @@ pub fn surface_at(buffer: &GBuffer, i: usize, view_origin: Option<[f64; 3]>, fra
     }
 }
 
-fn shade_pixel<T: Real>(kernel: &ShadingKernel<T>, occluders: Occluders, frame: &Frame, x: usize, y: usize) -> [f32; 4] {
+/// What one pixel needs from an executor.
+#[derive(Clone, Copy, Debug)]
+pub enum PixelWork {
+    /// A colour known without shading: the background (alpha 0), or water mirroring the
+    /// sky (alpha 1).
+    Fixed([f32; 4]),
+    /// A point to shade, its result multiplied by `tint` (1 but for water), alpha 1.
+    Shade { point: SurfacePoint, tint: [f32; 3] },
+}
+
+/// The frame walk shared by the CPU and GPU executors: background from the light along
+/// the camera ray, water through the reflection G-buffer (the reflected point shaded as
+/// seen from the water surface, or the sky in the mirror direction), every other pixel
+/// its own surface point.
+pub fn pixel_work(materials: &BTreeMap<u32, Material>, frame: &Frame, x: usize, y: usize) -> PixelWork {
     let g = &frame.gbuffer;
     let i = g.index(x, y);
-    let with_alpha = |c: [f32; 3]| [c[0], c[1], c[2], 1.0];
     match g.material[i] {
         0 => {
             let sky = match &frame.camera {
                 Some(camera) => frame.light.radiance(camera.ray_direction(x as f64 + 0.5, y as f64 + 0.5)),
                 None => [0.0; 3],
             };
-            [sky[0], sky[1], sky[2], 0.0]
+            PixelWork::Fixed([sky[0], sky[1], sky[2], 0.0])
         }
-        m => match kernel.material(m) {
+        m => match materials.get(&m) {
             Some(Material::Water { tint }) => {
                 let reflection = frame.reflection.as_ref().expect("checked before shading");
                 let water = surface_at(g, i, None, frame);
-                let seen = if reflection.material[i] == 0 {
+                if reflection.material[i] == 0 {
                     let mirror = super::kernel::reflect_view(water.view_origin, water.position, water.normal);
-                    frame.light.radiance(mirror)
+                    let sky = frame.light.radiance(mirror);
+                    PixelWork::Fixed([tint[0] * sky[0], tint[1] * sky[1], tint[2] * sky[2], 1.0])
                 } else {
-                    kernel.shade(occluders, &surface_at(reflection, i, Some(water.position), frame))
-                };
-                with_alpha([0, 1, 2].map(|c| tint[c] * seen[c]))
+                    PixelWork::Shade { point: surface_at(reflection, i, Some(water.position), frame), tint: *tint }
+                }
             }
-            _ => with_alpha(kernel.shade(occluders, &surface_at(g, i, None, frame))),
+            _ => PixelWork::Shade { point: surface_at(g, i, None, frame), tint: [1.0; 3] },
         },
+    }
+}
+
+fn shade_pixel<T: Real>(kernel: &ShadingKernel<T>, occluders: Occluders, frame: &Frame, x: usize, y: usize) -> [f32; 4] {
+    match pixel_work(kernel.materials(), frame, x, y) {
+        PixelWork::Fixed(rgba) => rgba,
+        PixelWork::Shade { point, tint } => {
+            let c = kernel.shade(occluders, &point);
+            [tint[0] * c[0], tint[1] * c[1], tint[2] * c[2], 1.0]
+        }
     }
 }

@@ -30,13 +30,13 @@ pub fn sh_space_max_magnitude(method: ExpMethod) -> f64 {
 
 /// `exp*` with the tables its method needs, built once per frame setting.
 pub struct Exponentiator {
-    method: ExpMethod,
+    pub(crate) method: ExpMethod,
     /// The fine grid for `exact`; the coarse one for `quad`, and for the other methods'
     /// fallback beyond [`sh_space_max_magnitude`].
-    exact: Option<ExactExp>,
-    tensor: Option<TriplingTensor>,
-    ol: Option<OlTable>,
-    hyb_threshold: f64,
+    pub(crate) exact: Option<ExactExp>,
+    pub(crate) tensor: Option<TriplingTensor>,
+    pub(crate) ol: Option<OlTable>,
+    pub(crate) hyb_threshold: f64,
 }
 
 /// Training vectors for the OL fit: 64 of them, a fixed seed (the table is the same on
@@ -96,9 +96,9 @@ impl Exponentiator {
 
 /// A lobe's log-ZH table and the log of its peak (the most its log function reaches).
 #[derive(Clone, Debug)]
-struct LobeTable<T> {
-    zonal: Vec<T>,
-    log_peak: f64,
+pub(crate) struct LobeTable<T> {
+    pub(crate) zonal: Vec<T>,
+    pub(crate) log_peak: f64,
 }
 
 impl<T: Real> LobeTable<T> {
@@ -109,10 +109,10 @@ impl<T: Real> LobeTable<T> {
 
 /// The BRDF lobes of one material.
 #[derive(Clone, Debug)]
-struct MaterialLobes<T> {
-    material: Material,
+pub(crate) struct MaterialLobes<T> {
+    pub(crate) material: Material,
     /// Phong lobe (Eq. 27) for `phong` materials.
-    phong: Option<LobeTable<T>>,
+    pub(crate) phong: Option<LobeTable<T>>,
 }
 
 /// What occludes a frame: its sphere blockers and its height-field pyramid.
@@ -135,24 +135,26 @@ pub struct SurfacePoint {
 
 /// Tables and settings for one frame's shading at precision `T`.
 pub struct ShadingKernel<T> {
-    order: usize,
-    log_epsilon: T,
-    ratio_attenuation: bool,
-    tangent_occlusion: bool,
-    exp: Exponentiator,
-    wedge: Option<WedgeOperator>,
-    diffuse: LobeTable<T>,
+    pub(crate) order: usize,
+    pub(crate) log_epsilon: T,
+    pub(crate) ratio_attenuation: bool,
+    pub(crate) tangent_occlusion: bool,
+    pub(crate) exp: Exponentiator,
+    pub(crate) wedge: Option<WedgeOperator>,
+    pub(crate) diffuse: LobeTable<T>,
     /// Log-ZH of the hemisphere behind the tangent plane, around -Z before rotation.
-    tangent: Vec<T>,
-    materials: BTreeMap<u32, MaterialLobes<T>>,
+    pub(crate) tangent: Vec<T>,
+    pub(crate) materials: BTreeMap<u32, MaterialLobes<T>>,
+    material_table: BTreeMap<u32, Material>,
     /// Light SH coefficients per colour channel.
-    light: [Vec<T>; 3],
+    pub(crate) light: [Vec<T>; 3],
 }
 
 impl<T: Real> ShadingKernel<T> {
     /// Builds the tables. `light` holds `order^2` RGB coefficients; `has_heightfield`
     /// decides whether the wedge operator is built at all.
     pub fn new(settings: &ShadingSettings, materials: &BTreeMap<u32, Material>, light: &[[f64; 3]], has_heightfield: bool) -> Self {
+        let material_table = materials;
         let order = settings.order;
         let epsilon = settings.epsilon;
         let mut tangent = vec![T::zero(); order];
@@ -188,6 +190,7 @@ impl<T: Real> ShadingKernel<T> {
             diffuse: LobeTable::new(order, Lobe::Diffuse, epsilon),
             tangent,
             materials,
+            material_table: material_table.clone(),
             light: [channel(0), channel(1), channel(2)],
         }
     }
@@ -198,6 +201,11 @@ impl<T: Real> ShadingKernel<T> {
 
     pub fn material(&self, index: u32) -> Option<&Material> {
         self.materials.get(&index).map(|m| &m.material)
+    }
+
+    /// The material table the kernel was built with.
+    pub fn materials(&self) -> &BTreeMap<u32, Material> {
+        &self.material_table
     }
 
     /// Log visibility at `p` with unit normal `n` (Eq. 9 before exponentiation): the

@@ -1,0 +1,237 @@
+// Height-field log visibility (paper 000, Section 4.1): SN08's horizon march over the
+// pyramid the pre-pass built (src/heightfield/pyramid.rs, horizon_elevations), one NLP
+// slice per azimuth (src/logsh/slice.rs, Eq. 15-16) and the wedge operator M_lin between
+// neighbouring slices (src/logsh/wedge.rs, Eq. 18-23). Same tables, same steps, in f32.
+
+// Grid coordinate of world v on an axis of n samples over [lo, hi], clamped to the
+// rectangle (the flat continuation).
+fn grid_coordinate(v: f32, lo: f32, hi: f32, n: u32) -> f32 {
+    if n <= 1u {
+        return 0.0;
+    }
+    let last = f32(n - 1u);
+    return clamp((v - lo) / (hi - lo) * last, 0.0, last);
+}
+
+fn level_sample(level: GpuLevel, column: u32, row: u32) -> f32 {
+    return levels[level.offset + row * level.columns + column];
+}
+
+// Bilinear read of a level at world (x, y) (mod.rs, bilinear).
+fn sample_bilinear(level: GpuLevel, x: f32, y: f32) -> f32 {
+    let rect = params.heightfield_rect;
+    let u = grid_coordinate(x, rect.x, rect.z, level.columns);
+    let v = grid_coordinate(y, rect.y, rect.w, level.rows);
+    var i0 = 0u;
+    var fx = 0.0;
+    if level.columns > 1u {
+        i0 = min(u32(floor(u)), level.columns - 2u);
+        fx = u - f32(i0);
+    }
+    var j0 = 0u;
+    var fy = 0.0;
+    if level.rows > 1u {
+        j0 = min(u32(floor(v)), level.rows - 2u);
+        fy = v - f32(j0);
+    }
+    let i1 = min(i0 + 1u, level.columns - 1u);
+    let j1 = min(j0 + 1u, level.rows - 1u);
+    let bottom = level_sample(level, i0, j0) + fx * (level_sample(level, i1, j0) - level_sample(level, i0, j0));
+    let top = level_sample(level, i0, j1) + fx * (level_sample(level, i1, j1) - level_sample(level, i0, j1));
+    return bottom + fy * (top - bottom);
+}
+
+// Uniform cubic B-spline weights at fraction t (SN08 Section 4, after Eq. 4).
+fn bspline_weights(t: f32) -> vec4<f32> {
+    let t2 = t * t;
+    let t3 = t2 * t;
+    let s = 1.0 - t;
+    return vec4<f32>(s * s * s, 3.0 * t3 - 6.0 * t2 + 4.0, -3.0 * t3 + 3.0 * t2 + 3.0 * t + 1.0, t3) / 6.0;
+}
+
+// Bicubic B-spline read of a level at world (x, y), edge samples replicated.
+fn sample_bspline(level: GpuLevel, x: f32, y: f32) -> f32 {
+    let rect = params.heightfield_rect;
+    let u = grid_coordinate(x, rect.x, rect.z, level.columns);
+    let v = grid_coordinate(y, rect.y, rect.w, level.rows);
+    var wx = vec4<f32>(0.25);
+    var ix = 0i;
+    if level.columns > 1u {
+        wx = bspline_weights(u - floor(u));
+        ix = i32(floor(u));
+    }
+    var wy = vec4<f32>(0.25);
+    var iy = 0i;
+    if level.rows > 1u {
+        wy = bspline_weights(v - floor(v));
+        iy = i32(floor(v));
+    }
+    let last_column = i32(level.columns) - 1;
+    let last_row = i32(level.rows) - 1;
+    var sum = 0.0;
+    for (var r = 0; r < 4; r++) {
+        let row = u32(clamp(iy - 1 + r, 0, last_row));
+        var s = 0.0;
+        for (var c = 0; c < 4; c++) {
+            let column = u32(clamp(ix - 1 + c, 0, last_column));
+            s += wx[c] * level_sample(level, column, row);
+        }
+        sum += wy[r] * s;
+    }
+    return sum;
+}
+
+fn sample_level(index: u32, x: f32, y: f32) -> f32 {
+    let level = level_table[index];
+    if BSPLINE_LEVELS {
+        return sample_bspline(level, x, y);
+    }
+    return sample_bilinear(level, x, y);
+}
+
+// Distance after which the clamped footprint of (x, y) + t dir stops moving.
+fn far_distance(x: f32, y: f32, dir: vec2<f32>) -> f32 {
+    let rect = params.heightfield_rect;
+    let level0 = level_table[0];
+    var t_far = 0.0;
+    if level0.columns > 1u {
+        if dir.x > 0.0 {
+            t_far = max(t_far, (rect.z - x) / dir.x);
+        } else if dir.x < 0.0 {
+            t_far = max(t_far, (rect.x - x) / dir.x);
+        }
+    }
+    if level0.rows > 1u {
+        if dir.y > 0.0 {
+            t_far = max(t_far, (rect.w - y) / dir.y);
+        } else if dir.y < 0.0 {
+            t_far = max(t_far, (rect.y - y) / dir.y);
+        }
+    }
+    return t_far;
+}
+
+// Maximum of the cubic B-spline through the per-step angles (SN08 Eq. 4-5), sampled at
+// knots and midpoints, end values replicated (pyramid.rs, bspline_max).
+fn bspline_max(omega: ptr<function, array<f32, STEP_ARRAY>>, m: u32) -> f32 {
+    var best = -3.0e38;
+    let last = i32(m) - 1;
+    for (var i = 0; i <= last; i++) {
+        let a = (*omega)[u32(clamp(i - 1, 0, last))];
+        let b = (*omega)[u32(i)];
+        let c = (*omega)[u32(clamp(i + 1, 0, last))];
+        best = max(best, (a + 4.0 * b + c) / 6.0);
+        if i < last {
+            let d = (*omega)[u32(clamp(i + 2, 0, last))];
+            best = max(best, (a + 23.0 * (b + c) + d) / 48.0);
+        }
+    }
+    return best;
+}
+
+// Horizon elevation along azimuth k from (x, y), `above` the level-0 surface, with the
+// receiver terms f_L(x) of SN08 Eq. 2 per level (pyramid.rs, horizon_elevations).
+fn horizon(x: f32, y: f32, above: f32, dir: vec2<f32>, receiver: ptr<function, array<f32, LEVELS>>) -> f32 {
+    let t_far = far_distance(x, y, dir);
+    var max_tan = -3.0e38;
+    var omega: array<f32, STEP_ARRAY>;
+    var m = 0u;
+    for (var s = 0u; s < STEPS; s++) {
+        let step = steps[s];
+        let q = sample_level(step.level, x + step.distance * dir.x, y + step.distance * dir.y);
+        let tangent = (q - (*receiver)[step.level] - above) * step.inv_distance;
+        if BSPLINE_SCALE_MAX {
+            omega[m] = atan(tangent);
+        } else {
+            max_tan = max(max_tan, tangent);
+        }
+        m++;
+        if step.distance > t_far {
+            break;
+        }
+    }
+    var elevation = atan(max_tan);
+    if BSPLINE_SCALE_MAX {
+        elevation = bspline_max(&omega, m);
+    }
+    return max(elevation, 0.0);
+}
+
+// NLP coefficients of log(eps) below elevation sigma (slice.rs, nlp_slice; Eq. 15-16).
+fn nlp_slice(log_epsilon: f32, sigma: f32) -> array<f32, ORDER> {
+    let s = clamp(sin(sigma), -1.0, 1.0);
+    var p: array<f32, ORDER_PLUS_ONE>;
+    legendre(s, &p);
+    var out: array<f32, ORDER>;
+    out[0] = log_epsilon * tables[T_NLP_SCALE] * (s + 1.0);
+    for (var l = 1u; l < ORDER; l++) {
+        out[l] = log_epsilon * tables[T_NLP_SCALE + l] * (p[l + 1u] - p[l - 1u]) / f32(2u * l + 1u);
+    }
+    return out;
+}
+
+// acc += wedge k between slices `first` and `second`, rotated about z by phi_k
+// (wedge.rs, accumulate; Eq. 20-23).
+fn add_wedge(k: u32, first: ptr<function, array<f32, ORDER>>, second: ptr<function, array<f32, ORDER>>, acc: ptr<function, array<f32, COUNT>>) {
+    var wedge: array<f32, COUNT>;
+    for (var i = 0u; i < COUNT; i++) {
+        let row = T_WEDGE + i * 2u * ORDER;
+        var sum = 0.0;
+        for (var j = 0u; j < ORDER; j++) {
+            sum += tables[row + j] * (*first)[j] + tables[row + ORDER + j] * (*second)[j];
+        }
+        wedge[i] = sum;
+    }
+    // z rotation by phi_k: the (y_l^m, y_l^-m) pair turns by m phi_k (rotation.rs).
+    let phases = T_PHASES + k * 2u * ORDER;
+    for (var l = 1u; l < ORDER; l++) {
+        for (var m = 1u; m <= l; m++) {
+            let c = tables[phases + 2u * m];
+            let s = tables[phases + 2u * m + 1u];
+            let ip = l * (l + 1u) + m;
+            let im = l * (l + 1u) - m;
+            let a = wedge[ip];
+            let b = wedge[im];
+            wedge[ip] = a * c - b * s;
+            wedge[im] = a * s + b * c;
+        }
+    }
+    for (var i = 0u; i < COUNT; i++) {
+        (*acc)[i] += wedge[i];
+    }
+}
+
+// The height field's log visibility at p, normal n (kernel.rs, add_visibility): one
+// horizon and slice per azimuth, the tangent plane folded into the horizons when
+// `fold_tangent`, wedges between neighbouring slices.
+fn add_heightfield(p: vec3<f32>, n: vec3<f32>, fold_tangent: bool, log_epsilon: f32, acc: ptr<function, array<f32, COUNT>>) {
+    let finite = all(abs(p) < vec3<f32>(3.0e38));
+    var receiver: array<f32, LEVELS>;
+    var above = 0.0;
+    if STEPS > 0u && finite {
+        above = max(p.z - sample_bilinear(level_table[0], p.x, p.y), 0.0);
+        for (var level = 0u; level < LEVELS; level++) {
+            receiver[level] = sample_level(level, p.x, p.y);
+        }
+    }
+    var first: array<f32, ORDER>;
+    var previous: array<f32, ORDER>;
+    for (var k = 0u; k < DIRECTIONS; k++) {
+        let dir = vec2<f32>(tables[T_AZIMUTHS + 2u * k], tables[T_AZIMUTHS + 2u * k + 1u]);
+        var sigma = 0.0;
+        if STEPS > 0u && finite {
+            sigma = horizon(p.x, p.y, above, dir, &receiver);
+        }
+        if fold_tangent {
+            sigma = max(sigma, atan(-(n.x * dir.x + n.y * dir.y) / n.z));
+        }
+        var slice = nlp_slice(log_epsilon, sigma);
+        if k == 0u {
+            first = slice;
+        } else {
+            add_wedge(k - 1u, &previous, &slice, acc);
+        }
+        previous = slice;
+    }
+    add_wedge(DIRECTIONS - 1u, &previous, &first, acc);
+}

@@ -1,0 +1,171 @@
+// The shading pass: one invocation per shading point of a tile (paper 000, Sections 4-5
+// and Eq. 9; src/shade/kernel.rs is the CPU executor of the same steps). Sums the log-SH
+// visibility of the tangent plane, the height field and every sphere blocker, adds each
+// BRDF lobe in log-SH, exponentiates, and dots with the light's SH vector.
+//
+// The host composes this file with the modules the scene needs and strips the blocks
+// between `//#if FEATURE` and `//#endif` whose feature the scene lacks, so a scene pays
+// only for what it contains; the prelude it generates declares ORDER, COUNT, the table
+// offsets T_* and the feature constants.
+
+@group(0) @binding(0) var<uniform> params: ShadeParams;
+@group(0) @binding(1) var<storage, read> tables: array<f32>;
+// Three vec4 per point: (position, material slot bits), (unit normal, 0), (reflected view
+// direction, 0).
+@group(0) @binding(2) var<storage, read> points: array<vec4<f32>>;
+// Two vec4 per point: diffuse rgb, specular rgb.
+@group(0) @binding(3) var<storage, read_write> shaded: array<vec4<f32>>;
+@group(0) @binding(4) var<storage, read> materials: array<GpuMaterial>;
+//#if BLOCKERS
+// Centre and radius.
+@group(0) @binding(5) var<storage, read> spheres: array<vec4<f32>>;
+//#endif
+//#if HEIGHTFIELD
+@group(0) @binding(6) var<storage, read> levels: array<f32>;
+@group(0) @binding(7) var<storage, read> level_table: array<GpuLevel>;
+@group(0) @binding(8) var<storage, read> steps: array<GpuStep>;
+//#endif
+
+// Whether the frame has a feature: decided when the program is generated, except in the
+// generic program that measures what specialisation saves.
+fn enabled(feature: u32) -> bool {
+    return !GENERIC || (params.feature_bits & feature) != 0u;
+}
+
+// exp*(f) . light per colour channel (kernel.rs, Exponentiator::exp and lit). SH-space
+// methods hand pixels with |f^| beyond their range to the quadrature, as on the CPU.
+fn exp_dot_light(f: ptr<function, array<f32, COUNT>>, ceiling: f32) -> vec3<f32> {
+//#if EXP_QUAD
+    return quad_exp_dot_light(f, ceiling);
+//#else
+    let magnitude = non_dc_magnitude(f);
+    if !(magnitude <= SH_SPACE_MAX_MAGNITUDE) {
+        return quad_exp_dot_light(f, ceiling);
+    }
+    var hat = *f;
+    hat[0] = 0.0;
+    var e: array<f32, COUNT>;
+//#if EXP_OL
+    ol_exp_non_dc(&hat, magnitude, &e);
+    let dc_factor = exp((*f)[0] * Y0);
+    for (var i = 0u; i < COUNT; i++) {
+        e[i] *= dc_factor;
+    }
+//#endif
+//#if EXP_HYB
+    // HYB (paper 000, Section 3.3): scale f^ below the threshold, OL, then square back up;
+    // the DC factor is split over the squarings so it never overflows (exp.rs, exp_hyb_with).
+    var squarings = 0u;
+    var scale = 1.0;
+    while magnitude * scale > params.hyb_threshold && squarings < HYB_MAX_SQUARINGS {
+        scale *= 0.5;
+        squarings++;
+    }
+    for (var i = 0u; i < COUNT; i++) {
+        hat[i] *= scale;
+    }
+    ol_exp_non_dc(&hat, magnitude * scale, &e);
+    let dc_share = exp((*f)[0] * Y0 * scale);
+    for (var i = 0u; i < COUNT; i++) {
+        e[i] *= dc_share;
+    }
+    var squared: array<f32, COUNT>;
+    for (var s = 0u; s < squarings; s++) {
+        sh_product(&e, &e, &squared);
+        e = squared;
+    }
+//#endif
+//#if EXP_SERIES
+    // DC isolation and the Taylor series of exp(f^) by repeated products (exp.rs,
+    // exp_series), stopped when a term no longer changes the sum in f32.
+    let dc_factor = exp((*f)[0] * Y0);
+    var term = hat;
+    var sum = hat;
+    sum[0] += ONE_DC;
+    var next: array<f32, COUNT>;
+    let tolerance = SERIES_TOLERANCE;
+    for (var k = 2u; k <= SERIES_MAX_TERMS; k++) {
+        sh_product(&term, &hat, &next);
+        let inv_k = 1.0 / f32(k);
+        var term_norm = 0.0;
+        var sum_norm = 0.0;
+        for (var i = 0u; i < COUNT; i++) {
+            term[i] = next[i] * inv_k;
+            sum[i] += term[i];
+            term_norm += term[i] * term[i];
+            sum_norm += sum[i] * sum[i];
+        }
+        if term_norm <= tolerance * tolerance * sum_norm {
+            break;
+        }
+    }
+    for (var i = 0u; i < COUNT; i++) {
+        e[i] = dc_factor * sum[i];
+    }
+//#endif
+    return dot_light(&e);
+//#endif
+}
+
+// Log visibility at p with unit normal n (kernel.rs, add_visibility): the tangent plane
+// clamped once (a hemisphere cap around -n, or folded into the height field's horizons
+// for an upward-facing receiver), the height field's wedges, every sphere's cap.
+fn visibility(p: vec3<f32>, n: vec3<f32>) -> array<f32, COUNT> {
+    var acc: array<f32, COUNT>;
+    var fold_tangent = false;
+//#if HEIGHTFIELD
+    fold_tangent = TANGENT_OCCLUSION && n.z > 0.0 && enabled(FEATURE_HEIGHTFIELD);
+//#endif
+    if TANGENT_OCCLUSION && !fold_tangent {
+        var tangent = load_zonal(T_TANGENT);
+        add_rotated_zonal(&tangent, 1.0, -n, &acc);
+    }
+//#if HEIGHTFIELD
+    if enabled(FEATURE_HEIGHTFIELD) {
+        add_heightfield(p, n, fold_tangent, params.log_epsilon, &acc);
+    }
+//#endif
+//#if BLOCKERS
+    for (var s = 0u; s < params.sphere_count; s++) {
+        add_sphere(p, n, spheres[s], params.log_epsilon, &acc);
+    }
+//#endif
+    return acc;
+}
+
+// exp*(visibility + lobe rotated to axis) . light, for the lobe table at `lobe` (ORDER
+// log-ZH values, then the log of the lobe's peak).
+fn lit(visibility: ptr<function, array<f32, COUNT>>, lobe: u32, axis: vec3<f32>) -> vec3<f32> {
+    var f = *visibility;
+    var zonal = load_zonal(lobe);
+    add_rotated_zonal(&zonal, 1.0, axis, &f);
+    return exp_dot_light(&f, tables[lobe + ORDER]);
+}
+
+@compute @workgroup_size(64)
+fn shade(@builtin(global_invocation_id) id: vec3<u32>) {
+    let point = id.x;
+    if point >= params.point_count {
+        return;
+    }
+    let a = points[3u * point];
+    let slot = bitcast<u32>(a.w);
+    var diffuse = vec3<f32>(0.0);
+    var specular = vec3<f32>(0.0);
+    if slot != SLOT_NONE {
+        let n = points[3u * point + 1u].xyz;
+        var v = visibility(a.xyz, n);
+        if slot != SLOT_UNKNOWN {
+            let material = materials[slot];
+            diffuse = lit(&v, T_DIFFUSE, n) * material.albedo.xyz;
+//#if PHONG
+            if material.kind == MATERIAL_PHONG && enabled(FEATURE_PHONG) {
+                let reflected = points[3u * point + 2u].xyz;
+                specular = lit(&v, material.phong_lobe, reflected) * material.specular.xyz;
+            }
+//#endif
+        }
+    }
+    shaded[2u * point] = vec4<f32>(diffuse, 0.0);
+    shaded[2u * point + 1u] = vec4<f32>(specular, 0.0);
+}

@@ -1,0 +1,247 @@
+//! Every struct the host and the shaders share, declared once: [`gpu_struct!`] emits the
+//! `#[repr(C)]` Rust struct and its WGSL declaration from the same field list, and the
+//! tests check with naga's layouter that both sides agree on every offset and the size.
+//!
+//! Fields are 4-byte scalars and `vec4`s only, grouped so that `repr(C)` and WGSL's
+//! uniform and storage layouts coincide without hidden padding.
+
+/// A Rust field type and its WGSL spelling.
+pub trait WgslType {
+    const WGSL: &'static str;
+}
+
+impl WgslType for u32 {
+    const WGSL: &'static str = "u32";
+}
+impl WgslType for f32 {
+    const WGSL: &'static str = "f32";
+}
+impl WgslType for [f32; 4] {
+    const WGSL: &'static str = "vec4<f32>";
+}
+impl WgslType for [u32; 4] {
+    const WGSL: &'static str = "vec4<u32>";
+}
+
+/// A struct shared with WGSL.
+pub trait GpuStruct: bytemuck::Pod {
+    const NAME: &'static str;
+    /// `(field name, WGSL type)` in declaration order.
+    fn fields() -> Vec<(&'static str, &'static str)>;
+    /// The WGSL declaration.
+    fn wgsl() -> String {
+        let fields: String = Self::fields().iter().map(|(name, ty)| format!("    {name}: {ty},\n")).collect();
+        format!("struct {} {{\n{fields}}}\n", Self::NAME)
+    }
+}
+
+macro_rules! gpu_struct {
+    ($(#[$meta:meta])* $name:ident { $($(#[$field_meta:meta])* $field:ident : $ty:ty),* $(,)? }) => {
+        $(#[$meta])*
+        #[repr(C)]
+        #[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+        pub struct $name {
+            $($(#[$field_meta])* pub $field: $ty),*
+        }
+
+        impl GpuStruct for $name {
+            const NAME: &'static str = stringify!($name);
+            fn fields() -> Vec<(&'static str, &'static str)> {
+                vec![$((stringify!($field), <$ty as WgslType>::WGSL)),*]
+            }
+        }
+    };
+}
+
+gpu_struct! {
+    /// Per-dispatch parameters of the shading pass (a uniform).
+    ShadeParams {
+        /// Shading points in this tile.
+        point_count: u32,
+        /// Sphere blockers of the frame.
+        sphere_count: u32,
+        /// `log(eps)` of the visibility terms (paper 000, Eq. 7).
+        log_epsilon: f32,
+        /// HYB's scaling threshold on `|f^|`.
+        hyb_threshold: f32,
+        /// Height-field rectangle: `min.x, min.y, max.x, max.y`.
+        heightfield_rect: [f32; 4],
+        /// What the frame contains, [`FEATURE_HEIGHTFIELD`] | [`FEATURE_BLOCKERS`] |
+        /// [`FEATURE_PHONG`]: read only by the generic (unspecialised) program.
+        feature_bits: u32,
+        pad0: u32,
+        pad1: u32,
+        pad2: u32,
+    }
+}
+
+gpu_struct! {
+    /// One material slot: what the shading pass needs of a [`crate::scene::Material`].
+    GpuMaterial {
+        /// Diffuse albedo (rgb).
+        albedo: [f32; 4],
+        /// Phong specular colour (rgb); zero for diffuse materials.
+        specular: [f32; 4],
+        /// [`MATERIAL_DIFFUSE`] or [`MATERIAL_PHONG`].
+        kind: u32,
+        /// Offset of the Phong lobe's log-ZH in the tables (`order` values, then the log
+        /// of its peak).
+        phong_lobe: u32,
+        pad0: u32,
+        pad1: u32,
+    }
+}
+
+gpu_struct! {
+    /// One pyramid level inside the levels buffer.
+    GpuLevel {
+        /// First sample of the level.
+        offset: u32,
+        columns: u32,
+        rows: u32,
+        pad: u32,
+    }
+}
+
+gpu_struct! {
+    /// One step of the horizon march ([`crate::heightfield::MarchStep`]).
+    GpuStep {
+        distance: f32,
+        inv_distance: f32,
+        level: u32,
+        pad: u32,
+    }
+}
+
+gpu_struct! {
+    /// One decimated level of the pyramid pre-pass: where its tent taps and its
+    /// samples live.
+    GpuDecimation {
+        /// Level-0 size.
+        in_columns: u32,
+        in_rows: u32,
+        /// This level's size.
+        out_columns: u32,
+        out_rows: u32,
+        /// First tap range along x (one per output column) and along y (one per row).
+        ranges_x: u32,
+        ranges_y: u32,
+        /// Where pass x writes `in_rows x out_columns` values in the scratch buffer.
+        scratch_offset: u32,
+        /// Where pass y writes the level in the levels buffer.
+        level_offset: u32,
+    }
+}
+
+gpu_struct! {
+    /// One tent tap: level-0 sample index along the axis, and weight.
+    GpuTap {
+        index: u32,
+        weight: f32,
+    }
+}
+
+/// [`ShadeParams::feature_bits`].
+pub const FEATURE_HEIGHTFIELD: u32 = 1;
+pub const FEATURE_BLOCKERS: u32 = 2;
+pub const FEATURE_PHONG: u32 = 4;
+
+/// [`GpuMaterial::kind`] values.
+pub const MATERIAL_DIFFUSE: u32 = 0;
+pub const MATERIAL_PHONG: u32 = 1;
+/// A point's material slot when nothing is shaded there (background, or a water pixel
+/// whose mirror ray leaves the scene): the pass writes zero.
+pub const SLOT_NONE: u32 = u32::MAX;
+/// A point's slot when its material index is not in the scene's table: shaded black, as
+/// the CPU path does.
+pub const SLOT_UNKNOWN: u32 = u32::MAX - 1;
+
+/// WGSL declarations of every shared struct and constant, prepended to each shader.
+pub fn wgsl_declarations() -> String {
+    let mut out = String::new();
+    for declaration in [
+        ShadeParams::wgsl(),
+        GpuMaterial::wgsl(),
+        GpuLevel::wgsl(),
+        GpuStep::wgsl(),
+        GpuDecimation::wgsl(),
+        GpuTap::wgsl(),
+    ] {
+        out += &declaration;
+    }
+    out += &format!(
+        "const FEATURE_HEIGHTFIELD: u32 = {FEATURE_HEIGHTFIELD}u;\nconst FEATURE_BLOCKERS: u32 = {FEATURE_BLOCKERS}u;\n\
+         const FEATURE_PHONG: u32 = {FEATURE_PHONG}u;\n"
+    );
+    out += &format!(
+        "const MATERIAL_DIFFUSE: u32 = {MATERIAL_DIFFUSE}u;\nconst MATERIAL_PHONG: u32 = {MATERIAL_PHONG}u;\n\
+         const SLOT_NONE: u32 = {SLOT_NONE}u;\nconst SLOT_UNKNOWN: u32 = {SLOT_UNKNOWN}u;\n"
+    );
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use wgpu::naga;
+
+    /// Offsets and size of struct `name` as naga lays it out in a uniform / storage
+    /// buffer.
+    fn naga_layout(name: &str) -> (Vec<u32>, u32) {
+        let source = wgsl_declarations();
+        let module = naga::front::wgsl::parse_str(&source).expect("declarations parse");
+        let mut layouter = naga::proc::Layouter::default();
+        layouter.update(module.to_ctx()).expect("layout");
+        let (handle, ty) = module.types.iter().find(|(_, t)| t.name.as_deref() == Some(name)).expect("declared");
+        let naga::TypeInner::Struct { members, span } = &ty.inner else { panic!("{name} is not a struct") };
+        let _ = handle;
+        (members.iter().map(|m| m.offset).collect(), *span)
+    }
+
+    fn check<T: GpuStruct>(rust_offsets: &[usize]) {
+        let (offsets, span) = naga_layout(T::NAME);
+        assert_eq!(span as usize, std::mem::size_of::<T>(), "{}: WGSL size vs Rust size", T::NAME);
+        let offsets: Vec<usize> = offsets.into_iter().map(|o| o as usize).collect();
+        assert_eq!(offsets, rust_offsets, "{}: WGSL offsets vs Rust offsets", T::NAME);
+    }
+
+    macro_rules! offsets {
+        ($t:ty, $($f:ident),*) => { vec![$(std::mem::offset_of!($t, $f)),*] };
+    }
+
+    #[test]
+    fn shared_structs_have_the_same_layout_on_both_sides() {
+        check::<ShadeParams>(&offsets!(
+            ShadeParams,
+            point_count,
+            sphere_count,
+            log_epsilon,
+            hyb_threshold,
+            heightfield_rect,
+            feature_bits,
+            pad0,
+            pad1,
+            pad2
+        ));
+        check::<GpuMaterial>(&offsets!(GpuMaterial, albedo, specular, kind, phong_lobe, pad0, pad1));
+        check::<GpuLevel>(&offsets!(GpuLevel, offset, columns, rows, pad));
+        check::<GpuStep>(&offsets!(GpuStep, distance, inv_distance, level, pad));
+        check::<GpuDecimation>(&offsets!(
+            GpuDecimation,
+            in_columns,
+            in_rows,
+            out_columns,
+            out_rows,
+            ranges_x,
+            ranges_y,
+            scratch_offset,
+            level_offset
+        ));
+        check::<GpuTap>(&offsets!(GpuTap, index, weight));
+    }
+
+    #[test]
+    fn uniform_structs_are_a_multiple_of_16_bytes() {
+        assert_eq!(std::mem::size_of::<ShadeParams>() % 16, 0);
+    }
+}
