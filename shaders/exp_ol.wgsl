@@ -17,7 +17,7 @@ fn ol_coefficients(magnitude: f32) -> vec2<f32> {
 }
 
 // out = OL's exp of the non-DC part `hat` (out[0] from a, the rest b * hat).
-fn ol_exp_non_dc(hat: ptr<function, array<f32, COUNT>>, magnitude: f32, out: ptr<function, array<f32, COUNT>>) {
+fn ol_exp_non_dc(hat: ptr<function, array<f32, COUNT_CAP>>, magnitude: f32, out: ptr<function, array<f32, COUNT_CAP>>) {
     let ab = ol_coefficients(magnitude);
     for (var i = 1u; i < COUNT; i++) {
         (*out)[i] = ab.y * (*hat)[i];

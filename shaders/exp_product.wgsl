@@ -1,6 +1,6 @@
 // The SH triple product with the host's sparse tripling tensor (src/sh/product.rs):
 // out_i = sum over (j <= k) of gamma_ijk (f_j g_k + f_k g_j), halved on the diagonal.
-fn sh_product(f: ptr<function, array<f32, COUNT>>, g: ptr<function, array<f32, COUNT>>, out: ptr<function, array<f32, COUNT>>) {
+fn sh_product(f: ptr<function, array<f32, COUNT_CAP>>, g: ptr<function, array<f32, COUNT_CAP>>, out: ptr<function, array<f32, COUNT_CAP>>) {
     for (var i = 0u; i < COUNT; i++) {
         let begin = table_u32(T_TENSOR_ROWS + i);
         let end = table_u32(T_TENSOR_ROWS + i + 1u);

@@ -4,13 +4,18 @@
 // (L(node) = sum_i L_i y_i(node), host-generated) is the same sum in another order, at
 // half the cost. Nodes are clamped at the log of the lobe's peak (the true function never
 // exceeds it): this only removes ringing.
-fn quad_exp_dot_light(f: ptr<function, array<f32, COUNT>>, ceiling: f32) -> vec3<f32> {
+fn quad_exp_dot_light(f: ptr<function, array<f32, COUNT_CAP>>, ceiling: f32) -> vec3<f32> {
+    // Rows of the basis table are padded with zeros to a multiple of 4 (as is f), so the
+    // node value is a sum of vec4 dot products.
+    let quads = (COUNT + 3u) / 4u;
     var sum = vec3<f32>(0.0);
     for (var node = 0u; node < NODES; node++) {
-        let basis = T_QUAD_BASIS + node * COUNT;
+        let basis = T_QUAD_BASIS + node * 4u * quads;
         var value = 0.0;
-        for (var i = 0u; i < COUNT; i++) {
-            value += tables[basis + i] * (*f)[i];
+        for (var j = 0u; j < quads; j++) {
+            let b = basis + 4u * j;
+            let y = vec4<f32>(tables[b], tables[b + 1u], tables[b + 2u], tables[b + 3u]);
+            value += dot(y, vec4<f32>((*f)[4u * j], (*f)[4u * j + 1u], (*f)[4u * j + 2u], (*f)[4u * j + 3u]));
         }
         let e = tables[T_QUAD_WEIGHTS + node] * exp(min(value, ceiling));
         let light = T_NODE_LIGHT + 3u * node;
@@ -20,7 +25,7 @@ fn quad_exp_dot_light(f: ptr<function, array<f32, COUNT>>, ceiling: f32) -> vec3
 }
 
 // An SH vector dotted with the light per colour channel, clamped at 0 (kernel.rs, lit).
-fn dot_light(e: ptr<function, array<f32, COUNT>>) -> vec3<f32> {
+fn dot_light(e: ptr<function, array<f32, COUNT_CAP>>) -> vec3<f32> {
     var sum = vec3<f32>(0.0);
     for (var i = 0u; i < COUNT; i++) {
         sum += (*e)[i] * vec3<f32>(tables[T_LIGHT + i], tables[T_LIGHT + COUNT + i], tables[T_LIGHT + 2u * COUNT + i]);
@@ -29,7 +34,7 @@ fn dot_light(e: ptr<function, array<f32, COUNT>>) -> vec3<f32> {
 }
 
 // |f^|: the norm of the non-DC coefficients.
-fn non_dc_magnitude(f: ptr<function, array<f32, COUNT>>) -> f32 {
+fn non_dc_magnitude(f: ptr<function, array<f32, COUNT_CAP>>) -> f32 {
     var sum = 0.0;
     for (var i = 1u; i < COUNT; i++) {
         sum += (*f)[i] * (*f)[i];

@@ -158,11 +158,11 @@ fn horizon(x: f32, y: f32, above: f32, dir: vec2<f32>, receiver: ptr<function, a
 }
 
 // NLP coefficients of log(eps) below elevation sigma (slice.rs, nlp_slice; Eq. 15-16).
-fn nlp_slice(log_epsilon: f32, sigma: f32) -> array<f32, ORDER> {
+fn nlp_slice(log_epsilon: f32, sigma: f32) -> array<f32, ORDER_CAP> {
     let s = clamp(sin(sigma), -1.0, 1.0);
     var p: array<f32, ORDER_PLUS_ONE>;
     legendre(s, &p);
-    var out: array<f32, ORDER>;
+    var out: array<f32, ORDER_CAP>;
     out[0] = log_epsilon * tables[T_NLP_SCALE] * (s + 1.0);
     for (var l = 1u; l < ORDER; l++) {
         out[l] = log_epsilon * tables[T_NLP_SCALE + l] * (p[l + 1u] - p[l - 1u]) / f32(2u * l + 1u);
@@ -172,8 +172,8 @@ fn nlp_slice(log_epsilon: f32, sigma: f32) -> array<f32, ORDER> {
 
 // acc += wedge k between slices `first` and `second`, rotated about z by phi_k
 // (wedge.rs, accumulate; Eq. 20-23).
-fn add_wedge(k: u32, first: ptr<function, array<f32, ORDER>>, second: ptr<function, array<f32, ORDER>>, acc: ptr<function, array<f32, COUNT>>) {
-    var wedge: array<f32, COUNT>;
+fn add_wedge(k: u32, first: ptr<function, array<f32, ORDER_CAP>>, second: ptr<function, array<f32, ORDER_CAP>>, acc: ptr<function, array<f32, COUNT_CAP>>) {
+    var wedge: array<f32, COUNT_CAP>;
     for (var i = 0u; i < COUNT; i++) {
         let row = T_WEDGE + i * 2u * ORDER;
         var sum = 0.0;
@@ -204,7 +204,7 @@ fn add_wedge(k: u32, first: ptr<function, array<f32, ORDER>>, second: ptr<functi
 // The height field's log visibility at p, normal n (kernel.rs, add_visibility): one
 // horizon and slice per azimuth, the tangent plane folded into the horizons when
 // `fold_tangent`, wedges between neighbouring slices.
-fn add_heightfield(p: vec3<f32>, n: vec3<f32>, fold_tangent: bool, log_epsilon: f32, acc: ptr<function, array<f32, COUNT>>) {
+fn add_heightfield(p: vec3<f32>, n: vec3<f32>, fold_tangent: bool, log_epsilon: f32, acc: ptr<function, array<f32, COUNT_CAP>>) {
     let finite = all(abs(p) < vec3<f32>(3.0e38));
     var receiver: array<f32, LEVELS>;
     var above = 0.0;
@@ -214,8 +214,8 @@ fn add_heightfield(p: vec3<f32>, n: vec3<f32>, fold_tangent: bool, log_epsilon: 
             receiver[level] = sample_level(level, p.x, p.y);
         }
     }
-    var first: array<f32, ORDER>;
-    var previous: array<f32, ORDER>;
+    var first: array<f32, ORDER_CAP>;
+    var previous: array<f32, ORDER_CAP>;
     for (var k = 0u; k < DIRECTIONS; k++) {
         let dir = vec2<f32>(tables[T_AZIMUTHS + 2u * k], tables[T_AZIMUTHS + 2u * k + 1u]);
         var sigma = 0.0;

@@ -2,11 +2,11 @@
 
 // ZH of log(eps) inside a cap of angular radius alpha around +Z (cap.rs, cap_log_zh):
 // V_l = log(eps) 2 pi K_l (P_{l-1}(cos a) - P_{l+1}(cos a)) / (2l + 1). Closed form.
-fn cap_log_zh(log_epsilon: f32, alpha: f32) -> array<f32, ORDER> {
+fn cap_log_zh(log_epsilon: f32, alpha: f32) -> array<f32, ORDER_CAP> {
     let x = cos(alpha);
     var p: array<f32, ORDER_PLUS_ONE>;
     legendre(x, &p);
-    var out: array<f32, ORDER>;
+    var out: array<f32, ORDER_CAP>;
     out[0] = log_epsilon * tables[T_CAP_SCALE] * (1.0 - x);
     for (var l = 1u; l < ORDER; l++) {
         out[l] = log_epsilon * tables[T_CAP_SCALE + l] * (p[l - 1u] - p[l + 1u]) / f32(2u * l + 1u);
@@ -17,7 +17,7 @@ fn cap_log_zh(log_epsilon: f32, alpha: f32) -> array<f32, ORDER> {
 // Adds one sphere's cap as seen from receiver p with normal n (cap.rs, view_blocker):
 // culled when its centre is on or behind the tangent plane (paper 000, end of Section
 // 4.2); a receiver inside the sphere sees the hemisphere towards its centre.
-fn add_sphere(p: vec3<f32>, n: vec3<f32>, sphere: vec4<f32>, log_epsilon: f32, acc: ptr<function, array<f32, COUNT>>) {
+fn add_sphere(p: vec3<f32>, n: vec3<f32>, sphere: vec4<f32>, log_epsilon: f32, acc: ptr<function, array<f32, COUNT_CAP>>) {
     let d = sphere.xyz - p;
     let distance = length(d);
     if !(distance > 0.0) {

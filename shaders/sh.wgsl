@@ -8,7 +8,7 @@ fn table_u32(i: u32) -> u32 {
 
 // y_i(dir) for the COUNT basis functions (basis.rs, eval_basis): associated Legendre
 // polynomials by upward recurrence in l, (x + iy)^m for the azimuthal part.
-fn eval_basis(d: vec3<f32>, y: ptr<function, array<f32, COUNT>>) {
+fn eval_basis(d: vec3<f32>, y: ptr<function, array<f32, COUNT_CAP>>) {
     var cm = 1.0;
     var sm = 0.0;
     for (var m = 0u; m < ORDER; m++) {
@@ -49,8 +49,8 @@ fn legendre(z: f32, p: ptr<function, array<f32, ORDER_PLUS_ONE>>) {
 
 // acc += weight * (zonal function rotated to dir) (rotation.rs, add_rotated_zonal;
 // paper 000, Eq. 5).
-fn add_rotated_zonal(zonal: ptr<function, array<f32, ORDER>>, weight: f32, dir: vec3<f32>, acc: ptr<function, array<f32, COUNT>>) {
-    var y: array<f32, COUNT>;
+fn add_rotated_zonal(zonal: ptr<function, array<f32, ORDER_CAP>>, weight: f32, dir: vec3<f32>, acc: ptr<function, array<f32, COUNT_CAP>>) {
+    var y: array<f32, COUNT_CAP>;
     eval_basis(dir, &y);
     for (var l = 0u; l < ORDER; l++) {
         let scale = weight * tables[T_FUNK_HECKE + l] * (*zonal)[l];
@@ -61,8 +61,8 @@ fn add_rotated_zonal(zonal: ptr<function, array<f32, ORDER>>, weight: f32, dir: 
 }
 
 // A zonal table of the host's (ORDER values at `offset`).
-fn load_zonal(offset: u32) -> array<f32, ORDER> {
-    var zonal: array<f32, ORDER>;
+fn load_zonal(offset: u32) -> array<f32, ORDER_CAP> {
+    var zonal: array<f32, ORDER_CAP>;
     for (var l = 0u; l < ORDER; l++) {
         zonal[l] = tables[offset + l];
     }

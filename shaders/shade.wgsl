@@ -34,7 +34,7 @@ fn enabled(feature: u32) -> bool {
 
 // exp*(f) . light per colour channel (kernel.rs, Exponentiator::exp and lit). SH-space
 // methods hand pixels with |f^| beyond their range to the quadrature, as on the CPU.
-fn exp_dot_light(f: ptr<function, array<f32, COUNT>>, ceiling: f32) -> vec3<f32> {
+fn exp_dot_light(f: ptr<function, array<f32, COUNT_CAP>>, ceiling: f32) -> vec3<f32> {
 //#if EXP_QUAD
     return quad_exp_dot_light(f, ceiling);
 //#else
@@ -44,7 +44,7 @@ fn exp_dot_light(f: ptr<function, array<f32, COUNT>>, ceiling: f32) -> vec3<f32>
     }
     var hat = *f;
     hat[0] = 0.0;
-    var e: array<f32, COUNT>;
+    var e: array<f32, COUNT_CAP>;
 //#if EXP_OL
     ol_exp_non_dc(&hat, magnitude, &e);
     let dc_factor = exp((*f)[0] * Y0);
@@ -69,7 +69,7 @@ fn exp_dot_light(f: ptr<function, array<f32, COUNT>>, ceiling: f32) -> vec3<f32>
     for (var i = 0u; i < COUNT; i++) {
         e[i] *= dc_share;
     }
-    var squared: array<f32, COUNT>;
+    var squared: array<f32, COUNT_CAP>;
     for (var s = 0u; s < squarings; s++) {
         sh_product(&e, &e, &squared);
         e = squared;
@@ -82,7 +82,7 @@ fn exp_dot_light(f: ptr<function, array<f32, COUNT>>, ceiling: f32) -> vec3<f32>
     var term = hat;
     var sum = hat;
     sum[0] += ONE_DC;
-    var next: array<f32, COUNT>;
+    var next: array<f32, COUNT_CAP>;
     let tolerance = SERIES_TOLERANCE;
     for (var k = 2u; k <= SERIES_MAX_TERMS; k++) {
         sh_product(&term, &hat, &next);
@@ -110,8 +110,8 @@ fn exp_dot_light(f: ptr<function, array<f32, COUNT>>, ceiling: f32) -> vec3<f32>
 // Log visibility at p with unit normal n (kernel.rs, add_visibility): the tangent plane
 // clamped once (a hemisphere cap around -n, or folded into the height field's horizons
 // for an upward-facing receiver), the height field's wedges, every sphere's cap.
-fn visibility(p: vec3<f32>, n: vec3<f32>) -> array<f32, COUNT> {
-    var acc: array<f32, COUNT>;
+fn visibility(p: vec3<f32>, n: vec3<f32>) -> array<f32, COUNT_CAP> {
+    var acc: array<f32, COUNT_CAP>;
     var fold_tangent = false;
 //#if HEIGHTFIELD
     fold_tangent = TANGENT_OCCLUSION && n.z > 0.0 && enabled(FEATURE_HEIGHTFIELD);
@@ -135,7 +135,7 @@ fn visibility(p: vec3<f32>, n: vec3<f32>) -> array<f32, COUNT> {
 
 // exp*(visibility + lobe rotated to axis) . light, for the lobe table at `lobe` (ORDER
 // log-ZH values, then the log of the lobe's peak).
-fn lit(visibility: ptr<function, array<f32, COUNT>>, lobe: u32, axis: vec3<f32>) -> vec3<f32> {
+fn lit(visibility: ptr<function, array<f32, COUNT_CAP>>, lobe: u32, axis: vec3<f32>) -> vec3<f32> {
     var f = *visibility;
     var zonal = load_zonal(lobe);
     add_rotated_zonal(&zonal, 1.0, axis, &f);

@@ -1,6 +1,7 @@
 //! Command-line options: parsed by clap into these structs, then turned into settings in
 //! a separate step that checks the rules spanning several flags.
 
+pub use crate::gpu::DeviceChoice;
 use crate::shade::{default_epsilon, Quality, ShadingSettings};
 use crate::sh::ExpMethod;
 use clap::{Args, Parser, Subcommand, ValueEnum};
@@ -23,6 +24,8 @@ pub enum Command {
     Sweep(SweepArgs),
     /// Write a procedural sample scene in format v1 (the scenes in gbuffers/ come from here).
     Example(ExampleArgs),
+    /// Time the shading of one frame stage by stage (GPU timestamps where the adapter has them, wall time otherwise) and report megapixels per second.
+    Bench(BenchArgs),
 }
 
 #[derive(Args, Debug)]
@@ -62,6 +65,29 @@ pub struct SweepArgs {
     /// Convergence target of the reference, per pixel.
     #[arg(long, default_value_t = 1e-3)]
     pub tolerance: f64,
+    /// Where the configurations are shaded (their times are that device's).
+    #[arg(long, value_enum, default_value_t = DeviceChoice::Auto)]
+    pub device: DeviceChoice,
+}
+
+#[derive(Args, Debug)]
+pub struct BenchArgs {
+    /// Scene directory holding scene.json.
+    pub scene: PathBuf,
+    /// Frame to time [default: the scene's first frame, or 1].
+    #[arg(long)]
+    pub frame: Option<i64>,
+    /// Timed runs after one warm-up run (which also compiles the GPU program); the table shows the median of each stage.
+    #[arg(long, default_value_t = 5)]
+    pub repeats: usize,
+    /// Print JSON instead of a table.
+    #[arg(long)]
+    pub json: bool,
+    /// Specialise the GPU program to the scene's features (off: every feature compiled in and chosen per frame, the baseline that shows what specialisation saves).
+    #[arg(long, value_enum, default_value_t = Switch::On)]
+    pub specialise: Switch,
+    #[command(flatten)]
+    pub shading: ShadingArgs,
 }
 
 #[derive(Args, Debug)]
@@ -161,9 +187,12 @@ pub struct ShadingArgs {
     /// Clamp the hemisphere behind each receiver's tangent plane in log space.
     #[arg(long, value_enum, default_value_t = Switch::On)]
     pub tangent_occlusion: Switch,
-    /// Precision of the per-pixel kernel.
+    /// Precision of the per-pixel kernel (the GPU pass is f32 only).
     #[arg(long, value_enum, default_value_t = PrecisionArg::F32)]
     pub precision: PrecisionArg,
+    /// Where to shade: auto takes a GPU adapter if there is one (lavapipe counts) and otherwise the CPU, saying so; gpu fails without an adapter.
+    #[arg(long, value_enum, default_value_t = DeviceChoice::Auto)]
+    pub device: DeviceChoice,
 }
 
 impl ShadingArgs {

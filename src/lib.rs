@@ -18,3 +18,4 @@ pub mod sh;
 pub mod shade;
 pub mod sweep;
 pub mod synth;
+pub mod timing;

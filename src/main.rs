@@ -8,6 +8,7 @@ fn main() {
         Command::Reference(args) => logsh::run::reference(&args),
         Command::Sweep(args) => logsh::run::sweep(&args),
         Command::Example(args) => logsh::run::example(&args),
+        Command::Bench(args) => logsh::run::bench(&args),
     };
     if let Err(error) = result {
         eprintln!("error: {error:#}");

@@ -1,9 +1,9 @@
 //! What each command does, between parsed options and the library.
 
-use crate::cli::{ExampleArgs, ExampleName, ReferenceArgs, ShadeArgs, SweepArgs};
+use crate::cli::{BenchArgs, ExampleArgs, ExampleName, ReferenceArgs, ShadeArgs, Switch, SweepArgs};
 use crate::reference::{render_reference, ReferenceLight, ReferenceOptions};
 use crate::scene::{output, Scene};
-use crate::shade::shade_frame;
+use crate::gpu::Executor;
 use anyhow::{anyhow, Context, Result};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use std::io::IsTerminal;
@@ -16,18 +16,20 @@ pub fn shade(args: &ShadeArgs) -> Result<()> {
     let scene = Scene::load(&args.scene)?;
     let frame_number = args.frame.unwrap_or_else(|| scene.default_frame());
     let frame = scene.frame(frame_number)?;
+    let executor = Executor::select(args.shading.device, &settings)?;
     let started = Instant::now();
-    let shaded = shade_frame(&scene, &frame, &settings)?;
+    let shaded = executor.shade(&scene, &frame, &settings)?;
     let elapsed = started.elapsed();
     let stem = format!("beauty.{frame_number:04}");
     write_image(&scene, &args.out, &stem, shaded.width, shaded.height, &shaded.rgba)?;
     eprintln!(
-        "shaded frame {frame_number} ({}x{}) at order {}, eps {}, {:?} in {:.2} s: {}",
+        "shaded frame {frame_number} ({}x{}) at order {}, eps {}, {:?} on {} in {:.2} s: {}",
         shaded.width,
         shaded.height,
         settings.order,
         settings.epsilon,
         settings.exp,
+        executor.describe(),
         elapsed.as_secs_f64(),
         args.out.join(format!("{stem}.exr")).display()
     );
@@ -97,8 +99,12 @@ pub fn sweep(args: &SweepArgs) -> Result<()> {
     let reference = render_reference(&scene, &frame, &options, &|rows| bar.set_position(rows as u64))?;
     bar.finish_and_clear();
     write_image(&scene, &args.out, &format!("reference.{frame_number:04}"), reference.width, reference.height, &reference.rgba)?;
+    let executor = Executor::select(args.device, &crate::shade::ShadingSettings::default())?;
+    eprintln!("sweep: shading on {}", executor.describe());
     let bar = progress_bar(crate::sweep::configurations().len(), "sweep");
-    let rows = crate::sweep::run(&scene, &frame, &reference.rgba, args.repeats, &|done, _| bar.set_position(done as u64))?;
+    let rows = crate::sweep::run(&executor, &scene, &frame, &reference.rgba, args.repeats, &|done, _| {
+        bar.set_position(done as u64)
+    })?;
     bar.finish_and_clear();
     let name = args.scene.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| "scene".into());
     let files = [
@@ -144,5 +150,39 @@ pub fn example(args: &ExampleArgs) -> Result<()> {
     )
         .with_context(|| format!("cannot write example scene {name} to {}", args.out.display()))?;
     eprintln!("wrote example scene {name} to {}", args.out.display());
+    Ok(())
+}
+
+/// `logsh bench`: one warm-up run, then `--repeats` timed runs; the median of each stage.
+pub fn bench(args: &BenchArgs) -> Result<()> {
+    let settings = args.shading.settings().map_err(|e| anyhow!(e))?;
+    let scene = Scene::load(&args.scene)?;
+    let frame_number = args.frame.unwrap_or_else(|| scene.default_frame());
+    let frame = scene.frame(frame_number)?;
+    let executor = Executor::select(args.shading.device, &settings)?;
+    let specialise = args.specialise == Switch::On;
+    executor.shade_timed(&scene, &frame, &settings, specialise)?;
+    let mut runs = Vec::new();
+    let mut walls = Vec::new();
+    for _ in 0..args.repeats.max(1) {
+        let started = Instant::now();
+        let (_, timings) = executor.shade_timed(&scene, &frame, &settings, specialise)?;
+        walls.push(started.elapsed().as_secs_f64() * 1e3);
+        runs.push(timings);
+    }
+    let report = crate::timing::BenchReport::new(
+        &executor.describe(),
+        &frame.gbuffer,
+        frame_number,
+        &settings,
+        specialise,
+        &runs,
+        &walls,
+    );
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    } else {
+        print!("{}", report.table());
+    }
     Ok(())
 }

@@ -8,7 +8,8 @@
 
 use crate::plot::{pareto_front, Chart, Scale, Series};
 use crate::scene::{Frame, Light, Scene};
-use crate::shade::{shade_frame, Quality, ShadeError, ShadingSettings};
+use crate::gpu::{Executor, GpuError};
+use crate::shade::{Quality, ShadingSettings};
 use crate::sh::quadrature::gauss_legendre_on;
 use crate::sh::ExpMethod;
 use serde::Serialize;
@@ -127,12 +128,13 @@ fn exp_name(exp: ExpMethod) -> &'static str {
 /// Runs every configuration `repeats` times on one frame and scores the fastest run
 /// against `reference`. `progress(done, total)` is called after each configuration.
 pub fn run(
+    executor: &Executor,
     scene: &Scene,
     frame: &Frame,
     reference: &[[f32; 4]],
     repeats: usize,
     progress: &dyn Fn(usize, usize),
-) -> Result<Vec<SweepRow>, ShadeError> {
+) -> Result<Vec<SweepRow>, GpuError> {
     let unit = unoccluded_value(&frame.light).max(1e-12);
     let configurations = configurations();
     let total = configurations.len();
@@ -142,7 +144,7 @@ pub fn run(
         let mut image = None;
         for _ in 0..repeats.max(1) {
             let started = Instant::now();
-            let shaded = shade_frame(scene, frame, &settings)?;
+            let shaded = executor.shade(scene, frame, &settings)?;
             best = best.min(started.elapsed().as_secs_f64() * 1e3);
             image = Some(shaded);
         }

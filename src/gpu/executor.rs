@@ -6,12 +6,13 @@ use super::layout::{
     GpuDecimation, GpuLevel, GpuStep, GpuTap, ShadeParams, FEATURE_BLOCKERS, FEATURE_HEIGHTFIELD, FEATURE_PHONG, SLOT_NONE,
     SLOT_UNKNOWN,
 };
-use super::program::{Features, MarchShape, ShadeProgram, PYRAMID_WGSL};
+use super::program::{Features, MarchShape, ShadeProgram, LAVAPIPE_LOOP_LIMIT, PYRAMID_WGSL};
 use super::GpuError;
 use crate::heightfield::{decimation_taps, PyramidPlan};
 use crate::scene::{Frame, Material, Scene};
 use crate::shade::frame::{check_frame, height_field, pixel_work, PixelWork};
 use crate::shade::{ShadeError, ShadedFrame, ShadingKernel, ShadingSettings};
+use crate::timing::{Clock, StageTimings};
 use rayon::prelude::*;
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
@@ -23,43 +24,6 @@ const WORKGROUP: u32 = 64;
 /// `vec4<f32>` per shading point in, and per shaded point out.
 const POINT_VEC4S: u64 = 3;
 const SHADED_VEC4S: u64 = 2;
-
-/// Where a stage's time was measured.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Clock {
-    /// GPU timestamp queries.
-    Gpu,
-    /// Host wall time.
-    Wall,
-}
-
-/// One timed stage of a frame.
-#[derive(Clone, Debug, serde::Serialize)]
-pub struct Stage {
-    pub name: &'static str,
-    pub milliseconds: f64,
-    pub clock: Clock,
-}
-
-/// Per-stage times of one frame, in order.
-#[derive(Clone, Debug, Default, serde::Serialize)]
-pub struct StageTimings {
-    pub stages: Vec<Stage>,
-}
-
-impl StageTimings {
-    fn add(&mut self, name: &'static str, milliseconds: f64, clock: Clock) {
-        match self.stages.iter_mut().find(|s| s.name == name) {
-            Some(stage) => stage.milliseconds += milliseconds,
-            None => self.stages.push(Stage { name, milliseconds, clock }),
-        }
-    }
-
-    fn add_wall(&mut self, name: &'static str, since: Instant) {
-        self.add(name, since.elapsed().as_secs_f64() * 1e3, Clock::Wall);
-    }
-}
 
 /// A GPU adapter and device with the pipelines built so far.
 pub struct Gpu {
@@ -73,6 +37,8 @@ pub struct Gpu {
     errors: Arc<Mutex<Vec<String>>>,
     shade_pipelines: Mutex<HashMap<String, Arc<wgpu::ComputePipeline>>>,
     pyramid_pipelines: Mutex<Option<Arc<(wgpu::ComputePipeline, wgpu::ComputePipeline)>>>,
+    /// An upper bound on the points per tile below the adapter's own.
+    max_tile_points: Option<usize>,
 }
 
 impl Gpu {
@@ -118,13 +84,35 @@ impl Gpu {
             errors,
             shade_pipelines: Mutex::new(HashMap::new()),
             pyramid_pipelines: Mutex::new(None),
+            max_tile_points: None,
         })
+    }
+
+    /// Shades at most `points` pixels per dispatch (tiles are otherwise as large as the
+    /// adapter's buffer and dispatch limits allow): bounds the GPU memory a frame takes.
+    pub fn with_max_tile_points(mut self, points: usize) -> Self {
+        self.max_tile_points = Some(points.max(1));
+        self
+    }
+
+    /// Pixels per tile for a frame of `pixels` pixels on this adapter.
+    pub fn tile_points(&self, pixels: usize) -> usize {
+        let binding = self.limits.max_storage_buffer_binding_size.min(self.limits.max_buffer_size);
+        let by_buffer = binding / (POINT_VEC4S * 16);
+        let by_dispatch = u64::from(self.limits.max_compute_workgroups_per_dimension) * u64::from(WORKGROUP);
+        let limit = by_buffer.min(by_dispatch) as usize;
+        limit.min(self.max_tile_points.unwrap_or(usize::MAX)).min(pixels).max(1)
     }
 
     /// The adapter, as "name (backend, driver)".
     pub fn adapter(&self) -> String {
         let i = &self.info;
         format!("{} ({:?}, {} {})", i.name, i.backend, i.driver, i.driver_info).trim_end().to_string()
+    }
+
+    /// Mesa's CPU driver, whose loop budget limits what it can shade.
+    pub fn is_lavapipe(&self) -> bool {
+        self.info.driver == "llvmpipe" || self.info.name.starts_with("llvmpipe")
     }
 
     /// Whether stage times come from GPU timestamps.
@@ -199,6 +187,23 @@ impl Gpu {
         let march = plan.as_ref().map(|p| MarchShape::of(p, settings.horizon.reconstruction, settings.horizon.scale_max));
         let program = ShadeProgram::new(&kernel, features, march);
         timings.add_wall("tables", started);
+        if self.is_lavapipe() {
+            let needed = program.loop_iterations(frame.blockers.len());
+            if needed > LAVAPIPE_LOOP_LIMIT {
+                return Err(GpuError::LoopBudget {
+                    adapter: self.info.name.clone(),
+                    needed,
+                    limit: LAVAPIPE_LOOP_LIMIT,
+                    what: format!(
+                        "order {}, {:?}, {} blocker(s), {}",
+                        settings.order,
+                        settings.exp,
+                        frame.blockers.len(),
+                        march.map_or("no height field".to_string(), |m| format!("W {} x {} steps", m.directions, m.steps))
+                    ),
+                });
+            }
+        }
 
         let started = Instant::now();
         let pipeline = self.shade_pipeline(&program.source)?;
@@ -244,18 +249,7 @@ impl Gpu {
         let mut rgba = vec![[0.0f32; 4]; pixels];
 
         // Tiles: as many points as one buffer binding and one dispatch allow.
-        let binding = self.limits.max_storage_buffer_binding_size.min(self.limits.max_buffer_size);
-        let by_buffer = binding / (POINT_VEC4S * 16);
-        let by_dispatch = u64::from(self.limits.max_compute_workgroups_per_dimension) * u64::from(WORKGROUP);
-        let tile = (by_buffer.min(by_dispatch) as usize).min(pixels).max(1);
-        if by_buffer == 0 {
-            return Err(GpuError::TooLarge {
-                what: "one shading point".into(),
-                needed: POINT_VEC4S * 16,
-                limit: binding,
-                adapter: self.info.name.clone(),
-            });
-        }
+        let tile = self.tile_points(pixels);
         let point_bytes = tile as u64 * POINT_VEC4S * 16;
         let shaded_bytes = tile as u64 * SHADED_VEC4S * 16;
         let points_buffer = self.buffer("points", point_bytes, wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST);
@@ -332,7 +326,9 @@ impl Gpu {
                 hyb_threshold: settings.hyb_threshold as f32,
                 heightfield_rect: rect,
                 feature_bits,
-                ..Default::default()
+                order: settings.order as u32,
+                coefficient_count: (settings.order * settings.order) as u32,
+                nodes: program.nodes as u32,
             };
             self.queue.write_buffer(&params_buffer, 0, bytemuck::bytes_of(&params));
             self.queue.write_buffer(&points_buffer, 0, bytemuck::cast_slice(&points[..count * POINT_VEC4S as usize]));

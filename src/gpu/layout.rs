@@ -69,9 +69,11 @@ gpu_struct! {
         /// What the frame contains, [`FEATURE_HEIGHTFIELD`] | [`FEATURE_BLOCKERS`] |
         /// [`FEATURE_PHONG`]: read only by the generic (unspecialised) program.
         feature_bits: u32,
-        pad0: u32,
-        pad1: u32,
-        pad2: u32,
+        /// SH order, coefficient count and quadrature node count: read only by the generic
+        /// program, whose loop bounds are not constants.
+        order: u32,
+        coefficient_count: u32,
+        nodes: u32,
     }
 }
 
@@ -219,9 +221,9 @@ mod tests {
             hyb_threshold,
             heightfield_rect,
             feature_bits,
-            pad0,
-            pad1,
-            pad2
+            order,
+            coefficient_count,
+            nodes
         ));
         check::<GpuMaterial>(&offsets!(GpuMaterial, albedo, specular, kind, phong_lobe, pad0, pad1));
         check::<GpuLevel>(&offsets!(GpuLevel, offset, columns, rows, pad));

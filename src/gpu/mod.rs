@@ -14,9 +14,11 @@ mod executor;
 pub mod layout;
 pub mod program;
 
-pub use executor::{Gpu, Stage, StageTimings};
+pub use executor::Gpu;
 
-use crate::shade::ShadeError;
+use crate::scene::{Frame, Scene};
+use crate::shade::{ShadeError, ShadedFrame, ShadingSettings};
+use crate::timing::StageTimings;
 
 /// Where shading runs (`--device`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
@@ -43,8 +45,82 @@ pub enum GpuError {
     Unsupported(String),
     #[error("{what} needs {needed} bytes of GPU buffer, more than adapter {adapter} allows ({limit} bytes)")]
     TooLarge { what: String, needed: u64, limit: u64, adapter: String },
+    #[error(
+        "{adapter} (lavapipe, Mesa's CPU Vulkan driver) ends each shader invocation after {limit} loop iterations, \
+         and this frame needs up to {needed} per pixel ({what}): its image would be wrong. Shade with --device cpu, \
+         or lower --order, --directions or the blocker count, or use a hardware GPU"
+    )]
+    LoopBudget { adapter: String, needed: u64, limit: u64, what: String },
     #[error("GPU error on {adapter} during {during}: {message}")]
     Wgpu { adapter: String, during: String, message: String },
     #[error(transparent)]
     Shade(#[from] ShadeError),
+}
+
+/// The executor `--device` chose.
+pub enum Executor {
+    Cpu,
+    /// `fallback`: chosen by `--device auto`, so a frame the adapter cannot shade
+    /// correctly goes to the CPU path instead of failing.
+    Gpu { gpu: Gpu, fallback: bool },
+}
+
+impl Executor {
+    /// Resolves `--device`. `auto` falls back to the CPU path, saying why on stderr in one
+    /// line, when no adapter exists or the settings need f64; `gpu` fails instead.
+    pub fn select(choice: DeviceChoice, settings: &ShadingSettings) -> Result<Self, GpuError> {
+        match choice {
+            DeviceChoice::Cpu => Ok(Self::Cpu),
+            DeviceChoice::Gpu => {
+                if settings.double_precision {
+                    return Err(GpuError::Unsupported("--precision f64 (the GPU pass runs in f32)".into()));
+                }
+                Ok(Self::Gpu { gpu: Gpu::new()?, fallback: false })
+            }
+            DeviceChoice::Auto if settings.double_precision => {
+                eprintln!("--device auto: shading on the CPU, since the GPU pass runs in f32 and --precision f64 was asked");
+                Ok(Self::Cpu)
+            }
+            DeviceChoice::Auto => match Gpu::new() {
+                Ok(gpu) => Ok(Self::Gpu { gpu, fallback: true }),
+                Err(e) => {
+                    eprintln!("--device auto: shading on the CPU: {e}");
+                    Ok(Self::Cpu)
+                }
+            },
+        }
+    }
+
+    /// "cpu (N threads)" or "gpu: adapter".
+    pub fn describe(&self) -> String {
+        match self {
+            Self::Cpu => format!("cpu ({} threads)", rayon::current_num_threads()),
+            Self::Gpu { gpu, .. } => format!("gpu: {}", gpu.adapter()),
+        }
+    }
+
+    pub fn shade(&self, scene: &Scene, frame: &Frame, settings: &ShadingSettings) -> Result<ShadedFrame, GpuError> {
+        Ok(self.shade_timed(scene, frame, settings, true)?.0)
+    }
+
+    /// Shades and times each stage; `specialise` only matters on the GPU (see
+    /// [`Gpu::shade_frame_timed`]).
+    pub fn shade_timed(
+        &self,
+        scene: &Scene,
+        frame: &Frame,
+        settings: &ShadingSettings,
+        specialise: bool,
+    ) -> Result<(ShadedFrame, StageTimings), GpuError> {
+        match self {
+            Self::Cpu => Ok(crate::shade::shade_frame_timed(scene, frame, settings)?),
+            Self::Gpu { gpu, fallback } => match gpu.shade_frame_timed(scene, frame, settings, specialise) {
+                Err(e @ GpuError::LoopBudget { .. }) if *fallback => {
+                    eprintln!("--device auto: shading frame {} on the CPU: {e}", frame.number);
+                    Ok(crate::shade::shade_frame_timed(scene, frame, settings)?)
+                }
+                other => other,
+            },
+        }
+    }
 }

@@ -36,8 +36,10 @@ pub struct Features {
     pub heightfield: bool,
     pub blockers: bool,
     pub phong: bool,
-    /// Every feature compiled in, decided by uniforms at run time instead: the baseline the
-    /// specialisation is measured against (`logsh bench --specialise off`).
+    /// The unspecialised baseline the specialisation is measured against (`logsh bench
+    /// --specialise off`): every feature compiled in and skipped by a uniform branch, arrays
+    /// sized for order 8 and loop bounds read from uniforms, as one program serving every
+    /// scene and order would be.
     pub generic: bool,
 }
 
@@ -111,6 +113,12 @@ pub struct ShadeProgram {
     /// Material slots, and the slot of each material index the scene declares.
     pub materials: Vec<GpuMaterial>,
     pub slots: BTreeMap<u32, u32>,
+    /// Quadrature nodes of the exponentiation.
+    pub nodes: usize,
+    order: usize,
+    exp: ExpMethod,
+    march: Option<MarchShape>,
+    tensor_entries: usize,
 }
 
 impl ShadeProgram {
@@ -177,7 +185,12 @@ impl ShadeProgram {
         let quadrature = kernel.exp.exact.as_ref().expect("every exponentiator carries its quadrature");
         let nodes = quadrature.weights().len();
         t.push("T_QUAD_WEIGHTS", quadrature.weights().iter().map(|&w| w as f32));
-        t.push("T_QUAD_BASIS", quadrature.basis().iter().map(|&y| y as f32));
+        // Rows padded with zeros to a multiple of 4 (the shader reads them as vec4).
+        let padded = count.div_ceil(4) * 4;
+        t.push(
+            "T_QUAD_BASIS",
+            quadrature.basis().chunks(count).flat_map(|y| y.iter().map(|&v| v as f32).chain(std::iter::repeat_n(0.0, padded - count))),
+        );
         // L(node) = sum_i L_i y_i(node), per channel.
         t.push(
             "T_NODE_LIGHT",
@@ -240,9 +253,14 @@ impl ShadeProgram {
             t.data.push(0.0);
         }
 
+        let march_in = march;
         let march = march.unwrap_or_default();
+        let order_cap = if features.generic { crate::sh::MAX_ORDER } else { order };
+        // Coefficient arrays hold a multiple of 4 entries (the padding stays 0).
+        let count_cap = (order_cap * order_cap).div_ceil(4) * 4;
         let mut prelude = format!(
-            "const ORDER: u32 = {order}u;\nconst ORDER_PLUS_ONE: u32 = {}u;\nconst COUNT: u32 = {count}u;\n\
+            "const ORDER: u32 = {order}u;\nconst ORDER_CAP: u32 = {}u;\nconst ORDER_PLUS_ONE: u32 = {}u;\n\
+             const COUNT: u32 = {count}u;\nconst COUNT_CAP: u32 = {}u;\n\
              const NODES: u32 = {nodes}u;\nconst DIRECTIONS: u32 = {}u;\nconst LEVELS: u32 = {}u;\n\
              const STEPS: u32 = {}u;\nconst STEP_ARRAY: u32 = {}u;\n\
              const BSPLINE_LEVELS: bool = {};\nconst BSPLINE_SCALE_MAX: bool = {};\n\
@@ -251,7 +269,9 @@ impl ShadeProgram {
              const OL_FINE_NODES: u32 = {OL_FINE_NODES}u;\nconst OL_COARSE_STEP: f32 = {};\nconst OL_NODES: u32 = {}u;\n\
              const HYB_MAX_SQUARINGS: u32 = {}u;\nconst SERIES_MAX_TERMS: u32 = {SERIES_MAX_TERMS}u;\n\
              const SERIES_TOLERANCE: f32 = {};\nconst SH_SPACE_MAX_MAGNITUDE: f32 = {};\n",
-            order + 1,
+            order_cap,
+            order_cap + 1,
+            count_cap,
             directions.max(1),
             march.levels.max(1),
             march.steps,
@@ -290,11 +310,49 @@ impl ShadeProgram {
         modules.push(SHADE_WGSL);
         let mut source = wgsl_declarations() + &prelude;
         for module in modules {
-            source += &preprocess(module, &flags);
+            let module = preprocess(module, &flags);
+            source += &if features.generic { runtime_bounds(&module) } else { module };
         }
-        Self { source, features, tables: t.data, materials, slots }
+        let tensor_entries = kernel.exp.tensor.as_ref().map_or(0, |t| t.entry_count());
+        Self { source, features, tables: t.data, materials, slots, nodes, order, exp, march: march_in, tensor_entries }
     }
 }
+
+impl ShadeProgram {
+    /// An upper bound on the loop iterations one invocation of the shading pass runs, for
+    /// a Phong point seeing every blocker: lavapipe (Mesa's CPU Vulkan driver, through
+    /// at least Mesa 22.3) ends an invocation's loops after 65535 iterations in all, so a
+    /// program above [`LAVAPIPE_LOOP_LIMIT`] would silently shade a wrong image there.
+    pub fn loop_iterations(&self, spheres: usize) -> u64 {
+        let n = self.order as u64;
+        let c = n * n;
+        let eval_basis = n + n * (n + 1) / 2;
+        let add_rotated = eval_basis + n + c;
+        let quad = self.nodes as u64 * (c.div_ceil(4) + 1);
+        let product = c + self.tensor_entries as u64;
+        let exp = match self.exp {
+            ExpMethod::Quad | ExpMethod::Exact => quad,
+            ExpMethod::Ol => quad.max(3 * c),
+            // Magnitudes above 16 go to the quadrature; below, at most 7 squarings.
+            ExpMethod::Hyb => quad.max(3 * c + 7 * product),
+            ExpMethod::Series => quad.max(3 * c + SERIES_MAX_TERMS as u64 * (product + c)),
+        };
+        let lit = n + add_rotated + exp;
+        let tangent = n + add_rotated;
+        let sphere = 1 + 2 * n + add_rotated;
+        let heightfield = self.march.map_or(0, |m| {
+            let sample = if m.bspline_levels { 21 } else { 1 };
+            let steps = m.steps as u64;
+            let horizon = steps * (1 + sample) + if m.bspline_scale_max { steps } else { 0 };
+            let wedge = c * (1 + n) + n * (n + 1) / 2 + c;
+            m.levels as u64 * (1 + sample) + m.directions as u64 * (1 + horizon + 2 * n + wedge) + wedge
+        });
+        1 + tangent + heightfield + spheres as u64 * sphere + 2 * lit
+    }
+}
+
+/// lavapipe's loop budget per shader invocation (see [`ShadeProgram::loop_iterations`]).
+pub const LAVAPIPE_LOOP_LIMIT: u64 = 65535;
 
 fn flag(flags: &[(&str, bool)], name: &str) -> bool {
     flags.iter().any(|&(n, on)| n == name && on)
@@ -309,6 +367,32 @@ fn wgsl_float(value: f64) -> String {
     } else {
         format!("{text}.0")
     }
+}
+
+/// The generic program's loop bounds: the order, coefficient count and node count read
+/// from the uniforms instead of the constants (array sizes use the `_CAP` constants).
+fn runtime_bounds(source: &str) -> String {
+    let mut out = String::with_capacity(source.len());
+    let mut word = String::new();
+    let flush = |word: &mut String, out: &mut String| {
+        out.push_str(match word.as_str() {
+            "ORDER" => "params.order",
+            "COUNT" => "params.coefficient_count",
+            "NODES" => "params.nodes",
+            other => other,
+        });
+        word.clear();
+    };
+    for c in source.chars() {
+        if c.is_ascii_alphanumeric() || c == '_' {
+            word.push(c);
+        } else {
+            flush(&mut word, &mut out);
+            out.push(c);
+        }
+    }
+    flush(&mut word, &mut out);
+    out
 }
 
 /// Keeps the lines of `source` whose enclosing `//#if FEATURE` / `//#if !FEATURE` /
@@ -351,6 +435,14 @@ mod tests {
         assert_eq!(preprocess(source, &[("X", true), ("Y", false)]), "a\nb\nd\nf\n");
         assert_eq!(preprocess(source, &[("X", false), ("Y", true)]), "a\ne\nf\n");
         assert_eq!(preprocess(source, &[("X", true), ("Y", true)]), "a\nb\nc\nf\n");
+    }
+
+    #[test]
+    fn generic_bounds_replace_whole_words_only() {
+        assert_eq!(
+            runtime_bounds("for (i < COUNT) { a[ORDER_CAP] = T_ORDER + ORDER + NODES; }"),
+            "for (i < params.coefficient_count) { a[ORDER_CAP] = T_ORDER + params.order + params.nodes; }"
+        );
     }
 
     #[test]

@@ -7,7 +7,9 @@ use crate::heightfield::{HeightField, HeightFieldError, HorizonPyramid};
 use crate::scene::{Frame, GBuffer, Material, Scene};
 use crate::sh::Real;
 use rayon::prelude::*;
+use crate::timing::StageTimings;
 use std::collections::BTreeMap;
+use std::time::Instant;
 
 /// A shaded frame: linear RGBA, row-major from the top row. Alpha is 1 where a surface
 /// was shaded and 0 on the background.
@@ -34,8 +36,19 @@ pub enum ShadeError {
 
 /// Shades one frame of `scene` with `settings`.
 pub fn shade_frame(scene: &Scene, frame: &Frame, settings: &ShadingSettings) -> Result<ShadedFrame, ShadeError> {
+    Ok(shade_frame_timed(scene, frame, settings)?.0)
+}
+
+/// [`shade_frame`], timing its stages: the tables, the height-field pyramid, the pixels.
+pub fn shade_frame_timed(
+    scene: &Scene,
+    frame: &Frame,
+    settings: &ShadingSettings,
+) -> Result<(ShadedFrame, StageTimings), ShadeError> {
     settings.validate().map_err(ShadeError::Settings)?;
     check_frame(scene, frame)?;
+    let mut timings = StageTimings::default();
+    let started = Instant::now();
     let pyramid = match height_field(scene, frame)? {
         Some(field) => Some(
             HorizonPyramid::new(&field, settings.horizon)
@@ -43,15 +56,29 @@ pub fn shade_frame(scene: &Scene, frame: &Frame, settings: &ShadingSettings) -> 
         ),
         None => None,
     };
+    if pyramid.is_some() {
+        timings.add_wall("pyramid", started);
+    }
     let light = frame.light.sh_coefficients(settings.order);
     let occluders = Occluders { blockers: &frame.blockers, horizons: pyramid.as_ref() };
-    Ok(if settings.double_precision {
+    let shaded = if settings.double_precision {
+        let started = Instant::now();
         let kernel = ShadingKernel::<f64>::new(settings, &scene.materials, &light, pyramid.is_some());
-        shade_pixels(&kernel, occluders, frame)
+        timings.add_wall("tables", started);
+        let started = Instant::now();
+        let shaded = shade_pixels(&kernel, occluders, frame);
+        timings.add_wall("shade", started);
+        shaded
     } else {
+        let started = Instant::now();
         let kernel = ShadingKernel::<f32>::new(settings, &scene.materials, &light, pyramid.is_some());
-        shade_pixels(&kernel, occluders, frame)
-    })
+        timings.add_wall("tables", started);
+        let started = Instant::now();
+        let shaded = shade_pixels(&kernel, occluders, frame);
+        timings.add_wall("shade", started);
+        shaded
+    };
+    Ok((shaded, timings))
 }
 
 /// The name of the scene's height map, for messages.

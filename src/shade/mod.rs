@@ -4,6 +4,6 @@ pub mod frame;
 pub mod kernel;
 pub mod settings;
 
-pub use frame::{pixel_work, shade_frame, PixelWork, ShadeError, ShadedFrame};
+pub use frame::{pixel_work, shade_frame, shade_frame_timed, PixelWork, ShadeError, ShadedFrame};
 pub use kernel::{Exponentiator, Occluders, ShadingKernel, SurfacePoint};
 pub use settings::{default_epsilon, Quality, ShadingSettings};
