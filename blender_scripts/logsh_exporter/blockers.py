@@ -15,11 +15,13 @@ Pure numpy, no bpy: the exporter hands in world-space triangles each frame.
   keep each sample's cluster and each triangle's sphere and only recompute centres and
   radii, so spheres follow the animation (armatures, modifiers, shape keys) instead of
   jumping between clusterings. A mesh whose triangle count changes is clustered anew.
-- Radius: each triangle belongs to the sphere nearest its centroid, and a sphere's radius
-  is the largest distance from its centre to a vertex of its triangles. A sphere is
-  convex, so it then holds each of its triangles whole: the union covers the mesh
-  exactly, and no light leaks through a blocker between samples. The price is that
-  spheres reach out beyond the surface; the fit error reports how far.
+- Radius: the largest distance from a sphere's centre to its samples and to the mesh
+  vertices nearest to it, so that the union of spheres holds every sample and every
+  vertex: light does not leak through a blocker between its spheres. Covering whole
+  triangles instead would be exact, but a long, thin triangle (the side of a cone or a
+  cylinder primitive) would then inflate its sphere to half the object. What the union
+  misses between samples, and how far it reaches beyond the surface, is measured and
+  printed as the fit error (`exporter.fit_error`).
 """
 import zlib
 
@@ -61,7 +63,6 @@ class SphereFit:
             centres = moved
         self.sample_label = _nearest(points, centres)
         self.count = count
-        self.triangle_label = _nearest(triangles.mean(axis=1), centres)
 
     def _samples(self, triangles):
         t = triangles[self.sample_triangle]
@@ -73,20 +74,26 @@ class SphereFit:
     def spheres(self, triangles):
         """Centres (k, 3) and radii (k,) for this frame's triangles."""
         points = self._samples(triangles)
-        centres = np.zeros((self.count, 3))
-        for k in range(self.count):
-            members = points[self.sample_label == k]
-            if len(members):
-                centres[k] = members.mean(axis=0)
-            else:
-                centres[k] = triangles[self.triangle_label == k].reshape(-1, 3).mean(axis=0)
-        radii = np.zeros(self.count)
-        for k in range(self.count):
-            verts = triangles[self.triangle_label == k].reshape(-1, 3)
-            if len(verts):
-                radii[k] = np.linalg.norm(verts - centres[k], axis=1).max()
-        keep = radii > 0.0  # a sphere that owns no triangle blocks nothing
-        return centres[keep], radii[keep]
+        used = np.unique(self.sample_label)
+        centres = np.array([points[self.sample_label == k].mean(axis=0) for k in used])
+        label = np.searchsorted(used, self.sample_label)
+        vertices = np.unique(triangles.reshape(-1, 3), axis=0)
+        vertex_label = _nearest(vertices, centres)
+        radii = np.zeros(len(centres))
+        for k in range(len(centres)):
+            held = np.concatenate([points[label == k], vertices[vertex_label == k]])
+            radii[k] = np.linalg.norm(held - centres[k], axis=1).max()
+        return centres, radii
+
+    def surface_points(self, triangles, n=2000):
+        """Fresh surface samples (not those clustered) for measuring coverage."""
+        rng = np.random.default_rng(1)
+        area = _areas(triangles)
+        t = triangles[rng.choice(len(triangles), size=n, p=area / area.sum())]
+        u, v = rng.random(n), rng.random(n)
+        flip = u + v > 1.0
+        u[flip], v[flip] = 1.0 - u[flip], 1.0 - v[flip]
+        return t[:, 0] + u[:, None] * (t[:, 1] - t[:, 0]) + v[:, None] * (t[:, 2] - t[:, 0])
 
 
 def fibonacci_sphere(n):

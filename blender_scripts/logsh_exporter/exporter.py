@@ -431,16 +431,19 @@ def export_blockers(scene, depsgraph, objects, terrain, index_of, table, options
             fits[key] = fit
         centres, radii = fit.spheres(triangles)
         spheres += [{"center": [float(v) for v in c], "radius": float(r)} for c, r in zip(centres, radii)]
-        reports.append((fit.name, len(radii), fit_error(triangles, centres, radii)))
+        reports.append((fit.name, len(radii), fit_error(fit, triangles, centres, radii)))
     report_fit_errors(reports, frame, log)
     return spheres
 
 
-def fit_error(triangles, centres, radii):
-    """How far the union of spheres reaches beyond the mesh: distances from points of the
-    union's boundary that lie outside the mesh to the mesh surface, as (mean, max), and
-    the object's size (bounding-box diagonal) to read them against. The union covers the
-    mesh by construction, so this one-sided distance is the whole fit error."""
+def fit_error(fit, triangles, centres, radii):
+    """The two ways a union of spheres can miss its mesh, as (coverage, mean reach, max
+    reach, size): the fraction of fresh surface samples inside the union (1 when no light
+    leaks through), and the distances from the union's boundary points that lie outside
+    the mesh to the mesh surface (how far the blocker is fatter than the object), read
+    against the object's size (bounding-box diagonal)."""
+    surface = fit.surface_points(triangles)
+    inside = (np.linalg.norm(surface[:, None, :] - centres[None], axis=2) <= radii[None] * (1 + 1e-9)).any(axis=1)
     vertices = triangles.reshape(-1, 3)
     tree = BVHTree.FromPolygons([tuple(v) for v in vertices], [(3 * i, 3 * i + 1, 3 * i + 2) for i in range(len(triangles))])
     outside = []
@@ -449,23 +452,25 @@ def fit_error(triangles, centres, radii):
         if location is not None and (mathutils.Vector(p) - location).dot(normal) > 0:
             outside.append(distance)
     size = float(np.linalg.norm(np.ptp(vertices, axis=0)))
-    if not outside:
-        return 0.0, 0.0, size
-    return float(np.mean(outside)), float(np.max(outside)), size
+    mean, worst = (float(np.mean(outside)), float(np.max(outside))) if outside else (0.0, 0.0)
+    return float(inside.mean()), mean, worst, size
 
 
 def report_fit_errors(reports, frame, log):
     if not reports:
         return
     if len(reports) <= 12:
-        for name, count, (mean, worst, size) in reports:
-            log(f"frame {frame}: {name}: {count} spheres cover the mesh; they reach {mean:.3g} (mean) and "
-                f"{worst:.3g} (max) beyond it, {100 * mean / size:.1f}% and {100 * worst / size:.1f}% of its size {size:.3g}")
+        for name, count, (coverage, mean, worst, size) in reports:
+            log(f"frame {frame}: {name}: {count} spheres hold {100 * coverage:.1f}% of its surface and reach "
+                f"{mean:.3g} (mean) and {worst:.3g} (max) beyond it, {100 * mean / size:.1f}% and "
+                f"{100 * worst / size:.1f}% of its size {size:.3g}")
     else:
-        relative = np.array([[m / s, w / s] for _, _, (m, w, s) in reports])
+        coverage = np.array([c for _, _, (c, _, _, _) in reports])
+        relative = np.array([[m / s, w / s] for _, _, (_, m, w, s) in reports])
         worst = reports[int(np.argmax(relative[:, 1]))][0]
-        log(f"frame {frame}: {len(reports)} objects, {sum(c for _, c, _ in reports)} spheres cover their meshes; "
-            f"they reach {100 * relative[:, 0].mean():.1f}% of an object's size beyond it on average, "
+        log(f"frame {frame}: {len(reports)} objects, {sum(c for _, c, _ in reports)} spheres hold "
+            f"{100 * coverage.mean():.1f}% of their surfaces (least {100 * coverage.min():.1f}%); they reach "
+            f"{100 * relative[:, 0].mean():.1f}% of an object's size beyond it on average, "
             f"{100 * relative[:, 1].max():.1f}% at worst ({worst})")
 
 
