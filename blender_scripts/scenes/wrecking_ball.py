@@ -12,8 +12,8 @@ on every machine).
 """
 import os
 
-import bmesh
 import bpy
+import bmesh  # after bpy: pip's bpy module provides it
 import numpy as np
 
 from common import assign, camera, empty_scene, material, parse_args, save, sky_world
