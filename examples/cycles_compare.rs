@@ -1,5 +1,6 @@
 //! logsh against Cycles on exported Blender scenes: shades a scene's first frame at the
-//! default quality and compares it with the direct-lighting Cycles render stored beside it
+//! `default`, `high` and `ultra` presets and at `default` with ratio attenuation, and
+//! compares each with the direct-lighting Cycles render stored beside it
 //! (`cycles.NNNN.exr`, written by `blender_scripts/render_cycles.py` with the exported
 //! material table turned back into Cycles shaders, so that both sides use the same albedo,
 //! specular colour and lobe width).
@@ -16,7 +17,7 @@
 
 use exr::prelude::read_first_rgba_layer_from_file;
 use logsh::scene::{Light, Scene};
-use logsh::shade::settings::ShadingSettings;
+use logsh::shade::{Quality, ShadingSettings};
 use logsh::shade::shade_frame;
 use std::path::{Path, PathBuf};
 
@@ -64,41 +65,45 @@ fn main() {
         eprintln!("usage: cycles_compare SCENE_DIR...");
         std::process::exit(2);
     }
-    println!("| scene | frame | pixels | unoccluded value (R, G, B) | mean abs error | p95 | mean signed |");
-    println!("| --- | --- | --- | --- | --- | --- | --- |");
+    println!("| scene | settings | pixels | mean abs error | p95 | mean signed |");
+    println!("| --- | --- | --- | --- | --- | --- |");
+    let ratio = ShadingSettings { ratio_attenuation: true, ..Quality::Default.settings() };
+    let runs = [
+        ("default", Quality::Default.settings()),
+        ("high", Quality::High.settings()),
+        ("ultra", Quality::Ultra.settings()),
+        ("default, ratio attenuation", ratio),
+    ];
     for dir in dirs {
         let scene = Scene::load(&dir).unwrap_or_else(|e| panic!("{e}"));
         let number = scene.default_frame();
         let frame = scene.frame(number).unwrap_or_else(|e| panic!("{e}"));
-        let shaded = shade_frame(&scene, &frame, &ShadingSettings::default()).unwrap_or_else(|e| panic!("{e}"));
         let (width, height, cycles) = read_rgb(&dir.join(format!("cycles.{number:04}.exr")));
-        assert_eq!([width, height], [shaded.width, shaded.height], "{}: Cycles render and G-buffer differ in size", dir.display());
         let unoccluded = unoccluded_value(&frame.light);
-        let mut errors = Vec::new();
-        let mut signed = 0.0;
-        for (i, &m) in frame.gbuffer.material.iter().enumerate() {
-            if m == 0 {
-                continue;
+        eprintln!("{}: frame {number}, unoccluded value {unoccluded:.3?}", dir.display());
+        for (name, settings) in &runs {
+            let shaded = shade_frame(&scene, &frame, settings).unwrap_or_else(|e| panic!("{e}"));
+            assert_eq!([width, height], [shaded.width, shaded.height], "{}: Cycles render and G-buffer differ in size", dir.display());
+            let mut errors = Vec::new();
+            let mut signed = 0.0;
+            for (i, &m) in frame.gbuffer.material.iter().enumerate() {
+                if m == 0 {
+                    continue;
+                }
+                let mut e = 0.0;
+                for k in 0..3 {
+                    let d = (shaded.rgba[i][k] as f64 - cycles[i][k] as f64) / unoccluded[k];
+                    e += d.abs() / 3.0;
+                    signed += d / 3.0;
+                }
+                errors.push(e);
             }
-            let mut e = 0.0;
-            for k in 0..3 {
-                let d = (shaded.rgba[i][k] as f64 - cycles[i][k] as f64) / unoccluded[k];
-                e += d.abs() / 3.0;
-                signed += d / 3.0;
-            }
-            errors.push(e);
+            let count = errors.len();
+            let mean = errors.iter().sum::<f64>() / count as f64;
+            errors.sort_by(|a, b| a.total_cmp(b));
+            let p95 = errors[(0.95 * (count - 1) as f64).round() as usize];
+            let scene_name = dir.file_name().map_or_else(|| dir.display().to_string(), |n| n.to_string_lossy().into_owned());
+            println!("| {scene_name} | {name} | {count} | {mean:.3} | {p95:.3} | {:+.3} |", signed / count as f64);
         }
-        let count = errors.len();
-        let mean = errors.iter().sum::<f64>() / count as f64;
-        errors.sort_by(|a, b| a.total_cmp(b));
-        let p95 = errors[(0.95 * (count - 1) as f64).round() as usize];
-        println!(
-            "| {} | {number} | {count} | {:.3}, {:.3}, {:.3} | {mean:.3} | {p95:.3} | {:+.3} |",
-            dir.display(),
-            unoccluded[0],
-            unoccluded[1],
-            unoccluded[2],
-            signed / count as f64
-        );
     }
 }

@@ -173,7 +173,7 @@ def export(scene, options, log=print):
             camera = camera_json(scene, frame, width, height)
             write_json(os.path.join(out, f"camera.{frame:04d}.json"), camera)
             spheres = export_blockers(scene, depsgraph, objects, terrain, index_of, table, options, fits, frame, log)
-            write_json(os.path.join(out, f"blockers.{frame:04d}.json"), {"frame": frame, "spheres": spheres})
+            write_blockers(os.path.join(out, f"blockers.{frame:04d}.json"), frame, spheres)
             if water:
                 write_reflection(scene, depsgraph, camera, index_of, water, os.path.join(out, f"reflection.{frame:04d}.exr"))
             log(f"frame {frame}: {len(spheres)} blocker spheres, {time.time() - began:.1f} s")
@@ -716,6 +716,13 @@ def export_world(scene, out, options, log):
         log(f"environment map {w}x{h} box-filtered to {w // factor}x{h // factor}")
     write_exr(os.path.join(out, "sky.exr"), {c: rgb[..., k] for k, c in enumerate("RGB")})
     return {"environment": "sky.exr", "strength": strength}
+
+
+def write_blockers(path, frame, spheres):
+    """One sphere per line: hundreds of blockers stay small and readable."""
+    lines = ",\n".join("  " + json.dumps(s) for s in spheres)
+    with open(path, "w") as f:
+        f.write(f'{{"frame": {frame}, "spheres": [\n{lines}\n]}}\n')
 
 
 def write_json(path, value):
