@@ -2,7 +2,7 @@
 logsh is compared against (`examples/cycles_compare.rs`).
 
     python blender_scripts/render_cycles.py --blend scene.blend --out DIR [--frame 1]
-        [--samples 256] [--resolution WxH]
+        [--samples 256] [--resolution WxH] [--seed 0]
     blender -b scene.blend -P blender_scripts/render_cycles.py -- --out DIR ...
 
 Writes `DIR/cycles.NNNN.exr` (linear RGB, half float) and `DIR/cycles.NNNN.png` (sRGB,
@@ -84,6 +84,7 @@ def main(argv):
     parser.add_argument("--frame", type=int)
     parser.add_argument("--samples", type=int, default=256)
     parser.add_argument("--resolution", type=size)
+    parser.add_argument("--seed", type=int, default=0, help="Cycles' noise seed (two seeds measure the noise)")
     args = parser.parse_args(argv)
     if args.blend:
         bpy.ops.wm.open_mainfile(filepath=os.path.abspath(args.blend), load_ui=False)
@@ -107,6 +108,7 @@ def main(argv):
     render.engine = "CYCLES"
     cycles.device = "CPU"
     cycles.samples = args.samples
+    cycles.seed = args.seed
     cycles.use_adaptive_sampling = False
     cycles.use_denoising = False
     cycles.pixel_filter_type = "BOX"

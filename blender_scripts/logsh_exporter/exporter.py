@@ -234,6 +234,9 @@ def configure_render(scene, options, changes):
         if attribute.startswith("use_pass_"):
             wanted = attribute in ("use_pass_position", "use_pass_normal", "use_pass_uv", "use_pass_material_index")
             changes.set(layer, attribute, wanted)
+    for attribute in dir(layer.cycles):  # Cycles' own passes (denoising data, debug, ...)
+        if attribute.startswith("use_pass_") or attribute in ("denoising_store_passes", "pass_debug_sample_count"):
+            changes.set(layer.cycles, attribute, False)
     return layer
 
 
@@ -296,8 +299,8 @@ def material_table(objects, terrain, changes):
 
 def _principled(material):
     """The BSDF node feeding the active Material Output, if it is one we read."""
-    tree = material.node_tree if material.node_tree else None
-    if tree is None:
+    tree = material.node_tree
+    if tree is None or not getattr(material, "use_nodes", True):  # Blender 4 without nodes
         return None
     outputs = [n for n in tree.nodes if n.type == "OUTPUT_MATERIAL" and n.is_active_output] or \
               [n for n in tree.nodes if n.type == "OUTPUT_MATERIAL"]
@@ -673,8 +676,8 @@ def export_world(scene, out, options, log):
     world = scene.world
     if world is None:
         raise ExportError("the scene has no World; add one (World tab) for the light")
-    tree = world.node_tree if world.node_tree else None
-    if tree is None:
+    tree = world.node_tree
+    if tree is None or not getattr(world, "use_nodes", True):
         return {"constant": [float(c) for c in world.color]}
     outputs = [n for n in tree.nodes if n.type == "OUTPUT_WORLD" and n.is_active_output] or \
               [n for n in tree.nodes if n.type == "OUTPUT_WORLD"]
