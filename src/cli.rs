@@ -21,7 +21,7 @@ pub enum Command {
     Reference(ReferenceArgs),
     /// Measure the speed/accuracy trade on one frame: presets and single-knob sweeps against the reference; writes CSV, JSON and an SVG plot.
     Sweep(SweepArgs),
-    /// Write a procedural sample scene in format v1 (the scenes in gbuffers/ come from here).
+    /// Write a procedural sample scene in format v1 (gbuffers/spheres comes from here).
     Example(ExampleArgs),
 }
 
