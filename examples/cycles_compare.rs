@@ -7,6 +7,10 @@
 //!
 //!     cargo run --release --example cycles_compare -- gbuffers/dunes gbuffers/wrecking_ball
 //!
+//! With `--noise DIR`, the same measure between the stored render and a second one of the
+//! same scene with another seed, `DIR/<scene name>/cycles.NNNN.exr`
+//! (`render_cycles.py --seed 1`): the Cycles noise floor under these figures.
+//!
 //! Error: mean over non-background pixels and over R, G, B of |logsh - Cycles| divided by
 //! the unoccluded value, the radiance an open, upward-facing white diffuse floor receives
 //! from the scene's light (`(1/pi) * integral of L max(w.z, 0)`), so that 0.01 reads as
@@ -60,9 +64,15 @@ fn read_rgb(path: &Path) -> (usize, usize, Vec<[f32; 3]>) {
 }
 
 fn main() {
-    let dirs: Vec<PathBuf> = std::env::args().skip(1).map(PathBuf::from).collect();
+    let mut args: Vec<String> = std::env::args().skip(1).collect();
+    let noise = args.iter().position(|a| a == "--noise").map(|i| {
+        let dir = PathBuf::from(args.get(i + 1).expect("--noise needs a directory"));
+        args.drain(i..i + 2);
+        dir
+    });
+    let dirs: Vec<PathBuf> = args.into_iter().map(PathBuf::from).collect();
     if dirs.is_empty() {
-        eprintln!("usage: cycles_compare SCENE_DIR...");
+        eprintln!("usage: cycles_compare [--noise DIR] SCENE_DIR...");
         std::process::exit(2);
     }
     println!("| scene | settings | pixels | mean abs error | p95 | mean signed |");
@@ -81,9 +91,18 @@ fn main() {
         let (width, height, cycles) = read_rgb(&dir.join(format!("cycles.{number:04}.exr")));
         let unoccluded = unoccluded_value(&frame.light);
         eprintln!("{}: frame {number}, unoccluded value {unoccluded:.3?}", dir.display());
+        let scene_name = dir.file_name().map_or_else(|| dir.display().to_string(), |n| n.to_string_lossy().into_owned());
+        let mut images: Vec<(String, Vec<[f32; 3]>)> = Vec::new();
         for (name, settings) in &runs {
             let shaded = shade_frame(&scene, &frame, settings).unwrap_or_else(|e| panic!("{e}"));
             assert_eq!([width, height], [shaded.width, shaded.height], "{}: Cycles render and G-buffer differ in size", dir.display());
+            images.push((name.to_string(), shaded.rgba.iter().map(|p| [p[0], p[1], p[2]]).collect()));
+        }
+        if let Some(noise) = &noise {
+            let (_, _, second) = read_rgb(&noise.join(&scene_name).join(format!("cycles.{number:04}.exr")));
+            images.push(("Cycles, another seed".to_string(), second));
+        }
+        for (name, image) in &images {
             let mut errors = Vec::new();
             let mut signed = 0.0;
             for (i, &m) in frame.gbuffer.material.iter().enumerate() {
@@ -92,7 +111,7 @@ fn main() {
                 }
                 let mut e = 0.0;
                 for k in 0..3 {
-                    let d = (shaded.rgba[i][k] as f64 - cycles[i][k] as f64) / unoccluded[k];
+                    let d = (image[i][k] as f64 - cycles[i][k] as f64) / unoccluded[k];
                     e += d.abs() / 3.0;
                     signed += d / 3.0;
                 }
@@ -102,7 +121,6 @@ fn main() {
             let mean = errors.iter().sum::<f64>() / count as f64;
             errors.sort_by(|a, b| a.total_cmp(b));
             let p95 = errors[(0.95 * (count - 1) as f64).round() as usize];
-            let scene_name = dir.file_name().map_or_else(|| dir.display().to_string(), |n| n.to_string_lossy().into_owned());
             println!("| {scene_name} | {name} | {count} | {mean:.3} | {p95:.3} | {:+.3} |", signed / count as f64);
         }
     }
