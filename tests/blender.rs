@@ -200,3 +200,55 @@ fn export_fails_clearly() {
     assert_eq!(output.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&output.stderr).contains("error: no .blend given"));
 }
+
+/// The `dunes` sample built and exported small: the height map lies where the G-buffer
+/// sees the terrain, and the sky map is oriented as the World's (the brightest texel is
+/// the sun the builder placed), which ties the exporter's conventions to the reader's.
+#[test]
+fn dunes_height_map_and_sky_match_blender() {
+    let Some(python) = bpy_python() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let blend = dir.path().join("dunes.blend");
+    assert_ok(&run_python(&python, "blender_scripts/scenes/dunes.py", &[Path::new("--save"), &blend]), "dunes.py");
+    let scene_dir = dir.path().join("scene");
+    let options = ["--frames", "1", "--resolution", "64x36", "--heightmap-size", "97"].map(Path::new);
+    let mut args = vec![Path::new("--blend"), &blend, Path::new("--out"), &scene_dir];
+    args.extend(options);
+    assert_ok(&run_python(&python, "blender_scripts/export_scene.py", &args), "export_scene.py");
+
+    let scene = Scene::load(&scene_dir).unwrap();
+    let frame = scene.frame(1).unwrap();
+    let map = frame.height_map.as_ref().unwrap();
+    assert_eq!([map.columns, map.rows], [97, 97]);
+    let terrain = scene.materials.iter().find(|(_, m)| m.type_name() == "heightfield").map(|(&i, _)| i).unwrap();
+    let g = &frame.gbuffer;
+    let gaps: Vec<f64> = (0..g.material.len())
+        .filter(|&i| g.material[i] == terrain)
+        .map(|i| {
+            let p = g.position[i];
+            (map.height_at(p[0] as f64, p[1] as f64) - p[2] as f64).abs()
+        })
+        .collect();
+    assert!(gaps.len() > 500, "terrain in view ({} pixels)", gaps.len());
+    let mean = gaps.iter().sum::<f64>() / gaps.len() as f64;
+    let worst = gaps.iter().cloned().fold(0.0, f64::max);
+    // The map samples the mesh's vertices; bilinear and the mesh's triangles differ inside
+    // a cell by the cell's twist (measured: mean 0.002, max 0.011 with cells 0.29 wide).
+    assert!(mean < 0.005 && worst < 0.03, "height map vs G-buffer: mean {mean:.4}, max {worst:.4}");
+
+    let logsh::scene::Light::Environment { map: sky, .. } = frame.light.as_ref() else { panic!("an environment light") };
+    let brightest = (0..sky.texels.len()).max_by(|&a, &b| sky.texels[a][0].total_cmp(&sky.texels[b][0])).unwrap();
+    let (u, v) = (
+        ((brightest % sky.width) as f64 + 0.5) / sky.width as f64,
+        1.0 - ((brightest / sky.width) as f64 + 0.5) / sky.height as f64,
+    );
+    let d = logsh::scene::light::equirectangular_to_direction(u, v);
+    let sun = [-0.5, 0.6, 0.35]; // sun_direction in blender_scripts/scenes/dunes.py
+    let length = (sun[0] * sun[0] + sun[1] * sun[1] + sun[2] * sun[2]) as f64;
+    let cos = (d[0] * sun[0] + d[1] * sun[1] + d[2] * sun[2]) / length.sqrt();
+    // One texel of a 256-wide map is 1.4 degrees: the sun lands within two.
+    assert!(cos > (3.0f64.to_radians()).cos(), "brightest texel at {d:?}, sun at {sun:?}");
+    let out = dir.path().join("out");
+    let output = Command::cargo_bin("logsh").unwrap().arg("shade").arg(&scene_dir).arg("--out").arg(&out).output().unwrap();
+    assert_ok(&output, "logsh shade");
+}
