@@ -9,7 +9,6 @@ blocker spheres (`logsh_spheres`); the water material is `logsh_type = water`.
 """
 import os
 
-import bpy
 import numpy as np
 
 from common import assign, camera, empty_scene, grid_object, material, mesh_object, parse_args, save, sky_world
