@@ -126,6 +126,15 @@ class Changes:
 
 # ---- entry point -----------------------------------------------------------------------
 
+def new_file(out, name):
+    """The path of output `name`, which must not exist yet: an export never writes over a
+    file, so neither an earlier export nor an input (the .blend, an image) is lost."""
+    path = os.path.join(out, name)
+    if os.path.exists(path):
+        raise ExportError(f"{path} exists; export into an empty directory")
+    return path
+
+
 def export(scene, options, log=print):
     """Writes `scene` into `options.out` as a format-v1 scene; returns the summary dict."""
     out = os.path.abspath(options.out)
@@ -168,16 +177,16 @@ def export(scene, options, log=print):
             began = time.time()
             scene.frame_set(frame)
             depsgraph = bpy.context.evaluated_depsgraph_get()
-            scene.render.filepath = os.path.join(out, f"gbuffer.{frame:04d}.exr")
+            scene.render.filepath = new_file(out, f"gbuffer.{frame:04d}.exr")
             bpy.ops.render.render(write_still=True, scene=scene.name, layer=view_layer.name)
             camera = camera_json(scene, frame, width, height)
-            write_json(os.path.join(out, f"camera.{frame:04d}.json"), camera)
+            write_json(new_file(out, f"camera.{frame:04d}.json"), camera)
             spheres = export_blockers(scene, depsgraph, objects, terrain, index_of, table, options, fits, frame, log)
-            write_blockers(os.path.join(out, f"blockers.{frame:04d}.json"), frame, spheres)
+            write_blockers(new_file(out, f"blockers.{frame:04d}.json"), frame, spheres)
             if water:
-                write_reflection(scene, depsgraph, camera, index_of, water, os.path.join(out, f"reflection.{frame:04d}.exr"))
+                write_reflection(scene, depsgraph, camera, index_of, water, new_file(out, f"reflection.{frame:04d}.exr"))
             log(f"frame {frame}: {len(spheres)} blocker spheres, {time.time() - began:.1f} s")
-        write_json(os.path.join(out, "scene.json"), description)
+        write_json(new_file(out, "scene.json"), description)
     finally:
         changes.undo()
         scene.frame_set(frame_before)
@@ -511,7 +520,7 @@ def export_heightmap(terrain, depsgraph, out, options, log):
         log(f"note: height field \"{terrain.name}\": {int(holes.sum())} of {holes.size} samples fall in holes; set to its lowest point")
         heights[holes] = np.nanmin(heights)
     # Row 0 of the map lies at min y and is the file's first scan line.
-    write_exr(os.path.join(out, "heightmap.exr"), {"Y": heights})
+    write_exr(new_file(out, "heightmap.exr"), {"Y": heights})
     log(f"height map: {columns}x{rows} samples of \"{terrain.name}\" over x {lo[0]:.3g}..{hi[0]:.3g}, y {lo[1]:.3g}..{hi[1]:.3g}")
     return {"heights": "heightmap.exr", "min": [float(lo[0]), float(lo[1])], "max": [float(hi[0]), float(hi[1])]}
 
@@ -717,7 +726,7 @@ def export_world(scene, out, options, log):
     if factor > 1:
         rgb = rgb.reshape(h // factor, factor, w // factor, factor, 3).mean(axis=(1, 3))
         log(f"environment map {w}x{h} box-filtered to {w // factor}x{h // factor}")
-    write_exr(os.path.join(out, "sky.exr"), {c: rgb[..., k] for k, c in enumerate("RGB")})
+    write_exr(new_file(out, "sky.exr"), {c: rgb[..., k] for k, c in enumerate("RGB")})
     return {"environment": "sky.exr", "strength": strength}
 
 
