@@ -12,9 +12,9 @@ Pure numpy, no bpy: the exporter hands in world-space triangles each frame.
   uniform random start; the generator is seeded from the object's name, so an export is
   reproducible. A cluster that empties is moved to the sample farthest from its centre.
 - Coherence: clustering happens once, on the first frame a mesh is seen. Later frames
-  keep each sample's cluster and each triangle's sphere and only recompute centres and
-  radii, so spheres follow the animation (armatures, modifiers, shape keys) instead of
-  jumping between clusterings. A mesh whose triangle count changes is clustered anew.
+  keep each sample's cluster and only recompute centres and radii, so spheres follow the
+  animation (armatures, modifiers, shape keys) instead of jumping between clusterings. A
+  mesh whose triangle count changes is clustered anew.
 - Radius: the largest distance from a sphere's centre to its samples and to the mesh
   vertices nearest to it, so that the union of spheres holds every sample and every
   vertex: light does not leak through a blocker between its spheres. Covering whole
