@@ -16,10 +16,13 @@ from bpy_extras.io_utils import ExportHelper
 from . import exporter
 
 
+_ITEMS = []  # Blender keeps no reference to dynamic enum strings: Python must (bpy.props docs)
+
+
 def _heightfield_items(self, context):
-    items = [("", "(marked with logsh_heightfield, or none)", "")]
-    items += [(o.name, o.name, "") for o in context.scene.objects if o.type in exporter.GEOMETRY_TYPES]
-    return items
+    _ITEMS[:] = [("", "(marked with logsh_heightfield, or none)", "")]
+    _ITEMS.extend((o.name, o.name, "") for o in context.scene.objects if o.type in exporter.GEOMETRY_TYPES)
+    return _ITEMS
 
 
 class LOGSH_OT_export_scene(bpy.types.Operator, ExportHelper):
