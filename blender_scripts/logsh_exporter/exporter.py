@@ -257,9 +257,17 @@ def output_size(scene):
 # ---- objects and materials -------------------------------------------------------------
 
 def renderable_objects(scene, view_layer):
-    """Geometry objects that render in this view layer."""
+    """Geometry objects that render in this view layer, and the sources of instances
+    (collection instances, particles, geometry nodes), which render through their
+    instancer even when they are not in the view layer themselves."""
     names = {o.name for o in view_layer.objects}
-    return [o for o in scene.objects if o.type in GEOMETRY_TYPES and o.name in names and not o.hide_render]
+    direct = [o for o in scene.objects if o.type in GEOMETRY_TYPES and o.name in names and not o.hide_render]
+    instanced = []
+    for instance in bpy.context.evaluated_depsgraph_get().object_instances:
+        source = instance.object.original
+        if instance.is_instance and source.type in GEOMETRY_TYPES and source not in direct and source not in instanced:
+            instanced.append(source)
+    return direct + instanced
 
 
 def find_heightfield(objects, options):
@@ -419,7 +427,8 @@ def export_blockers(scene, depsgraph, objects, terrain, index_of, table, options
         count = original.get("logsh_spheres")
         if count is not None and int(count) <= 0:
             continue
-        key = (original.name, tuple(instance.persistent_id) if instance.is_instance else ())
+        instancer = instance.parent.original.name if instance.is_instance and instance.parent else ""
+        key = (original.name, instancer, tuple(instance.persistent_id) if instance.is_instance else ())
         triangles = world_triangles(instance.object, instance.matrix_world)
         if triangles is None:
             continue
@@ -437,7 +446,7 @@ def export_blockers(scene, depsgraph, objects, terrain, index_of, table, options
                     fits[key] = "skip"
                     log(f"note: \"{original.name}\" is flat; not a blocker (set its logsh_spheres property to force it)")
                     continue
-            name = original.name + (f"[{instance.persistent_id[0]}]" if instance.is_instance else "")
+            name = original.name + (f" (instanced by {instancer}, {instance.persistent_id[0]})" if instance.is_instance else "")
             fit = blocker_fit.SphereFit(name, triangles, int(count) if count is not None else options.spheres,
                                         options.samples_per_sphere)
             fits[key] = fit
