@@ -123,6 +123,9 @@ def main(argv):
     render.use_motion_blur = False
     render.use_compositing = render.use_sequencer = False
     render.film_transparent = False
+    for attribute in dir(render):  # no metadata (file path, date, host) in the outputs
+        if attribute.startswith("use_stamp"):
+            setattr(render, attribute, False)
     scene.camera.data.dof.use_dof = False
     scene.view_settings.view_transform = "Standard"
     scene.view_settings.look = "None"

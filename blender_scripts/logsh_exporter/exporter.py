@@ -211,6 +211,9 @@ def configure_render(scene, options, changes):
     changes.set(render, "use_compositing", False)
     changes.set(render, "use_sequencer", False)
     changes.set(render, "film_transparent", False)
+    for attribute in dir(render):  # no metadata (file path, date, host) in the outputs
+        if attribute.startswith("use_stamp"):
+            changes.set(render, attribute, False)
     if options.resolution:
         changes.set(render, "resolution_x", int(options.resolution[0]))
         changes.set(render, "resolution_y", int(options.resolution[1]))

@@ -3,7 +3,7 @@ rolling between the two frames, under a procedural sky. Nothing is marked up: it
 exported with the exporter's defaults (8 spheres per object, materials typed by
 roughness and metallic, the flat ground left out of the blockers).
 
-    python blender_scripts/scenes/cones.py --save /tmp/cones.blend
+    python blender_scripts/scenes/cones.py --save out/cones.blend
 """
 import os
 

@@ -2,7 +2,7 @@
 whale-like creature surfacing in it, its back above the water, swimming forward with its
 tail beating (an animated Bend modifier). Lit by a procedural sky with a low sun.
 
-    python blender_scripts/scenes/dunes.py --save /tmp/dunes.blend
+    python blender_scripts/scenes/dunes.py --save out/dunes.blend
 
 Markup read by the exporter: the terrain has `logsh_heightfield`; the whale asks for 50
 blocker spheres (`logsh_spheres`); the water material is `logsh_type = water`.

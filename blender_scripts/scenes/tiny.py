@@ -3,7 +3,7 @@ plane, a water patch, a diffuse sphere, a glossy sphere that moves between frame
 2, a camera, and a grey World (constant light). No custom properties: everything is
 exported with the script's defaults.
 
-    python blender_scripts/scenes/tiny.py --save /tmp/tiny.blend
+    python blender_scripts/scenes/tiny.py --save out/tiny.blend
 """
 import bpy
 

@@ -3,7 +3,7 @@ wall of 400 cubes (diffuse in three colours, one in five glossy gold) standing o
 floor, and knocks the cubes near the impact outwards. Three frames: the ball on its way,
 the ball at the wall, the cubes flying. Lit by a procedural sky.
 
-    python blender_scripts/scenes/wrecking_ball.py --save /tmp/wrecking_ball.blend
+    python blender_scripts/scenes/wrecking_ball.py --save out/wrecking_ball.blend
 
 Each cube asks for one blocker sphere and the ball for one (`logsh_spheres`), the chain
 for three: 404 blockers. The floor is flat, so it is not a blocker. The cube motion is
