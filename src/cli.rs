@@ -22,7 +22,7 @@ pub enum Command {
     Reference(ReferenceArgs),
     /// Measure the speed/accuracy trade on one frame: presets and single-knob sweeps against the reference; writes CSV, JSON and an SVG plot.
     Sweep(SweepArgs),
-    /// Write a procedural sample scene in format v1 (the scenes in gbuffers/ come from here).
+    /// Write a procedural sample scene in format v1 (gbuffers/spheres comes from here).
     Example(ExampleArgs),
     /// Time the shading of one frame stage by stage (GPU timestamps where the adapter has them, wall time otherwise) and report megapixels per second.
     Bench(BenchArgs),

@@ -1,0 +1,82 @@
+"""Exports a Blender scene as a logsh scene (format v1): G-buffers, reflection G-buffer,
+per-frame sphere blockers and camera, height map, materials and the World's light.
+
+    blender -b scene.blend -P blender_scripts/export_scene.py -- --out DIR [--frames 1-24]
+    python blender_scripts/export_scene.py --blend scene.blend --out DIR [--frames 1-24]
+
+(the second with Blender as a Python module: `python -m pip install bpy`). Options:
+
+    --blend FILE            the .blend to open (required unless Blender already opened one)
+    --out DIR               output directory; must not already hold a scene.json
+    --frames A-B | N        frame range (default: the scene's)
+    --resolution WxH        output size in pixels (default: the scene's, with its percentage)
+    --spheres N             blocker spheres per object without a logsh_spheres property (8)
+    --samples-per-sphere N  surface samples per sphere for the k-means fit (40)
+    --heightfield NAME      the terrain object (default: the one with logsh_heightfield set)
+    --heightmap-size N      height map samples along the terrain's longer side (256)
+
+What is exported and how materials and blockers are derived is documented at the top of
+`blender_scripts/logsh_exporter/exporter.py`; the add-on in the same folder runs the same
+code from Blender's File > Export menu. Exits with status 1 and one `error:` line when the
+scene cannot be exported. The .blend is never written.
+"""
+import argparse
+import os
+import sys
+
+import bpy
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from logsh_exporter.exporter import ExportError, Options, export  # noqa: E402
+
+
+def frame_range(text):
+    start, _, end = text.partition("-")
+    try:
+        return int(start), int(end or start)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"\"{text}\" is not a frame range like 1-24 or 7")
+
+
+def size(text):
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"\"{text}\" is not a size like 480x270")
+    if w <= 0 or h <= 0:
+        raise argparse.ArgumentTypeError(f"size {text} is empty")
+    return w, h
+
+
+def main(argv):
+    parser = argparse.ArgumentParser(prog="export_scene.py", description="Export a Blender scene for logsh.")
+    parser.add_argument("--blend")
+    parser.add_argument("--out", required=True)
+    parser.add_argument("--frames", type=frame_range)
+    parser.add_argument("--resolution", type=size)
+    parser.add_argument("--spheres", type=int, default=Options.spheres)
+    parser.add_argument("--samples-per-sphere", type=int, default=Options.samples_per_sphere)
+    parser.add_argument("--heightfield")
+    parser.add_argument("--heightmap-size", type=int, default=Options.heightmap_size)
+    args = parser.parse_args(argv)
+
+    if args.blend:
+        if not os.path.isfile(args.blend):
+            sys.exit(f"error: {args.blend}: no such .blend file")
+        bpy.ops.wm.open_mainfile(filepath=os.path.abspath(args.blend), load_ui=False)
+    elif not bpy.data.filepath:
+        sys.exit("error: no .blend given; pass --blend FILE (or open one: blender -b FILE -P export_scene.py -- ...)")
+    scene = bpy.context.scene
+    if args.spheres < 1 or args.samples_per_sphere < 1 or args.heightmap_size < 2:
+        sys.exit("error: --spheres and --samples-per-sphere must be >= 1, --heightmap-size >= 2")
+    options = Options(out=args.out, frames=args.frames, resolution=args.resolution, spheres=args.spheres,
+                      samples_per_sphere=args.samples_per_sphere, heightfield=args.heightfield,
+                      heightmap_size=args.heightmap_size)
+    try:
+        export(scene, options)
+    except ExportError as e:
+        sys.exit(f"error: {e}")
+
+
+if __name__ == "__main__":
+    main(sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else sys.argv[1:])

@@ -1,0 +1,102 @@
+"""logsh scene exporter, as a Blender extension (Blender 4.2 and later).
+
+Adds File > Export > logsh scene (format v1). The operator sets up Cycles' data passes,
+renders every frame of the chosen range and writes G-buffers, reflection G-buffers,
+blockers, cameras, the height map, the material table and the light into a directory,
+with the same code the command line uses (`exporter.py`; its top comment documents the
+scene markup and the conversions). Render settings are restored afterwards.
+
+Install: zip this folder (`blender --command extension build` inside it, or any zip of
+the folder), then Edit > Preferences > Get Extensions > Install from Disk.
+"""
+import bpy
+from bpy.props import BoolProperty, IntProperty, StringProperty
+from bpy_extras.io_utils import ExportHelper
+
+from . import exporter
+
+
+_ITEMS = []  # Blender keeps no reference to dynamic enum strings: Python must (bpy.props docs)
+
+
+def _heightfield_items(self, context):
+    _ITEMS[:] = [("", "(marked with logsh_heightfield, or none)", "")]
+    _ITEMS.extend((o.name, o.name, "") for o in context.scene.objects if o.type in exporter.GEOMETRY_TYPES)
+    return _ITEMS
+
+
+class LOGSH_OT_export_scene(bpy.types.Operator, ExportHelper):
+    """Export the scene's frames as a logsh scene directory (format v1)"""
+
+    bl_idname = "export_scene.logsh"
+    bl_label = "Export logsh scene"
+    bl_options = {"PRESET"}
+
+    # ExportHelper asks for a file name; the scene is written into a directory of that name.
+    filename_ext = ""
+    use_filter_folder = True
+    filepath: StringProperty(subtype="DIR_PATH")
+
+    use_scene_frames: BoolProperty(name="Scene frame range", default=True)
+    frame_start: IntProperty(name="Start", default=1)
+    frame_end: IntProperty(name="End", default=1)
+    use_scene_resolution: BoolProperty(name="Scene resolution", default=True)
+    width: IntProperty(name="Width", default=480, min=1)
+    height: IntProperty(name="Height", default=270, min=1)
+    spheres: IntProperty(name="Spheres per object", default=exporter.Options.spheres, min=1,
+                         description="Blocker spheres for objects without a logsh_spheres property")
+    samples_per_sphere: IntProperty(name="Samples per sphere", default=exporter.Options.samples_per_sphere, min=4)
+    heightfield: bpy.props.EnumProperty(name="Height field", items=_heightfield_items)
+    heightmap_size: IntProperty(name="Height map size", default=exporter.Options.heightmap_size, min=2)
+
+    def invoke(self, context, event):
+        self.frame_start, self.frame_end = context.scene.frame_start, context.scene.frame_end
+        return super().invoke(context, event)
+
+    def execute(self, context):
+        options = exporter.Options(
+            out=bpy.path.abspath(self.filepath),
+            frames=None if self.use_scene_frames else (self.frame_start, self.frame_end),
+            resolution=None if self.use_scene_resolution else (self.width, self.height),
+            spheres=self.spheres,
+            samples_per_sphere=self.samples_per_sphere,
+            heightfield=self.heightfield or None,
+            heightmap_size=self.heightmap_size,
+        )
+        try:
+            exporter.export(context.scene, options, log=lambda line: self.report({"INFO"}, line))
+        except exporter.ExportError as e:
+            self.report({"ERROR"}, str(e))
+            return {"CANCELLED"}
+        return {"FINISHED"}
+
+    def draw(self, context):
+        layout = self.layout
+        layout.prop(self, "use_scene_frames")
+        if not self.use_scene_frames:
+            row = layout.row(align=True)
+            row.prop(self, "frame_start")
+            row.prop(self, "frame_end")
+        layout.prop(self, "use_scene_resolution")
+        if not self.use_scene_resolution:
+            row = layout.row(align=True)
+            row.prop(self, "width")
+            row.prop(self, "height")
+        layout.prop(self, "spheres")
+        layout.prop(self, "samples_per_sphere")
+        layout.prop(self, "heightfield")
+        layout.prop(self, "heightmap_size")
+
+
+def _menu(self, context):
+    self.layout.operator(LOGSH_OT_export_scene.bl_idname, text="logsh scene (format v1)")
+
+
+def register():
+    bpy.utils.register_class(LOGSH_OT_export_scene)
+    bpy.types.TOPBAR_MT_file_export.append(_menu)
+
+
+def unregister():
+    bpy.types.TOPBAR_MT_file_export.remove(_menu)
+    bpy.utils.unregister_class(LOGSH_OT_export_scene)

@@ -1,0 +1,755 @@
+"""Exports the open Blender scene as a logsh scene (format v1, `docs/design.md`).
+
+Used by the command line (`blender_scripts/export_scene.py`) and by the add-on's
+operator (`__init__.py`); both call `export(scene, Options(...))`.
+
+What is written into the output directory, per frame `####`:
+
+- `gbuffer.####.exr`: Cycles' Position, Normal, UV and Material Index passes in Blender's
+  own multilayer EXR (32-bit float, ZIP). Data passes must not be blended at object
+  edges (a pixel half ball, half floor would get a position between them and a material
+  index of 1.5), so each pixel gets exactly one sample at its centre: 1 sample, a box
+  pixel filter of the smallest width Cycles accepts (0.01 px), no denoising, no motion
+  blur, no depth of field. The Combined pass is switched off: nothing reads it.
+- `reflection.####.exr` when a material is water: for each water pixel, the world
+  position, normal and material index of the surface seen in the mirror direction, found
+  by ray casting the evaluated scene (`Scene.ray_cast`); Blender 4's single-part layout
+  (`ViewLayer.Position.X`, ..., `ViewLayer.IndexMA.X`), written by `exr.py`.
+- `camera.####.json`: the scene camera (perspective only, no lens shift).
+- `blockers.####.json`: spheres for every mesh that is not the height field, evaluated at
+  that frame (modifiers, armatures, shape keys, animation applied); see `blockers.py`.
+- `heightmap.exr`: the height field object sampled on a grid by vertical rays (frame
+  `start`; the terrain is static).
+- `sky.exr` when the World uses an environment texture; `scene.json`.
+
+Scene markup, all optional (custom properties, set in the Object or Material tab):
+
+- object `logsh_heightfield` (true): this mesh is the terrain (at most one);
+- object `logsh_spheres` (int): blocker spheres for this object, 0 for none;
+- material `logsh_type`: `diffuse`, `phong`, `water` or `heightfield`. Default: `phong`
+  for a Principled BSDF with metallic >= 0.5 or roughness < 0.4, else `diffuse`; every
+  material on the height field object is `heightfield`.
+- material `logsh_tint` (colour): a water tint other than its base colour.
+
+Material conversion (logsh has no Fresnel term and a Phong lobe about the mirror
+direction, `docs/design.md`):
+
+- albedo = base colour x (1 - metallic) x (1 - transmission);
+- specular = base colour x metallic + (1 - metallic) x F0, with F0 the normal-incidence
+  reflectance of the IOR, `((ior - 1) / (ior + 1))^2`, scaled by 2 x Specular IOR Level and
+  by Specular Tint, as the Principled BSDF does;
+- exponent from roughness: Blender's GGX width is alpha = roughness^2; a Beckmann /
+  Blinn-Phong lobe of the same width has exponent `2 / alpha^2 - 2` about the half vector
+  (Walter et al. 2007, "Microfacet Models for Refraction", Section 5.2), and a Phong lobe
+  about the mirror direction is about four times wider than a Blinn-Phong lobe about the
+  half vector, so exponent = `(2 / alpha^2 - 2) / 4 = 1 / (2 alpha^2) - 1/2`, clamped to
+  1..1024 (roughness 0.5 gives 7.5, 0.3 gives 61, 0.2 gives 312).
+
+Without markup every visible mesh-like object (mesh, curve, surface, text, metaball, and
+their instances) is a blocker of `Options.spheres` spheres, except flat ones (thinner
+than 2% of their size, such as a ground plane or a water surface: spheres around a plane
+would swallow everything standing on it) and water-only ones; there is no height field.
+
+Every change to the scene (render settings, passes, material pass indices, a default
+material on objects without one) is undone before `export` returns, so the add-on
+leaves the user's file as it was, and the .blend on disk is never written.
+"""
+import json
+import os
+import time
+from dataclasses import dataclass
+
+import bpy
+import mathutils
+import numpy as np
+from mathutils.bvhtree import BVHTree
+
+from . import blockers as blocker_fit
+from .exr import write_exr
+
+GEOMETRY_TYPES = {"MESH", "CURVE", "SURFACE", "FONT", "META", "CURVES"}
+MATERIAL_TYPES = ("diffuse", "phong", "water", "heightfield")
+# The smallest pixel filter Cycles accepts: one sample lands within 0.005 px of the centre.
+DATA_FILTER_WIDTH = 0.01
+FLAT_THICKNESS = 0.02
+MAX_EXPONENT = 1024.0
+VIEW_LAYER = "ViewLayer"
+
+
+class ExportError(Exception):
+    """Something the exporter cannot write; the message says what and how to fix it."""
+
+
+@dataclass
+class Options:
+    out: str
+    # Inclusive frame range; None takes the scene's.
+    frames: tuple = None
+    # (width, height) in pixels; None takes the scene's output size.
+    resolution: tuple = None
+    # Blocker spheres per object without `logsh_spheres`.
+    spheres: int = 8
+    samples_per_sphere: int = 40
+    # Name of the height field object; None uses the `logsh_heightfield` property.
+    heightfield: str = None
+    # Height map samples along the longer side of the terrain.
+    heightmap_size: int = 256
+    # Environment maps wider than this are box-filtered down (SH order 8 needs far less).
+    sky_max_width: int = 1024
+
+
+# ---- undoable scene changes ------------------------------------------------------------
+
+class Changes:
+    """Attribute changes recorded so that `undo` restores the scene."""
+
+    def __init__(self):
+        self._undo = []
+
+    def set(self, owner, attribute, value):
+        old = getattr(owner, attribute)
+        if old != value:
+            self._undo.append(lambda: setattr(owner, attribute, old))
+            setattr(owner, attribute, value)
+
+    def on_undo(self, action):
+        self._undo.append(action)
+
+    def undo(self):
+        for action in reversed(self._undo):
+            try:
+                action()
+            except ReferenceError:
+                pass  # the datablock went away with the scene; nothing to restore
+        self._undo.clear()
+
+
+# ---- entry point -----------------------------------------------------------------------
+
+def new_file(out, name):
+    """The path of output `name`, which must not exist yet: an export never writes over a
+    file, so neither an earlier export nor an input (the .blend, an image) is lost."""
+    path = os.path.join(out, name)
+    if os.path.exists(path):
+        raise ExportError(f"{path} exists; export into an empty directory")
+    return path
+
+
+def export(scene, options, log=print):
+    """Writes `scene` into `options.out` as a format-v1 scene; returns the summary dict."""
+    out = os.path.abspath(options.out)
+    if os.path.exists(os.path.join(out, "scene.json")):
+        raise ExportError(f"{out} already holds a scene (scene.json); choose an empty directory")
+    if scene.camera is None:
+        raise ExportError("the scene has no camera; set Scene > Camera")
+    start, end = options.frames or (scene.frame_start, scene.frame_end)
+    if start > end:
+        raise ExportError(f"frame range {start}-{end} is empty")
+    os.makedirs(out, exist_ok=True)
+
+    changes = Changes()
+    frame_before = scene.frame_current
+    try:
+        view_layer = configure_render(scene, options, changes)
+        objects = renderable_objects(scene, view_layer)
+        terrain = find_heightfield(objects, options)
+        table, index_of = material_table(objects, terrain, changes)
+        water = {i for i, m in table.items() if m["type"] == "water"}
+        width, height = output_size(scene)
+        description = {
+            "version": 1,
+            "frames": {"start": start, "end": end},
+            "gbuffer": "gbuffer.####.exr",
+            "camera": "camera.####.json",
+            "blockers": "blockers.####.json",
+            "materials": {str(i): m for i, m in sorted(table.items())},
+            "light": export_world(scene, out, options, log),
+        }
+        if water:
+            description["reflection_gbuffer"] = "reflection.####.exr"
+
+        scene.frame_set(start)
+        if terrain is not None:
+            description["heightfield"] = export_heightmap(terrain, bpy.context.evaluated_depsgraph_get(), out, options, log)
+
+        fits = {}
+        for frame in range(start, end + 1):
+            began = time.time()
+            scene.frame_set(frame)
+            depsgraph = bpy.context.evaluated_depsgraph_get()
+            scene.render.filepath = new_file(out, f"gbuffer.{frame:04d}.exr")
+            bpy.ops.render.render(write_still=True, scene=scene.name, layer=view_layer.name)
+            camera = camera_json(scene, frame, width, height)
+            write_json(new_file(out, f"camera.{frame:04d}.json"), camera)
+            spheres = export_blockers(scene, depsgraph, objects, terrain, index_of, table, options, fits, frame, log)
+            write_blockers(new_file(out, f"blockers.{frame:04d}.json"), frame, spheres)
+            if water:
+                write_reflection(scene, depsgraph, camera, index_of, water, new_file(out, f"reflection.{frame:04d}.exr"))
+            log(f"frame {frame}: {len(spheres)} blocker spheres, {time.time() - began:.1f} s")
+        write_json(new_file(out, "scene.json"), description)
+    finally:
+        changes.undo()
+        scene.frame_set(frame_before)
+    log(f"wrote {out}")
+    return description
+
+
+# ---- render settings -------------------------------------------------------------------
+
+def configure_render(scene, options, changes):
+    """Cycles, one centred sample per pixel, the four data passes, multilayer float EXR."""
+    render, cycles = scene.render, scene.cycles
+    changes.set(render, "engine", "CYCLES")
+    changes.set(cycles, "samples", 1)
+    changes.set(cycles, "use_adaptive_sampling", False)
+    changes.set(cycles, "use_denoising", False)
+    changes.set(cycles, "pixel_filter_type", "BOX")
+    changes.set(cycles, "filter_width", DATA_FILTER_WIDTH)
+    changes.set(cycles, "max_bounces", 0)  # data passes come from the camera ray alone
+    changes.set(render, "use_motion_blur", False)
+    changes.set(render, "use_multiview", False)
+    changes.set(render, "use_compositing", False)
+    changes.set(render, "use_sequencer", False)
+    changes.set(render, "film_transparent", False)
+    for attribute in dir(render):  # no metadata (file path, date, host) in the outputs
+        if attribute.startswith("use_stamp"):
+            changes.set(render, attribute, False)
+    if options.resolution:
+        changes.set(render, "resolution_x", int(options.resolution[0]))
+        changes.set(render, "resolution_y", int(options.resolution[1]))
+        changes.set(render, "resolution_percentage", 100)
+    if render.pixel_aspect_x != render.pixel_aspect_y:
+        raise ExportError("pixel aspect is not 1 (Output > Format > Aspect); logsh's camera has square pixels")
+    if scene.camera.type != "CAMERA":
+        raise ExportError(f"the scene camera \"{scene.camera.name}\" is not a camera object")
+    changes.set(scene.camera.data.dof, "use_dof", False)
+
+    settings = render.image_settings
+    if hasattr(settings, "media_type"):
+        changes.set(settings, "media_type", "MULTI_LAYER_IMAGE")  # Blender 5: before file_format
+    changes.set(settings, "file_format", "OPEN_EXR_MULTILAYER")
+    changes.set(settings, "color_depth", "32")
+    changes.set(settings, "exr_codec", "ZIP")
+    changes.set(render, "use_file_extension", False)
+    changes.on_undo(lambda path=render.filepath: setattr(render, "filepath", path))
+
+    # One view layer, named as the format's default channel names expect.
+    layer = bpy.context.view_layer if bpy.context.view_layer.use else scene.view_layers[0]
+    for other in scene.view_layers:
+        if other != layer:
+            if other.name == VIEW_LAYER:
+                changes.set(other, "name", VIEW_LAYER + ".other")
+            changes.set(other, "use", False)
+    changes.set(layer, "name", VIEW_LAYER)
+    changes.set(layer, "use", True)
+    for attribute in dir(layer):
+        if attribute.startswith("use_pass_"):
+            wanted = attribute in ("use_pass_position", "use_pass_normal", "use_pass_uv", "use_pass_material_index")
+            changes.set(layer, attribute, wanted)
+    for attribute in dir(layer.cycles):  # Cycles' own passes (denoising data, debug, ...)
+        if attribute.startswith("use_pass_") or attribute in ("denoising_store_passes", "pass_debug_sample_count"):
+            changes.set(layer.cycles, attribute, False)
+    return layer
+
+
+def output_size(scene):
+    r = scene.render
+    return r.resolution_x * r.resolution_percentage // 100, r.resolution_y * r.resolution_percentage // 100
+
+
+# ---- objects and materials -------------------------------------------------------------
+
+def renderable_objects(scene, view_layer):
+    """Geometry objects that render in this view layer, and the sources of instances
+    (collection instances, particles, geometry nodes), which render through their
+    instancer even when they are not in the view layer themselves."""
+    names = {o.name for o in view_layer.objects}
+    direct = [o for o in scene.objects if o.type in GEOMETRY_TYPES and o.name in names and not o.hide_render]
+    instanced = []
+    for instance in bpy.context.evaluated_depsgraph_get().object_instances:
+        source = instance.object.original
+        if instance.is_instance and source.type in GEOMETRY_TYPES and source not in direct and source not in instanced:
+            instanced.append(source)
+    return direct + instanced
+
+
+def find_heightfield(objects, options):
+    if options.heightfield:
+        match = [o for o in objects if o.name == options.heightfield]
+        if not match:
+            raise ExportError(f"no visible geometry object named \"{options.heightfield}\" for the height field")
+        return match[0]
+    marked = [o for o in objects if o.get("logsh_heightfield")]
+    if len(marked) > 1:
+        raise ExportError("several objects have logsh_heightfield set: " + ", ".join(o.name for o in marked) + "; keep one")
+    return marked[0] if marked else None
+
+
+def material_table(objects, terrain, changes):
+    """Gives every material on a renderable object its own pass index 1..N and returns
+    the table (index -> format-v1 material) and the map material name -> index."""
+    default = None
+    used = {}
+    for obj in objects:
+        slots = obj.material_slots
+        if obj.type == "MESH" and not any(s.material for s in slots):
+            if default is None:
+                default = bpy.data.materials.new("logsh default")
+                changes.on_undo(lambda m=default: bpy.data.materials.remove(m))
+            if len(slots) == 0:
+                obj.data.materials.append(default)
+                changes.on_undo(lambda data=obj.data: data.materials.pop())
+            else:
+                for slot in slots:
+                    changes.set(slot, "material", default)
+        for slot in obj.material_slots:
+            if slot.material is not None:
+                used.setdefault(slot.material.name, (slot.material, set()))[1].add(obj == terrain)
+
+    table, index_of = {}, {}
+    for i, name in enumerate(sorted(used), start=1):
+        material, on_terrain = used[name]
+        if on_terrain == {True, False}:
+            raise ExportError(f"material \"{name}\" is on the height field and on other objects; give the terrain its own material")
+        changes.set(material, "pass_index", i)
+        table[i] = convert_material(material, on_terrain == {True})
+        index_of[name] = i
+    return table, index_of
+
+
+def _principled(material):
+    """The BSDF node feeding the active Material Output, if it is one we read."""
+    tree = material.node_tree
+    if tree is None or not getattr(material, "use_nodes", True):  # Blender 4 without nodes
+        return None
+    outputs = [n for n in tree.nodes if n.type == "OUTPUT_MATERIAL" and n.is_active_output] or \
+              [n for n in tree.nodes if n.type == "OUTPUT_MATERIAL"]
+    if not outputs or not outputs[0].inputs["Surface"].is_linked:
+        return None
+    return outputs[0].inputs["Surface"].links[0].from_node
+
+
+def _value(node, name, fallback):
+    socket = node.inputs.get(name)
+    if socket is None:
+        return fallback
+    if socket.is_linked:
+        print(f"note: {node.id_data.name}: input \"{name}\" is linked; its constant value is exported")
+    v = socket.default_value
+    return list(v)[:3] if hasattr(v, "__len__") else float(v)
+
+
+def phong_exponent(roughness):
+    """Phong exponent about the mirror direction for a GGX roughness (module doc)."""
+    alpha = max(roughness, 1e-3) ** 2
+    return float(min(max(1.0 / (2.0 * alpha * alpha) - 0.5, 1.0), MAX_EXPONENT))
+
+
+def convert_material(material, on_terrain):
+    node = _principled(material)
+    base, metallic, roughness, transmission = list(material.diffuse_color)[:3], material.metallic, material.roughness, 0.0
+    ior, level, tint = 1.5, 0.5, [1.0, 1.0, 1.0]
+    if node is not None and node.type == "BSDF_PRINCIPLED":
+        base = _value(node, "Base Color", base)
+        metallic = _value(node, "Metallic", metallic)
+        roughness = _value(node, "Roughness", roughness)
+        transmission = _value(node, "Transmission Weight", 0.0)
+        ior = _value(node, "IOR", ior)
+        level = _value(node, "Specular IOR Level", level)
+        tint = _value(node, "Specular Tint", tint)
+        if not isinstance(tint, list):
+            tint = [tint] * 3
+    elif node is not None and node.type == "BSDF_DIFFUSE":
+        base, metallic = _value(node, "Color", base), 0.0
+        roughness = 1.0
+    elif node is not None and node.type in ("BSDF_GLOSSY", "BSDF_ANISOTROPIC"):
+        base, metallic = _value(node, "Color", base), 1.0
+        roughness = _value(node, "Roughness", 0.5)
+    elif node is not None:
+        print(f"note: material \"{material.name}\": surface node {node.type} is not read; its viewport colour is exported")
+
+    kind = material.get("logsh_type")
+    if on_terrain:
+        kind = "heightfield"
+    elif kind is None:
+        kind = "phong" if metallic >= 0.5 or roughness < 0.4 else "diffuse"
+    kind = str(kind)
+    if kind not in MATERIAL_TYPES:
+        raise ExportError(f"material \"{material.name}\": logsh_type \"{kind}\" is not one of {', '.join(MATERIAL_TYPES)}")
+    colour = [max(float(c), 0.0) for c in base]
+    if kind in ("diffuse", "heightfield"):
+        return {"type": kind, "albedo": colour}
+    if kind == "water":
+        tint_prop = material.get("logsh_tint")
+        return {"type": "water", "tint": [float(c) for c in tint_prop][:3] if tint_prop is not None else colour}
+    f0 = ((ior - 1.0) / (ior + 1.0)) ** 2 * 2.0 * level
+    diffuse_weight = (1.0 - metallic) * (1.0 - transmission)
+    return {
+        "type": "phong",
+        "albedo": [c * diffuse_weight for c in colour],
+        "specular": [c * metallic + (1.0 - metallic) * f0 * t for c, t in zip(colour, tint)],
+        "exponent": phong_exponent(roughness),
+    }
+
+
+# ---- geometry --------------------------------------------------------------------------
+
+def world_triangles(obj_eval, matrix):
+    """(T, 3, 3) world-space triangles of an evaluated object, or None without geometry."""
+    mesh = obj_eval.to_mesh()
+    try:
+        if mesh is None or len(mesh.polygons) == 0:
+            return None
+        mesh.calc_loop_triangles()
+        co = np.empty(len(mesh.vertices) * 3)
+        mesh.vertices.foreach_get("co", co)
+        tris = np.empty(len(mesh.loop_triangles) * 3, dtype=np.int64)
+        mesh.loop_triangles.foreach_get("vertices", tris)
+    finally:
+        obj_eval.to_mesh_clear()
+    m = np.array(matrix)
+    world = co.reshape(-1, 3) @ m[:3, :3].T + m[:3, 3]
+    return world[tris.reshape(-1, 3)]
+
+
+def is_flat(triangles):
+    points = triangles.reshape(-1, 3)
+    centred = points - points.mean(axis=0)
+    extents = np.sort(np.ptp(centred @ np.linalg.svd(centred, full_matrices=False)[2].T, axis=0))
+    return extents[-1] <= 0 or extents[0] < FLAT_THICKNESS * extents[-1]
+
+
+def export_blockers(scene, depsgraph, objects, terrain, index_of, table, options, fits, frame, log):
+    """Spheres of every blocker object at this frame; prints each fit's error."""
+    allowed = {o.name for o in objects}
+    spheres, reports = [], []
+    for instance in depsgraph.object_instances:
+        original = instance.object.original
+        if original.name not in allowed or original == terrain or original.type not in GEOMETRY_TYPES:
+            continue
+        count = original.get("logsh_spheres")
+        if count is not None and int(count) <= 0:
+            continue
+        instancer = instance.parent.original.name if instance.is_instance and instance.parent else ""
+        key = (original.name, instancer, tuple(instance.persistent_id) if instance.is_instance else ())
+        triangles = world_triangles(instance.object, instance.matrix_world)
+        if triangles is None:
+            continue
+        fit = fits.get(key)
+        if fit == "skip":
+            continue
+        if fit is None or not fit.fits(triangles):
+            if count is None:
+                materials = {s.material.name for s in original.material_slots if s.material}
+                if materials and all(table[index_of[m]]["type"] == "water" for m in materials):
+                    fits[key] = "skip"
+                    log(f"note: \"{original.name}\" is water only; not a blocker")
+                    continue
+                if is_flat(triangles):
+                    fits[key] = "skip"
+                    log(f"note: \"{original.name}\" is flat; not a blocker (set its logsh_spheres property to force it)")
+                    continue
+            name = original.name + (f" (instanced by {instancer}, {instance.persistent_id[0]})" if instance.is_instance else "")
+            fit = blocker_fit.SphereFit(name, triangles, int(count) if count is not None else options.spheres,
+                                        options.samples_per_sphere)
+            fits[key] = fit
+        centres, radii = fit.spheres(triangles)
+        spheres += [{"center": [float(v) for v in c], "radius": float(r)} for c, r in zip(centres, radii)]
+        reports.append((fit.name, len(radii), fit_error(fit, triangles, centres, radii)))
+    report_fit_errors(reports, frame, log)
+    return spheres
+
+
+def fit_error(fit, triangles, centres, radii):
+    """The two ways a union of spheres can miss its mesh, as (coverage, mean reach, max
+    reach, size): the fraction of fresh surface samples inside the union (1 when no light
+    leaks through), and the distances from the union's boundary points that lie outside
+    the mesh to the mesh surface (how far the blocker is fatter than the object), read
+    against the object's size (bounding-box diagonal)."""
+    surface = fit.surface_points(triangles)
+    inside = (np.linalg.norm(surface[:, None, :] - centres[None], axis=2) <= radii[None] * (1 + 1e-9)).any(axis=1)
+    vertices = triangles.reshape(-1, 3)
+    tree = BVHTree.FromPolygons([tuple(v) for v in vertices], [(3 * i, 3 * i + 1, 3 * i + 2) for i in range(len(triangles))])
+    outside = []
+    for p in blocker_fit.union_boundary_points(centres, radii):
+        location, normal, _, distance = tree.find_nearest(mathutils.Vector(p))
+        if location is not None and (mathutils.Vector(p) - location).dot(normal) > 0:
+            outside.append(distance)
+    size = float(np.linalg.norm(np.ptp(vertices, axis=0)))
+    mean, worst = (float(np.mean(outside)), float(np.max(outside))) if outside else (0.0, 0.0)
+    return float(inside.mean()), mean, worst, size
+
+
+def report_fit_errors(reports, frame, log):
+    if not reports:
+        return
+    if len(reports) <= 12:
+        for name, count, (coverage, mean, worst, size) in reports:
+            log(f"frame {frame}: {name}: {count} spheres hold {100 * coverage:.1f}% of its surface and reach "
+                f"{mean:.3g} (mean) and {worst:.3g} (max) beyond it, {100 * mean / size:.1f}% and "
+                f"{100 * worst / size:.1f}% of its size {size:.3g}")
+    else:
+        coverage = np.array([c for _, _, (c, _, _, _) in reports])
+        relative = np.array([[m / s, w / s] for _, _, (_, m, w, s) in reports])
+        worst = reports[int(np.argmax(relative[:, 1]))][0]
+        log(f"frame {frame}: {len(reports)} objects, {sum(c for _, c, _ in reports)} spheres hold "
+            f"{100 * coverage.mean():.1f}% of their surfaces (least {100 * coverage.min():.1f}%); they reach "
+            f"{100 * relative[:, 0].mean():.1f}% of an object's size beyond it on average, "
+            f"{100 * relative[:, 1].max():.1f}% at worst ({worst})")
+
+
+def export_heightmap(terrain, depsgraph, out, options, log):
+    """Samples the terrain's top surface on a corner-registered grid over its XY bounds."""
+    triangles = world_triangles(terrain.evaluated_get(depsgraph), terrain.evaluated_get(depsgraph).matrix_world)
+    if triangles is None:
+        raise ExportError(f"height field \"{terrain.name}\" has no faces")
+    vertices = triangles.reshape(-1, 3)
+    lo, hi = vertices.min(axis=0), vertices.max(axis=0)
+    if not (hi[0] > lo[0] and hi[1] > lo[1]):
+        raise ExportError(f"height field \"{terrain.name}\" has no extent in x or y")
+    long_side = max(hi[0] - lo[0], hi[1] - lo[1])
+    columns = max(2, int(round(options.heightmap_size * (hi[0] - lo[0]) / long_side)))
+    rows = max(2, int(round(options.heightmap_size * (hi[1] - lo[1]) / long_side)))
+    tree = BVHTree.FromPolygons([tuple(v) for v in vertices], [(3 * i, 3 * i + 1, 3 * i + 2) for i in range(len(triangles))])
+    top = hi[2] + 1.0 + 0.01 * long_side
+    heights = np.full((rows, columns), np.nan, dtype=np.float32)
+    down = mathutils.Vector((0.0, 0.0, -1.0))
+    for j in range(rows):
+        y = lo[1] + (hi[1] - lo[1]) * j / (rows - 1)
+        for i in range(columns):
+            x = lo[0] + (hi[0] - lo[0]) * i / (columns - 1)
+            hit = tree.ray_cast(mathutils.Vector((x, y, top)), down)[0]
+            if hit is None:  # the outermost samples lie on the edges; nudge inwards
+                nx = min(max(x, lo[0] + 1e-5 * long_side), hi[0] - 1e-5 * long_side)
+                ny = min(max(y, lo[1] + 1e-5 * long_side), hi[1] - 1e-5 * long_side)
+                hit = tree.ray_cast(mathutils.Vector((nx, ny, top)), down)[0]
+            if hit is not None:
+                heights[j, i] = hit.z
+    holes = np.isnan(heights)
+    if holes.all():
+        raise ExportError(f"height field \"{terrain.name}\": no vertical ray hits it")
+    if holes.any():
+        log(f"note: height field \"{terrain.name}\": {int(holes.sum())} of {holes.size} samples fall in holes; set to its lowest point")
+        heights[holes] = np.nanmin(heights)
+    # Row 0 of the map lies at min y and is the file's first scan line.
+    write_exr(new_file(out, "heightmap.exr"), {"Y": heights})
+    log(f"height map: {columns}x{rows} samples of \"{terrain.name}\" over x {lo[0]:.3g}..{hi[0]:.3g}, y {lo[1]:.3g}..{hi[1]:.3g}")
+    return {"heights": "heightmap.exr", "min": [float(lo[0]), float(lo[1])], "max": [float(hi[0]), float(hi[1])]}
+
+
+# ---- camera and reflection -------------------------------------------------------------
+
+def camera_json(scene, frame, width, height):
+    obj = scene.camera
+    data = obj.data
+    if data.type != "PERSP":
+        raise ExportError(f"camera \"{obj.name}\" is {data.type}; logsh reads perspective cameras only")
+    if data.shift_x != 0.0 or data.shift_y != 0.0:
+        raise ExportError(f"camera \"{obj.name}\" has a lens shift; logsh's camera has none")
+    # logsh reads Blender's default sensor fit (AUTO: the sensor width spans the longer
+    # image side); other fits are written as the AUTO width that gives the same view.
+    landscape = width >= height
+    if data.sensor_fit == "HORIZONTAL":
+        sensor = data.sensor_width if landscape else data.sensor_width * height / width
+    elif data.sensor_fit == "VERTICAL":
+        sensor = data.sensor_height * width / height if landscape else data.sensor_height
+    else:
+        sensor = data.sensor_width
+    m = obj.matrix_world
+    return {
+        "frame": frame,
+        "position": list(m.translation),
+        "matrix_world": [list(row) for row in m],
+        "lens_mm": data.lens,
+        "sensor_width_mm": sensor,
+        "resolution": [width, height],
+    }
+
+
+def pixel_rays(camera):
+    """Unit world directions through every pixel centre, rows from the top (as logsh's
+    `Camera::ray_direction`)."""
+    w, h = camera["resolution"]
+    half = 0.5 * camera["sensor_width_mm"] / camera["lens_mm"]
+    hw, hh = (half, half * h / w) if w >= h else (half * w / h, half)
+    x = (2.0 * (np.arange(w) + 0.5) / w - 1.0) * hw
+    y = (1.0 - 2.0 * (np.arange(h) + 0.5) / h) * hh
+    local = np.stack(np.broadcast_arrays(x[None, :], y[:, None], -np.ones((h, w))), axis=-1)
+    world = local @ np.array(camera["matrix_world"])[:3, :3].T
+    return world / np.linalg.norm(world, axis=-1, keepdims=True)
+
+
+class SurfaceLookup:
+    """Smooth (interpolated) normals and materials at ray hits, per evaluated object.
+
+    `Scene.ray_cast` returns the face normal; Cycles' Normal pass is the interpolated
+    shading normal, so the reflection G-buffer interpolates corner normals the same way.
+    """
+
+    def __init__(self, depsgraph):
+        self.depsgraph = depsgraph
+        self.cache = {}
+
+    def _mesh(self, obj):
+        entry = self.cache.get(obj.name)
+        if entry is None:
+            evaluated = obj.evaluated_get(self.depsgraph)
+            mesh = evaluated.to_mesh()
+            mesh.calc_loop_triangles()
+            n = len(mesh.loop_triangles)
+            verts = np.empty(n * 3, dtype=np.int64)
+            loops = np.empty(n * 3, dtype=np.int64)
+            polys = np.empty(n, dtype=np.int64)
+            mesh.loop_triangles.foreach_get("vertices", verts)
+            mesh.loop_triangles.foreach_get("loops", loops)
+            mesh.loop_triangles.foreach_get("polygon_index", polys)
+            co = np.empty(len(mesh.vertices) * 3)
+            mesh.vertices.foreach_get("co", co)
+            normals = np.empty(len(mesh.loops) * 3)
+            mesh.corner_normals.foreach_get("vector", normals)
+            material_index = np.empty(len(mesh.polygons), dtype=np.int64)
+            mesh.polygons.foreach_get("material_index", material_index)
+            slots = [s.material.name if s.material else None for s in evaluated.material_slots]
+            evaluated.to_mesh_clear()
+            order = np.argsort(polys, kind="stable")
+            entry = {
+                "tri_vertices": verts.reshape(-1, 3), "tri_loops": loops.reshape(-1, 3), "tri_poly": polys,
+                "co": co.reshape(-1, 3), "normals": normals.reshape(-1, 3), "material_index": material_index,
+                "slots": slots, "order": order, "sorted_poly": polys[order],
+            }
+            self.cache[obj.name] = entry
+        return entry
+
+    def at(self, obj, face, location, matrix, ray):
+        """(shading normal facing the ray, material name) of a hit."""
+        m = self._mesh(obj)
+        inverse = matrix.inverted()
+        local = np.array(inverse @ location)
+        lo, hi = np.searchsorted(m["sorted_poly"], [face, face + 1])
+        best, best_weights = None, None
+        for t in m["order"][lo:hi]:
+            a, b, c = m["co"][m["tri_vertices"][t]]
+            weights = _barycentric(local, a, b, c)
+            if best is None or weights.min() > best_weights.min():
+                best, best_weights = t, weights
+        if best is None:
+            normal = mathutils.Vector((0.0, 0.0, 1.0))
+        else:
+            n_local = best_weights @ m["normals"][m["tri_loops"][best]]
+            normal = (inverse.transposed().to_3x3() @ mathutils.Vector(n_local)).normalized()
+        if normal.dot(ray) > 0.0:  # Cycles turns the normal towards the viewer on back faces
+            normal = -normal
+        slot = m["material_index"][face] if face < len(m["material_index"]) else 0
+        name = m["slots"][slot] if slot < len(m["slots"]) else None
+        return normal, name
+
+
+def _barycentric(p, a, b, c):
+    v0, v1, v2 = b - a, c - a, p - a
+    d00, d01, d11 = v0 @ v0, v0 @ v1, v1 @ v1
+    d20, d21 = v2 @ v0, v2 @ v1
+    denominator = d00 * d11 - d01 * d01
+    if denominator == 0.0:
+        return np.array([1.0, 0.0, 0.0])
+    v = (d11 * d20 - d01 * d21) / denominator
+    w = (d00 * d21 - d01 * d20) / denominator
+    return np.array([1.0 - v - w, v, w])
+
+
+def write_reflection(scene, depsgraph, camera, index_of, water, path):
+    """The reflection G-buffer: what each water pixel's mirror ray hits."""
+    w, h = camera["resolution"]
+    rays = pixel_rays(camera)
+    origin = mathutils.Vector(camera["position"])
+    lookup = SurfaceLookup(depsgraph)
+    position = np.zeros((h, w, 3), dtype=np.float32)
+    normal = np.zeros((h, w, 3), dtype=np.float32)
+    index = np.zeros((h, w), dtype=np.float32)
+    scale = max(1.0, origin.length)
+    for y in range(h):
+        for x in range(w):
+            d = mathutils.Vector(rays[y, x])
+            hit, location, _, face, obj, matrix = scene.ray_cast(depsgraph, origin, d)
+            if not hit:
+                continue
+            n, material = lookup.at(obj, face, location, matrix, d)
+            if index_of.get(material) not in water:
+                continue
+            mirror = d - 2.0 * d.dot(n) * n
+            start = location + n * (1e-5 * scale)
+            hit, location, _, face, obj, matrix = scene.ray_cast(depsgraph, start, mirror)
+            if not hit:
+                continue  # the sky: material 0
+            n, material = lookup.at(obj, face, location, matrix, mirror)
+            position[y, x], normal[y, x] = location, n
+            index[y, x] = index_of.get(material, 0)
+    channels = {"ViewLayer.IndexMA.X": index}
+    for k, axis in enumerate("XYZ"):
+        channels[f"ViewLayer.Position.{axis}"] = position[..., k]
+        channels[f"ViewLayer.Normal.{axis}"] = normal[..., k]
+    write_exr(path, channels)
+
+
+# ---- light -----------------------------------------------------------------------------
+
+def export_world(scene, out, options, log):
+    """The World as a format-v1 light: an environment map or a constant colour."""
+    world = scene.world
+    if world is None:
+        raise ExportError("the scene has no World; add one (World tab) for the light")
+    tree = world.node_tree
+    if tree is None or not getattr(world, "use_nodes", True):
+        return {"constant": [float(c) for c in world.color]}
+    outputs = [n for n in tree.nodes if n.type == "OUTPUT_WORLD" and n.is_active_output] or \
+              [n for n in tree.nodes if n.type == "OUTPUT_WORLD"]
+    if not outputs or not outputs[0].inputs["Surface"].is_linked:
+        return {"constant": [0.0, 0.0, 0.0]}
+    background = outputs[0].inputs["Surface"].links[0].from_node
+    if background.type != "BACKGROUND":
+        raise ExportError(f"the World's surface is a {background.type} node; logsh reads a Background node "
+                          "with a constant colour or an Environment Texture")
+    if background.inputs["Strength"].is_linked:
+        raise ExportError("the World's Background strength is linked; logsh reads a constant strength")
+    strength = float(background.inputs["Strength"].default_value)
+    colour = background.inputs["Color"]
+    if not colour.is_linked:
+        return {"constant": [float(c) * strength for c in list(colour.default_value)[:3]]}
+    texture = colour.links[0].from_node
+    if texture.type != "TEX_ENVIRONMENT":
+        raise ExportError(f"the World's colour comes from a {texture.type} node; logsh reads an Environment Texture "
+                          "(or bake this sky into an equirectangular image)")
+    if texture.inputs["Vector"].is_linked:
+        raise ExportError("the World's Environment Texture has a mapped vector input; logsh reads the default "
+                          "mapping only (remove the Mapping / Texture Coordinate nodes)")
+    if texture.projection != "EQUIRECTANGULAR":
+        raise ExportError(f"the World's Environment Texture uses {texture.projection} projection; logsh reads equirectangular")
+    image = texture.image
+    if image is None or image.size[0] == 0:
+        raise ExportError("the World's Environment Texture has no (loadable) image")
+    w, h = image.size
+    pixels = np.empty(w * h * 4, dtype=np.float32)
+    image.pixels.foreach_get(pixels)
+    rgb = pixels.reshape(h, w, 4)[::-1, :, :3]  # Blender stores images bottom-up
+    if not image.is_float and image.colorspace_settings.name == "sRGB":
+        rgb = np.where(rgb <= 0.04045, rgb / 12.92, ((rgb + 0.055) / 1.055) ** 2.4)
+    factor = 1
+    while w // factor > options.sky_max_width and h % (2 * factor) == 0 and w % (2 * factor) == 0:
+        factor *= 2
+    if factor > 1:
+        rgb = rgb.reshape(h // factor, factor, w // factor, factor, 3).mean(axis=(1, 3))
+        log(f"environment map {w}x{h} box-filtered to {w // factor}x{h // factor}")
+    write_exr(new_file(out, "sky.exr"), {c: rgb[..., k] for k, c in enumerate("RGB")})
+    return {"environment": "sky.exr", "strength": strength}
+
+
+def write_blockers(path, frame, spheres):
+    """One sphere per line: hundreds of blockers stay small and readable."""
+    lines = ",\n".join("  " + json.dumps(s) for s in spheres)
+    with open(path, "w") as f:
+        f.write(f'{{"frame": {frame}, "spheres": [\n{lines}\n]}}\n')
+
+
+def write_json(path, value):
+    with open(path, "w") as f:
+        json.dump(value, f, indent=1)
+        f.write("\n")

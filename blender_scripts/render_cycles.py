@@ -1,0 +1,156 @@
+"""Renders one frame of a .blend in Cycles with direct lighting only, as the ground truth
+logsh is compared against (`examples/cycles_compare.rs`).
+
+    python blender_scripts/render_cycles.py --blend scene.blend --out DIR [--frame 1]
+        [--samples 256] [--resolution WxH] [--seed 0]
+    blender -b scene.blend -P blender_scripts/render_cycles.py -- --out DIR ...
+
+Writes `DIR/cycles.NNNN.exr` (linear RGB, half float) and `DIR/cycles.NNNN.png` (sRGB,
+Standard view transform); refuses to write over either.
+
+So that the two renders differ only in how they compute light and visibility, every
+material is first converted as the exporter converts it (`logsh_exporter/exporter.py`)
+and turned back into the Cycles shader that means the same thing:
+
+- `diffuse`, `heightfield`: a Diffuse BSDF with the albedo;
+- `phong`: Diffuse BSDF (albedo) + Glossy BSDF (GGX, specular colour, the roughness whose
+  mapped exponent is the exported one). GGX and the Phong lobe have the same width but
+  not the same shape, and neither has a Fresnel term here;
+- `water`: a sharp Glossy BSDF with the tint (a mirror), which needs one glossy bounce:
+  scenes with water render with max bounces 1, glossy bounces 1 and no diffuse,
+  transmission or volume bounces; scenes without water with max bounces 0. A glossy
+  surface in a scene with water therefore also mirrors the direct light of other
+  surfaces, which logsh (visibility only) does not.
+
+The World is used as it is (the same light logsh reads). Each pixel's samples are taken
+at its centre (box filter of width 0.01 px), as for the G-buffer, so the two images
+compare pixel for pixel; no denoising, no clamping.
+"""
+import argparse
+import os
+import sys
+
+import bpy
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from export_scene import size  # noqa: E402
+from logsh_exporter.exporter import DATA_FILTER_WIDTH, Changes, material_table, find_heightfield, Options, \
+    renderable_objects  # noqa: E402
+
+
+def roughness_of(exponent):
+    """Inverse of `exporter.phong_exponent`."""
+    alpha = (1.0 / (2.0 * (exponent + 0.5))) ** 0.5
+    return alpha ** 0.5
+
+
+def cycles_shader(material, entry):
+    tree = material.node_tree
+    if tree is None:
+        material.use_nodes = True
+        tree = material.node_tree
+    tree.nodes.clear()
+    output = tree.nodes.new("ShaderNodeOutputMaterial")
+
+    def diffuse(colour):
+        node = tree.nodes.new("ShaderNodeBsdfDiffuse")
+        node.inputs["Color"].default_value = (*colour, 1.0)
+        node.inputs["Roughness"].default_value = 0.0
+        return node
+
+    def glossy(colour, roughness):
+        node = tree.nodes.new("ShaderNodeBsdfAnisotropic")  # "Glossy BSDF" in Blender 4+
+        node.distribution = "GGX"
+        node.inputs["Color"].default_value = (*colour, 1.0)
+        node.inputs["Roughness"].default_value = roughness
+        return node
+
+    kind = entry["type"]
+    if kind in ("diffuse", "heightfield"):
+        shader = diffuse(entry["albedo"])
+    elif kind == "water":
+        shader = glossy(entry["tint"], 0.0)
+    else:
+        shader = tree.nodes.new("ShaderNodeAddShader")
+        tree.links.new(diffuse(entry["albedo"]).outputs[0], shader.inputs[0])
+        tree.links.new(glossy(entry["specular"], roughness_of(entry["exponent"])).outputs[0], shader.inputs[1])
+    tree.links.new(shader.outputs[0], output.inputs["Surface"])
+
+
+def main(argv):
+    parser = argparse.ArgumentParser(prog="render_cycles.py", description=__doc__.split("\n")[0])
+    parser.add_argument("--blend")
+    parser.add_argument("--out", required=True)
+    parser.add_argument("--frame", type=int)
+    parser.add_argument("--samples", type=int, default=256)
+    parser.add_argument("--resolution", type=size)
+    parser.add_argument("--seed", type=int, default=0, help="Cycles' noise seed (two seeds measure the noise)")
+    args = parser.parse_args(argv)
+    if args.blend:
+        bpy.ops.wm.open_mainfile(filepath=os.path.abspath(args.blend), load_ui=False)
+    elif not bpy.data.filepath:
+        sys.exit("error: no .blend given; pass --blend FILE")
+    scene = bpy.context.scene
+    frame = args.frame if args.frame is not None else scene.frame_start
+    stem = os.path.join(os.path.abspath(args.out), f"cycles.{frame:04d}")
+    for path in (stem + ".exr", stem + ".png"):
+        if os.path.exists(path):
+            sys.exit(f"error: {path} exists; choose another directory")
+    os.makedirs(args.out, exist_ok=True)
+
+    objects = renderable_objects(scene, bpy.context.view_layer)
+    table, index_of = material_table(objects, find_heightfield(objects, Options(out=args.out)), Changes())
+    for name, index in index_of.items():
+        cycles_shader(bpy.data.materials[name], table[index])
+    water = any(m["type"] == "water" for m in table.values())
+
+    render, cycles = scene.render, scene.cycles
+    render.engine = "CYCLES"
+    cycles.device = "CPU"
+    cycles.samples = args.samples
+    cycles.seed = args.seed
+    cycles.use_adaptive_sampling = False
+    cycles.use_denoising = False
+    cycles.pixel_filter_type = "BOX"
+    cycles.filter_width = DATA_FILTER_WIDTH
+    cycles.max_bounces = 1 if water else 0
+    cycles.glossy_bounces = 1 if water else 0
+    cycles.diffuse_bounces = cycles.transmission_bounces = cycles.volume_bounces = 0
+    cycles.transparent_max_bounces = 0
+    cycles.sample_clamp_direct = cycles.sample_clamp_indirect = 0.0
+    cycles.blur_glossy = 0.0
+    cycles.caustics_reflective = True
+    render.use_motion_blur = False
+    render.use_compositing = render.use_sequencer = False
+    render.film_transparent = False
+    for attribute in dir(render):  # no metadata (file path, date, host) in the outputs
+        if attribute.startswith("use_stamp"):
+            setattr(render, attribute, False)
+    scene.camera.data.dof.use_dof = False
+    scene.view_settings.view_transform = "Standard"
+    scene.view_settings.look = "None"
+    scene.view_settings.exposure, scene.view_settings.gamma = 0.0, 1.0
+    if args.resolution:
+        render.resolution_x, render.resolution_y = args.resolution
+        render.resolution_percentage = 100
+
+    scene.frame_set(frame)
+    render.use_file_extension = False
+    bpy.ops.render.render()
+    result = bpy.data.images["Render Result"]
+    settings = render.image_settings
+    if hasattr(settings, "media_type"):
+        settings.media_type = "IMAGE"
+    settings.file_format = "OPEN_EXR"
+    settings.color_mode = "RGB"
+    settings.color_depth = "16"
+    settings.exr_codec = "ZIP"
+    result.save_render(stem + ".exr", scene=scene)
+    settings.file_format = "PNG"
+    settings.color_depth = "8"
+    result.save_render(stem + ".png", scene=scene)
+    print(f"wrote {stem}.exr and .png ({args.samples} samples, max bounces {cycles.max_bounces})")
+
+
+if __name__ == "__main__":
+    main(sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else sys.argv[1:])
