@@ -56,6 +56,7 @@ mod exr_read;
 pub mod gbuffer;
 pub mod heightmap;
 pub mod light;
+pub mod layers;
 pub mod output;
 mod paths;
 
