@@ -5,12 +5,15 @@
 //! Layout: [`sh`] is the SH core (basis, rotation, products, exponentiation), [`logsh`]
 //! the log-SH building blocks of the paper, [`heightfield`] the horizon march of SN08,
 //! [`scene`] the format-v1 reader and output writers, [`shade`] the per-pixel pipeline on
-//! the CPU, [`synth`] procedural scenes, [`cli`] and [`run`] the command line.
+//! the CPU, [`render`] the sequence driver of `logsh render`, [`synth`] procedural scenes,
+//! [`info`] the EXR listing of `logsh info`, [`cli`] and [`run`] the command line.
 pub mod cli;
 pub mod heightfield;
+pub mod info;
 pub mod logsh;
 pub mod plot;
 pub mod reference;
+pub mod render;
 pub mod run;
 pub mod scene;
 pub mod sh;

@@ -8,6 +8,8 @@ fn main() {
         Command::Reference(args) => logsh::run::reference(&args),
         Command::Sweep(args) => logsh::run::sweep(&args),
         Command::Example(args) => logsh::run::example(&args),
+        Command::Render(args) => logsh::run::render(&args),
+        Command::Info(args) => logsh::run::info(&args),
     };
     if let Err(error) = result {
         eprintln!("error: {error:#}");
