@@ -54,10 +54,7 @@ pub struct ExrInfo {
 /// Reads the headers of `file`.
 pub fn describe(file: &Path) -> Result<ExrInfo, SceneError> {
     let bytes = std::fs::metadata(file).map_err(|e| SceneError::io(file, "the EXR file", e))?.len();
-    let meta = exr::meta::MetaData::read_from_file(file, false).map_err(|e| match e {
-        exr::error::Error::Io(io) => SceneError::io(file, "the EXR file", io),
-        other => SceneError::Image { file: file.to_path_buf(), message: other.to_string() },
-    })?;
+    let meta = exr::meta::MetaData::read_from_file(file, false).map_err(|e| crate::scene::error::exr_error(file, "the EXR file", e))?;
     let parts = meta
         .headers
         .iter()
