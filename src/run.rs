@@ -157,7 +157,20 @@ pub fn render(args: &crate::cli::RenderArgs) -> Result<()> {
     let scene = Scene::load(&args.scene)?;
     let frames: Vec<i64> = match &args.frames {
         Some(spec) => spec.frames.clone(),
-        None => scene.frame_numbers().collect(),
+        None => {
+            let range = scene.frame_numbers();
+            let count = i128::from(*range.end()) - i128::from(*range.start()) + 1;
+            if count > crate::render::frames::MAX_FRAMES as i128 {
+                return Err(anyhow!(
+                    "{}: the scene's frames {}-{} are {count} frames, more than {} in one run; choose some with --frames",
+                    scene.scene_file().display(),
+                    range.start(),
+                    range.end(),
+                    crate::render::frames::MAX_FRAMES
+                ));
+            }
+            range.collect()
+        }
     };
     if let Some(range) = scene.frames {
         let outside: Vec<String> =

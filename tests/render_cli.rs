@@ -295,6 +295,15 @@ fn flags_and_outputs_are_checked_before_rendering() {
     assert_fails_with(&render(&["--name", "../x"], &out), 1, &["--name"]);
     assert!(!out.exists(), "nothing is created when the command is refused");
 
+    // A scene claiming every frame there is needs --frames.
+    let json = scene.join("scene.json");
+    let original = std::fs::read_to_string(&json).unwrap();
+    let mut v: serde_json::Value = serde_json::from_str(&original).unwrap();
+    v["frames"] = serde_json::json!({"start": i64::MIN, "end": i64::MAX});
+    std::fs::write(&json, v.to_string()).unwrap();
+    assert_fails_with(&render(&[], &out), 1, &["scene.json", "choose some with --frames"]);
+    std::fs::write(&json, &original).unwrap();
+
     // Outputs named like an input are refused before any frame is shaded.
     let before = std::fs::read(scene.join("gbuffer.0002.exr")).unwrap();
     assert_fails_with(&render(&["--name", "gbuffer"], &scene), 1, &["gbuffer.0001.exr", "refusing to write over an input"]);
