@@ -31,8 +31,11 @@ fn three_frame_scene(dir: &Path, width: u32, height: u32) -> PathBuf {
     out
 }
 
-/// Every channel of an EXR as f32, by full name.
-fn channels(path: &Path) -> (usize, usize, HashMap<String, (Vec<f32>, &'static str)>) {
+/// Channel values as f32 and the type they were stored as, by full name.
+type Channels = HashMap<String, (Vec<f32>, &'static str)>;
+
+/// Every channel of an EXR, with the image size.
+fn channels(path: &Path) -> (usize, usize, Channels) {
     let image = read_all_flat_layers_from_file(path).unwrap();
     assert_eq!(image.layer_data.len(), 1, "one part");
     let layer = &image.layer_data[0];
@@ -93,10 +96,9 @@ fn three_frames_render_to_passes_that_add_up() {
         assert_eq!(names, expected);
         // Stored as float (--colour-type float), the sum is exact.
         for (k, ch) in ["R", "G", "B"].iter().enumerate() {
-            let beauty = &c[*ch].0;
-            for i in 0..w * h {
+            for (i, beauty) in c[*ch].0.iter().enumerate() {
                 let sum = c[&format!("diffuse.{ch}")].0[i] + c[&format!("specular.{ch}")].0[i] + c[&format!("environment.{ch}")].0[i];
-                assert_eq!(sum, beauty[i], "frame {frame} pixel {i} channel {k}");
+                assert_eq!(sum, *beauty, "frame {frame} pixel {i} channel {k}");
             }
         }
         // Something of every kind of shading is in the frame.
