@@ -26,6 +26,10 @@ pub enum Command {
     Example(ExampleArgs),
     /// Time the shading of one frame stage by stage (GPU timestamps where the adapter has them, wall time otherwise) and report megapixels per second.
     Bench(BenchArgs),
+    /// Shade a sequence of frames into multi-layer EXRs (beauty and compositing passes) and PNG previews; keeps going when a frame fails.
+    Render(RenderArgs),
+    /// List the parts, layers, channels, sizes and sample types of an EXR file (headers only).
+    Info(InfoArgs),
 }
 
 #[derive(Args, Debug)]
@@ -255,4 +259,51 @@ pub struct ExampleArgs {
     /// Image height in pixels.
     #[arg(long, default_value_t = 180)]
     pub height: u32,
+}
+
+#[derive(Clone, Copy, Debug, ValueEnum, PartialEq, Eq)]
+pub enum ColourTypeArg {
+    /// 16-bit float: half the size, relative error below 5e-4.
+    Half,
+    /// 32-bit float.
+    Float,
+}
+
+#[derive(Args, Debug)]
+pub struct RenderArgs {
+    /// Scene directory holding scene.json.
+    pub scene: PathBuf,
+    /// Frames to render, as farm managers and oiiotool write them: 1-240, 1-240x2, 1,5,10-20, 1..10 [default: the scene's frames].
+    #[arg(long, value_parser = clap::value_parser!(crate::render::frames::FrameSpec))]
+    pub frames: Option<crate::render::frames::FrameSpec>,
+    /// Output directory; receives <name>.NNNN.exr (multi-layer: beauty, passes, P, N) and <name>.NNNN.png.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// File name stem of the outputs.
+    #[arg(long, default_value = "render")]
+    pub name: String,
+    /// Leave frames whose EXR and PNG are already complete untouched (resume a stopped render).
+    #[arg(long)]
+    pub skip_existing: bool,
+    /// Worker threads for the pixels of a frame [default: one per core].
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// Progress report: a bar on a terminal, plain lines in logs, JSON lines on stdout for scripts.
+    #[arg(long, value_enum, default_value_t = crate::render::progress::ProgressMode::Auto)]
+    pub progress: crate::render::progress::ProgressMode,
+    /// Storage of the colour passes and visibility terms (P and N are always float).
+    #[arg(long, value_enum, default_value_t = ColourTypeArg::Half)]
+    pub colour_type: ColourTypeArg,
+    #[command(flatten)]
+    pub shading: ShadingArgs,
+}
+
+#[derive(Args, Debug)]
+pub struct InfoArgs {
+    /// EXR files to describe.
+    #[arg(required = true)]
+    pub files: Vec<PathBuf>,
+    /// Print JSON instead of text.
+    #[arg(long)]
+    pub json: bool,
 }

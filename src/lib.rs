@@ -5,13 +5,17 @@
 //! Layout: [`sh`] is the SH core (basis, rotation, products, exponentiation), [`logsh`]
 //! the log-SH building blocks of the paper, [`heightfield`] the horizon march of SN08,
 //! [`scene`] the format-v1 reader and output writers, [`shade`] the per-pixel pipeline on
-//! the CPU, [`gpu`] the same pipeline as one wgpu compute pass, [`synth`] procedural scenes, [`cli`] and [`run`] the command line.
+//! the CPU, [`gpu`] the same pipeline as one wgpu compute pass, [`render`] the sequence
+//! driver of `logsh render`, [`synth`] procedural scenes, [`info`] the EXR listing of
+//! `logsh info`, [`cli`] and [`run`] the command line.
 pub mod cli;
 pub mod gpu;
 pub mod heightfield;
+pub mod info;
 pub mod logsh;
 pub mod plot;
 pub mod reference;
+pub mod render;
 pub mod run;
 pub mod scene;
 pub mod sh;

@@ -9,6 +9,8 @@ fn main() {
         Command::Sweep(args) => logsh::run::sweep(&args),
         Command::Example(args) => logsh::run::example(&args),
         Command::Bench(args) => logsh::run::bench(&args),
+        Command::Render(args) => logsh::run::render(&args),
+        Command::Info(args) => logsh::run::info(&args),
     };
     if let Err(error) = result {
         eprintln!("error: {error:#}");

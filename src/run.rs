@@ -186,3 +186,115 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
     }
     Ok(())
 }
+
+/// `logsh render`.
+pub fn render(args: &crate::cli::RenderArgs) -> Result<()> {
+    use crate::render::{check_outputs, progress::reporter, render_sequence, FrameStatus, SequenceOptions};
+    let settings = args.shading.settings().map_err(|e| anyhow!(e))?;
+    // The visibility passes need three more exponentiations per pixel, which only the CPU
+    // path computes so far.
+    match args.shading.device {
+        crate::cli::DeviceChoice::Gpu => {
+            return Err(anyhow!(
+                "--device gpu: logsh render's compositing passes (the visibility terms) are computed on the CPU path only; \
+                 use --device cpu, or logsh shade --device gpu for the beauty"
+            ))
+        }
+        crate::cli::DeviceChoice::Auto => eprintln!("--device auto: logsh render shades on the CPU (its visibility passes have no GPU path yet)"),
+        crate::cli::DeviceChoice::Cpu => {}
+    }
+    if args.threads == Some(0) {
+        return Err(anyhow!("--threads 0: give at least 1, or leave it out for one thread per core"));
+    }
+    let scene = Scene::load(&args.scene)?;
+    let frames: Vec<i64> = match &args.frames {
+        Some(spec) => spec.frames.clone(),
+        None => {
+            let range = scene.frame_numbers();
+            let count = i128::from(*range.end()) - i128::from(*range.start()) + 1;
+            if count > crate::render::frames::MAX_FRAMES as i128 {
+                return Err(anyhow!(
+                    "{}: the scene's frames {}-{} are {count} frames, more than {} in one run; choose some with --frames",
+                    scene.scene_file().display(),
+                    range.start(),
+                    range.end(),
+                    crate::render::frames::MAX_FRAMES
+                ));
+            }
+            range.collect()
+        }
+    };
+    if let Some(range) = scene.frames {
+        let outside: Vec<String> =
+            frames.iter().filter(|f| !(range.start..=range.end).contains(*f)).take(5).map(|f| f.to_string()).collect();
+        if !outside.is_empty() {
+            return Err(anyhow!(
+                "--frames {}: frame(s) {} outside the scene's frames {}-{} ({})",
+                args.frames.as_ref().map(|s| s.text.as_str()).unwrap_or_default(),
+                outside.join(", "),
+                range.start,
+                range.end,
+                scene.scene_file().display()
+            ));
+        }
+    }
+    if args.out.exists() && !args.out.is_dir() {
+        return Err(anyhow!("--out {}: exists and is not a directory", args.out.display()));
+    }
+    let options = SequenceOptions {
+        frames,
+        out: args.out.clone(),
+        name: args.name.clone(),
+        skip_existing: args.skip_existing,
+        colour: match args.colour_type {
+            crate::cli::ColourTypeArg::Half => crate::scene::layers::SampleType::Half,
+            crate::cli::ColourTypeArg::Float => crate::scene::layers::SampleType::Float,
+        },
+        settings,
+    };
+    check_outputs(&scene, &options)?;
+    std::fs::create_dir_all(&args.out).with_context(|| format!("cannot create output directory {}", args.out.display()))?;
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(args.threads.unwrap_or(0))
+        .build()
+        .context("cannot start the worker threads")?;
+    let mut progress = reporter(args.progress);
+    let started = Instant::now();
+    let outcomes = pool.install(|| render_sequence(&scene, &options, progress.as_mut()));
+    let failed: Vec<_> = outcomes.iter().filter(|o| o.failed()).collect();
+    let skipped = outcomes.iter().filter(|o| matches!(o.status, FrameStatus::Skipped { .. })).count();
+    let rendered = outcomes.len() - failed.len() - skipped;
+    eprintln!(
+        "{rendered} frame(s) rendered, {skipped} skipped, {} failed in {:.1} s: {}",
+        failed.len(),
+        started.elapsed().as_secs_f64(),
+        args.out.display()
+    );
+    if failed.is_empty() {
+        return Ok(());
+    }
+    let list: Vec<String> = failed
+        .iter()
+        .map(|o| match &o.status {
+            FrameStatus::Failed { error } => format!("  frame {}: {error}", o.frame),
+            _ => unreachable!("filtered on failures"),
+        })
+        .collect();
+    Err(anyhow!("{} of {} frame(s) failed:\n{}", failed.len(), outcomes.len(), list.join("\n")))
+}
+
+/// `logsh info`.
+pub fn info(args: &crate::cli::InfoArgs) -> Result<()> {
+    let mut all = Vec::new();
+    for file in &args.files {
+        let info = crate::info::describe(file)?;
+        if !args.json {
+            print!("{}", crate::info::to_text(&info));
+        }
+        all.push(info);
+    }
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&all)?);
+    }
+    Ok(())
+}

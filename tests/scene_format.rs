@@ -453,3 +453,49 @@ fn height_map_lookup_handles_thin_maps_built_in_memory() {
     assert_eq!(row.height_at(1.5, 0.5), 2.0);
     assert_eq!(row.height_at(9.0, -4.0), 3.0);
 }
+
+#[test]
+fn truncated_exr_says_so() {
+    let dir = base_scene();
+    let file = dir.path().join("gbuffer.0001.exr");
+    let bytes = std::fs::read(&file).unwrap();
+    for keep in [bytes.len() / 2, 200, 10] {
+        std::fs::write(&file, &bytes[..keep]).unwrap();
+        let err = frame_error(dir.path());
+        assert!(matches!(err, SceneError::Image { .. }), "{keep} bytes: {err:?}");
+        assert_mentions(&err, &["gbuffer.0001.exr"]);
+    }
+    std::fs::write(&file, &bytes[..bytes.len() / 2]).unwrap();
+    assert_mentions(&frame_error(dir.path()), &["ends early or is damaged"]);
+}
+
+#[test]
+fn paths_outside_the_scene_directory_are_refused() {
+    let cases: Vec<(Box<dyn Fn(&mut serde_json::Value)>, &[&str])> = vec![
+        (Box::new(|v| v["gbuffer"] = "../gbuffer.####.exr".into()), &["\"gbuffer\"", "climbs out"]),
+        (Box::new(|v| v["camera"] = "cams/../../camera.####.json".into()), &["\"camera\"", "climbs out"]),
+        (Box::new(|v| v["blockers"] = "/tmp/blockers.####.json".into()), &["\"blockers\"", "absolute and outside"]),
+        (Box::new(|v| v["reflection_gbuffer"] = "C:\\shots\\r.exr".into()), &["\"reflection_gbuffer\"", "absolute"]),
+        (
+            Box::new(|v| v["heightfield"] = serde_json::json!({"heights": "../h.exr", "min": [0, 0], "max": [1, 1]})),
+            &["\"heightfield.heights\"", "climbs out"],
+        ),
+        (Box::new(|v| v["light"] = serde_json::json!({"environment": "../../sky.exr"})), &["\"light.environment\""]),
+    ];
+    for (edit, parts) in cases {
+        let dir = base_scene();
+        edit_json(&dir.path().join("scene.json"), |v| edit(v));
+        let err = Scene::load(dir.path()).unwrap_err();
+        assert_mentions(&err, &["scene.json", "inside the scene directory"]);
+        assert_mentions(&err, parts);
+    }
+    // An absolute path inside the scene directory, and `..` that stays inside, are fine.
+    let dir = base_scene();
+    let inside = dir.path().join("gbuffer.####.exr").display().to_string();
+    std::fs::create_dir(dir.path().join("sub")).unwrap();
+    edit_json(&dir.path().join("scene.json"), |v| {
+        v["gbuffer"] = inside.into();
+        v["camera"] = "sub/../camera.####.json".into();
+    });
+    Scene::load(dir.path()).unwrap().frame(1).unwrap();
+}

@@ -134,3 +134,18 @@ pub(crate) fn check_image_size(file: &Path, width: usize, height: usize) -> Resu
     }
     Ok(())
 }
+
+/// Wraps an error of the `exr` crate. A file that ends early (the usual damage: a copy or
+/// a write cut short) says so, since the decoder's own words for it are cryptic.
+pub(crate) fn exr_error(file: &Path, what: &str, e: exr::error::Error) -> SceneError {
+    let truncated = |detail: &str| SceneError::Image {
+        file: file.to_path_buf(),
+        message: format!("the file ends early or is damaged ({detail}); write or copy it again"),
+    };
+    match e {
+        exr::error::Error::Io(io) if io.kind() == std::io::ErrorKind::UnexpectedEof => truncated(&io.to_string()),
+        exr::error::Error::Io(io) => SceneError::io(file, what, io),
+        exr::error::Error::Invalid(why) if why.contains("missing bytes") => truncated(&why),
+        other => SceneError::Image { file: file.to_path_buf(), message: other.to_string() },
+    }
+}

@@ -17,7 +17,7 @@
 //! as an alias (first part wins), so that `R` finds an environment map's red channel in
 //! any layout.
 
-use super::error::{check_image_size, SceneError};
+use super::error::{check_image_size, exr_error, SceneError};
 use exr::prelude::{read, FlatSamples, ReadChannels, ReadLayers};
 use std::collections::HashMap;
 use std::path::Path;
@@ -138,12 +138,5 @@ impl ExrChannels {
             self.width = self.sizes[index][0];
             self.height = self.sizes[index][1];
         }
-    }
-}
-
-fn exr_error(file: &Path, what: &str, e: exr::error::Error) -> SceneError {
-    match e {
-        exr::error::Error::Io(io) => SceneError::io(file, what, io),
-        other => SceneError::Image { file: file.to_path_buf(), message: other.to_string() },
     }
 }

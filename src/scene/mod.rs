@@ -10,7 +10,8 @@
 //! - Every JSON object denies unknown keys; the error names the key, the file, the line
 //!   and the column. `version` must be 1 (checked before anything else, so a newer file
 //!   says "unsupported version" rather than "unknown key").
-//! - Paths are relative to the scene directory. A run of `#` is the frame number,
+//! - Paths are relative to the scene directory and must stay inside it (no `..` above
+//!   it, no absolute path elsewhere; see [`paths`]). A run of `#` is the frame number,
 //!   zero-padded to the run's length (`####` and frame 7 give `0007`); a path without `#`
 //!   is shared by all frames.
 //! - Materials: keys are material indices as decimal strings, at least 1 (0 is the
@@ -55,7 +56,9 @@ mod exr_read;
 pub mod gbuffer;
 pub mod heightmap;
 pub mod light;
+pub mod layers;
 pub mod output;
+mod paths;
 
 pub use camera::{Camera, Sphere};
 pub use error::{SceneError, MAX_IMAGE_PIXELS, MAX_IMAGE_SIDE};
@@ -268,6 +271,28 @@ struct LightFile {
     sh: Option<Vec<[f64; 3]>>,
 }
 
+impl SceneFile {
+    /// Every path of the file lies inside the scene directory ([`paths`]).
+    fn check_paths_inside(&self, file: &Path, dir: &Path) -> Result<(), SceneError> {
+        let optional = [
+            ("reflection_gbuffer", &self.reflection_gbuffer),
+            ("camera", &self.camera),
+            ("blockers", &self.blockers),
+            ("light.environment", &self.light.environment),
+        ];
+        paths::check_inside(file, dir, "gbuffer", &self.gbuffer)?;
+        for (key, path) in optional {
+            if let Some(path) = path {
+                paths::check_inside(file, dir, key, path)?;
+            }
+        }
+        if let Some(h) = &self.heightfield {
+            paths::check_inside(file, dir, "heightfield.heights", &h.heights)?;
+        }
+        Ok(())
+    }
+}
+
 /// Reads a JSON file into `T`, mapping every failure to a [`SceneError`] that names the
 /// file (and the line, for syntax and schema errors).
 pub(crate) fn read_json<T: serde::de::DeserializeOwned>(file: &Path, what: &str) -> Result<T, SceneError> {
@@ -396,6 +421,7 @@ impl Scene {
             Some(v) => return Err(SceneError::Version { file: file.clone(), found: v.to_string() }),
         }
         let raw: SceneFile = serde_json::from_str(&text).map_err(|e| SceneError::json(&file, e))?;
+        raw.check_paths_inside(&file, dir)?;
 
         if let Some(f) = raw.frames {
             if f.start > f.end {

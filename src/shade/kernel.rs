@@ -309,3 +309,7 @@ pub fn reflect_view(eye: [f64; 3], p: [f64; 3], n: [f64; 3]) -> [f64; 3] {
     let d = 2.0 * (n[0] * v[0] + n[1] * v[1] + n[2] * v[2]);
     [d * n[0] - v[0], d * n[1] - v[1], d * n[2] - v[2]]
 }
+
+// The same shading split into compositing passes and visibility terms (`logsh render`).
+mod passes;
+pub use passes::PixelPasses;

@@ -1,0 +1,184 @@
+//! `logsh render`: shade a sequence of frames, each into a multi-layer EXR of compositing
+//! passes and a PNG preview, frame after frame (pixels in parallel within a frame).
+//!
+//! A farm runs this unattended, so one bad frame costs only itself: its error is recorded
+//! and the next frame starts; a panic inside a frame is caught and reported the same way.
+//! Outputs are written atomically (a killed run leaves whole files or none), which is what
+//! makes `--skip-existing` a safe resume: a frame counts as done when its EXR header reads
+//! and its PNG exists.
+//!
+//! # The output of a frame (`<name>.NNNN.exr`, one part, ZIP)
+//!
+//! | channels | type | what |
+//! |---|---|---|
+//! | `R`, `G`, `B`, `A` | colour | beauty = diffuse + specular + environment; alpha 1 on surfaces |
+//! | `diffuse.{R,G,B}` | colour | the diffuse term |
+//! | `specular.{R,G,B}` | colour | the Phong term (and water's mirror of the sky) |
+//! | `environment.{R,G,B}` | colour | the light seen directly on the background |
+//! | `visibility.Y` | colour | height field and blockers together |
+//! | `visibility_heightfield.Y` | colour | the height field alone |
+//! | `visibility_blockers.Y` | colour | the sphere blockers alone |
+//! | `P.{X,Y,Z}`, `N.{X,Y,Z}` | float | world position and normal of the G-buffer |
+//!
+//! "colour" is half by default (`--colour-type float` stores f32); see
+//! [`crate::shade::passes`] and docs/design.md for the pass definitions.
+
+pub mod frames;
+pub mod progress;
+
+use crate::scene::layers::{write_exr_layers, OutputChannel, SampleType};
+use crate::scene::{output, Scene, SceneError};
+use crate::shade::{shade_frame_passes, ShadedPasses, ShadingSettings};
+use anyhow::Context;
+use progress::Progress;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// What a render of a sequence needs beyond the scene.
+#[derive(Clone, Debug)]
+pub struct SequenceOptions {
+    /// Frames in render order.
+    pub frames: Vec<i64>,
+    /// Output directory.
+    pub out: PathBuf,
+    /// File name stem: `<name>.NNNN.exr` and `<name>.NNNN.png`.
+    pub name: String,
+    /// Leave frames whose outputs are complete untouched.
+    pub skip_existing: bool,
+    /// Storage of the colour passes.
+    pub colour: SampleType,
+    pub settings: ShadingSettings,
+}
+
+/// What became of one frame.
+#[derive(Clone, Debug)]
+pub enum FrameStatus {
+    Rendered { seconds: f64, outputs: Vec<PathBuf> },
+    Skipped { outputs: Vec<PathBuf> },
+    Failed { error: String },
+}
+
+#[derive(Clone, Debug)]
+pub struct FrameOutcome {
+    pub frame: i64,
+    pub status: FrameStatus,
+}
+
+impl FrameOutcome {
+    pub fn failed(&self) -> bool {
+        matches!(self.status, FrameStatus::Failed { .. })
+    }
+}
+
+/// The EXR and the PNG of `frame`: `<out>/<name>.NNNN.{exr,png}` (frame zero-padded to 4).
+pub fn frame_outputs(out: &Path, name: &str, frame: i64) -> [PathBuf; 2] {
+    ["exr", "png"].map(|ext| out.join(format!("{name}.{frame:04}.{ext}")))
+}
+
+/// Refuses, before anything is rendered, an output of any frame that is an input of the
+/// scene, and a `name` that is not a plain file name.
+pub fn check_outputs(scene: &Scene, options: &SequenceOptions) -> Result<(), SceneError> {
+    let plain = !options.name.is_empty()
+        && !options.name.contains(['/', '\\'])
+        && options.name != "."
+        && options.name != "..";
+    if !plain {
+        return Err(SceneError::invalid(
+            &options.out,
+            format!("--name \"{}\" must be a plain file name stem, without separators", options.name),
+        ));
+    }
+    for &frame in &options.frames {
+        for path in frame_outputs(&options.out, &options.name, frame) {
+            scene.check_output_path(&path)?;
+        }
+    }
+    Ok(())
+}
+
+/// True when both outputs exist, the EXR's header reads, and the PNG is not empty.
+pub fn is_complete(outputs: &[PathBuf; 2]) -> bool {
+    let [exr, png] = outputs;
+    exr::meta::MetaData::read_from_file(exr, false).is_ok() && std::fs::metadata(png).is_ok_and(|m| m.len() > 0)
+}
+
+/// Renders `options.frames` in order, reporting to `progress`; never stops early.
+pub fn render_sequence(scene: &Scene, options: &SequenceOptions, progress: &mut dyn Progress) -> Vec<FrameOutcome> {
+    let total = options.frames.len();
+    progress.start(total);
+    let mut outcomes = Vec::with_capacity(total);
+    for (index, &frame) in options.frames.iter().enumerate() {
+        progress.frame_started(frame, index);
+        let outputs = frame_outputs(&options.out, &options.name, frame);
+        let status = if options.skip_existing && is_complete(&outputs) {
+            FrameStatus::Skipped { outputs: outputs.to_vec() }
+        } else {
+            let started = Instant::now();
+            let attempt = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| render_frame(scene, frame, options, &outputs)));
+            match attempt {
+                Ok(Ok(())) => FrameStatus::Rendered { seconds: started.elapsed().as_secs_f64(), outputs: outputs.to_vec() },
+                Ok(Err(e)) => FrameStatus::Failed { error: format!("{e:#}") },
+                Err(panic) => FrameStatus::Failed { error: format!("internal error (please report): {}", panic_message(&panic)) },
+            }
+        };
+        let outcome = FrameOutcome { frame, status };
+        progress.frame_finished(&outcome, index, total);
+        outcomes.push(outcome);
+    }
+    progress.finish(&outcomes);
+    outcomes
+}
+
+fn panic_message(panic: &Box<dyn std::any::Any + Send>) -> String {
+    panic
+        .downcast_ref::<&str>()
+        .map(|s| s.to_string())
+        .or_else(|| panic.downcast_ref::<String>().cloned())
+        .unwrap_or_else(|| "a panic without a message".into())
+}
+
+/// Reads, shades and writes one frame.
+fn render_frame(scene: &Scene, frame: i64, options: &SequenceOptions, outputs: &[PathBuf; 2]) -> anyhow::Result<()> {
+    let data = scene.frame(frame)?;
+    let passes = shade_frame_passes(scene, &data, &options.settings)?;
+    let [exr, png] = outputs;
+    write_passes(exr, &passes, options.colour)?;
+    output::write_png_preview(png, passes.width, passes.height, &passes.beauty)
+        .with_context(|| format!("frame {frame}: cannot write the preview"))?;
+    Ok(())
+}
+
+/// The channels of the table in the module doc, in that order.
+pub fn pass_channels(passes: &ShadedPasses, colour: SampleType) -> Vec<(String, SampleType, Vec<f32>)> {
+    let mut channels = Vec::new();
+    let mut rgb = |layer: &str, names: &[&str], values: &[[f32; 3]], kind: SampleType| {
+        for (k, channel) in names.iter().enumerate() {
+            let name = if layer.is_empty() { channel.to_string() } else { format!("{layer}.{channel}") };
+            channels.push((name, kind, values.iter().map(|v| v[k]).collect()));
+        }
+    };
+    let beauty: Vec<[f32; 3]> = passes.beauty.iter().map(|p| [p[0], p[1], p[2]]).collect();
+    rgb("", &["R", "G", "B"], &beauty, colour);
+    for (layer, values) in [("diffuse", &passes.diffuse), ("specular", &passes.specular), ("environment", &passes.environment)] {
+        rgb(layer, &["R", "G", "B"], values, colour);
+    }
+    rgb("P", &["X", "Y", "Z"], &passes.position, SampleType::Float);
+    rgb("N", &["X", "Y", "Z"], &passes.normal, SampleType::Float);
+    channels.insert(3, ("A".into(), colour, passes.beauty.iter().map(|p| p[3]).collect()));
+    for (layer, values) in [
+        ("visibility", &passes.visibility),
+        ("visibility_heightfield", &passes.visibility_heightfield),
+        ("visibility_blockers", &passes.visibility_blockers),
+    ] {
+        channels.push((format!("{layer}.Y"), colour, values.clone()));
+    }
+    channels
+}
+
+/// Writes the multi-layer EXR of one frame.
+pub fn write_passes(path: &Path, passes: &ShadedPasses, colour: SampleType) -> Result<(), output::OutputError> {
+    let channels = pass_channels(passes, colour);
+    let refs: Vec<OutputChannel> =
+        channels.iter().map(|(name, kind, values)| OutputChannel { name: name.clone(), sample_type: *kind, values }).collect();
+    write_exr_layers(path, passes.width, passes.height, &refs)
+}

@@ -1,0 +1,360 @@
+//! `logsh render` and `logsh info` as a black box: a three-frame shot rendered into
+//! multi-layer EXRs whose passes add up to the beauty, resuming after a killed run, and
+//! every bad input ending in a non-zero exit with the file named and no panic.
+
+use assert_cmd::Command;
+use exr::prelude::{read_all_flat_layers_from_file, FlatSamples};
+use logsh::scene::Camera;
+use logsh::synth::{self, ExampleOptions};
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::process::{Output, Stdio};
+
+fn logsh() -> Command {
+    Command::cargo_bin("logsh").unwrap()
+}
+
+fn stderr_of(output: &Output) -> String {
+    String::from_utf8_lossy(&output.stderr).into_owned()
+}
+
+/// The dune sample (height field, blockers, water, a Phong sphere, a sky map) with a
+/// third frame whose camera has moved: per-frame cameras and blockers both change.
+fn three_frame_scene(dir: &Path, width: u32, height: u32) -> PathBuf {
+    let mut scene = synth::example("dunes", ExampleOptions { width, height, ..Default::default() }).unwrap();
+    let mut third = scene.frames[1].clone();
+    third.number = 3;
+    third.camera = Camera::look_at([2.0, -15.0, 5.5], [0.0, 0.0, 0.5], [0.0, 0.0, 1.0], 24.0, 36.0, [width, height]);
+    scene.frames.push(third);
+    let out = dir.join("shot");
+    synth::write_scene(&out, &scene).unwrap();
+    out
+}
+
+/// Channel values as f32 and the type they were stored as, by full name.
+type Channels = HashMap<String, (Vec<f32>, &'static str)>;
+
+/// Every channel of an EXR, with the image size.
+fn channels(path: &Path) -> (usize, usize, Channels) {
+    let image = read_all_flat_layers_from_file(path).unwrap();
+    assert_eq!(image.layer_data.len(), 1, "one part");
+    let layer = &image.layer_data[0];
+    let map = layer
+        .channel_data
+        .list
+        .iter()
+        .map(|c| {
+            let (values, kind) = match &c.sample_data {
+                FlatSamples::F16(v) => (v.iter().map(|h| h.to_f32()).collect(), "half"),
+                FlatSamples::F32(v) => (v.clone(), "float"),
+                FlatSamples::U32(v) => (v.iter().map(|&u| u as f32).collect(), "uint"),
+            };
+            (c.name.to_string(), (values, kind))
+        })
+        .collect();
+    (layer.size.0, layer.size.1, map)
+}
+
+fn assert_fails_with(output: &Output, code: i32, needles: &[&str]) {
+    let stderr = stderr_of(output);
+    assert_eq!(output.status.code(), Some(code), "{stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    for needle in needles {
+        assert!(stderr.contains(needle), "expected {needle:?} in: {stderr}");
+    }
+}
+
+const PASS_CHANNELS: &[&str] = &[
+    "R", "G", "B", "A", "diffuse.R", "diffuse.G", "diffuse.B", "specular.R", "specular.G", "specular.B",
+    "environment.R", "environment.G", "environment.B", "visibility.Y", "visibility_heightfield.Y",
+    "visibility_blockers.Y", "P.X", "P.Y", "P.Z", "N.X", "N.Y", "N.Z",
+];
+
+#[test]
+fn three_frames_render_to_passes_that_add_up() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = three_frame_scene(dir.path(), 64, 36);
+    let out = dir.path().join("out");
+    let output = logsh()
+        .arg("render")
+        .arg(&scene)
+        .args(["--frames", "1-3", "--colour-type", "float", "--progress", "lines", "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(output.status.success(), "{}", stderr_of(&output));
+    assert!(stderr_of(&output).contains("3 frame(s) rendered, 0 skipped, 0 failed"), "{}", stderr_of(&output));
+
+    for frame in 1..=3 {
+        let exr = out.join(format!("render.{frame:04}.exr"));
+        let (w, h, c) = channels(&exr);
+        assert_eq!((w, h), (64, 36));
+        let mut names: Vec<&str> = c.keys().map(|s| s.as_str()).collect();
+        names.sort();
+        let mut expected = PASS_CHANNELS.to_vec();
+        expected.sort();
+        assert_eq!(names, expected);
+        // Stored as float (--colour-type float), the sum is exact.
+        for (k, ch) in ["R", "G", "B"].iter().enumerate() {
+            for (i, beauty) in c[*ch].0.iter().enumerate() {
+                let sum = c[&format!("diffuse.{ch}")].0[i] + c[&format!("specular.{ch}")].0[i] + c[&format!("environment.{ch}")].0[i];
+                assert_eq!(sum, *beauty, "frame {frame} pixel {i} channel {k}");
+            }
+        }
+        // Something of every kind of shading is in the frame.
+        let positive = |name: &str| c[name].0.iter().filter(|&&v| v > 1e-4).count();
+        assert!(positive("specular.G") > 0 && positive("environment.G") > 0 && positive("diffuse.G") > 0);
+        let shadowed = |name: &str| c[name].0.iter().filter(|&&v| v < 0.9).count();
+        assert!(shadowed("visibility_heightfield.Y") > 0, "the dunes shadow themselves");
+        assert!(shadowed("visibility_blockers.Y") > 0, "the spheres cast shadows");
+        for name in ["visibility.Y", "visibility_heightfield.Y", "visibility_blockers.Y"] {
+            assert!(c[name].0.iter().all(|v| v.is_finite() && *v >= 0.0 && *v <= 1.2), "{name} out of range");
+        }
+        // P and N are the G-buffer's, bit for bit.
+        let g = logsh::scene::Scene::load(&scene).unwrap().frame(frame).unwrap().gbuffer;
+        for (k, axis) in ["X", "Y", "Z"].iter().enumerate() {
+            assert!(c[&format!("P.{axis}")].0.iter().zip(&g.position).all(|(a, p)| a.to_bits() == p[k].to_bits()));
+            assert!(c[&format!("N.{axis}")].0.iter().zip(&g.normal).all(|(a, n)| a.to_bits() == n[k].to_bits()));
+        }
+        assert_eq!(c["P.X"].1, "float");
+        assert!(out.join(format!("render.{frame:04}.png")).is_file());
+    }
+
+    // The beauty is `logsh shade`'s image (water pixels up to rounding of tint * (d + s)).
+    let shaded = dir.path().join("shaded");
+    logsh().arg("shade").arg(&scene).args(["--frame", "3", "--out"]).arg(&shaded).assert().success();
+    let (_, _, single) = channels(&shaded.join("beauty.0003.exr"));
+    let (_, _, layered) = channels(&out.join("render.0003.exr"));
+    for ch in ["R", "G", "B", "A"] {
+        for (a, b) in single[ch].0.iter().zip(&layered[ch].0) {
+            assert!((a - b).abs() <= 1e-6 * a.abs().max(1.0), "{ch}: {a} vs {b}");
+        }
+    }
+
+    // Half colour (the default): the sum holds to half precision.
+    let half = dir.path().join("half");
+    logsh().arg("render").arg(&scene).args(["--frames", "2", "--progress", "none", "--out"]).arg(&half).assert().success();
+    let (_, _, c) = channels(&half.join("render.0002.exr"));
+    assert_eq!(c["R"].1, "half");
+    assert_eq!(c["P.X"].1, "float");
+    for ch in ["R", "G", "B"] {
+        for i in 0..c[ch].0.len() {
+            let sum = c[&format!("diffuse.{ch}")].0[i] + c[&format!("specular.{ch}")].0[i] + c[&format!("environment.{ch}")].0[i];
+            assert!((sum - c[ch].0[i]).abs() <= 2e-3 * c[ch].0[i].abs().max(1e-2), "{ch} {i}");
+        }
+    }
+
+    // `logsh info` lists the layers and types.
+    let output = logsh().arg("info").arg(out.join("render.0001.exr")).output().unwrap();
+    let text = String::from_utf8_lossy(&output.stdout);
+    assert!(output.status.success());
+    for needle in ["64 x 36", "ZIP16", "diffuse", "B G R", "visibility_heightfield", "P ", "X Y Z", "float"] {
+        assert!(text.contains(needle), "{needle:?} in {text}");
+    }
+    let output = logsh().args(["info", "--json"]).arg(half.join("render.0002.exr")).output().unwrap();
+    let json: serde_json::Value = serde_json::from_slice(&output.stdout).unwrap();
+    assert_eq!(json[0]["parts"][0]["channels"].as_array().unwrap().len(), PASS_CHANNELS.len());
+}
+
+fn modified_and_bytes(path: &Path) -> (std::time::SystemTime, Vec<u8>) {
+    (std::fs::metadata(path).unwrap().modified().unwrap(), std::fs::read(path).unwrap())
+}
+
+#[test]
+fn skip_existing_leaves_finished_frames_untouched() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = three_frame_scene(dir.path(), 32, 18);
+    let out = dir.path().join("out");
+    let render = |extra: &[&str]| {
+        logsh().arg("render").arg(&scene).args(["--progress", "json", "--out"]).arg(&out).args(extra).output().unwrap()
+    };
+    assert!(render(&[]).status.success());
+    let files: Vec<PathBuf> = (1..=3)
+        .flat_map(|f| ["exr", "png"].map(|e| out.join(format!("render.{f:04}.{e}"))))
+        .collect();
+    let before: Vec<_> = files.iter().map(|f| modified_and_bytes(f)).collect();
+    std::thread::sleep(std::time::Duration::from_millis(20));
+    std::fs::remove_file(&files[3]).unwrap(); // frame 2's PNG: frame 2 is incomplete.
+
+    let output = render(&["--skip-existing"]);
+    assert!(output.status.success(), "{}", stderr_of(&output));
+    let events: Vec<serde_json::Value> =
+        String::from_utf8_lossy(&output.stdout).lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    let statuses: Vec<&str> = events.iter().filter(|e| e["event"] == "frame").map(|e| e["status"].as_str().unwrap()).collect();
+    assert_eq!(statuses, ["skipped", "rendered", "skipped"]);
+    assert_eq!(events.last().unwrap()["event"], "done");
+    for (i, file) in files.iter().enumerate() {
+        let after = modified_and_bytes(file);
+        assert_eq!(after.1, before[i].1, "{} has the same bytes", file.display());
+        if !(2..4).contains(&i) {
+            assert_eq!(after.0, before[i].0, "{} untouched", file.display());
+        }
+    }
+}
+
+#[test]
+fn a_killed_render_resumes_to_identical_frames() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = three_frame_scene(dir.path(), 160, 90);
+    let full = dir.path().join("full");
+    let resumed = dir.path().join("resumed");
+    let bin = assert_cmd::cargo::cargo_bin("logsh");
+    let args = |out: &Path| -> Vec<std::ffi::OsString> {
+        vec!["render".into(), scene.clone().into(), "--progress".into(), "json".into(), "--threads".into(), "1".into(), "--out".into(), out.into()]
+    };
+    assert!(std::process::Command::new(&bin).args(args(&full)).output().unwrap().status.success());
+
+    // Kill the render as soon as its first frame is on disk.
+    let mut child = std::process::Command::new(&bin).args(args(&resumed)).stdout(Stdio::piped()).stderr(Stdio::null()).spawn().unwrap();
+    let mut reader = std::io::BufReader::new(child.stdout.take().unwrap());
+    let mut line = String::new();
+    loop {
+        line.clear();
+        assert!(std::io::BufRead::read_line(&mut reader, &mut line).unwrap() > 0, "render ended before a frame");
+        if line.contains("\"event\":\"frame\"") {
+            break;
+        }
+    }
+    child.kill().unwrap();
+    let status = child.wait().unwrap();
+    assert!(!status.success(), "the render was killed mid-sequence");
+    let finished = (1..=3).filter(|f| resumed.join(format!("render.{f:04}.png")).exists()).count();
+    assert!((1..3).contains(&finished), "{finished} frame(s) finished before the kill");
+    let first = modified_and_bytes(&resumed.join("render.0001.exr"));
+
+    let output = std::process::Command::new(&bin).args(args(&resumed)).arg("--skip-existing").output().unwrap();
+    assert!(output.status.success(), "{}", stderr_of(&output));
+    assert_eq!(modified_and_bytes(&resumed.join("render.0001.exr")).0, first.0, "frame 1 was not rendered again");
+    for f in 1..=3 {
+        for ext in ["exr", "png"] {
+            let name = format!("render.{f:04}.{ext}");
+            assert_eq!(std::fs::read(full.join(&name)).unwrap(), std::fs::read(resumed.join(&name)).unwrap(), "{name}");
+        }
+    }
+}
+
+#[test]
+fn one_bad_frame_fails_alone_and_is_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = three_frame_scene(dir.path(), 32, 18);
+    let out = dir.path().join("out");
+    // A truncated G-buffer in the middle of the shot.
+    let gbuffer = scene.join("gbuffer.0002.exr");
+    let bytes = std::fs::read(&gbuffer).unwrap();
+    std::fs::write(&gbuffer, &bytes[..bytes.len() / 2]).unwrap();
+    // A negative radius in the last frame.
+    std::fs::write(scene.join("blockers.0003.json"), r#"{"frame": 3, "spheres": [{"center": [0, 0, 2], "radius": -1}]}"#).unwrap();
+    let output = logsh().arg("render").arg(&scene).args(["--progress", "lines", "--out"]).arg(&out).output().unwrap();
+    assert_fails_with(&output, 1, &["2 of 3 frame(s) failed", "frame 2: ", "gbuffer.0002.exr", "frame 3: ", "blockers.0003.json", "negative radius"]);
+    assert!(out.join("render.0001.exr").is_file(), "the good frame is rendered");
+    assert!(!out.join("render.0002.exr").exists() && !out.join("render.0003.exr").exists());
+    let leftovers: Vec<_> = std::fs::read_dir(&out).unwrap().map(|e| e.unwrap().file_name()).collect();
+    assert_eq!(leftovers.len(), 2, "no temporary files left: {leftovers:?}");
+}
+
+#[test]
+fn bad_scenes_end_with_the_file_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = three_frame_scene(dir.path(), 32, 18);
+    let out = dir.path().join("out");
+    let render = || logsh().arg("render").arg(&scene).arg("--out").arg(&out).output().unwrap();
+    let json = scene.join("scene.json");
+    let original = std::fs::read_to_string(&json).unwrap();
+
+    std::fs::write(&json, original.replacen("\"version\": 1", "\"version\": 1,\n  \"colour\": 3", 1)).unwrap();
+    assert_fails_with(&render(), 1, &["scene.json", "unknown field `colour`"]);
+
+    std::fs::write(&json, "{\n  \"version\": 1,\n  \"gbuffer\": [\n}").unwrap();
+    assert_fails_with(&render(), 1, &["scene.json:4:1"]);
+
+    std::fs::write(&json, original.replace("gbuffer.####.exr", "../elsewhere/gbuffer.####.exr")).unwrap();
+    assert_fails_with(&render(), 1, &["scene.json", "\"gbuffer\"", "climbs out of the scene directory"]);
+
+    std::fs::write(&json, original.replace("\"sky.exr\"", "\"/etc/sky.exr\"")).unwrap();
+    assert_fails_with(&render(), 1, &["scene.json", "\"light.environment\"", "absolute and outside"]);
+
+    std::fs::write(&json, &original).unwrap();
+    std::fs::remove_file(scene.join("gbuffer.0001.exr")).unwrap();
+    assert_fails_with(&render(), 1, &["1 of 3 frame(s) failed", "gbuffer.0001.exr", "file not found"]);
+
+    std::fs::write(scene.join("camera.0002.json"), "{\"frame\": 2,").unwrap();
+    assert_fails_with(&render(), 1, &["2 of 3 frame(s) failed", "camera.0002.json:1:"]);
+    assert!(out.join("render.0003.exr").is_file());
+}
+
+#[test]
+fn flags_and_outputs_are_checked_before_rendering() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = three_frame_scene(dir.path(), 32, 18);
+    let out = dir.path().join("out");
+    let render = |args: &[&str], out: &Path| logsh().arg("render").arg(&scene).args(args).arg("--out").arg(out).output().unwrap();
+
+    assert_fails_with(&render(&["--frames", "1-3x0"], &out), 2, &["--frames", "step must be at least 1"]);
+    assert_fails_with(&render(&["--frames", "1,,3"], &out), 2, &["--frames", "empty item"]);
+    assert_fails_with(&render(&["--frames", "2-9"], &out), 1, &["frame(s) 4, 5, 6, 7, 8 outside the scene's frames 1-3"]);
+    assert_fails_with(&render(&["--order", "12"], &out), 1, &["--order 12"]);
+    assert_fails_with(&render(&["--threads", "0"], &out), 1, &["--threads 0"]);
+    assert_fails_with(&render(&["--name", "../x"], &out), 1, &["--name"]);
+    assert!(!out.exists(), "nothing is created when the command is refused");
+
+    // A scene claiming every frame there is needs --frames.
+    let json = scene.join("scene.json");
+    let original = std::fs::read_to_string(&json).unwrap();
+    let mut v: serde_json::Value = serde_json::from_str(&original).unwrap();
+    v["frames"] = serde_json::json!({"start": i64::MIN, "end": i64::MAX});
+    std::fs::write(&json, v.to_string()).unwrap();
+    assert_fails_with(&render(&[], &out), 1, &["scene.json", "choose some with --frames"]);
+    std::fs::write(&json, &original).unwrap();
+
+    // Outputs named like an input are refused before any frame is shaded.
+    let before = std::fs::read(scene.join("gbuffer.0002.exr")).unwrap();
+    assert_fails_with(&render(&["--name", "gbuffer"], &scene), 1, &["gbuffer.0001.exr", "refusing to write over an input"]);
+    assert_eq!(std::fs::read(scene.join("gbuffer.0002.exr")).unwrap(), before);
+    assert_fails_with(&render(&[], &scene.join("scene.json")), 1, &["scene.json", "not a directory"]);
+
+    // Frame specs the way farms write them.
+    let output = render(&["--frames", "3,1..2x1", "--progress", "json"], &out);
+    assert!(output.status.success(), "{}", stderr_of(&output));
+    let frames: Vec<i64> = String::from_utf8_lossy(&output.stdout)
+        .lines()
+        .map(|l| serde_json::from_str::<serde_json::Value>(l).unwrap())
+        .filter(|e| e["event"] == "frame")
+        .map(|e| e["frame"].as_i64().unwrap())
+        .collect();
+    assert_eq!(frames, [3, 1, 2]);
+}
+
+#[test]
+fn info_refuses_what_is_not_an_exr() {
+    let dir = tempfile::tempdir().unwrap();
+    let garbage = dir.path().join("garbage.exr");
+    std::fs::write(&garbage, b"v/1\x01\x02\x00\x00 not an exr at all").unwrap();
+    assert_fails_with(&logsh().arg("info").arg(&garbage).output().unwrap(), 1, &["garbage.exr", "not a readable image"]);
+    assert_fails_with(&logsh().arg("info").arg(dir.path().join("none.exr")).output().unwrap(), 1, &["none.exr", "file not found"]);
+}
+
+/// An EXR header claiming 100000 x 100000 pixels: refused by size, before the pixels.
+#[test]
+fn huge_headers_are_refused_before_allocation() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = three_frame_scene(dir.path(), 32, 18);
+    let file = scene.join("gbuffer.0001.exr");
+    let mut bytes = std::fs::read(&file).unwrap();
+    let key = b"dataWindow\0box2i\0";
+    let mut patched = 0;
+    let mut at = 0;
+    while let Some(i) = bytes[at..].windows(key.len()).position(|w| w == key) {
+        let start = at + i + key.len() + 4; // after the attribute size
+        bytes[start + 8..start + 12].copy_from_slice(&99_999i32.to_le_bytes());
+        bytes[start + 12..start + 16].copy_from_slice(&99_999i32.to_le_bytes());
+        patched += 1;
+        at = start;
+    }
+    assert!(patched > 0);
+    std::fs::write(&file, &bytes).unwrap();
+    let out = dir.path().join("out");
+    let output = logsh().arg("render").arg(&scene).args(["--frames", "1", "--out"]).arg(&out).output().unwrap();
+    assert_fails_with(&output, 1, &["gbuffer.0001.exr", "100000 x 100000 pixels is too large"]);
+    let output = logsh().arg("info").arg(&file).output().unwrap();
+    assert!(!stderr_of(&output).contains("panicked"), "{}", stderr_of(&output));
+}
