@@ -2,7 +2,7 @@
 // the sum over the NODES nodes of w exp(min(f(node), ceiling)) L(node). The CPU path
 // projects exp(f) onto the basis and then dots with L; folding L into the node table
 // (L(node) = sum_i L_i y_i(node), host-generated) is the same sum in another order, at
-// half the cost. Nodes are clamped at the log of the lobe's peak (the true function never
+// half the cost; the caller clamps at 0. Nodes are clamped at the log of the lobe's peak (the true function never
 // exceeds it): this only removes ringing.
 fn quad_exp_dot_light(f: ptr<function, array<f32, COUNT_CAP>>, ceiling: f32) -> vec3<f32> {
     // Rows of the basis table are padded with zeros to a multiple of 4 (as is f), so the
@@ -21,16 +21,17 @@ fn quad_exp_dot_light(f: ptr<function, array<f32, COUNT_CAP>>, ceiling: f32) -> 
         let light = T_NODE_LIGHT + 3u * node;
         sum += e * vec3<f32>(tables[light], tables[light + 1u], tables[light + 2u]);
     }
-    return max(sum, vec3<f32>(0.0));
+    return sum;
 }
 
-// An SH vector dotted with the light per colour channel, clamped at 0 (kernel.rs, lit).
+// An SH vector dotted with the light per colour channel (kernel.rs, lit; the caller
+// clamps at 0).
 fn dot_light(e: ptr<function, array<f32, COUNT_CAP>>) -> vec3<f32> {
     var sum = vec3<f32>(0.0);
     for (var i = 0u; i < COUNT; i++) {
         sum += (*e)[i] * vec3<f32>(tables[T_LIGHT + i], tables[T_LIGHT + COUNT + i], tables[T_LIGHT + 2u * COUNT + i]);
     }
-    return max(sum, vec3<f32>(0.0));
+    return sum;
 }
 
 // |f^|: the norm of the non-DC coefficients.

@@ -13,7 +13,8 @@
 // Three vec4 per point: (position, material slot bits), (unit normal, 0), (reflected view
 // direction, 0).
 @group(0) @binding(2) var<storage, read> points: array<vec4<f32>>;
-// Two vec4 per point: diffuse rgb, specular rgb.
+// Three vec4 per point: diffuse rgb, specular rgb, and with PASSES the visibility terms
+// (combined, height field, blockers).
 @group(0) @binding(3) var<storage, read_write> shaded: array<vec4<f32>>;
 @group(0) @binding(4) var<storage, read> materials: array<GpuMaterial>;
 //#if BLOCKERS
@@ -36,11 +37,17 @@ fn enabled(feature: u32) -> bool {
 // methods hand pixels with |f^| beyond their range to the quadrature, as on the CPU.
 fn exp_dot_light(f: ptr<function, array<f32, COUNT_CAP>>, ceiling: f32) -> vec3<f32> {
 //#if EXP_QUAD
-    return quad_exp_dot_light(f, ceiling);
+    return max(quad_exp_dot_light(f, ceiling), vec3<f32>(0.0));
 //#else
+    // Blended into quad over the band below the method's range (kernel.rs,
+    // quadrature_weight), so the hand-over leaves no seam.
     let magnitude = non_dc_magnitude(f);
-    if !(magnitude <= SH_SPACE_MAX_MAGNITUDE) {
-        return quad_exp_dot_light(f, ceiling);
+    var weight = 1.0;
+    if magnitude <= SH_SPACE_MAX_MAGNITUDE {
+        weight = clamp((magnitude - (SH_SPACE_MAX_MAGNITUDE - SH_SPACE_BLEND)) / SH_SPACE_BLEND, 0.0, 1.0);
+    }
+    if weight >= 1.0 {
+        return max(quad_exp_dot_light(f, ceiling), vec3<f32>(0.0));
     }
     var hat = *f;
     hat[0] = 0.0;
@@ -103,22 +110,27 @@ fn exp_dot_light(f: ptr<function, array<f32, COUNT_CAP>>, ceiling: f32) -> vec3<
         e[i] = dc_factor * sum[i];
     }
 //#endif
-    return dot_light(&e);
+    var lit = dot_light(&e);
+    if weight > 0.0 {
+        lit = mix(lit, quad_exp_dot_light(f, ceiling), weight);
+    }
+    // Clamped at 0: ringing of a band-limited product can dip below it (kernel.rs, lit).
+    return max(lit, vec3<f32>(0.0));
 //#endif
 }
 
 // Log visibility at p with unit normal n (kernel.rs, add_visibility): the tangent plane
 // clamped once (a hemisphere cap around -n, or folded into the height field's horizons
-// for an upward-facing receiver), the height field's wedges, every sphere's cap.
-fn visibility(p: vec3<f32>, n: vec3<f32>) -> array<f32, COUNT_CAP> {
+// for an upward-facing receiver), the height field's wedges, every sphere's cap. The
+// caps' sum goes to `caps` too, which the visibility passes read.
+fn visibility(p: vec3<f32>, n: vec3<f32>, caps: ptr<function, array<f32, COUNT_CAP>>) -> array<f32, COUNT_CAP> {
     var acc: array<f32, COUNT_CAP>;
     var fold_tangent = false;
 //#if HEIGHTFIELD
     fold_tangent = TANGENT_OCCLUSION && n.z > 0.0 && enabled(FEATURE_HEIGHTFIELD);
 //#endif
     if TANGENT_OCCLUSION && !fold_tangent {
-        var tangent = load_zonal(T_TANGENT);
-        add_rotated_zonal(&tangent, 1.0, -n, &acc);
+        add_tangent(n, &acc);
     }
 //#if HEIGHTFIELD
     if enabled(FEATURE_HEIGHTFIELD) {
@@ -127,10 +139,29 @@ fn visibility(p: vec3<f32>, n: vec3<f32>) -> array<f32, COUNT_CAP> {
 //#endif
 //#if BLOCKERS
     for (var s = 0u; s < params.sphere_count; s++) {
-        add_sphere(p, n, spheres[s], params.log_epsilon, &acc);
+        add_sphere(p, n, spheres[s], params.log_epsilon, caps);
+    }
+    for (var i = 0u; i < COUNT; i++) {
+        acc[i] += (*caps)[i];
     }
 //#endif
     return acc;
+}
+
+// The hemisphere behind the tangent plane (kernel.rs, the unfolded tangent term).
+fn add_tangent(n: vec3<f32>, acc: ptr<function, array<f32, COUNT_CAP>>) {
+    var tangent = load_zonal(T_TANGENT);
+    add_rotated_zonal(&tangent, 1.0, -n, acc);
+}
+
+// lum(lit) / lum(unoccluded), or 1 where the unoccluded receiver gets no light
+// (src/shade/kernel/passes.rs, ratio).
+fn luminance_ratio(lit: vec3<f32>, unoccluded: vec3<f32>) -> f32 {
+    let below = dot(LUMINANCE, unoccluded);
+    if below > 1e-12 {
+        return dot(LUMINANCE, lit) / below;
+    }
+    return 1.0;
 }
 
 // exp*(visibility + lobe rotated to axis) . light, for the lobe table at `lobe` (ORDER
@@ -152,20 +183,55 @@ fn shade(@builtin(global_invocation_id) id: vec3<u32>) {
     let slot = bitcast<u32>(a.w);
     var diffuse = vec3<f32>(0.0);
     var specular = vec3<f32>(0.0);
+    var terms = vec3<f32>(1.0);
     if slot != SLOT_NONE {
         let n = points[3u * point + 1u].xyz;
-        var v = visibility(a.xyz, n);
+        var caps: array<f32, COUNT_CAP>;
+        var v = visibility(a.xyz, n, &caps);
         if slot != SLOT_UNKNOWN {
             let material = materials[slot];
-            diffuse = lit(&v, T_DIFFUSE, n) * material.albedo.xyz;
+            let lit_diffuse = lit(&v, T_DIFFUSE, n);
+            diffuse = lit_diffuse * material.albedo.xyz;
 //#if PHONG
             if material.kind == MATERIAL_PHONG && enabled(FEATURE_PHONG) {
                 let reflected = points[3u * point + 2u].xyz;
                 specular = lit(&v, material.phong_lobe, reflected) * material.specular.xyz;
             }
 //#endif
+//#if PASSES
+            // The visibility terms (src/shade/kernel/passes.rs): diffuse light with the
+            // height field, the blockers or both, over the unoccluded receiver's.
+            var unoccluded: array<f32, COUNT_CAP>;
+            if TANGENT_OCCLUSION {
+                add_tangent(n, &unoccluded);
+            }
+            let lit_unoccluded = lit(&unoccluded, T_DIFFUSE, n);
+            let combined = luminance_ratio(lit_diffuse, lit_unoccluded);
+            var has_heightfield = false;
+//#if HEIGHTFIELD
+            has_heightfield = enabled(FEATURE_HEIGHTFIELD);
+//#endif
+            let has_blockers = params.sphere_count > 0u;
+            terms = vec3<f32>(combined, 1.0, 1.0);
+            if has_heightfield && !has_blockers {
+                terms.y = combined;
+            } else if has_blockers && !has_heightfield {
+                terms.z = combined;
+            } else if has_blockers && has_heightfield {
+                // Log vectors add: the height field alone is all but the caps.
+                var blockers = unoccluded;
+                var heightfield = v;
+                for (var i = 0u; i < COUNT; i++) {
+                    blockers[i] += caps[i];
+                    heightfield[i] -= caps[i];
+                }
+                terms.y = luminance_ratio(lit(&heightfield, T_DIFFUSE, n), lit_unoccluded);
+                terms.z = luminance_ratio(lit(&blockers, T_DIFFUSE, n), lit_unoccluded);
+            }
+//#endif
         }
     }
-    shaded[2u * point] = vec4<f32>(diffuse, 0.0);
-    shaded[2u * point + 1u] = vec4<f32>(specular, 0.0);
+    shaded[3u * point] = vec4<f32>(diffuse, 0.0);
+    shaded[3u * point + 1u] = vec4<f32>(specular, 0.0);
+    shaded[3u * point + 2u] = vec4<f32>(terms, 0.0);
 }

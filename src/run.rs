@@ -191,18 +191,6 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
 pub fn render(args: &crate::cli::RenderArgs) -> Result<()> {
     use crate::render::{check_outputs, progress::reporter, render_sequence, FrameStatus, SequenceOptions};
     let settings = args.shading.settings().map_err(|e| anyhow!(e))?;
-    // The visibility passes need three more exponentiations per pixel, which only the CPU
-    // path computes so far.
-    match args.shading.device {
-        crate::cli::DeviceChoice::Gpu => {
-            return Err(anyhow!(
-                "--device gpu: logsh render's compositing passes (the visibility terms) are computed on the CPU path only; \
-                 use --device cpu, or logsh shade --device gpu for the beauty"
-            ))
-        }
-        crate::cli::DeviceChoice::Auto => eprintln!("--device auto: logsh render shades on the CPU (its visibility passes have no GPU path yet)"),
-        crate::cli::DeviceChoice::Cpu => {}
-    }
     if args.threads == Some(0) {
         return Err(anyhow!("--threads 0: give at least 1, or leave it out for one thread per core"));
     }
@@ -254,13 +242,17 @@ pub fn render(args: &crate::cli::RenderArgs) -> Result<()> {
     };
     check_outputs(&scene, &options)?;
     std::fs::create_dir_all(&args.out).with_context(|| format!("cannot create output directory {}", args.out.display()))?;
+    let executor = Executor::select(args.shading.device, &settings)?;
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(args.threads.unwrap_or(0))
         .build()
         .context("cannot start the worker threads")?;
     let mut progress = reporter(args.progress);
     let started = Instant::now();
-    let outcomes = pool.install(|| render_sequence(&scene, &options, progress.as_mut()));
+    let outcomes = pool.install(|| {
+        eprintln!("render: shading on {}", executor.describe());
+        render_sequence(&executor, &scene, &options, progress.as_mut())
+    });
     let failed: Vec<_> = outcomes.iter().filter(|o| o.failed()).collect();
     let skipped = outcomes.iter().filter(|o| matches!(o.status, FrameStatus::Skipped { .. })).count();
     let rendered = outcomes.len() - failed.len() - skipped;

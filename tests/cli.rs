@@ -113,3 +113,43 @@ fn inputs_are_never_written_over() {
     // And `logsh example` does not overwrite a scene.
     assert_fails_with(logsh().args(["example", "spheres", "--out"]).arg(&scene), &["already holds a scene"]);
 }
+
+#[test]
+fn device_gpu_without_an_adapter_fails_and_auto_falls_back() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = example_scene(dir.path());
+    // No Metal adapter exists off Apple machines; on one, this test has nothing to check.
+    if cfg!(target_os = "macos") {
+        return;
+    }
+    let out = dir.path().join("out");
+    let gpu = logsh().env("WGPU_BACKEND", "metal").args(["shade", "--device", "gpu"]).arg(&scene).arg("--out").arg(&out).output().unwrap();
+    assert_eq!(gpu.status.code(), Some(1), "{}", stderr_of(&gpu));
+    assert!(stderr_of(&gpu).contains("no GPU adapter found"), "{}", stderr_of(&gpu));
+    assert!(!out.join("beauty.0001.exr").exists());
+    let auto = logsh().env("WGPU_BACKEND", "metal").args(["shade", "--device", "auto"]).arg(&scene).arg("--out").arg(&out).output().unwrap();
+    assert!(auto.status.success(), "{}", stderr_of(&auto));
+    let lines: Vec<String> = stderr_of(&auto).lines().filter(|l| l.contains("--device auto")).map(String::from).collect();
+    assert_eq!(lines.len(), 1, "one line says why the CPU is used: {lines:?}");
+    assert!(lines[0].contains("shading on the CPU") && lines[0].contains("no GPU adapter"), "{}", lines[0]);
+    assert!(stderr_of(&auto).contains("on cpu"));
+    assert!(out.join("beauty.0001.exr").is_file());
+}
+
+#[test]
+fn bench_prints_stages_as_a_table_and_as_json() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = example_scene(dir.path());
+    let table = logsh().args(["bench", "--device", "cpu", "--repeats", "2"]).arg(&scene).output().unwrap();
+    assert!(table.status.success(), "{}", stderr_of(&table));
+    let text = String::from_utf8_lossy(&table.stdout);
+    for word in ["stage", "tables", "shade", "frame", "Mpixel/s", "median of 2 run(s)"] {
+        assert!(text.contains(word), "no {word:?} in\n{text}");
+    }
+    let json = logsh().args(["bench", "--device", "cpu", "--repeats", "1", "--json"]).arg(&scene).output().unwrap();
+    assert!(json.status.success(), "{}", stderr_of(&json));
+    let report: serde_json::Value = serde_json::from_slice(&json.stdout).expect("bench --json prints JSON");
+    assert_eq!(report["width"], 48);
+    assert!(report["stages"].as_array().is_some_and(|s| s.iter().any(|s| s["name"] == "shade" && s["milliseconds"].as_f64().unwrap() > 0.0)));
+    assert!(report["megapixels_per_second"].as_f64().unwrap() > 0.0);
+}

@@ -307,3 +307,74 @@ fn settings_beyond_lavapipes_loop_budget_are_refused_there() {
         Err(e) => panic!("{e}"),
     }
 }
+
+/// `logsh render`'s passes: diffuse, specular, environment, beauty and the three
+/// visibility terms, GPU against CPU.
+#[test]
+fn compositing_passes_match() {
+    let Some(gpu) = gpu() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let mut scenes = vec![small_dunes(dir.path())];
+    scenes.extend(sample_scenes().iter().map(|d| Scene::load(d).unwrap()));
+    for scene in &scenes {
+        let frame = scene.frame(scene.default_frame()).unwrap();
+        let settings = ShadingSettings::default();
+        let cpu = logsh::shade::shade_frame_passes(scene, &frame, &settings).unwrap();
+        let on_gpu = gpu.shade_frame_passes(scene, &frame, &settings).unwrap();
+        let unit = unoccluded_value(&frame.light).max(1e-12) as f32;
+        let rgb = |v: &[[f32; 3]]| v.iter().flat_map(|c| c.iter().map(|x| x / unit)).collect::<Vec<f32>>();
+        let rgba = |v: &[[f32; 4]]| v.iter().flat_map(|c| c.iter().map(|x| x / unit)).collect::<Vec<f32>>();
+        let what = scene.dir.display();
+        assert_close!(rgba(&on_gpu.beauty), rgba(&cpu.beauty), TOLERANCE, "{what}: beauty");
+        assert_close!(rgb(&on_gpu.diffuse), rgb(&cpu.diffuse), TOLERANCE, "{what}: diffuse");
+        assert_close!(rgb(&on_gpu.specular), rgb(&cpu.specular), TOLERANCE, "{what}: specular");
+        assert_close!(rgb(&on_gpu.environment), rgb(&cpu.environment), TOLERANCE, "{what}: environment");
+        assert_close!(on_gpu.visibility, cpu.visibility, TOLERANCE, "{what}: visibility");
+        assert_close!(on_gpu.visibility_heightfield, cpu.visibility_heightfield, TOLERANCE, "{what}: visibility_heightfield");
+        assert_close!(on_gpu.visibility_blockers, cpu.visibility_blockers, TOLERANCE, "{what}: visibility_blockers");
+    }
+}
+
+/// The RGBA pixels of an EXR `logsh shade` wrote.
+fn read_rgba(path: &Path) -> Vec<[f32; 4]> {
+    use exr::prelude::*;
+    let image = read_first_rgba_layer_from_file(
+        path,
+        |resolution, _| (resolution.width(), vec![[0.0f32; 4]; resolution.width() * resolution.height()]),
+        |(width, pixels): &mut (usize, Vec<[f32; 4]>), position, (r, g, b, a): (f32, f32, f32, f32)| {
+            pixels[position.y() * *width + position.x()] = [r, g, b, a];
+        },
+    )
+    .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    image.layer_data.channel_data.pixels.1
+}
+
+/// The done-when of the GPU pass: `logsh shade --device gpu` against `--device cpu` on
+/// every sample scene, through the command line and the written EXRs.
+#[test]
+fn shade_on_the_gpu_matches_the_cpu_through_the_command_line() {
+    let Some(_) = gpu() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    for scene in sample_scenes() {
+        let mut images = Vec::new();
+        for device in ["gpu", "cpu"] {
+            let out = dir.path().join(format!("{}-{device}", scene.file_name().unwrap().to_string_lossy()));
+            let output = assert_cmd::Command::cargo_bin("logsh")
+                .unwrap()
+                .args(["shade", "--device", device])
+                .arg(&scene)
+                .arg("--out")
+                .arg(&out)
+                .output()
+                .unwrap();
+            let stderr = String::from_utf8_lossy(&output.stderr);
+            assert!(output.status.success(), "{stderr}");
+            assert!(stderr.contains(&format!("on {device}")), "{stderr}");
+            let frame = Scene::load(&scene).unwrap().default_frame();
+            images.push(read_rgba(&out.join(format!("beauty.{frame:04}.exr"))));
+        }
+        let light = Scene::load(&scene).unwrap().frame(1).map(|f| unoccluded_value(&f.light)).unwrap_or(1.0);
+        let scale = |v: &[[f32; 4]]| v.iter().flat_map(|c| c.iter().map(|x| f64::from(*x) / light)).collect::<Vec<f64>>();
+        assert_close!(scale(&images[0]), scale(&images[1]), TOLERANCE, "{}: --device gpu vs --device cpu", scene.display());
+    }
+}

@@ -10,8 +10,8 @@ use super::program::{Features, MarchShape, ShadeProgram, LAVAPIPE_LOOP_LIMIT, PY
 use super::GpuError;
 use crate::heightfield::{decimation_taps, PyramidPlan};
 use crate::scene::{Frame, Material, Scene};
-use crate::shade::frame::{check_frame, height_field, pixel_work, PixelWork};
-use crate::shade::{ShadeError, ShadedFrame, ShadingKernel, ShadingSettings};
+use crate::shade::frame::{check_frame, height_field, height_map_file, pixel_work, PixelWork};
+use crate::shade::{ShadeError, ShadedFrame, ShadedPasses, ShadingKernel, ShadingSettings};
 use crate::timing::{Clock, StageTimings};
 use rayon::prelude::*;
 use std::collections::HashMap;
@@ -21,9 +21,18 @@ use wgpu::util::DeviceExt;
 
 /// Invocations per workgroup of the shading pass (`@workgroup_size(64)`).
 const WORKGROUP: u32 = 64;
-/// `vec4<f32>` per shading point in, and per shaded point out.
+/// `vec4<f32>` per shading point in (position and slot, normal, reflected view), and per
+/// shaded point out (diffuse, specular, visibility terms).
 const POINT_VEC4S: u64 = 3;
-const SHADED_VEC4S: u64 = 2;
+const SHADED_VEC4S: usize = 3;
+
+/// What a pixel of a tile is: a colour known without shading, or a shaded point whose
+/// result is multiplied by a tint.
+#[derive(Clone, Copy, Debug)]
+enum TileWork {
+    Fixed([f32; 4]),
+    Shaded([f32; 3]),
+}
 
 /// A GPU adapter and device with the pipelines built so far.
 pub struct Gpu {
@@ -157,6 +166,85 @@ impl Gpu {
         settings: &ShadingSettings,
         specialise: bool,
     ) -> Result<(ShadedFrame, StageTimings), GpuError> {
+        let g = &frame.gbuffer;
+        let mut rgba = vec![[0.0f32; 4]; g.width * g.height];
+        let timings = self.shade_tiles(scene, frame, settings, specialise, false, &mut |start, work, shaded| {
+            rgba[start..start + work.len()].par_iter_mut().zip(work.par_iter()).enumerate().for_each(|(i, (out, w))| {
+                *out = match *w {
+                    TileWork::Fixed(colour) => colour,
+                    TileWork::Shaded(tint) => {
+                        let (d, s) = (shaded[SHADED_VEC4S * i], shaded[SHADED_VEC4S * i + 1]);
+                        [tint[0] * (d[0] + s[0]), tint[1] * (d[1] + s[1]), tint[2] * (d[2] + s[2]), 1.0]
+                    }
+                };
+            });
+        })?;
+        Ok((ShadedFrame { width: g.width, height: g.height, rgba }, timings))
+    }
+
+    /// Shades one frame into compositing passes and visibility terms (the GPU
+    /// counterpart of [`crate::shade::shade_frame_passes`]).
+    pub fn shade_frame_passes(&self, scene: &Scene, frame: &Frame, settings: &ShadingSettings) -> Result<ShadedPasses, GpuError> {
+        let g = &frame.gbuffer;
+        let pixels = g.width * g.height;
+        let mut out = ShadedPasses {
+            width: g.width,
+            height: g.height,
+            beauty: vec![[0.0; 4]; pixels],
+            diffuse: vec![[0.0; 3]; pixels],
+            specular: vec![[0.0; 3]; pixels],
+            environment: vec![[0.0; 3]; pixels],
+            visibility: vec![1.0; pixels],
+            visibility_heightfield: vec![1.0; pixels],
+            visibility_blockers: vec![1.0; pixels],
+            position: g.position.clone(),
+            normal: g.normal.clone(),
+        };
+        self.shade_tiles(scene, frame, settings, true, true, &mut |start, work, shaded| {
+            for (i, w) in work.iter().enumerate() {
+                let pixel = start + i;
+                match *w {
+                    // The background is the environment pass; water mirroring the sky is
+                    // specular, as on the CPU path.
+                    TileWork::Fixed(colour) => {
+                        let rgb = [colour[0], colour[1], colour[2]];
+                        if colour[3] == 0.0 {
+                            out.environment[pixel] = rgb;
+                        } else {
+                            out.specular[pixel] = rgb;
+                        }
+                        out.beauty[pixel] = colour;
+                    }
+                    TileWork::Shaded(tint) => {
+                        let (d, s, v) =
+                            (shaded[SHADED_VEC4S * i], shaded[SHADED_VEC4S * i + 1], shaded[SHADED_VEC4S * i + 2]);
+                        let diffuse = [0, 1, 2].map(|c| tint[c] * d[c]);
+                        let specular = [0, 1, 2].map(|c| tint[c] * s[c]);
+                        out.diffuse[pixel] = diffuse;
+                        out.specular[pixel] = specular;
+                        out.beauty[pixel] =
+                            [diffuse[0] + specular[0], diffuse[1] + specular[1], diffuse[2] + specular[2], 1.0];
+                        out.visibility[pixel] = v[0];
+                        out.visibility_heightfield[pixel] = v[1];
+                        out.visibility_blockers[pixel] = v[2];
+                    }
+                }
+            }
+        })?;
+        Ok(out)
+    }
+
+    /// The frame's passes, tile by tile: `consume(first pixel, what each pixel of the tile
+    /// is, SHADED_VEC4S vec4 per pixel)`.
+    fn shade_tiles(
+        &self,
+        scene: &Scene,
+        frame: &Frame,
+        settings: &ShadingSettings,
+        specialise: bool,
+        passes: bool,
+        consume: &mut dyn FnMut(usize, &[TileWork], &[[f32; 4]]),
+    ) -> Result<StageTimings, GpuError> {
         settings.validate().map_err(ShadeError::Settings)?;
         if settings.double_precision {
             return Err(GpuError::Unsupported("--precision f64 (the GPU pass runs in f32)".into()));
@@ -170,10 +258,8 @@ impl Gpu {
         let plan = field
             .as_ref()
             .map(|f| {
-                PyramidPlan::new(f, settings.horizon).map_err(|source| ShadeError::HeightField {
-                    file: scene.heightfield.as_ref().map(|h| h.heights.0.clone()).unwrap_or_default(),
-                    source,
-                })
+                PyramidPlan::new(f, settings.horizon)
+                    .map_err(|source| ShadeError::HeightField { file: height_map_file(scene), source })
             })
             .transpose()?;
         let light = frame.light.sh_coefficients(settings.order);
@@ -183,6 +269,7 @@ impl Gpu {
             blockers: !frame.blockers.is_empty(),
             phong: scene.materials.values().any(|m| matches!(m, Material::Phong { .. })),
             generic: !specialise,
+            passes,
         };
         let march = plan.as_ref().map(|p| MarchShape::of(p, settings.horizon.reconstruction, settings.horizon.scale_max));
         let program = ShadeProgram::new(&kernel, features, march);
@@ -246,12 +333,12 @@ impl Gpu {
         let g = &frame.gbuffer;
         let (width, height) = (g.width, g.height);
         let pixels = width * height;
-        let mut rgba = vec![[0.0f32; 4]; pixels];
+        let _ = height;
 
         // Tiles: as many points as one buffer binding and one dispatch allow.
         let tile = self.tile_points(pixels);
         let point_bytes = tile as u64 * POINT_VEC4S * 16;
-        let shaded_bytes = tile as u64 * SHADED_VEC4S * 16;
+        let shaded_bytes = tile as u64 * SHADED_VEC4S as u64 * 16;
         let points_buffer = self.buffer("points", point_bytes, wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST);
         let shaded_buffer = self.buffer("shaded", shaded_bytes, wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC);
         let readback = self.buffer("readback", shaded_bytes, wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST);
@@ -285,6 +372,7 @@ impl Gpu {
         let timer = self.timer();
 
         let mut points = vec![[0.0f32; 4]; tile * POINT_VEC4S as usize];
+        let mut work = vec![TileWork::Fixed([0.0; 4]); tile];
         let mut start = 0;
         while start < pixels {
             let end = (start + tile).min(pixels);
@@ -295,18 +383,18 @@ impl Gpu {
             let started = Instant::now();
             points[..count * POINT_VEC4S as usize]
                 .par_chunks_mut(POINT_VEC4S as usize)
-                .zip(rgba[start..end].par_iter_mut())
+                .zip(work[..count].par_iter_mut())
                 .enumerate()
                 .for_each(|(i, (point, out))| {
                     let pixel = start + i;
                     let (x, y) = (pixel % width, pixel / width);
                     match pixel_work(&scene.materials, frame, x, y) {
                         PixelWork::Fixed(colour) => {
-                            *out = colour;
+                            *out = TileWork::Fixed(colour);
                             point[0] = [0.0, 0.0, 0.0, f32::from_bits(SLOT_NONE)];
                         }
                         PixelWork::Shade { point: p, tint } => {
-                            *out = [tint[0], tint[1], tint[2], 1.0];
+                            *out = TileWork::Shaded(tint);
                             let slot = program.slots.get(&p.material).copied().unwrap_or(SLOT_UNKNOWN);
                             let reflected = crate::shade::kernel::reflect_view(p.view_origin, p.position, p.normal);
                             let f = |v: [f64; 3], w: f32| [v[0] as f32, v[1] as f32, v[2] as f32, w];
@@ -342,7 +430,7 @@ impl Gpu {
                 pass.set_bind_group(0, &bind_group, &[]);
                 pass.dispatch_workgroups((count as u32).div_ceil(WORKGROUP), 1, 1);
             }
-            let out_bytes = count as u64 * SHADED_VEC4S * 16;
+            let out_bytes = count as u64 * SHADED_VEC4S as u64 * 16;
             encoder.copy_buffer_to_buffer(&shaded_buffer, 0, &readback, 0, out_bytes);
             if let Some(t) = &timer {
                 t.resolve(&mut encoder);
@@ -365,18 +453,13 @@ impl Gpu {
             {
                 let data = slice.get_mapped_range().map_err(|e| self.wgpu_error("reading the shaded tile back", e.to_string()))?;
                 let shaded: &[[f32; 4]] = bytemuck::cast_slice(&data);
-                rgba[start..end].par_iter_mut().enumerate().for_each(|(i, out)| {
-                    if points[i * POINT_VEC4S as usize][3].to_bits() != SLOT_NONE {
-                        let (d, s) = (shaded[2 * i], shaded[2 * i + 1]);
-                        *out = [out[0] * (d[0] + s[0]), out[1] * (d[1] + s[1]), out[2] * (d[2] + s[2]), 1.0];
-                    }
-                });
+                consume(start, &work[..count], shaded);
             }
             readback.unmap();
             timings.add_wall("readback", started);
             start = end;
         }
-        Ok((ShadedFrame { width, height, rgba }, timings))
+        Ok(timings)
     }
 
     fn buffer(&self, label: &str, size: u64, usage: wgpu::BufferUsages) -> wgpu::Buffer {

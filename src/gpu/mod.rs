@@ -17,7 +17,7 @@ pub mod program;
 pub use executor::Gpu;
 
 use crate::scene::{Frame, Scene};
-use crate::shade::{ShadeError, ShadedFrame, ShadingSettings};
+use crate::shade::{ShadeError, ShadedFrame, ShadedPasses, ShadingSettings};
 use crate::timing::StageTimings;
 
 /// Where shading runs (`--device`).
@@ -101,6 +101,20 @@ impl Executor {
 
     pub fn shade(&self, scene: &Scene, frame: &Frame, settings: &ShadingSettings) -> Result<ShadedFrame, GpuError> {
         Ok(self.shade_timed(scene, frame, settings, true)?.0)
+    }
+
+    /// The frame's compositing passes and visibility terms (`logsh render`).
+    pub fn shade_passes(&self, scene: &Scene, frame: &Frame, settings: &ShadingSettings) -> Result<ShadedPasses, GpuError> {
+        match self {
+            Self::Cpu => Ok(crate::shade::shade_frame_passes(scene, frame, settings)?),
+            Self::Gpu { gpu, fallback } => match gpu.shade_frame_passes(scene, frame, settings) {
+                Err(e @ GpuError::LoopBudget { .. }) if *fallback => {
+                    eprintln!("--device auto: shading frame {} on the CPU: {e}", frame.number);
+                    Ok(crate::shade::shade_frame_passes(scene, frame, settings)?)
+                }
+                other => other,
+            },
+        }
     }
 
     /// Shades and times each stage; `specialise` only matters on the GPU (see

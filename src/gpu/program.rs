@@ -16,7 +16,7 @@ use crate::scene::Material;
 use crate::sh::basis::{coefficient_count, funk_hecke_factor, nlp_scale, normalisation};
 use crate::sh::exp::{ol_node_count, ONE_DC, OL_COARSE_STEP, OL_FINE_NODES, SERIES_MAX_TERMS, Y0};
 use crate::sh::ExpMethod;
-use crate::shade::kernel::sh_space_max_magnitude;
+use crate::shade::kernel::{sh_space_max_magnitude, LUMINANCE, SH_SPACE_BLEND};
 use crate::shade::ShadingKernel;
 use std::collections::BTreeMap;
 
@@ -41,6 +41,9 @@ pub struct Features {
     /// sized for order 8 and loop bounds read from uniforms, as one program serving every
     /// scene and order would be.
     pub generic: bool,
+    /// The visibility terms of `logsh render`'s compositing passes (three more diffuse
+    /// exponentiations per point; src/shade/kernel/passes.rs).
+    pub passes: bool,
 }
 
 impl Features {
@@ -54,6 +57,7 @@ impl Features {
             ("EXP_OL", exp == ExpMethod::Ol),
             ("EXP_HYB", exp == ExpMethod::Hyb),
             ("EXP_SERIES", exp == ExpMethod::Series),
+            ("PASSES", self.passes),
         ]
     }
 }
@@ -268,7 +272,8 @@ impl ShadeProgram {
              const Y0: f32 = {};\nconst ONE_DC: f32 = {};\n\
              const OL_FINE_NODES: u32 = {OL_FINE_NODES}u;\nconst OL_COARSE_STEP: f32 = {};\nconst OL_NODES: u32 = {}u;\n\
              const HYB_MAX_SQUARINGS: u32 = {}u;\nconst SERIES_MAX_TERMS: u32 = {SERIES_MAX_TERMS}u;\n\
-             const SERIES_TOLERANCE: f32 = {};\nconst SH_SPACE_MAX_MAGNITUDE: f32 = {};\n",
+             const SERIES_TOLERANCE: f32 = {};\nconst SH_SPACE_MAX_MAGNITUDE: f32 = {};\n\
+             const SH_SPACE_BLEND: f32 = {};\nconst LUMINANCE: vec3<f32> = vec3<f32>({}, {}, {});\n",
             order_cap,
             order_cap + 1,
             count_cap,
@@ -288,6 +293,10 @@ impl ShadeProgram {
             crate::sh::exp::HYB_MAX_SQUARINGS,
             wgsl_float(f64::from(f32::EPSILON) * 0.01),
             wgsl_float(sh_space_max_magnitude(exp)),
+            wgsl_float(SH_SPACE_BLEND),
+            wgsl_float(LUMINANCE[0]),
+            wgsl_float(LUMINANCE[1]),
+            wgsl_float(LUMINANCE[2]),
         );
         for (name, offset) in &t.offsets {
             prelude += &format!("const {name}: u32 = {offset}u;\n");
@@ -330,12 +339,13 @@ impl ShadeProgram {
         let add_rotated = eval_basis + n + c;
         let quad = self.nodes as u64 * (c.div_ceil(4) + 1);
         let product = c + self.tensor_entries as u64;
+        // SH-space methods blend into the quadrature near their range's end (both run).
         let exp = match self.exp {
             ExpMethod::Quad | ExpMethod::Exact => quad,
-            ExpMethod::Ol => quad.max(3 * c),
-            // Magnitudes above 16 go to the quadrature; below, at most 7 squarings.
-            ExpMethod::Hyb => quad.max(3 * c + 7 * product),
-            ExpMethod::Series => quad.max(3 * c + SERIES_MAX_TERMS as u64 * (product + c)),
+            ExpMethod::Ol => quad + 3 * c,
+            // Below the hand-over, at most 7 squarings.
+            ExpMethod::Hyb => quad + 3 * c + 7 * product,
+            ExpMethod::Series => quad + 3 * c + SERIES_MAX_TERMS as u64 * (product + c),
         };
         let lit = n + add_rotated + exp;
         let tangent = n + add_rotated;
@@ -347,7 +357,8 @@ impl ShadeProgram {
             let wedge = c * (1 + n) + n * (n + 1) / 2 + c;
             m.levels as u64 * (1 + sample) + m.directions as u64 * (1 + horizon + 2 * n + wedge) + wedge
         });
-        1 + tangent + heightfield + spheres as u64 * sphere + 2 * lit
+        let passes = if self.features.passes { 2 * tangent + 3 * lit + n } else { 0 };
+        1 + tangent + heightfield + spheres as u64 * sphere + 2 * lit + passes
     }
 }
 

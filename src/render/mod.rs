@@ -28,7 +28,8 @@ pub mod progress;
 
 use crate::scene::layers::{write_exr_layers, OutputChannel, SampleType};
 use crate::scene::{output, Scene, SceneError};
-use crate::shade::{shade_frame_passes, ShadedPasses, ShadingSettings};
+use crate::gpu::Executor;
+use crate::shade::{ShadedPasses, ShadingSettings};
 use anyhow::Context;
 use progress::Progress;
 use std::path::{Path, PathBuf};
@@ -103,7 +104,12 @@ pub fn is_complete(outputs: &[PathBuf; 2]) -> bool {
 }
 
 /// Renders `options.frames` in order, reporting to `progress`; never stops early.
-pub fn render_sequence(scene: &Scene, options: &SequenceOptions, progress: &mut dyn Progress) -> Vec<FrameOutcome> {
+pub fn render_sequence(
+    executor: &Executor,
+    scene: &Scene,
+    options: &SequenceOptions,
+    progress: &mut dyn Progress,
+) -> Vec<FrameOutcome> {
     let total = options.frames.len();
     progress.start(total);
     let mut outcomes = Vec::with_capacity(total);
@@ -114,7 +120,7 @@ pub fn render_sequence(scene: &Scene, options: &SequenceOptions, progress: &mut 
             FrameStatus::Skipped { outputs: outputs.to_vec() }
         } else {
             let started = Instant::now();
-            let attempt = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| render_frame(scene, frame, options, &outputs)));
+            let attempt = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| render_frame(executor, scene, frame, options, &outputs)));
             match attempt {
                 Ok(Ok(())) => FrameStatus::Rendered { seconds: started.elapsed().as_secs_f64(), outputs: outputs.to_vec() },
                 Ok(Err(e)) => FrameStatus::Failed { error: format!("{e:#}") },
@@ -138,9 +144,15 @@ fn panic_message(panic: &Box<dyn std::any::Any + Send>) -> String {
 }
 
 /// Reads, shades and writes one frame.
-fn render_frame(scene: &Scene, frame: i64, options: &SequenceOptions, outputs: &[PathBuf; 2]) -> anyhow::Result<()> {
+fn render_frame(
+    executor: &Executor,
+    scene: &Scene,
+    frame: i64,
+    options: &SequenceOptions,
+    outputs: &[PathBuf; 2],
+) -> anyhow::Result<()> {
     let data = scene.frame(frame)?;
-    let passes = shade_frame_passes(scene, &data, &options.settings)?;
+    let passes = executor.shade_passes(scene, &data, &options.settings)?;
     let [exr, png] = outputs;
     write_passes(exr, &passes, options.colour)?;
     output::write_png_preview(png, passes.width, passes.height, &passes.beauty)

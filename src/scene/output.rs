@@ -6,7 +6,6 @@
 //! functions do not know the scene; call [`super::Scene::check_output_path`] first so
 //! that no input is ever overwritten.
 
-use exr::prelude::{AnyChannel, AnyChannels, Blocks, Compression, Encoding, FlatSamples, Image, Layer, LayerAttributes, LineOrder, WritableImage};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
 
@@ -73,26 +72,15 @@ pub fn write_exr_channels(
     for (_, data) in channels {
         check_len(path, width, height, data.len())?;
     }
-    let list: Vec<AnyChannel<FlatSamples>> = channels
+    let list: Vec<super::layers::OutputChannel> = channels
         .iter()
-        .map(|(name, data)| AnyChannel::new(*name, FlatSamples::F32(data.to_vec())))
+        .map(|(name, values)| super::layers::OutputChannel {
+            name: name.to_string(),
+            sample_type: super::layers::SampleType::Float,
+            values,
+        })
         .collect();
-    let layer = Layer::new(
-        (width, height),
-        LayerAttributes::default(),
-        Encoding {
-            compression: Compression::ZIP16,
-            blocks: Blocks::ScanLines,
-            line_order: LineOrder::Increasing,
-        },
-        AnyChannels::sort(list.into_iter().collect()),
-    );
-    let image = Image::from_layer(layer);
-    write_atomically(
-        path,
-        |temp| image.write().to_file(temp),
-        |e| OutputError::Encode { file: path.to_path_buf(), message: e.to_string() },
-    )
+    super::layers::write_exr_layers(path, width, height, &list)
 }
 
 /// The sRGB transfer function (IEC 61966-2-1) of a linear value in `[0, 1]`.

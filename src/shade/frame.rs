@@ -49,13 +49,7 @@ pub fn shade_frame_timed(
     check_frame(scene, frame)?;
     let mut timings = StageTimings::default();
     let started = Instant::now();
-    let pyramid = match height_field(scene, frame)? {
-        Some(field) => Some(
-            HorizonPyramid::new(&field, settings.horizon)
-                .map_err(|source| ShadeError::HeightField { file: height_map_file(scene), source })?,
-        ),
-        None => None,
-    };
+    let pyramid = pyramid(scene, frame, settings)?;
     if pyramid.is_some() {
         timings.add_wall("pyramid", started);
     }
@@ -81,8 +75,18 @@ pub fn shade_frame_timed(
     Ok((shaded, timings))
 }
 
+/// The frame's horizon pyramid, if the scene has a height field.
+pub fn pyramid(scene: &Scene, frame: &Frame, settings: &ShadingSettings) -> Result<Option<HorizonPyramid>, ShadeError> {
+    height_field(scene, frame)?
+        .map(|field| {
+            HorizonPyramid::new(&field, settings.horizon)
+                .map_err(|source| ShadeError::HeightField { file: height_map_file(scene), source })
+        })
+        .transpose()
+}
+
 /// The name of the scene's height map, for messages.
-fn height_map_file(scene: &Scene) -> String {
+pub fn height_map_file(scene: &Scene) -> String {
     scene.heightfield.as_ref().map(|h| h.heights.0.clone()).unwrap_or_default()
 }
 

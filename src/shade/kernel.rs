@@ -72,15 +72,30 @@ impl Exponentiator {
     /// ([`ExactExp::exp_below`]), the SH-space ones cannot.
     pub fn exp<T: Real>(&self, f: &[T], ceiling: f64, out: &mut [T]) {
         let quadrature = self.exact.as_ref().expect("always built");
-        let sh_space = !matches!(self.method, ExpMethod::Exact | ExpMethod::Quad);
-        if sh_space {
-            let magnitude = f[1..].iter().fold(0.0f64, |acc, c| acc + c.to_f64().unwrap_or(f64::INFINITY).powi(2)).sqrt();
-            if !(magnitude <= sh_space_max_magnitude(self.method)) {
-                return quadrature.exp_below(f, ceiling, out);
-            }
-        }
+        let count = f.len();
         match self.method {
             ExpMethod::Exact | ExpMethod::Quad => quadrature.exp_below(f, ceiling, out),
+            method => {
+                let magnitude = f[1..].iter().fold(0.0f64, |acc, c| acc + c.to_f64().unwrap_or(f64::INFINITY).powi(2)).sqrt();
+                let weight = quadrature_weight(method, magnitude);
+                if weight >= 1.0 {
+                    return quadrature.exp_below(f, ceiling, out);
+                }
+                self.exp_sh_space(f, out);
+                if weight > 0.0 {
+                    let mut quad = [T::zero(); MAX_COEFFICIENTS];
+                    quadrature.exp_below(f, ceiling, &mut quad[..count]);
+                    let w = T::of(weight);
+                    for (o, q) in out[..count].iter_mut().zip(&quad[..count]) {
+                        *o = *o + w * (*q - *o);
+                    }
+                }
+            }
+        }
+    }
+
+    fn exp_sh_space<T: Real>(&self, f: &[T], out: &mut [T]) {
+        match self.method {
             ExpMethod::Series => exp_series(self.tensor.as_ref().expect("built with its table"), f, out),
             ExpMethod::Ol => self.ol.as_ref().expect("built with its table").exp(f, out),
             ExpMethod::Hyb => exp_hyb_with(
@@ -90,8 +105,26 @@ impl Exponentiator {
                 f,
                 out,
             ),
+            ExpMethod::Exact | ExpMethod::Quad => unreachable!("quadrature methods are not SH-space"),
         }
     }
+}
+
+/// Width of the band of magnitudes below [`sh_space_max_magnitude`] over which an
+/// SH-space method hands over to `quad`: the result is blended linearly across it, so
+/// the hand-over leaves no seam in the image, and two executors whose magnitudes differ
+/// by rounding give nearly the same value (a hard switch made a 0.06 jump on the `cones`
+/// sample at `--quality draft`).
+pub const SH_SPACE_BLEND: f64 = 1.0;
+
+/// How much of `quad` a pixel of magnitude `|f^|` takes with an SH-space `method`: 0 up to
+/// the blend band, 1 from [`sh_space_max_magnitude`] on (and for a non-finite magnitude).
+pub fn quadrature_weight(method: ExpMethod, magnitude: f64) -> f64 {
+    let max = sh_space_max_magnitude(method);
+    if !(magnitude <= max) {
+        return 1.0;
+    }
+    ((magnitude - (max - SH_SPACE_BLEND)) / SH_SPACE_BLEND).clamp(0.0, 1.0)
 }
 
 /// A lobe's log-ZH table and the log of its peak (the most its log function reaches).
@@ -312,4 +345,4 @@ pub fn reflect_view(eye: [f64; 3], p: [f64; 3], n: [f64; 3]) -> [f64; 3] {
 
 // The same shading split into compositing passes and visibility terms (`logsh render`).
 mod passes;
-pub use passes::PixelPasses;
+pub use passes::{PixelPasses, LUMINANCE};

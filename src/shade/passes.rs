@@ -13,11 +13,10 @@
 //! `tint * (d + s)` and `tint * d + tint * s` can differ in the last bit.
 //! Visibility terms are 1 on the background and, for water, those of the reflected point.
 
-use super::frame::{check_frame, height_field, surface_at, ShadeError};
-use super::kernel::{reflect_view, Occluders, PixelPasses, ShadingKernel};
+use super::frame::{check_frame, pixel_work, pyramid, PixelWork, ShadeError};
+use super::kernel::{Occluders, PixelPasses, ShadingKernel};
 use super::settings::ShadingSettings;
-use crate::heightfield::HorizonPyramid;
-use crate::scene::{Frame, Material, Scene};
+use crate::scene::{Frame, Scene};
 use crate::sh::Real;
 use rayon::prelude::*;
 
@@ -53,13 +52,7 @@ struct Pixel {
 pub fn shade_frame_passes(scene: &Scene, frame: &Frame, settings: &ShadingSettings) -> Result<ShadedPasses, ShadeError> {
     settings.validate().map_err(ShadeError::Settings)?;
     check_frame(scene, frame)?;
-    let pyramid = match height_field(scene, frame)? {
-        Some(field) => Some(HorizonPyramid::new(&field, settings.horizon).map_err(|source| ShadeError::HeightField {
-            file: scene.heightfield.as_ref().map(|h| h.heights.0.clone()).unwrap_or_default(),
-            source,
-        })?),
-        None => None,
-    };
+    let pyramid = pyramid(scene, frame, settings)?;
     let light = frame.light.sh_coefficients(settings.order);
     let occluders = Occluders { blockers: &frame.blockers, horizons: pyramid.as_ref() };
     let pixels = if settings.double_precision {
@@ -106,31 +99,21 @@ fn shade_pixels<T: Real>(kernel: &ShadingKernel<T>, occluders: Occluders, frame:
 
 /// The pixel `shade_frame` computes, by pass (its `shade_pixel`, branch for branch).
 fn shade_pixel<T: Real>(kernel: &ShadingKernel<T>, occluders: Occluders, frame: &Frame, x: usize, y: usize) -> Pixel {
-    let g = &frame.gbuffer;
-    let i = g.index(x, y);
-    let surface = |passes| Pixel { passes, environment: [0.0; 3], alpha: 1.0 };
-    match g.material[i] {
-        0 => {
-            let sky = match &frame.camera {
-                Some(camera) => frame.light.radiance(camera.ray_direction(x as f64 + 0.5, y as f64 + 0.5)),
-                None => [0.0; 3],
-            };
-            Pixel { passes: PixelPasses::UNSHADED, environment: sky, alpha: 0.0 }
-        }
-        m => match kernel.material(m) {
-            Some(Material::Water { tint }) => {
-                let reflection = frame.reflection.as_ref().expect("checked before shading");
-                let water = surface_at(g, i, None, frame);
-                let tinted = |c: [f32; 3]| [0, 1, 2].map(|k| tint[k] * c[k]);
-                if reflection.material[i] == 0 {
-                    let mirror = reflect_view(water.view_origin, water.position, water.normal);
-                    surface(PixelPasses { specular: tinted(frame.light.radiance(mirror)), ..PixelPasses::UNSHADED })
-                } else {
-                    let seen = kernel.shade_passes(occluders, &surface_at(reflection, i, Some(water.position), frame));
-                    surface(PixelPasses { diffuse: tinted(seen.diffuse), specular: tinted(seen.specular), ..seen })
-                }
+    match pixel_work(kernel.materials(), frame, x, y) {
+        // The background is the environment pass; water mirroring the sky is specular.
+        PixelWork::Fixed(colour) => {
+            let rgb = [colour[0], colour[1], colour[2]];
+            if colour[3] == 0.0 {
+                Pixel { passes: PixelPasses::UNSHADED, environment: rgb, alpha: 0.0 }
+            } else {
+                Pixel { passes: PixelPasses { specular: rgb, ..PixelPasses::UNSHADED }, environment: [0.0; 3], alpha: 1.0 }
             }
-            _ => surface(kernel.shade_passes(occluders, &surface_at(g, i, None, frame))),
-        },
+        }
+        PixelWork::Shade { point, tint } => {
+            let seen = kernel.shade_passes(occluders, &point);
+            let tinted = |c: [f32; 3]| [0, 1, 2].map(|k| tint[k] * c[k]);
+            let passes = PixelPasses { diffuse: tinted(seen.diffuse), specular: tinted(seen.specular), ..seen };
+            Pixel { passes, environment: [0.0; 3], alpha: 1.0 }
+        }
     }
 }
