@@ -1,7 +1,7 @@
 //! Command-line options: parsed by clap into these structs, then turned into settings in
 //! a separate step that checks the rules spanning several flags.
 
-pub use crate::gpu::DeviceChoice;
+pub use crate::gpu::{DeviceChoice, Specialisation};
 use crate::shade::{default_epsilon, Quality, ShadingSettings};
 use crate::sh::ExpMethod;
 use clap::{Args, Parser, Subcommand, ValueEnum};
@@ -87,9 +87,9 @@ pub struct BenchArgs {
     /// Print JSON instead of a table.
     #[arg(long)]
     pub json: bool,
-    /// Specialise the GPU program to the scene's features (off: every feature compiled in and chosen per frame, the baseline that shows what specialisation saves).
-    #[arg(long, value_enum, default_value_t = Switch::On)]
-    pub specialise: Switch,
+    /// What the GPU program is specialised to: full (the scene's features and the order, as shading runs), order (every feature compiled in, skipped per frame by uniform branches), none (also loop bounds and array sizes from uniforms); the last two only measure what specialisation saves.
+    #[arg(long, value_enum, default_value_t = Specialisation::Full)]
+    pub specialise: Specialisation,
     #[command(flatten)]
     pub shading: ShadingArgs,
 }

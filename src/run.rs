@@ -1,6 +1,6 @@
 //! What each command does, between parsed options and the library.
 
-use crate::cli::{BenchArgs, ExampleArgs, ExampleName, ReferenceArgs, ShadeArgs, Switch, SweepArgs};
+use crate::cli::{BenchArgs, ExampleArgs, ExampleName, ReferenceArgs, ShadeArgs, SweepArgs};
 use crate::reference::{render_reference, ReferenceLight, ReferenceOptions};
 use crate::scene::{output, Scene};
 use crate::gpu::Executor;
@@ -160,7 +160,7 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
     let frame_number = args.frame.unwrap_or_else(|| scene.default_frame());
     let frame = scene.frame(frame_number)?;
     let executor = Executor::select(args.shading.device, &settings)?;
-    let specialise = args.specialise == Switch::On;
+    let specialise = args.specialise;
     executor.shade_timed(&scene, &frame, &settings, specialise)?;
     let mut runs = Vec::new();
     let mut walls = Vec::new();

@@ -6,7 +6,7 @@ use super::layout::{
     GpuDecimation, GpuLevel, GpuStep, GpuTap, ShadeParams, FEATURE_BLOCKERS, FEATURE_HEIGHTFIELD, FEATURE_PHONG, SLOT_NONE,
     SLOT_UNKNOWN,
 };
-use super::program::{Features, MarchShape, ShadeProgram, LAVAPIPE_LOOP_LIMIT, PYRAMID_WGSL};
+use super::program::{Features, Specialisation, MarchShape, ShadeProgram, LAVAPIPE_LOOP_LIMIT, PYRAMID_WGSL};
 use super::GpuError;
 use crate::heightfield::{decimation_taps, PyramidPlan};
 use crate::scene::{Frame, Material, Scene};
@@ -153,22 +153,21 @@ impl Gpu {
 
     /// Shades one frame (the GPU counterpart of [`crate::shade::shade_frame`]).
     pub fn shade_frame(&self, scene: &Scene, frame: &Frame, settings: &ShadingSettings) -> Result<ShadedFrame, GpuError> {
-        Ok(self.shade_frame_timed(scene, frame, settings, true)?.0)
+        Ok(self.shade_frame_timed(scene, frame, settings, Specialisation::Full)?.0)
     }
 
-    /// Shades one frame and times each stage. `specialise = false` runs the generic
-    /// program (every feature compiled in, chosen per frame by uniforms), the baseline
-    /// that shows what specialisation saves.
+    /// Shades one frame and times each stage; `specialisation` below
+    /// [`Specialisation::Full`] only measures what specialisation saves.
     pub fn shade_frame_timed(
         &self,
         scene: &Scene,
         frame: &Frame,
         settings: &ShadingSettings,
-        specialise: bool,
+        specialisation: Specialisation,
     ) -> Result<(ShadedFrame, StageTimings), GpuError> {
         let g = &frame.gbuffer;
         let mut rgba = vec![[0.0f32; 4]; g.width * g.height];
-        let timings = self.shade_tiles(scene, frame, settings, specialise, false, &mut |start, work, shaded| {
+        let timings = self.shade_tiles(scene, frame, settings, specialisation, false, &mut |start, work, shaded| {
             rgba[start..start + work.len()].par_iter_mut().zip(work.par_iter()).enumerate().for_each(|(i, (out, w))| {
                 *out = match *w {
                     TileWork::Fixed(colour) => colour,
@@ -200,7 +199,7 @@ impl Gpu {
             position: g.position.clone(),
             normal: g.normal.clone(),
         };
-        self.shade_tiles(scene, frame, settings, true, true, &mut |start, work, shaded| {
+        self.shade_tiles(scene, frame, settings, Specialisation::Full, true, &mut |start, work, shaded| {
             for (i, w) in work.iter().enumerate() {
                 let pixel = start + i;
                 match *w {
@@ -241,7 +240,7 @@ impl Gpu {
         scene: &Scene,
         frame: &Frame,
         settings: &ShadingSettings,
-        specialise: bool,
+        specialisation: Specialisation,
         passes: bool,
         consume: &mut dyn FnMut(usize, &[TileWork], &[[f32; 4]]),
     ) -> Result<StageTimings, GpuError> {
@@ -268,7 +267,7 @@ impl Gpu {
             heightfield: field.is_some(),
             blockers: !frame.blockers.is_empty(),
             phong: scene.materials.values().any(|m| matches!(m, Material::Phong { .. })),
-            generic: !specialise,
+            specialisation,
             passes,
         };
         let march = plan.as_ref().map(|p| MarchShape::of(p, settings.horizon.reconstruction, settings.horizon.scale_max));
@@ -316,7 +315,8 @@ impl Gpu {
             }
             _ => None,
         };
-        let dummy_levels = if heightfield.is_none() && !specialise {
+        let generic = specialisation != Specialisation::Full;
+        let dummy_levels = if heightfield.is_none() && generic {
             Some((
                 self.storage("levels", bytemuck::cast_slice(&[0.0f32]))?,
                 self.storage("level table", bytemuck::cast_slice(&[GpuLevel { columns: 1, rows: 1, ..Default::default() }]))?,
@@ -355,7 +355,7 @@ impl Gpu {
             entry(3, &shaded_buffer),
             entry(4, &materials),
         ];
-        if features.blockers || !specialise {
+        if features.blockers || generic {
             entries.push(entry(5, &spheres));
         }
         if let Some((levels, level_table, steps)) = level_buffers {

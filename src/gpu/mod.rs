@@ -15,6 +15,7 @@ pub mod layout;
 pub mod program;
 
 pub use executor::Gpu;
+pub use program::Specialisation;
 
 use crate::scene::{Frame, Scene};
 use crate::shade::{ShadeError, ShadedFrame, ShadedPasses, ShadingSettings};
@@ -100,7 +101,7 @@ impl Executor {
     }
 
     pub fn shade(&self, scene: &Scene, frame: &Frame, settings: &ShadingSettings) -> Result<ShadedFrame, GpuError> {
-        Ok(self.shade_timed(scene, frame, settings, true)?.0)
+        Ok(self.shade_timed(scene, frame, settings, Specialisation::Full)?.0)
     }
 
     /// The frame's compositing passes and visibility terms (`logsh render`).
@@ -117,18 +118,18 @@ impl Executor {
         }
     }
 
-    /// Shades and times each stage; `specialise` only matters on the GPU (see
+    /// Shades and times each stage; `specialisation` only matters on the GPU (see
     /// [`Gpu::shade_frame_timed`]).
     pub fn shade_timed(
         &self,
         scene: &Scene,
         frame: &Frame,
         settings: &ShadingSettings,
-        specialise: bool,
+        specialisation: Specialisation,
     ) -> Result<(ShadedFrame, StageTimings), GpuError> {
         match self {
             Self::Cpu => Ok(crate::shade::shade_frame_timed(scene, frame, settings)?),
-            Self::Gpu { gpu, fallback } => match gpu.shade_frame_timed(scene, frame, settings, specialise) {
+            Self::Gpu { gpu, fallback } => match gpu.shade_frame_timed(scene, frame, settings, specialisation) {
                 Err(e @ GpuError::LoopBudget { .. }) if *fallback => {
                     eprintln!("--device auto: shading frame {} on the CPU: {e}", frame.number);
                     Ok(crate::shade::shade_frame_timed(scene, frame, settings)?)

@@ -36,11 +36,9 @@ pub struct Features {
     pub heightfield: bool,
     pub blockers: bool,
     pub phong: bool,
-    /// The unspecialised baseline the specialisation is measured against (`logsh bench
-    /// --specialise off`): every feature compiled in and skipped by a uniform branch, arrays
-    /// sized for order 8 and loop bounds read from uniforms, as one program serving every
-    /// scene and order would be.
-    pub generic: bool,
+    /// How far the program is specialised; less than [`Specialisation::Full`] only to
+    /// measure what specialisation saves (`logsh bench --specialise`).
+    pub specialisation: Specialisation,
     /// The visibility terms of `logsh render`'s compositing passes (three more diffuse
     /// exponentiations per point; src/shade/kernel/passes.rs).
     pub passes: bool,
@@ -48,7 +46,7 @@ pub struct Features {
 
 impl Features {
     fn flags(&self, exp: ExpMethod) -> Vec<(&'static str, bool)> {
-        let all = self.generic;
+        let all = self.specialisation != Specialisation::Full;
         vec![
             ("HEIGHTFIELD", self.heightfield || all),
             ("BLOCKERS", self.blockers || all),
@@ -60,6 +58,20 @@ impl Features {
             ("PASSES", self.passes),
         ]
     }
+}
+
+/// What a program is specialised to.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, clap::ValueEnum, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Specialisation {
+    /// The scene's features and the order: what shading runs.
+    Full,
+    /// The order only: every feature compiled in and skipped by a uniform branch when the
+    /// frame lacks it (what a program serving every scene would carry).
+    Order,
+    /// Neither: every feature compiled in, arrays sized for order 8 and loop bounds read
+    /// from uniforms (one program for every scene and order).
+    None,
 }
 
 /// The height-field march's shape, which fixes the shader's loop bounds.
@@ -259,7 +271,8 @@ impl ShadeProgram {
 
         let march_in = march;
         let march = march.unwrap_or_default();
-        let order_cap = if features.generic { crate::sh::MAX_ORDER } else { order };
+        let runtime_order = features.specialisation == Specialisation::None;
+        let order_cap = if runtime_order { crate::sh::MAX_ORDER } else { order };
         // Coefficient arrays hold a multiple of 4 entries (the padding stays 0).
         let count_cap = (order_cap * order_cap).div_ceil(4) * 4;
         let mut prelude = format!(
@@ -283,7 +296,7 @@ impl ShadeProgram {
             march.steps.max(1),
             march.bspline_levels,
             march.bspline_scale_max,
-            features.generic,
+            features.specialisation != Specialisation::Full,
             kernel.tangent_occlusion,
             kernel.ratio_attenuation,
             wgsl_float(Y0),
@@ -320,7 +333,7 @@ impl ShadeProgram {
         let mut source = wgsl_declarations() + &prelude;
         for module in modules {
             let module = preprocess(module, &flags);
-            source += &if features.generic { runtime_bounds(&module) } else { module };
+            source += &if runtime_order { runtime_bounds(&module) } else { module };
         }
         let tensor_entries = kernel.exp.tensor.as_ref().map_or(0, |t| t.entry_count());
         Self { source, features, tables: t.data, materials, slots, nodes, order, exp, march: march_in, tensor_entries }
