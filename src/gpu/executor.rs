@@ -331,9 +331,8 @@ impl Gpu {
             | (if features.blockers { FEATURE_BLOCKERS } else { 0 })
             | (if features.phong { FEATURE_PHONG } else { 0 });
         let g = &frame.gbuffer;
-        let (width, height) = (g.width, g.height);
-        let pixels = width * height;
-        let _ = height;
+        let width = g.width;
+        let pixels = width * g.height;
 
         // Tiles: as many points as one buffer binding and one dispatch allow.
         let tile = self.tile_points(pixels);
