@@ -11,6 +11,8 @@ use super::GpuError;
 use crate::heightfield::{decimation_taps, PyramidPlan};
 use crate::scene::{Frame, Material, Scene};
 use crate::shade::frame::{check_frame, height_field, height_map_file, pixel_work, PixelWork};
+use crate::shade::kernel::PixelPasses;
+use crate::shade::passes::{assemble, Pixel};
 use crate::shade::{ShadeError, ShadedFrame, ShadedPasses, ShadingKernel, ShadingSettings};
 use crate::timing::{Clock, StageTimings};
 use rayon::prelude::*;
@@ -185,52 +187,27 @@ impl Gpu {
     /// counterpart of [`crate::shade::shade_frame_passes`]).
     pub fn shade_frame_passes(&self, scene: &Scene, frame: &Frame, settings: &ShadingSettings) -> Result<ShadedPasses, GpuError> {
         let g = &frame.gbuffer;
-        let pixels = g.width * g.height;
-        let mut out = ShadedPasses {
-            width: g.width,
-            height: g.height,
-            beauty: vec![[0.0; 4]; pixels],
-            diffuse: vec![[0.0; 3]; pixels],
-            specular: vec![[0.0; 3]; pixels],
-            environment: vec![[0.0; 3]; pixels],
-            visibility: vec![1.0; pixels],
-            visibility_heightfield: vec![1.0; pixels],
-            visibility_blockers: vec![1.0; pixels],
-            position: g.position.clone(),
-            normal: g.normal.clone(),
-        };
+        let mut pixels = vec![Pixel::fixed([0.0; 4]); g.width * g.height];
         self.shade_tiles(scene, frame, settings, Specialisation::Full, true, &mut |start, work, shaded| {
-            for (i, w) in work.iter().enumerate() {
-                let pixel = start + i;
-                match *w {
-                    // The background is the environment pass; water mirroring the sky is
-                    // specular, as on the CPU path.
-                    TileWork::Fixed(colour) => {
-                        let rgb = [colour[0], colour[1], colour[2]];
-                        if colour[3] == 0.0 {
-                            out.environment[pixel] = rgb;
-                        } else {
-                            out.specular[pixel] = rgb;
-                        }
-                        out.beauty[pixel] = colour;
-                    }
+            for (i, (w, out)) in work.iter().zip(&mut pixels[start..]).enumerate() {
+                *out = match *w {
+                    TileWork::Fixed(colour) => Pixel::fixed(colour),
                     TileWork::Shaded(tint) => {
                         let (d, s, v) =
                             (shaded[SHADED_VEC4S * i], shaded[SHADED_VEC4S * i + 1], shaded[SHADED_VEC4S * i + 2]);
-                        let diffuse = [0, 1, 2].map(|c| tint[c] * d[c]);
-                        let specular = [0, 1, 2].map(|c| tint[c] * s[c]);
-                        out.diffuse[pixel] = diffuse;
-                        out.specular[pixel] = specular;
-                        out.beauty[pixel] =
-                            [diffuse[0] + specular[0], diffuse[1] + specular[1], diffuse[2] + specular[2], 1.0];
-                        out.visibility[pixel] = v[0];
-                        out.visibility_heightfield[pixel] = v[1];
-                        out.visibility_blockers[pixel] = v[2];
+                        let seen = PixelPasses {
+                            diffuse: [d[0], d[1], d[2]],
+                            specular: [s[0], s[1], s[2]],
+                            visibility: v[0],
+                            visibility_heightfield: v[1],
+                            visibility_blockers: v[2],
+                        };
+                        Pixel::shaded(seen, tint)
                     }
-                }
+                };
             }
         })?;
-        Ok(out)
+        Ok(assemble(frame, &pixels))
     }
 
     /// The frame's passes, tile by tile: `consume(first pixel, what each pixel of the tile

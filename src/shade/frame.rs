@@ -56,23 +56,34 @@ pub fn shade_frame_timed(
     let light = frame.light.sh_coefficients(settings.order);
     let occluders = Occluders { blockers: &frame.blockers, horizons: pyramid.as_ref() };
     let shaded = if settings.double_precision {
-        let started = Instant::now();
-        let kernel = ShadingKernel::<f64>::new(settings, &scene.materials, &light, pyramid.is_some());
-        timings.add_wall("tables", started);
-        let started = Instant::now();
-        let shaded = shade_pixels(&kernel, occluders, frame);
-        timings.add_wall("shade", started);
-        shaded
+        timed_kernel::<f64, _>(scene, settings, &light, pyramid.is_some(), Some(&mut timings), |k| shade_pixels(k, occluders, frame))
     } else {
-        let started = Instant::now();
-        let kernel = ShadingKernel::<f32>::new(settings, &scene.materials, &light, pyramid.is_some());
-        timings.add_wall("tables", started);
-        let started = Instant::now();
-        let shaded = shade_pixels(&kernel, occluders, frame);
-        timings.add_wall("shade", started);
-        shaded
+        timed_kernel::<f32, _>(scene, settings, &light, pyramid.is_some(), Some(&mut timings), |k| shade_pixels(k, occluders, frame))
     };
     Ok((shaded, timings))
+}
+
+/// Builds the kernel at precision `T` and shades with it, timing each as the stages
+/// "tables" and "shade" when `timings` is given.
+pub(crate) fn timed_kernel<T: Real, R>(
+    scene: &Scene,
+    settings: &ShadingSettings,
+    light: &[[f64; 3]],
+    has_heightfield: bool,
+    mut timings: Option<&mut StageTimings>,
+    shade: impl FnOnce(&ShadingKernel<T>) -> R,
+) -> R {
+    let started = Instant::now();
+    let kernel = ShadingKernel::<T>::new(settings, &scene.materials, light, has_heightfield);
+    if let Some(t) = timings.as_deref_mut() {
+        t.add_wall("tables", started);
+    }
+    let started = Instant::now();
+    let shaded = shade(&kernel);
+    if let Some(t) = timings {
+        t.add_wall("shade", started);
+    }
+    shaded
 }
 
 /// The frame's horizon pyramid, if the scene has a height field.
