@@ -18,7 +18,7 @@ pub fn shade(args: &ShadeArgs) -> Result<()> {
     let frame = scene.frame(frame_number)?;
     let executor = Executor::select(args.shading.device, &settings)?;
     let started = Instant::now();
-    let shaded = executor.shade(&scene, &frame, &settings)?;
+    let (shaded, timings) = executor.shade_timed(&scene, &frame, &settings, crate::gpu::Specialisation::Full)?;
     let elapsed = started.elapsed();
     let stem = format!("beauty.{frame_number:04}");
     write_image(&scene, &args.out, &stem, shaded.width, shaded.height, &shaded.rgba)?;
@@ -29,7 +29,7 @@ pub fn shade(args: &ShadeArgs) -> Result<()> {
         settings.order,
         settings.epsilon,
         settings.exp,
-        executor.describe(),
+        timings.device,
         elapsed.as_secs_f64(),
         args.out.join(format!("{stem}.exr")).display()
     );
@@ -171,7 +171,6 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
         runs.push(timings);
     }
     let report = crate::timing::BenchReport::new(
-        &executor.describe(),
         &frame.gbuffer,
         frame_number,
         &settings,

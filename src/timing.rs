@@ -25,6 +25,9 @@ pub struct Stage {
 #[derive(Clone, Debug, Default, serde::Serialize)]
 pub struct StageTimings {
     pub stages: Vec<Stage>,
+    /// Where the frame was shaded ([`crate::gpu::Executor::describe`]); under
+    /// `--device auto` a frame the adapter refuses is shaded on the CPU.
+    pub device: String,
 }
 
 impl StageTimings {
@@ -78,7 +81,6 @@ fn median(mut values: Vec<f64>) -> f64 {
 
 impl BenchReport {
     pub fn new(
-        device: &str,
         gbuffer: &crate::scene::GBuffer,
         frame: i64,
         settings: &crate::shade::ShadingSettings,
@@ -104,7 +106,7 @@ impl BenchReport {
         let shade = stages.iter().find(|s| s.name == "shade").map_or(frame_milliseconds, |s| s.milliseconds);
         let per_second = |ms: f64| if ms > 0.0 { pixels / (ms * 1e3) } else { 0.0 };
         Self {
-            device: device.to_string(),
+            device: runs.first().map(|r| r.device.clone()).unwrap_or_default(),
             frame,
             width: gbuffer.width,
             height: gbuffer.height,

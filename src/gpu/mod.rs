@@ -58,6 +58,10 @@ pub enum GpuError {
     Shade(#[from] ShadeError),
 }
 
+fn cpu_description() -> String {
+    format!("cpu ({} threads)", rayon::current_num_threads())
+}
+
 /// The executor `--device` chose.
 pub enum Executor {
     Cpu,
@@ -95,7 +99,7 @@ impl Executor {
     /// "cpu (N threads)" or "gpu: adapter".
     pub fn describe(&self) -> String {
         match self {
-            Self::Cpu => format!("cpu ({} threads)", rayon::current_num_threads()),
+            Self::Cpu => cpu_description(),
             Self::Gpu { gpu, .. } => format!("gpu: {}", gpu.adapter()),
         }
     }
@@ -127,14 +131,23 @@ impl Executor {
         settings: &ShadingSettings,
         specialisation: Specialisation,
     ) -> Result<(ShadedFrame, StageTimings), GpuError> {
+        let on_cpu = || -> Result<(ShadedFrame, StageTimings), GpuError> {
+            let (shaded, mut timings) = crate::shade::shade_frame_timed(scene, frame, settings)?;
+            timings.device = cpu_description();
+            Ok((shaded, timings))
+        };
         match self {
-            Self::Cpu => Ok(crate::shade::shade_frame_timed(scene, frame, settings)?),
+            Self::Cpu => on_cpu(),
             Self::Gpu { gpu, fallback } => match gpu.shade_frame_timed(scene, frame, settings, specialisation) {
                 Err(e @ GpuError::LoopBudget { .. }) if *fallback => {
                     eprintln!("--device auto: shading frame {} on the CPU: {e}", frame.number);
-                    Ok(crate::shade::shade_frame_timed(scene, frame, settings)?)
+                    on_cpu()
                 }
-                other => other,
+                Ok((shaded, mut timings)) => {
+                    timings.device = self.describe();
+                    Ok((shaded, timings))
+                }
+                Err(e) => Err(e),
             },
         }
     }
