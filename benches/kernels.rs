@@ -2,16 +2,19 @@
 //! per-pixel blocker accumulation. Compare methods as ratios within one run:
 //! `cargo bench --bench kernels`.
 use criterion::{criterion_group, criterion_main, Criterion};
-use std::hint::black_box;
 use logsh::logsh::training_log_vectors;
-use logsh::shade::Exponentiator;
 use logsh::sh::{ExpMethod, MAX_COEFFICIENTS};
+use logsh::shade::Exponentiator;
+use std::hint::black_box;
 
 fn exponentiation(c: &mut Criterion) {
     for order in [3, 4, 6, 8] {
         let count = order * order;
         // Training vectors are sums of what pixels see: a tangent hemisphere, caps and a lobe.
-        let vectors: Vec<Vec<f32>> = training_log_vectors(order, 16, 42).into_iter().map(|v| v.into_iter().map(|c| c as f32).collect()).collect();
+        let vectors: Vec<Vec<f32>> = training_log_vectors(order, 16, 42)
+            .into_iter()
+            .map(|v| v.into_iter().map(|c| c as f32).collect())
+            .collect();
         for method in [ExpMethod::Ol, ExpMethod::Hyb, ExpMethod::Series, ExpMethod::Quad, ExpMethod::Exact] {
             let exp = Exponentiator::new(order, method, logsh::sh::exp::HYB_MAGNITUDE);
             let mut out = [0.0f32; MAX_COEFFICIENTS];
@@ -30,13 +33,16 @@ fn blockers(c: &mut Criterion) {
     use logsh::logsh::{cap_log_zh, view_blocker, BlockerView};
     use logsh::sh::add_rotated_zonal;
     for order in [4, 8] {
-        let spheres: Vec<([f32; 3], f32)> = (0..50).map(|i| ([i as f32 * 0.3 - 7.0, (i % 7) as f32, 2.0 + (i % 3) as f32], 0.5)).collect();
+        let spheres: Vec<([f32; 3], f32)> =
+            (0..50).map(|i| ([i as f32 * 0.3 - 7.0, (i % 7) as f32, 2.0 + (i % 3) as f32], 0.5)).collect();
         c.bench_function(&format!("blockers50/order{order}"), |b| {
             b.iter(|| {
                 let mut acc = [0.0f32; MAX_COEFFICIENTS];
                 let mut zonal = [0.0f32; 8];
                 for (centre, radius) in &spheres {
-                    if let BlockerView::Cap { direction, alpha, weight } = view_blocker([0.0; 3], [0.0, 0.0, 1.0], *centre, *radius, false) {
+                    if let BlockerView::Cap { direction, alpha, weight } =
+                        view_blocker([0.0; 3], [0.0, 0.0, 1.0], *centre, *radius, false)
+                    {
                         cap_log_zh(order, 0.1f32.ln(), alpha, &mut zonal[..order]);
                         add_rotated_zonal(order, &zonal[..order], weight, direction, &mut acc[..order * order]);
                     }

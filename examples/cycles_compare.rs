@@ -21,8 +21,8 @@
 
 use exr::prelude::read_first_rgba_layer_from_file;
 use logsh::scene::{Light, Scene};
-use logsh::shade::{Quality, ShadingSettings};
 use logsh::shade::shade_frame;
+use logsh::shade::{Quality, ShadingSettings};
 use std::path::{Path, PathBuf};
 
 fn unoccluded_value(light: &Light) -> [f64; 3] {
@@ -46,7 +46,9 @@ fn unoccluded_value(light: &Light) -> [f64; 3] {
             }
             sum
         }
-        Light::Sh(_) => panic!("an SH light has no map to integrate; compare scenes with an environment or constant light"),
+        Light::Sh(_) => {
+            panic!("an SH light has no map to integrate; compare scenes with an environment or constant light")
+        }
     }
 }
 
@@ -91,11 +93,17 @@ fn main() {
         let (width, height, cycles) = read_rgb(&dir.join(format!("cycles.{number:04}.exr")));
         let unoccluded = unoccluded_value(&frame.light);
         eprintln!("{}: frame {number}, unoccluded value {unoccluded:.3?}", dir.display());
-        let scene_name = dir.file_name().map_or_else(|| dir.display().to_string(), |n| n.to_string_lossy().into_owned());
+        let scene_name =
+            dir.file_name().map_or_else(|| dir.display().to_string(), |n| n.to_string_lossy().into_owned());
         let mut images: Vec<(String, Vec<[f32; 3]>)> = Vec::new();
         for (name, settings) in &runs {
             let shaded = shade_frame(&scene, &frame, settings).unwrap_or_else(|e| panic!("{e}"));
-            assert_eq!([width, height], [shaded.width, shaded.height], "{}: Cycles render and G-buffer differ in size", dir.display());
+            assert_eq!(
+                [width, height],
+                [shaded.width, shaded.height],
+                "{}: Cycles render and G-buffer differ in size",
+                dir.display()
+            );
             images.push((name.to_string(), shaded.rgba.iter().map(|p| [p[0], p[1], p[2]]).collect()));
         }
         if let Some(noise) = &noise {

@@ -73,7 +73,10 @@ fn main() -> std::io::Result<()> {
     std::fs::create_dir_all(&out)?;
     let epsilons: Vec<f64> = (0..=40).map(|k| 10f64.powf(-3.0 + 3.0 * k as f64 / 40.0)).filter(|e| *e < 0.95).collect();
     let lobes: Vec<(String, Lobe)> = std::iter::once(("diffuse".to_string(), Lobe::Diffuse))
-        .chain([1.0, 2.0, 3.0, 4.0, 5.0, 8.0, 16.0, 32.0, 64.0, 128.0, 256.0, 512.0, 1024.0].map(|r| (format!("phong{r}"), Lobe::Phong { exponent: r })))
+        .chain(
+            [1.0, 2.0, 3.0, 4.0, 5.0, 8.0, 16.0, 32.0, 64.0, 128.0, 256.0, 512.0, 1024.0]
+                .map(|r| (format!("phong{r}"), Lobe::Phong { exponent: r })),
+        )
         .collect();
     let mut csv = std::fs::File::create(out.join("lobe_l2.csv"))?;
     let mut optimal = std::fs::File::create(out.join("optimal.csv"))?;
@@ -89,7 +92,12 @@ fn main() -> std::io::Result<()> {
                 for (e, err) in epsilons.iter().zip(&errors) {
                     writeln!(csv, "{order},{name},{clamp_name},{e:.6},{err:.6}")?;
                 }
-                let (best, best_err) = epsilons.iter().zip(&errors).min_by(|a, b| a.1.total_cmp(b.1)).map(|(e, r)| (*e, *r)).expect("grid");
+                let (best, best_err) = epsilons
+                    .iter()
+                    .zip(&errors)
+                    .min_by(|a, b| a.1.total_cmp(b.1))
+                    .map(|(e, r)| (*e, *r))
+                    .expect("grid");
                 let default = lobe_error(order, *lobe, logsh::shade::default_epsilon(order), clamp, &exact);
                 // What `logsh shade` uses: the whole-pixel default for the diffuse lobe, the
                 // L2-optimal eps for Phong lobes.
@@ -98,18 +106,29 @@ fn main() -> std::io::Result<()> {
                     Lobe::Phong { .. } => optimal_lobe_epsilon(order, *lobe, &exact),
                 };
                 let tool_err = lobe_error(order, *lobe, tool, clamp, &exact);
-                writeln!(optimal, "{order},{name},{clamp_name},{best:.4},{best_err:.6},{default:.6},{tool:.4},{tool_err:.6}")?;
+                writeln!(
+                    optimal,
+                    "{order},{name},{clamp_name},{best:.4},{best_err:.6},{default:.6},{tool:.4},{tool_err:.6}"
+                )?;
                 if order == 4 {
                     if let Lobe::Phong { exponent } = lobe {
                         if *exponent <= 5.0 {
-                            figure6[c].push(Series { name: format!("r = {exponent}"), points: epsilons.iter().copied().zip(errors.iter().copied()).collect(), line: true, labels: vec![] });
+                            figure6[c].push(Series {
+                                name: format!("r = {exponent}"),
+                                points: epsilons.iter().copied().zip(errors.iter().copied()).collect(),
+                                line: true,
+                                labels: vec![],
+                            });
                         }
                     }
                 }
             }
         }
     }
-    for (series, (file, clamp)) in figure6.into_iter().zip([("figure6_paper_clamp.svg", "log(max(f, eps)) (the paper's clamp)"), ("figure6_peak_relative.svg", "log(max(f/f_max, eps)) + log(f_max)")]) {
+    for (series, (file, clamp)) in figure6.into_iter().zip([
+        ("figure6_paper_clamp.svg", "log(max(f, eps)) (the paper's clamp)"),
+        ("figure6_peak_relative.svg", "log(max(f/f_max, eps)) + log(f_max)"),
+    ]) {
         let chart = Chart {
             title: format!("Order 4 Phong lobes: L2 error of exp(log-SH lobe) vs SH lobe, clamp {clamp}"),
             x_label: "eps".into(),

@@ -7,8 +7,8 @@
 //! eps, a minute instead of an hour; `--defaults` runs every method at each order's
 //! default eps.
 use logsh::scene::Scene;
-use logsh::shade::{shade_frame, ShadingSettings};
 use logsh::sh::ExpMethod;
+use logsh::shade::{shade_frame, ShadingSettings};
 use logsh::synth::{analytic_placements, sphere_over_plane, SphereOverPlane};
 
 fn main() {
@@ -27,7 +27,11 @@ fn main() {
     }
     let orders: Vec<usize> = (3..=8).collect();
     let sweep = [0.01, 0.02, 0.03, 0.05, 0.07, 0.1, 0.15, 0.2];
-    let methods = if quick { vec![ExpMethod::Quad] } else { vec![ExpMethod::Exact, ExpMethod::Quad, ExpMethod::Hyb, ExpMethod::Ol, ExpMethod::Series] };
+    let methods = if quick {
+        vec![ExpMethod::Quad]
+    } else {
+        vec![ExpMethod::Exact, ExpMethod::Quad, ExpMethod::Hyb, ExpMethod::Ol, ExpMethod::Series]
+    };
     println!("order eps    exp     tangent  mean_abs  worst_scene_mean  max_abs");
     for order in orders {
         let epsilons = if defaults { vec![logsh::shade::default_epsilon(order)] } else { sweep.to_vec() };

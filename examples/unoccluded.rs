@@ -15,7 +15,9 @@ fn main() {
             let alone = e[0] * logsh::sh::exp::ONE_DC;
             let mut slice = vec![0.0; order];
             nlp_slice(order, eps.ln(), 0.0, &mut slice);
-            for l in 0..order { f[index(l, 0)] += (2.0 * std::f64::consts::PI).sqrt() * slice[l]; }
+            for l in 0..order {
+                f[index(l, 0)] += (2.0 * std::f64::consts::PI).sqrt() * slice[l];
+            }
             exact.exp(&f, &mut e);
             let ground = e[0] * logsh::sh::exp::ONE_DC;
             println!("order {order} eps {eps}: lobe alone {alone:.4}, with ground {ground:.4}");

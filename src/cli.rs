@@ -2,13 +2,17 @@
 //! a separate step that checks the rules spanning several flags.
 
 pub use crate::gpu::{DeviceChoice, Specialisation};
-use crate::shade::{default_epsilon, Quality, ShadingSettings};
 use crate::sh::ExpMethod;
+use crate::shade::{default_epsilon, Quality, ShadingSettings};
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use std::path::PathBuf;
 
 #[derive(Parser, Debug)]
-#[command(name = "logsh", version, about = "Soft environment shadows and glossy reflections for Blender G-buffers, by log-SH exponentiation")]
+#[command(
+    name = "logsh",
+    version,
+    about = "Soft environment shadows and glossy reflections for Blender G-buffers, by log-SH exponentiation"
+)]
 pub struct Cli {
     #[command(subcommand)]
     pub command: Command,

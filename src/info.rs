@@ -54,7 +54,8 @@ pub struct ExrInfo {
 /// Reads the headers of `file`.
 pub fn describe(file: &Path) -> Result<ExrInfo, SceneError> {
     let bytes = std::fs::metadata(file).map_err(|e| SceneError::io(file, "the EXR file", e))?.len();
-    let meta = exr::meta::MetaData::read_from_file(file, false).map_err(|e| crate::scene::error::exr_error(file, "the EXR file", e))?;
+    let meta = exr::meta::MetaData::read_from_file(file, false)
+        .map_err(|e| crate::scene::error::exr_error(file, "the EXR file", e))?;
     let parts = meta
         .headers
         .iter()
@@ -106,7 +107,10 @@ fn group_layers(channels: &[ChannelInfo]) -> Vec<LayerInfo> {
                     types.push(c.sample_type);
                 }
             }
-            None => layers.push((LayerInfo { name: layer, channels: vec![channel], sample_type: String::new() }, vec![c.sample_type])),
+            None => layers.push((
+                LayerInfo { name: layer, channels: vec![channel], sample_type: String::new() },
+                vec![c.sample_type],
+            )),
         }
     }
     layers

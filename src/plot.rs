@@ -111,20 +111,42 @@ impl Chart {
             r#"<svg xmlns="http://www.w3.org/2000/svg" width="{WIDTH}" height="{HEIGHT}" font-family="sans-serif" font-size="12">"#
         );
         let _ = writeln!(svg, r#"<rect width="100%" height="100%" fill="white"/>"#);
-        let _ = writeln!(svg, r#"<text x="{}" y="28" font-size="16" text-anchor="middle">{}</text>"#, WIDTH / 2.0, escape(&self.title));
+        let _ = writeln!(
+            svg,
+            r#"<text x="{}" y="28" font-size="16" text-anchor="middle">{}</text>"#,
+            WIDTH / 2.0,
+            escape(&self.title)
+        );
         let _ = writeln!(
             svg,
             r#"<rect x="{MARGIN_LEFT}" y="{MARGIN_TOP}" width="{plot_w}" height="{plot_h}" fill="none" stroke="black"/>"#
         );
         for (t, label) in ticks(x0, x1, self.x_scale) {
             let x = px(t);
-            let _ = writeln!(svg, r##"<line x1="{x:.1}" y1="{MARGIN_TOP}" x2="{x:.1}" y2="{:.1}" stroke="#ddd"/>"##, MARGIN_TOP + plot_h);
-            let _ = writeln!(svg, r#"<text x="{x:.1}" y="{:.1}" text-anchor="middle">{label}</text>"#, MARGIN_TOP + plot_h + 18.0);
+            let _ = writeln!(
+                svg,
+                r##"<line x1="{x:.1}" y1="{MARGIN_TOP}" x2="{x:.1}" y2="{:.1}" stroke="#ddd"/>"##,
+                MARGIN_TOP + plot_h
+            );
+            let _ = writeln!(
+                svg,
+                r#"<text x="{x:.1}" y="{:.1}" text-anchor="middle">{label}</text>"#,
+                MARGIN_TOP + plot_h + 18.0
+            );
         }
         for (t, label) in ticks(y0, y1, self.y_scale) {
             let y = py(t);
-            let _ = writeln!(svg, r##"<line x1="{MARGIN_LEFT}" y1="{y:.1}" x2="{:.1}" y2="{y:.1}" stroke="#ddd"/>"##, MARGIN_LEFT + plot_w);
-            let _ = writeln!(svg, r#"<text x="{:.1}" y="{:.1}" text-anchor="end">{label}</text>"#, MARGIN_LEFT - 6.0, y + 4.0);
+            let _ = writeln!(
+                svg,
+                r##"<line x1="{MARGIN_LEFT}" y1="{y:.1}" x2="{:.1}" y2="{y:.1}" stroke="#ddd"/>"##,
+                MARGIN_LEFT + plot_w
+            );
+            let _ = writeln!(
+                svg,
+                r#"<text x="{:.1}" y="{:.1}" text-anchor="end">{label}</text>"#,
+                MARGIN_LEFT - 6.0,
+                y + 4.0
+            );
         }
         let _ = writeln!(
             svg,
@@ -150,12 +172,22 @@ impl Chart {
                 .collect();
             if series.line && points.len() > 1 {
                 let path: Vec<String> = points.iter().map(|(x, y, _)| format!("{x:.1},{y:.1}")).collect();
-                let _ = writeln!(svg, r#"<polyline points="{}" fill="none" stroke="{colour}" stroke-width="1.5"/>"#, path.join(" "));
+                let _ = writeln!(
+                    svg,
+                    r#"<polyline points="{}" fill="none" stroke="{colour}" stroke-width="1.5"/>"#,
+                    path.join(" ")
+                );
             }
             for (x, y, k) in &points {
                 let _ = writeln!(svg, r#"<circle cx="{x:.1}" cy="{y:.1}" r="3.5" fill="{colour}"/>"#);
                 if let Some(label) = series.labels.get(*k).filter(|l| !l.is_empty()) {
-                    let _ = writeln!(svg, r#"<text x="{:.1}" y="{:.1}" font-size="10" fill="{colour}">{}</text>"#, x + 5.0, y - 5.0, escape(label));
+                    let _ = writeln!(
+                        svg,
+                        r#"<text x="{:.1}" y="{:.1}" font-size="10" fill="{colour}">{}</text>"#,
+                        x + 5.0,
+                        y - 5.0,
+                        escape(label)
+                    );
                 }
             }
             let ly = MARGIN_TOP + 14.0 + 18.0 * i as f64;
@@ -171,7 +203,8 @@ impl Chart {
 /// Indices of the points on the lower-left Pareto front of `(cost, error)` pairs: no
 /// other point is both cheaper and more accurate. Sorted by cost.
 pub fn pareto_front(points: &[(f64, f64)]) -> Vec<usize> {
-    let mut order: Vec<usize> = (0..points.len()).filter(|&i| points[i].0.is_finite() && points[i].1.is_finite()).collect();
+    let mut order: Vec<usize> =
+        (0..points.len()).filter(|&i| points[i].0.is_finite() && points[i].1.is_finite()).collect();
     order.sort_by(|&a, &b| points[a].0.total_cmp(&points[b].0).then(points[a].1.total_cmp(&points[b].1)));
     let mut front = Vec::new();
     let mut best = f64::INFINITY;
@@ -202,7 +235,12 @@ mod tests {
             y_label: "y".into(),
             x_scale: Scale::Log,
             y_scale: Scale::Log,
-            series: vec![Series { name: "a<b".into(), points: vec![(1.0, 1.0), (0.0, 2.0), (10.0, 0.1)], line: true, labels: vec![] }],
+            series: vec![Series {
+                name: "a<b".into(),
+                points: vec![(1.0, 1.0), (0.0, 2.0), (10.0, 0.1)],
+                line: true,
+                labels: vec![],
+            }],
         };
         let svg = chart.to_svg();
         assert!(svg.starts_with("<svg") && svg.contains("a&lt;b") && svg.trim_end().ends_with("</svg>"));

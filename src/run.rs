@@ -1,9 +1,9 @@
 //! What each command does, between parsed options and the library.
 
 use crate::cli::{BenchArgs, ExampleArgs, ExampleName, ReferenceArgs, ShadeArgs, SweepArgs};
+use crate::gpu::Executor;
 use crate::reference::{render_reference, ReferenceLight, ReferenceOptions};
 use crate::scene::{output, Scene};
-use crate::gpu::Executor;
 use anyhow::{anyhow, Context, Result};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use std::io::IsTerminal;
@@ -56,7 +56,9 @@ fn progress_bar(total: usize, what: &str) -> ProgressBar {
         Some(total as u64),
         if std::io::stderr().is_terminal() { ProgressDrawTarget::stderr() } else { ProgressDrawTarget::hidden() },
     );
-    bar.set_style(ProgressStyle::with_template("{msg} [{bar:40}] {pos}/{len} {elapsed}<{eta}").expect("valid template"));
+    bar.set_style(
+        ProgressStyle::with_template("{msg} [{bar:40}] {pos}/{len} {elapsed}<{eta}").expect("valid template"),
+    );
     bar.set_message(what.to_string());
     bar
 }
@@ -94,11 +96,19 @@ pub fn sweep(args: &SweepArgs) -> Result<()> {
     let scene = Scene::load(&args.scene)?;
     let frame_number = args.frame.unwrap_or_else(|| scene.default_frame());
     let frame = scene.frame(frame_number)?;
-    let options = ReferenceOptions { light: ReferenceLight::EnvironmentMap, tolerance: args.tolerance, ..Default::default() };
+    let options =
+        ReferenceOptions { light: ReferenceLight::EnvironmentMap, tolerance: args.tolerance, ..Default::default() };
     let bar = progress_bar(frame.gbuffer.height, "reference");
     let reference = render_reference(&scene, &frame, &options, &|rows| bar.set_position(rows as u64))?;
     bar.finish_and_clear();
-    write_image(&scene, &args.out, &format!("reference.{frame_number:04}"), reference.width, reference.height, &reference.rgba)?;
+    write_image(
+        &scene,
+        &args.out,
+        &format!("reference.{frame_number:04}"),
+        reference.width,
+        reference.height,
+        &reference.rgba,
+    )?;
     let executor = Executor::select(args.device, &crate::shade::ShadingSettings::default())?;
     eprintln!("sweep: shading on {}", executor.describe());
     let bar = progress_bar(crate::sweep::configurations().len(), "sweep");
@@ -119,7 +129,10 @@ pub fn sweep(args: &SweepArgs) -> Result<()> {
     }
     println!("{:<18} {:<8} {:>10} {:>9} {:>9} {:>9}", "knob", "value", "ms/frame", "mean", "p99", "rmse");
     for r in &rows {
-        println!("{:<18} {:<8} {:>10.1} {:>9.4} {:>9.4} {:>9.4}", r.knob, r.value, r.milliseconds, r.mean_abs, r.p99_abs, r.rmse);
+        println!(
+            "{:<18} {:<8} {:>10.1} {:>9.4} {:>9.4} {:>9.4}",
+            r.knob, r.value, r.milliseconds, r.mean_abs, r.p99_abs, r.rmse
+        );
     }
     eprintln!(
         "reference: {} pixel(s) above the tolerance {}; wrote sweep.csv, sweep.json, sweep.svg to {}",
@@ -148,7 +161,7 @@ pub fn example(args: &ExampleArgs) -> Result<()> {
         &args.out,
         crate::synth::ExampleOptions { width: args.width, height: args.height, ..Default::default() },
     )
-        .with_context(|| format!("cannot write example scene {name} to {}", args.out.display()))?;
+    .with_context(|| format!("cannot write example scene {name} to {}", args.out.display()))?;
     eprintln!("wrote example scene {name} to {}", args.out.display());
     Ok(())
 }
@@ -170,14 +183,7 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
         walls.push(started.elapsed().as_secs_f64() * 1e3);
         runs.push(timings);
     }
-    let report = crate::timing::BenchReport::new(
-        &frame.gbuffer,
-        frame_number,
-        &settings,
-        specialise,
-        &runs,
-        &walls,
-    );
+    let report = crate::timing::BenchReport::new(&frame.gbuffer, frame_number, &settings, specialise, &runs, &walls);
     if args.json {
         println!("{}", serde_json::to_string_pretty(&report)?);
     } else {
@@ -240,7 +246,8 @@ pub fn render(args: &crate::cli::RenderArgs) -> Result<()> {
         settings,
     };
     check_outputs(&scene, &options)?;
-    std::fs::create_dir_all(&args.out).with_context(|| format!("cannot create output directory {}", args.out.display()))?;
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("cannot create output directory {}", args.out.display()))?;
     let executor = Executor::select(args.shading.device, &settings)?;
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(args.threads.unwrap_or(0))

@@ -6,12 +6,12 @@
 //! luminance), so 0.01 means 1% of what an open white floor would show. They are taken
 //! over the pixels the reference shades (alpha 1), on the mean of the three channels.
 
+use crate::gpu::{Executor, GpuError};
 use crate::plot::{pareto_front, Chart, Scale, Series};
 use crate::scene::{Frame, Light, Scene};
-use crate::gpu::{Executor, GpuError};
-use crate::shade::{Quality, ShadingSettings};
 use crate::sh::quadrature::gauss_legendre_on;
 use crate::sh::ExpMethod;
+use crate::shade::{Quality, ShadingSettings};
 use serde::Serialize;
 use std::time::Instant;
 
@@ -48,12 +48,18 @@ pub fn configurations() -> Vec<(String, String, ShadingSettings)> {
     }
     let base = Quality::Default.settings();
     for order in 3..=8 {
-        out.push(("order".into(), order.to_string(), ShadingSettings { order, epsilon: crate::shade::default_epsilon(order), ..base }));
+        out.push((
+            "order".into(),
+            order.to_string(),
+            ShadingSettings { order, epsilon: crate::shade::default_epsilon(order), ..base },
+        ));
     }
     for epsilon in [0.02, 0.05, 0.07, 0.1, 0.15, 0.2, 0.3] {
         out.push(("epsilon".into(), epsilon.to_string(), ShadingSettings { epsilon, ..base }));
     }
-    for (name, exp) in [("quad", ExpMethod::Quad), ("hyb", ExpMethod::Hyb), ("ol", ExpMethod::Ol), ("series", ExpMethod::Series)] {
+    for (name, exp) in
+        [("quad", ExpMethod::Quad), ("hyb", ExpMethod::Hyb), ("ol", ExpMethod::Ol), ("series", ExpMethod::Series)]
+    {
         out.push(("exp".into(), name.into(), ShadingSettings { exp, ..base }));
     }
     for directions in [8, 16, 32, 64] {
@@ -222,7 +228,12 @@ pub fn chart(rows: &[SweepRow], scene_name: &str) -> Chart {
         .collect();
     let points: Vec<(f64, f64)> = rows.iter().map(|r| (r.milliseconds, r.mean_abs)).collect();
     let front = pareto_front(&points);
-    series.push(Series { name: "Pareto front".into(), points: front.iter().map(|&i| points[i]).collect(), line: true, labels: vec![] });
+    series.push(Series {
+        name: "Pareto front".into(),
+        points: front.iter().map(|&i| points[i]).collect(),
+        line: true,
+        labels: vec![],
+    });
     Chart {
         title: format!("{scene_name}: mean absolute error against time per frame"),
         x_label: "time per frame (ms, CPU, best of repeats)".into(),
@@ -254,7 +265,17 @@ mod tests {
     #[test]
     fn configurations_cover_presets_and_every_knob() {
         let knobs: std::collections::BTreeSet<String> = configurations().into_iter().map(|c| c.0).collect();
-        for k in ["preset", "order", "epsilon", "exp", "directions", "level_step", "level_offset", "ratio_attenuation", "tangent_occlusion"] {
+        for k in [
+            "preset",
+            "order",
+            "epsilon",
+            "exp",
+            "directions",
+            "level_step",
+            "level_offset",
+            "ratio_attenuation",
+            "tangent_occlusion",
+        ] {
             assert!(knobs.contains(k), "{k}");
         }
     }

@@ -98,7 +98,9 @@ impl BenchReport {
         }
         for stage in &mut stages {
             stage.milliseconds = median(
-                runs.iter().map(|r| r.stages.iter().find(|s| s.name == stage.name).map_or(0.0, |s| s.milliseconds)).collect(),
+                runs.iter()
+                    .map(|r| r.stages.iter().find(|s| s.name == stage.name).map_or(0.0, |s| s.milliseconds))
+                    .collect(),
             );
         }
         let pixels = (gbuffer.width * gbuffer.height) as f64;
@@ -151,10 +153,7 @@ impl BenchReport {
         }
         out += &format!(
             "{:<20} {:>12.3}  wall\n\n{:.2} Mpixel/s per frame, {:.2} Mpixel/s in the shading stage\n",
-            "frame",
-            self.frame_milliseconds,
-            self.megapixels_per_second,
-            self.shade_megapixels_per_second
+            "frame", self.frame_milliseconds, self.megapixels_per_second, self.shade_megapixels_per_second
         );
         out
     }

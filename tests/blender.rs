@@ -22,7 +22,9 @@ fn bpy_python() -> Option<PathBuf> {
         assert!(!required, "LOGSH_REQUIRE_BPY=1 but {why}");
         // Written to the stderr handle itself, which the test harness does not capture, so
         // that the skip shows in a plain `cargo test` run.
-        let line = format!("tests/blender.rs skipped: {why}; set LOGSH_BPY_PYTHON to a Python that imports bpy (see .ci/bpy-setup)\n");
+        let line = format!(
+            "tests/blender.rs skipped: {why}; set LOGSH_BPY_PYTHON to a Python that imports bpy (see .ci/bpy-setup)\n"
+        );
         let _ = std::io::Write::write_all(&mut std::io::stderr(), line.as_bytes());
         None
     };
@@ -60,12 +62,20 @@ fn export_tiny(python: &Path, dir: &Path) -> PathBuf {
     let blend = dir.join("tiny.blend");
     assert_ok(&run_python(python, "blender_scripts/scenes/tiny.py", &[Path::new("--save"), &blend]), "tiny.py");
     let scene = dir.join("scene");
-    let output = run_python(python, "blender_scripts/export_scene.py", &[Path::new("--blend"), &blend, Path::new("--out"), &scene]);
+    let output = run_python(
+        python,
+        "blender_scripts/export_scene.py",
+        &[Path::new("--blend"), &blend, Path::new("--out"), &scene],
+    );
     assert_ok(&output, "export_scene.py");
     let log = String::from_utf8_lossy(&output.stdout);
     assert!(log.contains("spheres hold"), "the export prints each fit's error:\n{log}");
     // An existing scene is never written over.
-    let again = run_python(python, "blender_scripts/export_scene.py", &[Path::new("--blend"), &blend, Path::new("--out"), &scene]);
+    let again = run_python(
+        python,
+        "blender_scripts/export_scene.py",
+        &[Path::new("--blend"), &blend, Path::new("--out"), &scene],
+    );
     assert_eq!(again.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&again.stderr).contains("already holds a scene"));
     scene
@@ -73,13 +83,21 @@ fn export_tiny(python: &Path, dir: &Path) -> PathBuf {
 
 /// Every channel of an EXR by full name (part name prefixed in multi-part files).
 fn raw_channels(file: &Path) -> HashMap<String, Vec<f32>> {
-    let image = read().no_deep_data().largest_resolution_level().all_channels().all_layers().all_attributes().from_file(file).unwrap();
+    let image = read()
+        .no_deep_data()
+        .largest_resolution_level()
+        .all_channels()
+        .all_layers()
+        .all_attributes()
+        .from_file(file)
+        .unwrap();
     let mut out = HashMap::new();
     for layer in &image.layer_data {
         let part = layer.attributes.layer_name.as_ref().map(|t| t.to_string()).unwrap_or_default();
         for channel in &layer.channel_data.list {
             let name = channel.name.to_string();
-            let full = if part.is_empty() || name.starts_with(&format!("{part}.")) { name } else { format!("{part}.{name}") };
+            let full =
+                if part.is_empty() || name.starts_with(&format!("{part}.")) { name } else { format!("{part}.{name}") };
             let values = match &channel.sample_data {
                 FlatSamples::F32(v) => v.clone(),
                 FlatSamples::F16(v) => v.iter().map(|h| h.to_f32()).collect(),
@@ -128,9 +146,8 @@ fn tiny_scene_exports_reads_and_shades() {
         assert_eq!(water.len(), 1);
         let reflection = frame.reflection.as_ref().unwrap();
         let water_pixels = g.material.iter().filter(|&&m| m == water[0]).count();
-        let reflected_surface = (0..g.material.len())
-            .filter(|&i| g.material[i] == water[0] && reflection.material[i] != 0)
-            .count();
+        let reflected_surface =
+            (0..g.material.len()).filter(|&i| g.material[i] == water[0] && reflection.material[i] != 0).count();
         assert!(water_pixels > 20, "the water patch is in view ({water_pixels} pixels)");
         assert!(reflected_surface > 0, "some water pixels mirror a ball");
         frames.push(frame);
@@ -190,7 +207,11 @@ fn export_fails_clearly() {
     );
     assert_ok(&std::process::Command::new(&python).args(["-c", &make]).output().unwrap(), "making a .blend");
     let out = dir.path().join("out");
-    let output = run_python(&python, "blender_scripts/export_scene.py", &[Path::new("--blend"), &blend, Path::new("--out"), &out]);
+    let output = run_python(
+        &python,
+        "blender_scripts/export_scene.py",
+        &[Path::new("--blend"), &blend, Path::new("--out"), &out],
+    );
     assert_eq!(output.status.code(), Some(1));
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert!(stderr.contains("error: the scene has no camera"), "{stderr}");
@@ -236,7 +257,9 @@ fn dunes_height_map_and_sky_match_blender() {
     // a cell by the cell's twist (measured: mean 0.002, max 0.011 with cells 0.29 wide).
     assert!(mean < 0.005 && worst < 0.03, "height map vs G-buffer: mean {mean:.4}, max {worst:.4}");
 
-    let logsh::scene::Light::Environment { map: sky, .. } = frame.light.as_ref() else { panic!("an environment light") };
+    let logsh::scene::Light::Environment { map: sky, .. } = frame.light.as_ref() else {
+        panic!("an environment light")
+    };
     let brightest = (0..sky.texels.len()).max_by(|&a, &b| sky.texels[a][0].total_cmp(&sky.texels[b][0])).unwrap();
     let (u, v) = (
         ((brightest % sky.width) as f64 + 0.5) / sky.width as f64,
@@ -249,6 +272,7 @@ fn dunes_height_map_and_sky_match_blender() {
     // One texel of a 256-wide map is 1.4 degrees: the sun lands within two.
     assert!(cos > (3.0f64.to_radians()).cos(), "brightest texel at {d:?}, sun at {sun:?}");
     let out = dir.path().join("out");
-    let output = Command::cargo_bin("logsh").unwrap().arg("shade").arg(&scene_dir).arg("--out").arg(&out).output().unwrap();
+    let output =
+        Command::cargo_bin("logsh").unwrap().arg("shade").arg(&scene_dir).arg("--out").arg(&out).output().unwrap();
     assert_ok(&output, "logsh shade");
 }

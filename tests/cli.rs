@@ -67,8 +67,14 @@ fn bad_flags_are_named() {
     let scene = example_scene(dir.path());
     let out = dir.path().join("out");
     assert_fails_with(logsh().arg("shade").arg(&scene).args(["--order", "9"]).arg("--out").arg(&out), &["--order 9"]);
-    assert_fails_with(logsh().arg("shade").arg(&scene).args(["--epsilon", "0"]).arg("--out").arg(&out), &["--epsilon 0"]);
-    assert_fails_with(logsh().arg("shade").arg(&scene).args(["--directions", "2"]).arg("--out").arg(&out), &["--directions 2"]);
+    assert_fails_with(
+        logsh().arg("shade").arg(&scene).args(["--epsilon", "0"]).arg("--out").arg(&out),
+        &["--epsilon 0"],
+    );
+    assert_fails_with(
+        logsh().arg("shade").arg(&scene).args(["--directions", "2"]).arg("--out").arg(&out),
+        &["--directions 2"],
+    );
     assert_fails_with(logsh().arg("shade").arg(&scene).args(["--exp", "fast"]), &["--exp"]);
     assert!(!out.exists(), "nothing is written when the flags are wrong");
 }
@@ -90,7 +96,11 @@ fn bad_scenes_are_named() {
     assert_fails_with(logsh().arg("shade").arg(&scene), &["scene.json:4:1"]);
 
     std::fs::write(&json, &original).unwrap();
-    std::fs::write(scene.join("blockers.0001.json"), r#"{"frame": 1, "spheres": [{"center": [0, 0, 2], "radius": -1}]}"#).unwrap();
+    std::fs::write(
+        scene.join("blockers.0001.json"),
+        r#"{"frame": 1, "spheres": [{"center": [0, 0, 2], "radius": -1}]}"#,
+    )
+    .unwrap();
     assert_fails_with(logsh().arg("shade").arg(&scene), &["blockers.0001.json", "radius"]);
 
     std::fs::remove_file(scene.join("gbuffer.0001.exr")).unwrap();
@@ -123,13 +133,28 @@ fn device_gpu_without_an_adapter_fails_and_auto_falls_back() {
         return;
     }
     let out = dir.path().join("out");
-    let gpu = logsh().env("WGPU_BACKEND", "metal").args(["shade", "--device", "gpu"]).arg(&scene).arg("--out").arg(&out).output().unwrap();
+    let gpu = logsh()
+        .env("WGPU_BACKEND", "metal")
+        .args(["shade", "--device", "gpu"])
+        .arg(&scene)
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
     assert_eq!(gpu.status.code(), Some(1), "{}", stderr_of(&gpu));
     assert!(stderr_of(&gpu).contains("no GPU adapter found"), "{}", stderr_of(&gpu));
     assert!(!out.join("beauty.0001.exr").exists());
-    let auto = logsh().env("WGPU_BACKEND", "metal").args(["shade", "--device", "auto"]).arg(&scene).arg("--out").arg(&out).output().unwrap();
+    let auto = logsh()
+        .env("WGPU_BACKEND", "metal")
+        .args(["shade", "--device", "auto"])
+        .arg(&scene)
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
     assert!(auto.status.success(), "{}", stderr_of(&auto));
-    let lines: Vec<String> = stderr_of(&auto).lines().filter(|l| l.contains("--device auto")).map(String::from).collect();
+    let lines: Vec<String> =
+        stderr_of(&auto).lines().filter(|l| l.contains("--device auto")).map(String::from).collect();
     assert_eq!(lines.len(), 1, "one line says why the CPU is used: {lines:?}");
     assert!(lines[0].contains("shading on the CPU") && lines[0].contains("no GPU adapter"), "{}", lines[0]);
     assert!(stderr_of(&auto).contains("on cpu"));
@@ -150,6 +175,8 @@ fn bench_prints_stages_as_a_table_and_as_json() {
     assert!(json.status.success(), "{}", stderr_of(&json));
     let report: serde_json::Value = serde_json::from_slice(&json.stdout).expect("bench --json prints JSON");
     assert_eq!(report["width"], 48);
-    assert!(report["stages"].as_array().is_some_and(|s| s.iter().any(|s| s["name"] == "shade" && s["milliseconds"].as_f64().unwrap() > 0.0)));
+    assert!(report["stages"]
+        .as_array()
+        .is_some_and(|s| s.iter().any(|s| s["name"] == "shade" && s["milliseconds"].as_f64().unwrap() > 0.0)));
     assert!(report["megapixels_per_second"].as_f64().unwrap() > 0.0);
 }

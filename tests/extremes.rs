@@ -206,7 +206,13 @@ impl Worst {
             );
         }
         for (method, e) in &self.0 {
-            assert!(e.value <= bound(method), "{name} [{method}]: value {} > {} at {}", e.value, bound(method), e.value_at);
+            assert!(
+                e.value <= bound(method),
+                "{name} [{method}]: value {} > {} at {}",
+                e.value,
+                bound(method),
+                e.value_at
+            );
             assert!(e.diff <= diff_bound, "{name} [{method}]: |f32 - f64| {} at {}", e.diff, e.diff_at);
         }
     }
@@ -229,7 +235,14 @@ fn shade_checked(scene: &Scene, frame: &Frame, settings: &ShadingSettings, ctx: 
 }
 
 /// Shades in f32 and, when `compare`, in f64; records the worst value and difference.
-fn shade_both(scene: &Scene, frame: &Frame, settings: &ShadingSettings, compare: bool, ctx: &str, worst: &mut Worst) -> ShadedFrame {
+fn shade_both(
+    scene: &Scene,
+    frame: &Frame,
+    settings: &ShadingSettings,
+    compare: bool,
+    ctx: &str,
+    worst: &mut Worst,
+) -> ShadedFrame {
     let mut s = *settings;
     s.double_precision = false;
     let (single, max) = shade_checked(scene, frame, &s, ctx);
@@ -365,7 +378,10 @@ fn five_thousand_overlapping_blockers_with_receivers_inside_and_grazing_normals(
         shade_both(&scene, &frame, &settings, true, &format!("5000 blockers, {name}"), &mut worst);
     }
     for (method, e) in &worst.0 {
-        println!("5000 blockers (done-when) [{method}]: worst value {:.4} at {}; worst |f32 - f64| {:.2e} at {}", e.value, e.value_at, e.diff, e.diff_at);
+        println!(
+            "5000 blockers (done-when) [{method}]: worst value {:.4} at {}; worst |f32 - f64| {:.2e} at {}",
+            e.value, e.value_at, e.diff, e.diff_at
+        );
         assert!(e.diff <= CULLING_FLIP_TOLERANCE, "[{method}] |f32 - f64| {} at {}", e.diff, e.diff_at);
     }
     let quad = &worst.0["Quad"];
@@ -381,12 +397,22 @@ fn five_thousand_blockers_across_epsilons_and_orders() {
         for epsilon in EPSILONS {
             for ratio in [false, true] {
                 let ctx = format!("5000 blockers, order {order}, eps {epsilon}, ratio {ratio}");
-                shade_both(&scene, &frame, &settings_with(order, epsilon, ExpMethod::Quad, ratio), true, &ctx, &mut worst);
+                shade_both(
+                    &scene,
+                    &frame,
+                    &settings_with(order, epsilon, ExpMethod::Quad, ratio),
+                    true,
+                    &ctx,
+                    &mut worst,
+                );
             }
         }
     }
     for (method, e) in &worst.0 {
-        println!("5000 blockers sweep [{method}]: worst value {:.4} at {}; worst |f32 - f64| {:.2e} at {}", e.value, e.value_at, e.diff, e.diff_at);
+        println!(
+            "5000 blockers sweep [{method}]: worst value {:.4} at {}; worst |f32 - f64| {:.2e} at {}",
+            e.value, e.value_at, e.diff, e.diff_at
+        );
         assert!(e.value <= MAX_DIFFUSE && e.diff <= PRECISION_TOLERANCE);
     }
 }
@@ -404,17 +430,23 @@ fn receivers_inside_touching_and_just_outside_one_blocker() {
     let heights = [0.25, 0.5, 0.999, 1.0 - 1e-7, 1.0, 1.0 + 1e-7, 1.0 + 1e-6, 1.0 + 1e-3, 1.01];
     let points: Vec<_> = (0..heights.len()).map(|k| ([1e4 * k as f64, 0.0, 0.0], [0.0, 0.0, 1.0], 1)).collect();
     let mut frame = point_frame(&base, &points);
-    frame.blockers = heights.iter().enumerate().map(|(k, &z)| Sphere { center: [1e4 * k as f64, 0.0, z], radius: 1.0 }).collect();
+    frame.blockers =
+        heights.iter().enumerate().map(|(k, &z)| Sphere { center: [1e4 * k as f64, 0.0, z], radius: 1.0 }).collect();
     let mut worst = Worst::default();
     for order in [3, 8] {
         for epsilon in EPSILONS {
             // `ol` and `hyb` fit an OL table per run (slow at order 8): order 3 only.
-            let methods: &[ExpMethod] = if order == 3 { &[ExpMethod::Quad, ExpMethod::Hyb, ExpMethod::Ol] } else { &[ExpMethod::Quad] };
+            let methods: &[ExpMethod] =
+                if order == 3 { &[ExpMethod::Quad, ExpMethod::Hyb, ExpMethod::Ol] } else { &[ExpMethod::Quad] };
             for &exp in methods {
                 for ratio in [false, true] {
                     let ctx = format!("order {order}, eps {epsilon}, {exp:?}, ratio {ratio}");
                     let s = settings_with(order, epsilon, exp, ratio);
-                    let values: Vec<f64> = shade_both(&scene, &frame, &s, true, &ctx, &mut worst).rgba.iter().map(|p| p[0] as f64).collect();
+                    let values: Vec<f64> = shade_both(&scene, &frame, &s, true, &ctx, &mut worst)
+                        .rgba
+                        .iter()
+                        .map(|p| p[0] as f64)
+                        .collect();
                     let touching = values[4];
                     for (z, v) in heights.iter().zip(&values) {
                         if *z <= 1.0 {
@@ -424,7 +456,10 @@ fn receivers_inside_touching_and_just_outside_one_blocker() {
                     }
                     // Continuity across the surface: 1e-6 outside changes alpha by 1.4e-3.
                     let just_outside = values[6];
-                    assert!((just_outside - touching).abs() <= 0.02, "{ctx}: touching {touching}, just outside {just_outside}");
+                    assert!(
+                        (just_outside - touching).abs() <= 0.02,
+                        "{ctx}: touching {touching}, just outside {just_outside}"
+                    );
                 }
             }
         }
@@ -499,7 +534,8 @@ fn grazing_normals_and_degenerate_normal_lengths() {
             for epsilon in EPSILONS {
                 // Every method unoccluded at order 3 (finite; `ol`, `hyb` and `series` are not
                 // bounded, see the bug tests); `quad` everywhere.
-                let methods: &[ExpMethod] = if frame.blockers.is_empty() && order == 3 { &CHEAP_METHODS } else { &BOUNDED_METHODS };
+                let methods: &[ExpMethod] =
+                    if frame.blockers.is_empty() && order == 3 { &CHEAP_METHODS } else { &BOUNDED_METHODS };
                 for &exp in methods {
                     let ctx = format!("{} blockers, order {order}, eps {epsilon}, {exp:?}", frame.blockers.len());
                     shade_both(&scene, frame, &settings_with(order, epsilon, exp, false), true, &ctx, &mut worst);
@@ -536,7 +572,8 @@ fn phong_exponents_from_1_to_1024() {
             for order in [3, 8] {
                 for epsilon in EPSILONS {
                     for exp in BOUNDED_METHODS {
-                        let ctx = format!("phong {exponent}, blockers {blocked}, order {order}, eps {epsilon}, {exp:?}");
+                        let ctx =
+                            format!("phong {exponent}, blockers {blocked}, order {order}, eps {epsilon}, {exp:?}");
                         shade_both(&scene, &f, &settings_with(order, epsilon, exp, false), true, &ctx, &mut worst);
                     }
                 }
@@ -554,7 +591,8 @@ fn phong_exponents_from_1_to_1024() {
 fn height_field_frame(base: &Frame, map: HeightMap, cliff_x: Option<f64>) -> Frame {
     let mut frame = base.clone();
     let g = &mut frame.gbuffer;
-    let h = |x: f64, y: f64| if map.columns >= 2 && map.rows >= 2 { map.height_at(x, y) } else { map.heights[0] as f64 };
+    let h =
+        |x: f64, y: f64| if map.columns >= 2 && map.rows >= 2 { map.height_at(x, y) } else { map.heights[0] as f64 };
     for i in surface_pixels(g) {
         let [x, y, _] = g.position[i].map(f64::from);
         let d = 1e-3;

@@ -140,7 +140,8 @@ fn sample_scenes_match_at_every_preset() {
 /// A small procedural dunes scene (height field, blockers, Phong, water, environment map)
 /// written to a temporary directory.
 fn small_dunes(dir: &Path) -> Scene {
-    synth::example_scene("dunes", dir, ExampleOptions { width: 64, height: 36, ..Default::default() }).expect("write dunes");
+    synth::example_scene("dunes", dir, ExampleOptions { width: 64, height: 36, ..Default::default() })
+        .expect("write dunes");
     Scene::load(dir).expect("load dunes")
 }
 
@@ -154,7 +155,8 @@ fn every_order_and_exponentiation_matches() {
     for order in 3..=8 {
         for exp in [ExpMethod::Quad, ExpMethod::Exact, ExpMethod::Ol, ExpMethod::Hyb, ExpMethod::Series] {
             let settings = ShadingSettings { exp, ..ShadingSettings::for_order(order) };
-            compared += check_parity(gpu, &scene, &frame, &settings, &format!("dunes 64x36 order {order} {exp:?}")).is_some() as usize;
+            compared += check_parity(gpu, &scene, &frame, &settings, &format!("dunes 64x36 order {order} {exp:?}"))
+                .is_some() as usize;
         }
     }
     assert!(compared >= 15, "only {compared} of 30 configurations compared");
@@ -199,7 +201,13 @@ fn analytic_scenes_match() {
         let frame = scene.frame(1).unwrap();
         let orders: &[usize] = if i == 0 { &[3, 4, 5, 6, 7, 8] } else { &[4] };
         for &order in orders {
-            check_parity(gpu, &scene, &frame, &ShadingSettings::for_order(order), &format!("sphere over plane {i} order {order}"));
+            check_parity(
+                gpu,
+                &scene,
+                &frame,
+                &ShadingSettings::for_order(order),
+                &format!("sphere over plane {i} order {order}"),
+            );
         }
     }
 }
@@ -292,7 +300,6 @@ fn frame_of_8192_squared_is_shaded_in_tiles() {
     assert!(corner[3] == 0.0 && corner[..3].iter().all(|c| c.is_finite() && *c >= 0.0), "corner {corner:?}");
 }
 
-
 /// The loop-budget guard: on lavapipe, settings beyond its budget are refused with a
 /// message, never shaded wrong; every other adapter shades them.
 #[test]
@@ -332,7 +339,12 @@ fn compositing_passes_match() {
         assert_close!(rgb(&on_gpu.specular), rgb(&cpu.specular), TOLERANCE, "{what}: specular");
         assert_close!(rgb(&on_gpu.environment), rgb(&cpu.environment), TOLERANCE, "{what}: environment");
         assert_close!(on_gpu.visibility, cpu.visibility, TOLERANCE, "{what}: visibility");
-        assert_close!(on_gpu.visibility_heightfield, cpu.visibility_heightfield, TOLERANCE, "{what}: visibility_heightfield");
+        assert_close!(
+            on_gpu.visibility_heightfield,
+            cpu.visibility_heightfield,
+            TOLERANCE,
+            "{what}: visibility_heightfield"
+        );
         assert_close!(on_gpu.visibility_blockers, cpu.visibility_blockers, TOLERANCE, "{what}: visibility_blockers");
     }
 }
@@ -376,7 +388,14 @@ fn shade_on_the_gpu_matches_the_cpu_through_the_command_line() {
             images.push(read_rgba(&out.join(format!("beauty.{frame:04}.exr"))));
         }
         let light = Scene::load(&scene).unwrap().frame(1).map(|f| unoccluded_value(&f.light)).unwrap_or(1.0);
-        let scale = |v: &[[f32; 4]]| v.iter().flat_map(|c| c.iter().map(|x| f64::from(*x) / light)).collect::<Vec<f64>>();
-        assert_close!(scale(&images[0]), scale(&images[1]), TOLERANCE, "{}: --device gpu vs --device cpu", scene.display());
+        let scale =
+            |v: &[[f32; 4]]| v.iter().flat_map(|c| c.iter().map(|x| f64::from(*x) / light)).collect::<Vec<f64>>();
+        assert_close!(
+            scale(&images[0]),
+            scale(&images[1]),
+            TOLERANCE,
+            "{}: --device gpu vs --device cpu",
+            scene.display()
+        );
     }
 }

@@ -2,7 +2,7 @@
 mod support;
 
 use logsh::logsh::*;
-use logsh::sh::basis::{eval_basis_spherical, nlp_scale, legendre};
+use logsh::sh::basis::{eval_basis_spherical, legendre, nlp_scale};
 use logsh::sh::quadrature::gauss_legendre_on;
 use logsh::sh::*;
 use std::f64::consts::PI;
@@ -89,7 +89,11 @@ fn wedge_operator_matches_equation_18() {
             let v1 = rng.vector(order, 1.0);
             let columns = 2 * order;
             let applied: Vec<f64> = (0..order * order)
-                .map(|i| (0..order).map(|j| op.matrix[i * columns + j] * v0[j] + op.matrix[i * columns + order + j] * v1[j]).sum())
+                .map(|i| {
+                    (0..order)
+                        .map(|j| op.matrix[i * columns + j] * v0[j] + op.matrix[i * columns + order + j] * v1[j])
+                        .sum()
+                })
                 .collect();
             let reference = wedge_by_quadrature(order, op.wedge_width(), &v0, &v1);
             assert_close!(applied, reference, REFERENCE, "M_lin at order {order}, W = {directions}");
@@ -154,10 +158,8 @@ fn cap_log_zh_matches_quadrature() {
             let mut zh = vec![0.0; order];
             cap_log_zh(order, log_eps, alpha, &mut zh);
             // Eq. 26: log(eps) on z in [cos alpha, 1]; y_l^0 = P^_l / sqrt(2 pi).
-            let reference: Vec<f64> = nlp_integral(order, alpha.cos(), 1.0, |_| log_eps)
-                .iter()
-                .map(|v| v * (2.0 * PI).sqrt())
-                .collect();
+            let reference: Vec<f64> =
+                nlp_integral(order, alpha.cos(), 1.0, |_| log_eps).iter().map(|v| v * (2.0 * PI).sqrt()).collect();
             assert_close!(zh, reference, REFERENCE, "cap at order {order}, alpha {alpha}");
         }
     }
@@ -166,12 +168,20 @@ fn cap_log_zh_matches_quadrature() {
 #[test]
 fn lobe_log_zh_matches_quadrature() {
     for order in ORDERS {
-        for lobe in [Lobe::Diffuse, Lobe::Phong { exponent: 1.0 }, Lobe::Phong { exponent: 16.0 }, Lobe::Phong { exponent: 1024.0 }] {
+        for lobe in [
+            Lobe::Diffuse,
+            Lobe::Phong { exponent: 1.0 },
+            Lobe::Phong { exponent: 16.0 },
+            Lobe::Phong { exponent: 1024.0 },
+        ] {
             for epsilon in [1e-6, 0.05, 0.1, 0.5, 0.9] {
                 let zh = lobe_log_zh(order, lobe, epsilon);
                 // Split at z = 0 and at the clamp's kink z_c; 200 nodes per piece, and a
                 // geometric subdivision towards 0 to resolve log z.
-                let r = match lobe { Lobe::Diffuse => 1.0, Lobe::Phong { exponent } => exponent };
+                let r = match lobe {
+                    Lobe::Diffuse => 1.0,
+                    Lobe::Phong { exponent } => exponent,
+                };
                 let z_c = epsilon.powf(1.0 / r);
                 let h = |z: f64| lobe.clamped_log(z, epsilon) * (2.0 * PI).sqrt();
                 let mut reference = nlp_integral(order, -1.0, z_c, h);
@@ -246,7 +256,9 @@ fn lobe_projection_matches_quadrature() {
             while a < 1.0 {
                 gap *= 0.5;
                 let b = if gap < 1e-7 { 1.0 } else { 1.0 - gap };
-                for (acc, v) in reference.iter_mut().zip(nlp_integral(order, a, b, |z| lobe.value(z) * (2.0 * PI).sqrt())) {
+                for (acc, v) in
+                    reference.iter_mut().zip(nlp_integral(order, a, b, |z| lobe.value(z) * (2.0 * PI).sqrt()))
+                {
                     *acc += v;
                 }
                 a = b;
@@ -266,9 +278,15 @@ fn optimal_lobe_epsilon_beats_the_visibility_default_for_sharp_lobes() {
         let best = optimal_lobe_epsilon(4, lobe, &exact);
         let at_best = lobe_exp_error(4, lobe, best, &exact);
         for eps in [0.001, 0.01, 0.1, 0.5] {
-            assert!(at_best <= lobe_exp_error(4, lobe, eps, &exact) + 1e-12, "r = {exponent}: eps {best} worse than {eps}");
+            assert!(
+                at_best <= lobe_exp_error(4, lobe, eps, &exact) + 1e-12,
+                "r = {exponent}: eps {best} worse than {eps}"
+            );
         }
     }
     let sharp = Lobe::Phong { exponent: 1024.0 };
-    assert!(lobe_exp_error(4, sharp, 0.1, &exact) > 20.0 * lobe_exp_error(4, sharp, optimal_lobe_epsilon(4, sharp, &exact), &exact));
+    assert!(
+        lobe_exp_error(4, sharp, 0.1, &exact)
+            > 20.0 * lobe_exp_error(4, sharp, optimal_lobe_epsilon(4, sharp, &exact), &exact)
+    );
 }

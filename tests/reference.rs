@@ -6,13 +6,15 @@
 
 use logsh::heightfield::HeightField;
 use logsh::logsh::Lobe;
-use logsh::shade::ShadeError;
 use logsh::reference::{
     integrate_point, render_reference, LightModel, LobeTerm, ReferenceError, ReferenceFrame, ReferenceLight,
     ReferenceOccluders, ReferenceOptions,
 };
 use logsh::scene::{Light, Material, Scene, Sphere};
-use logsh::synth::{analytic_placements, example_scene, sphere_over_plane, ExampleOptions, SphereOverPlane, PLANE_MATERIAL};
+use logsh::shade::ShadeError;
+use logsh::synth::{
+    analytic_placements, example_scene, sphere_over_plane, ExampleOptions, SphereOverPlane, PLANE_MATERIAL,
+};
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
 
@@ -135,12 +137,16 @@ fn height_field_wall_and_valley_match_closed_forms() {
     let h = 2.0;
     let wall = field_from(65, 9, [-8.0, -8.0], [8.0, 8.0], |x, _| if x > 1.1 { h } else { 0.0 });
     let distance = 1.25;
-    let cases = [("foot of the wall", 0.0), ("cast shadow, 0.5 above the ground", 0.5), ("cast shadow, 1.5 above", 1.5)];
+    let cases =
+        [("foot of the wall", 0.0), ("cast shadow, 0.5 above the ground", 0.5), ("cast shadow, 1.5 above", 1.5)];
     for (what, z) in cases {
         let k: f64 = (h - z) / distance;
         let expected = 0.5 + 0.5 / (1.0 + k * k).sqrt();
         let (got, estimate) = diffuse_fraction(&wall, &[], [0.0, 0.0, z], [0.0, 0.0, 1.0]);
-        println!("wall, {what}: reference {got:.6}, closed form {expected:.6}, error {:.1e} (estimate {estimate:.1e})", (got - expected).abs());
+        println!(
+            "wall, {what}: reference {got:.6}, closed form {expected:.6}, error {:.1e} (estimate {estimate:.1e})",
+            (got - expected).abs()
+        );
         assert!((got - expected).abs() <= 0.01, "{what}: {got} vs {expected}");
     }
 
@@ -166,7 +172,10 @@ fn height_field_wall_and_valley_match_closed_forms() {
         let n = [-slope / l, 0.0, 1.0 / l];
         let expected = 0.5 * (1.0 + 1.0 / l);
         let (got, estimate) = diffuse_fraction(&incline, &[], [0.3, 0.7, slope * 0.3], n);
-        println!("incline {slope}: reference {got:.6}, closed form {expected:.6}, error {:.1e} (estimate {estimate:.1e})", (got - expected).abs());
+        println!(
+            "incline {slope}: reference {got:.6}, closed form {expected:.6}, error {:.1e} (estimate {estimate:.1e})",
+            (got - expected).abs()
+        );
         assert!((got - expected).abs() <= 0.01, "incline {slope}: {got} vs {expected}");
     }
 }
@@ -201,7 +210,11 @@ fn dunes_render_in_both_light_modes() {
     let full = render(&scene, &frame, &options(1e-2, 3));
     let t_full = start.elapsed().as_secs_f64();
     let start = Instant::now();
-    let sh = render(&scene, &frame, &ReferenceOptions { light: ReferenceLight::ShProjected { order: 8 }, tolerance: 1e-2, max_level: 3 });
+    let sh = render(
+        &scene,
+        &frame,
+        &ReferenceOptions { light: ReferenceLight::ShProjected { order: 8 }, tolerance: 1e-2, max_level: 3 },
+    );
     let t_sh = start.elapsed().as_secs_f64();
     let (mut sum, mut n, mut worst, mut mean_value) = (0.0, 0usize, 0.0f64, 0.0);
     for ((a, b), &m) in full.rgba.iter().zip(&sh.rgba).zip(&frame.gbuffer.material) {
@@ -231,8 +244,9 @@ fn dunes_render_in_both_light_modes() {
 #[test]
 fn sh_light_matches_eval_expansion() {
     let order = 8;
-    let coefficients: Vec<[f64; 3]> =
-        (0..order * order).map(|i| [0.5 / (1.0 + i as f64), ((i * 7) % 5) as f64 - 2.0, (i as f64 * 0.37).sin()]).collect();
+    let coefficients: Vec<[f64; 3]> = (0..order * order)
+        .map(|i| [0.5 / (1.0 + i as f64), ((i * 7) % 5) as f64 - 2.0, (i as f64 * 0.37).sin()])
+        .collect();
     let light = Light::Sh(coefficients.clone());
     let model = LightModel::new(&light, &ReferenceLight::EnvironmentMap).unwrap();
     for d in [[0.0, 0.0, 1.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0], [0.3, -0.5, 0.812404], [-0.7, 0.2, -0.685565]] {

@@ -65,9 +65,28 @@ fn assert_fails_with(output: &Output, code: i32, needles: &[&str]) {
 }
 
 const PASS_CHANNELS: &[&str] = &[
-    "R", "G", "B", "A", "diffuse.R", "diffuse.G", "diffuse.B", "specular.R", "specular.G", "specular.B",
-    "environment.R", "environment.G", "environment.B", "visibility.Y", "visibility_heightfield.Y",
-    "visibility_blockers.Y", "P.X", "P.Y", "P.Z", "N.X", "N.Y", "N.Z",
+    "R",
+    "G",
+    "B",
+    "A",
+    "diffuse.R",
+    "diffuse.G",
+    "diffuse.B",
+    "specular.R",
+    "specular.G",
+    "specular.B",
+    "environment.R",
+    "environment.G",
+    "environment.B",
+    "visibility.Y",
+    "visibility_heightfield.Y",
+    "visibility_blockers.Y",
+    "P.X",
+    "P.Y",
+    "P.Z",
+    "N.X",
+    "N.Y",
+    "N.Z",
 ];
 
 #[test]
@@ -97,7 +116,9 @@ fn three_frames_render_to_passes_that_add_up() {
         // Stored as float (--colour-type float), the sum is exact.
         for (k, ch) in ["R", "G", "B"].iter().enumerate() {
             for (i, beauty) in c[*ch].0.iter().enumerate() {
-                let sum = c[&format!("diffuse.{ch}")].0[i] + c[&format!("specular.{ch}")].0[i] + c[&format!("environment.{ch}")].0[i];
+                let sum = c[&format!("diffuse.{ch}")].0[i]
+                    + c[&format!("specular.{ch}")].0[i]
+                    + c[&format!("environment.{ch}")].0[i];
                 assert_eq!(sum, *beauty, "frame {frame} pixel {i} channel {k}");
             }
         }
@@ -133,13 +154,21 @@ fn three_frames_render_to_passes_that_add_up() {
 
     // Half colour (the default): the sum holds to half precision.
     let half = dir.path().join("half");
-    logsh().arg("render").arg(&scene).args(["--frames", "2", "--progress", "none", "--out"]).arg(&half).assert().success();
+    logsh()
+        .arg("render")
+        .arg(&scene)
+        .args(["--frames", "2", "--progress", "none", "--out"])
+        .arg(&half)
+        .assert()
+        .success();
     let (_, _, c) = channels(&half.join("render.0002.exr"));
     assert_eq!(c["R"].1, "half");
     assert_eq!(c["P.X"].1, "float");
     for ch in ["R", "G", "B"] {
         for i in 0..c[ch].0.len() {
-            let sum = c[&format!("diffuse.{ch}")].0[i] + c[&format!("specular.{ch}")].0[i] + c[&format!("environment.{ch}")].0[i];
+            let sum = c[&format!("diffuse.{ch}")].0[i]
+                + c[&format!("specular.{ch}")].0[i]
+                + c[&format!("environment.{ch}")].0[i];
             assert!((sum - c[ch].0[i]).abs() <= 2e-3 * c[ch].0[i].abs().max(1e-2), "{ch} {i}");
         }
     }
@@ -169,9 +198,8 @@ fn skip_existing_leaves_finished_frames_untouched() {
         logsh().arg("render").arg(&scene).args(["--progress", "json", "--out"]).arg(&out).args(extra).output().unwrap()
     };
     assert!(render(&[]).status.success());
-    let files: Vec<PathBuf> = (1..=3)
-        .flat_map(|f| ["exr", "png"].map(|e| out.join(format!("render.{f:04}.{e}"))))
-        .collect();
+    let files: Vec<PathBuf> =
+        (1..=3).flat_map(|f| ["exr", "png"].map(|e| out.join(format!("render.{f:04}.{e}")))).collect();
     let before: Vec<_> = files.iter().map(|f| modified_and_bytes(f)).collect();
     std::thread::sleep(std::time::Duration::from_millis(20));
     std::fs::remove_file(&files[3]).unwrap(); // frame 2's PNG: frame 2 is incomplete.
@@ -180,7 +208,8 @@ fn skip_existing_leaves_finished_frames_untouched() {
     assert!(output.status.success(), "{}", stderr_of(&output));
     let events: Vec<serde_json::Value> =
         String::from_utf8_lossy(&output.stdout).lines().map(|l| serde_json::from_str(l).unwrap()).collect();
-    let statuses: Vec<&str> = events.iter().filter(|e| e["event"] == "frame").map(|e| e["status"].as_str().unwrap()).collect();
+    let statuses: Vec<&str> =
+        events.iter().filter(|e| e["event"] == "frame").map(|e| e["status"].as_str().unwrap()).collect();
     assert_eq!(statuses, ["skipped", "rendered", "skipped"]);
     assert_eq!(events.last().unwrap()["event"], "done");
     for (i, file) in files.iter().enumerate() {
@@ -200,12 +229,26 @@ fn a_killed_render_resumes_to_identical_frames() {
     let resumed = dir.path().join("resumed");
     let bin = assert_cmd::cargo::cargo_bin("logsh");
     let args = |out: &Path| -> Vec<std::ffi::OsString> {
-        vec!["render".into(), scene.clone().into(), "--progress".into(), "json".into(), "--threads".into(), "1".into(), "--out".into(), out.into()]
+        vec![
+            "render".into(),
+            scene.clone().into(),
+            "--progress".into(),
+            "json".into(),
+            "--threads".into(),
+            "1".into(),
+            "--out".into(),
+            out.into(),
+        ]
     };
     assert!(std::process::Command::new(&bin).args(args(&full)).output().unwrap().status.success());
 
     // Kill the render as soon as its first frame is on disk.
-    let mut child = std::process::Command::new(&bin).args(args(&resumed)).stdout(Stdio::piped()).stderr(Stdio::null()).spawn().unwrap();
+    let mut child = std::process::Command::new(&bin)
+        .args(args(&resumed))
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
     let mut reader = std::io::BufReader::new(child.stdout.take().unwrap());
     let mut line = String::new();
     loop {
@@ -243,9 +286,24 @@ fn one_bad_frame_fails_alone_and_is_named() {
     let bytes = std::fs::read(&gbuffer).unwrap();
     std::fs::write(&gbuffer, &bytes[..bytes.len() / 2]).unwrap();
     // A negative radius in the last frame.
-    std::fs::write(scene.join("blockers.0003.json"), r#"{"frame": 3, "spheres": [{"center": [0, 0, 2], "radius": -1}]}"#).unwrap();
+    std::fs::write(
+        scene.join("blockers.0003.json"),
+        r#"{"frame": 3, "spheres": [{"center": [0, 0, 2], "radius": -1}]}"#,
+    )
+    .unwrap();
     let output = logsh().arg("render").arg(&scene).args(["--progress", "lines", "--out"]).arg(&out).output().unwrap();
-    assert_fails_with(&output, 1, &["2 of 3 frame(s) failed", "frame 2: ", "gbuffer.0002.exr", "frame 3: ", "blockers.0003.json", "negative radius"]);
+    assert_fails_with(
+        &output,
+        1,
+        &[
+            "2 of 3 frame(s) failed",
+            "frame 2: ",
+            "gbuffer.0002.exr",
+            "frame 3: ",
+            "blockers.0003.json",
+            "negative radius",
+        ],
+    );
     assert!(out.join("render.0001.exr").is_file(), "the good frame is rendered");
     assert!(!out.join("render.0002.exr").exists() && !out.join("render.0003.exr").exists());
     let leftovers: Vec<_> = std::fs::read_dir(&out).unwrap().map(|e| e.unwrap().file_name()).collect();
@@ -287,11 +345,17 @@ fn flags_and_outputs_are_checked_before_rendering() {
     let dir = tempfile::tempdir().unwrap();
     let scene = three_frame_scene(dir.path(), 32, 18);
     let out = dir.path().join("out");
-    let render = |args: &[&str], out: &Path| logsh().arg("render").arg(&scene).args(args).arg("--out").arg(out).output().unwrap();
+    let render = |args: &[&str], out: &Path| {
+        logsh().arg("render").arg(&scene).args(args).arg("--out").arg(out).output().unwrap()
+    };
 
     assert_fails_with(&render(&["--frames", "1-3x0"], &out), 2, &["--frames", "step must be at least 1"]);
     assert_fails_with(&render(&["--frames", "1,,3"], &out), 2, &["--frames", "empty item"]);
-    assert_fails_with(&render(&["--frames", "2-9"], &out), 1, &["frame(s) 4, 5, 6, 7, 8 outside the scene's frames 1-3"]);
+    assert_fails_with(
+        &render(&["--frames", "2-9"], &out),
+        1,
+        &["frame(s) 4, 5, 6, 7, 8 outside the scene's frames 1-3"],
+    );
     assert_fails_with(&render(&["--order", "12"], &out), 1, &["--order 12"]);
     assert_fails_with(&render(&["--threads", "0"], &out), 1, &["--threads 0"]);
     assert_fails_with(&render(&["--name", "../x"], &out), 1, &["--name"]);
@@ -308,7 +372,11 @@ fn flags_and_outputs_are_checked_before_rendering() {
 
     // Outputs named like an input are refused before any frame is shaded.
     let before = std::fs::read(scene.join("gbuffer.0002.exr")).unwrap();
-    assert_fails_with(&render(&["--name", "gbuffer"], &scene), 1, &["gbuffer.0001.exr", "refusing to write over an input"]);
+    assert_fails_with(
+        &render(&["--name", "gbuffer"], &scene),
+        1,
+        &["gbuffer.0001.exr", "refusing to write over an input"],
+    );
     assert_eq!(std::fs::read(scene.join("gbuffer.0002.exr")).unwrap(), before);
     assert_fails_with(&render(&[], &scene.join("scene.json")), 1, &["scene.json", "not a directory"]);
 
@@ -329,8 +397,16 @@ fn info_refuses_what_is_not_an_exr() {
     let dir = tempfile::tempdir().unwrap();
     let garbage = dir.path().join("garbage.exr");
     std::fs::write(&garbage, b"v/1\x01\x02\x00\x00 not an exr at all").unwrap();
-    assert_fails_with(&logsh().arg("info").arg(&garbage).output().unwrap(), 1, &["garbage.exr", "not a readable image"]);
-    assert_fails_with(&logsh().arg("info").arg(dir.path().join("none.exr")).output().unwrap(), 1, &["none.exr", "file not found"]);
+    assert_fails_with(
+        &logsh().arg("info").arg(&garbage).output().unwrap(),
+        1,
+        &["garbage.exr", "not a readable image"],
+    );
+    assert_fails_with(
+        &logsh().arg("info").arg(dir.path().join("none.exr")).output().unwrap(),
+        1,
+        &["none.exr", "file not found"],
+    );
 }
 
 /// An EXR header claiming 100000 x 100000 pixels: refused by size, before the pixels.

@@ -28,7 +28,12 @@ fn edit_json(path: &Path, f: impl FnOnce(&mut serde_json::Value)) {
 fn write_raw_exr(path: &Path, width: usize, height: usize, channels: Vec<(&str, Vec<f32>)>) {
     let list: Vec<AnyChannel<FlatSamples>> =
         channels.into_iter().map(|(n, d)| AnyChannel::new(n, FlatSamples::F32(d))).collect();
-    let layer = Layer::new((width, height), LayerAttributes::default(), Encoding::SMALL_LOSSLESS, AnyChannels::sort(list.into_iter().collect()));
+    let layer = Layer::new(
+        (width, height),
+        LayerAttributes::default(),
+        Encoding::SMALL_LOSSLESS,
+        AnyChannels::sort(list.into_iter().collect()),
+    );
     Image::from_layer(layer).write().to_file(path).unwrap();
 }
 
@@ -78,7 +83,10 @@ fn missing_channel_lists_what_was_found() {
     write_raw_exr(&dir.path().join("gbuffer.0001.exr"), 32, 18, channels);
     let err = frame_error(dir.path());
     assert!(matches!(err, SceneError::MissingChannel { .. }), "{err:?}");
-    assert_mentions(&err, &["gbuffer.0001.exr", "missing channel \"ViewLayer.Normal.Y\"", "found:", "\"ViewLayer.Normal.X\""]);
+    assert_mentions(
+        &err,
+        &["gbuffer.0001.exr", "missing channel \"ViewLayer.Normal.Y\"", "found:", "\"ViewLayer.Normal.X\""],
+    );
 }
 
 #[test]
@@ -93,8 +101,12 @@ fn blender4_index_name_and_channel_overrides() {
     // Overrides: custom names, and UV named in an override is required.
     let n = 32 * 18;
     let custom = vec![
-        ("P.X", vec![0.0; n]), ("P.Y", vec![0.0; n]), ("P.Z", vec![0.0; n]),
-        ("N.X", vec![0.0; n]), ("N.Y", vec![0.0; n]), ("N.Z", vec![1.0; n]),
+        ("P.X", vec![0.0; n]),
+        ("P.Y", vec![0.0; n]),
+        ("P.Z", vec![0.0; n]),
+        ("N.X", vec![0.0; n]),
+        ("N.Y", vec![0.0; n]),
+        ("N.Z", vec![1.0; n]),
         ("idx", vec![2.0; n]),
     ];
     write_raw_exr(&dir.path().join("gbuffer.0001.exr"), 32, 18, custom);
@@ -130,7 +142,8 @@ fn size_mismatch_between_buffers() {
 #[test]
 fn malformed_json_gives_file_and_line() {
     let dir = base_scene();
-    std::fs::write(dir.path().join("scene.json"), "{\n  \"version\": 1,\n  \"gbuffer\": \"g.exr\" \"oops\"\n}\n").unwrap();
+    std::fs::write(dir.path().join("scene.json"), "{\n  \"version\": 1,\n  \"gbuffer\": \"g.exr\" \"oops\"\n}\n")
+        .unwrap();
     let err = Scene::load(dir.path()).unwrap_err();
     match &err {
         SceneError::Json { line, .. } => assert_eq!(*line, 3),
@@ -167,17 +180,43 @@ fn scene_level_validation() {
     type Edit = Box<dyn Fn(&mut serde_json::Value)>;
     let cases: Vec<(Edit, &[&str])> = vec![
         (Box::new(|v| v["version"] = serde_json::json!(2)), &["unsupported scene format version 2"]),
-        (Box::new(|v| v["materials"]["0"] = serde_json::json!({"type": "diffuse", "albedo": [1, 1, 1]})), &["material index 0"]),
-        (Box::new(|v| v["materials"]["x"] = serde_json::json!({"type": "diffuse", "albedo": [1, 1, 1]})), &["material key \"x\""]),
-        (Box::new(|v| v["materials"]["3"] = serde_json::json!({"type": "phong", "albedo": [0, 0, 0], "specular": [1, 1, 1], "exponent": 0})), &["material 3", "exponent 0 must be > 0"]),
-        (Box::new(|v| v["materials"]["3"] = serde_json::json!({"type": "phong", "albedo": [0, 0, 0], "specular": [1, 1, 1]})), &["needs key \"exponent\""]),
-        (Box::new(|v| v["materials"]["3"] = serde_json::json!({"type": "diffuse", "albedo": [1, -1, 1]})), &["negative"]),
-        (Box::new(|v| v["materials"]["3"] = serde_json::json!({"type": "metal", "albedo": [1, 1, 1]})), &["unknown type \"metal\""]),
+        (
+            Box::new(|v| v["materials"]["0"] = serde_json::json!({"type": "diffuse", "albedo": [1, 1, 1]})),
+            &["material index 0"],
+        ),
+        (
+            Box::new(|v| v["materials"]["x"] = serde_json::json!({"type": "diffuse", "albedo": [1, 1, 1]})),
+            &["material key \"x\""],
+        ),
+        (
+            Box::new(|v| {
+                v["materials"]["3"] =
+                    serde_json::json!({"type": "phong", "albedo": [0, 0, 0], "specular": [1, 1, 1], "exponent": 0})
+            }),
+            &["material 3", "exponent 0 must be > 0"],
+        ),
+        (
+            Box::new(|v| {
+                v["materials"]["3"] = serde_json::json!({"type": "phong", "albedo": [0, 0, 0], "specular": [1, 1, 1]})
+            }),
+            &["needs key \"exponent\""],
+        ),
+        (
+            Box::new(|v| v["materials"]["3"] = serde_json::json!({"type": "diffuse", "albedo": [1, -1, 1]})),
+            &["negative"],
+        ),
+        (
+            Box::new(|v| v["materials"]["3"] = serde_json::json!({"type": "metal", "albedo": [1, 1, 1]})),
+            &["unknown type \"metal\""],
+        ),
         (Box::new(|v| v["light"] = serde_json::json!({"sh": [[1, 1, 1], [0, 0, 0], [0, 0, 0]]})), &["3 coefficients"]),
         (Box::new(|v| v["light"] = serde_json::json!({"constant": [1, 1, 1], "sh": [[1, 1, 1]]})), &["exactly one of"]),
         (Box::new(|v| v["light"] = serde_json::json!({"environment": "nope.exr"})), &["nope.exr", "file not found"]),
         (Box::new(|v| v["frames"] = serde_json::json!({"start": 5, "end": 1})), &["start 5 is after end 1"]),
-        (Box::new(|v| v["heightfield"] = serde_json::json!({"heights": "h.exr", "min": [0, 0], "max": [0, 1]})), &["min", "below max"]),
+        (
+            Box::new(|v| v["heightfield"] = serde_json::json!({"heights": "h.exr", "min": [0, 0], "max": [0, 1]})),
+            &["min", "below max"],
+        ),
     ];
     for (edit, parts) in cases {
         let dir = base_scene();
@@ -236,7 +275,10 @@ fn fractional_and_unknown_material_indices() {
     assert!(Scene::load(dir.path()).unwrap().frame(1).unwrap().gbuffer.material.iter().all(|&m| m == 2));
 
     write_raw_exr(&g, 32, 18, gbuffer_channels(32, 18, |x, y| if (x, y) == (5, 7) { 7.0 } else { 0.0 }));
-    assert_mentions(&frame_error(dir.path()), &["pixel (5, 7)", "material index 7", "not in the material table", "1, 2"]);
+    assert_mentions(
+        &frame_error(dir.path()),
+        &["pixel (5, 7)", "material index 7", "not in the material table", "1, 2"],
+    );
 
     write_raw_exr(&g, 32, 18, gbuffer_channels(32, 18, |_, _| -1.0));
     assert_mentions(&frame_error(dir.path()), &["pixel (0, 0)", "is negative"]);
@@ -267,7 +309,9 @@ fn absurd_sizes_are_refused_before_allocation() {
 #[test]
 fn water_pixels_need_a_reflection_buffer() {
     let dir = base_scene();
-    edit_json(&dir.path().join("scene.json"), |v| v["materials"]["2"] = serde_json::json!({"type": "water", "tint": [1, 1, 1]}));
+    edit_json(&dir.path().join("scene.json"), |v| {
+        v["materials"]["2"] = serde_json::json!({"type": "water", "tint": [1, 1, 1]})
+    });
     assert_mentions(&frame_error(dir.path()), &["is water (material 2)", "reflection_gbuffer"]);
 }
 
@@ -412,7 +456,8 @@ fn outputs_never_overwrite_inputs() {
     let scene = Scene::load(dir.path()).unwrap();
     let inputs = scene.input_paths(1);
     assert!(inputs.contains(&dir.path().join("gbuffer.0001.exr")) && inputs.contains(&dir.path().join("scene.json")));
-    for bad in ["gbuffer.0001.exr", "gbuffer.0042.exr", "camera.0003.json", "scene.json", "./sub/../blockers.0001.json"] {
+    for bad in ["gbuffer.0001.exr", "gbuffer.0042.exr", "camera.0003.json", "scene.json", "./sub/../blockers.0001.json"]
+    {
         let err = scene.check_output_path(&dir.path().join(bad)).unwrap_err();
         assert!(matches!(err, SceneError::OutputIsInput { .. }), "{bad}: {err:?}");
     }

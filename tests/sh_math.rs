@@ -227,9 +227,17 @@ fn approximate_exponentiations_against_quadrature() {
                 quad.exp(&f, &mut out);
                 worst[3] = worst[3].max(relative_l2(&out, &reference));
             }
-            println!("order {order} |f^| {m:5.2}: series {:.4} OL {:.4} HYB {:.4} quad {:.6}", worst[0], worst[1], worst[2], worst[3]);
-            for (method, err) in [ExpMethod::Series, ExpMethod::Ol, ExpMethod::Hyb, ExpMethod::Quad].into_iter().zip(worst) {
-                assert!(err.is_finite() && err <= exp_error_bound(method, m), "{method:?} at order {order}, |f^| = {m}: relative error {err:.4}");
+            println!(
+                "order {order} |f^| {m:5.2}: series {:.4} OL {:.4} HYB {:.4} quad {:.6}",
+                worst[0], worst[1], worst[2], worst[3]
+            );
+            for (method, err) in
+                [ExpMethod::Series, ExpMethod::Ol, ExpMethod::Hyb, ExpMethod::Quad].into_iter().zip(worst)
+            {
+                assert!(
+                    err.is_finite() && err <= exp_error_bound(method, m),
+                    "{method:?} at order {order}, |f^| = {m}: relative error {err:.4}"
+                );
             }
         }
     }

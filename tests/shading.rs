@@ -4,7 +4,9 @@ mod support;
 
 use logsh::scene::{Scene, Sphere};
 use logsh::shade::{shade_frame, ShadedFrame, ShadingSettings};
-use logsh::synth::{analytic_placements, example_scene, sphere_over_plane, ExampleOptions, GBufferLayout, SphereOverPlane};
+use logsh::synth::{
+    analytic_placements, example_scene, sphere_over_plane, ExampleOptions, GBufferLayout, SphereOverPlane,
+};
 use std::path::Path;
 
 /// Writes and loads a sphere-over-plane scene; returns the scene, its frame and the
@@ -68,7 +70,11 @@ fn sphere_over_plane_meets_the_error_bounds_at_every_order() {
         }
         let mean = sum / count as f64;
         println!("order {order}: eps {}, mean abs error {mean:.4}, max {worst:.4}", settings.epsilon);
-        assert!(mean <= mean_error_bound(order), "order {order}: mean abs error {mean:.4} > {}", mean_error_bound(order));
+        assert!(
+            mean <= mean_error_bound(order),
+            "order {order}: mean abs error {mean:.4} > {}",
+            mean_error_bound(order)
+        );
     }
 }
 
@@ -93,13 +99,22 @@ fn unoccluded_plane_comes_out_as_its_albedo() {
         let frame = scene.frame(1).unwrap();
         for order in 3..=8 {
             let shaded = shade_frame(&scene, &frame, &ShadingSettings::for_order(order)).unwrap();
-            let plane: Vec<&[f32; 4]> = shaded.rgba.iter().zip(&frame.gbuffer.material).filter(|(_, &m)| m == 1).map(|(p, _)| p).collect();
+            let plane: Vec<&[f32; 4]> =
+                shaded.rgba.iter().zip(&frame.gbuffer.material).filter(|(_, &m)| m == 1).map(|(p, _)| p).collect();
             assert!(!plane.is_empty());
             let unoccluded = plane[0][2] as f64;
             println!("{layout:?} order {order}: unoccluded {unoccluded:.4}");
-            assert!((unoccluded - 1.0).abs() <= unoccluded_tolerance(order), "order {order}: unoccluded value {unoccluded}");
+            assert!(
+                (unoccluded - 1.0).abs() <= unoccluded_tolerance(order),
+                "order {order}: unoccluded value {unoccluded}"
+            );
             for px in plane {
-                assert_close!(px[..3], [0.5 * unoccluded, 0.25 * unoccluded, unoccluded], 1e-4, "albedo scaling at order {order}");
+                assert_close!(
+                    px[..3],
+                    [0.5 * unoccluded, 0.25 * unoccluded, unoccluded],
+                    1e-4,
+                    "albedo scaling at order {order}"
+                );
                 assert_eq!(px[3], 1.0);
             }
         }
@@ -146,7 +161,10 @@ fn receivers_inside_and_touching_blockers_stay_finite() {
                 settings.ratio_attenuation = ratio;
                 let shaded = shade_frame(&scene, &frame, &settings).unwrap();
                 for px in &shaded.rgba {
-                    assert!(px.iter().all(|c| c.is_finite() && *c >= 0.0 && *c < 10.0), "order {order}, eps {epsilon}: {px:?}");
+                    assert!(
+                        px.iter().all(|c| c.is_finite() && *c >= 0.0 && *c < 10.0),
+                        "order {order}, eps {epsilon}: {px:?}"
+                    );
                 }
             }
         }

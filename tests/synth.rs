@@ -53,13 +53,15 @@ fn layouts_match_blender_naming() {
     for (layout, sub) in [(GBufferLayout::Blender5, "b5"), (GBufferLayout::Blender4, "b4")] {
         synth::sphere_over_plane(&dir.path().join(sub), &small(layout)).unwrap();
     }
-    let meta = |sub: &str| exr::meta::MetaData::read_from_file(dir.path().join(sub).join("gbuffer.0001.exr"), false).unwrap();
+    let meta =
+        |sub: &str| exr::meta::MetaData::read_from_file(dir.path().join(sub).join("gbuffer.0001.exr"), false).unwrap();
     let b5 = meta("b5");
     let parts: Vec<String> =
         b5.headers.iter().map(|h| h.own_attributes.layer_name.as_ref().unwrap().to_string()).collect();
     assert!(parts.contains(&"ViewLayer.Position".to_string()), "{parts:?}");
     assert!(parts.contains(&"ViewLayer.Material Index".to_string()), "{parts:?}");
-    let position = b5.headers.iter().find(|h| h.own_attributes.layer_name.as_ref().unwrap() == "ViewLayer.Position").unwrap();
+    let position =
+        b5.headers.iter().find(|h| h.own_attributes.layer_name.as_ref().unwrap() == "ViewLayer.Position").unwrap();
     let names: Vec<String> = position.channels.list.iter().map(|c| c.name.to_string()).collect();
     assert_eq!(names, ["ViewLayer.Position.X", "ViewLayer.Position.Y", "ViewLayer.Position.Z"]);
 
@@ -88,7 +90,8 @@ fn sphere_over_plane_geometry() {
             }
             SPHERE_MATERIAL => {
                 sphere += 1;
-                let d = ((p[0] as f64 - c[0]).powi(2) + (p[1] as f64 - c[1]).powi(2) + (p[2] as f64 - c[2]).powi(2)).sqrt();
+                let d =
+                    ((p[0] as f64 - c[0]).powi(2) + (p[1] as f64 - c[1]).powi(2) + (p[2] as f64 - c[2]).powi(2)).sqrt();
                 assert!((d - 1.0).abs() < 1e-5, "sphere pixel at distance {d}");
             }
             m => panic!("unexpected material {m}"),
@@ -104,7 +107,10 @@ fn sphere_over_plane_closed_form() {
     let below = spec.expected_at([0.0, 0.0, 0.0]).unwrap();
     assert!((below - 0.75).abs() < 1e-12, "{below}");
     // A sphere that cuts the plane: far away its cap crosses the horizon, no closed form.
-    let low = SphereOverPlane { spheres: vec![logsh::scene::Sphere { center: [0.0, 0.0, 0.5], radius: 1.0 }], ..spec.clone() };
+    let low = SphereOverPlane {
+        spheres: vec![logsh::scene::Sphere { center: [0.0, 0.0, 0.5], radius: 1.0 }],
+        ..spec.clone()
+    };
     assert!(low.expected_at([5.0, 0.0, 0.0]).is_none());
     assert!(low.expected_at([0.0, 0.0, 0.0]).is_none(), "inside the sphere");
     // beta = 45 deg at horizontal distance 2: sin^2(alpha) = 1/8, cos(beta) = 1/sqrt(2).
@@ -174,7 +180,8 @@ fn dunes_sample_scene_reads_back() {
 #[test]
 fn spheres_sample_and_unknown_name() {
     let dir = tempfile::tempdir().unwrap();
-    example_scene("spheres", dir.path(), ExampleOptions { width: 40, height: 24, layout: GBufferLayout::Blender4 }).unwrap();
+    example_scene("spheres", dir.path(), ExampleOptions { width: 40, height: 24, layout: GBufferLayout::Blender4 })
+        .unwrap();
     Scene::load(dir.path()).unwrap().frame(1).unwrap();
     let err = example_scene("nope", &dir.path().join("x"), ExampleOptions::default()).unwrap_err();
     assert!(err.to_string().contains("unknown example scene \"nope\""), "{err}");
@@ -186,7 +193,8 @@ fn spheres_sample_and_unknown_name() {
 #[test]
 fn cone_intersection() {
     use synth::{trace, Object, Shape};
-    let cone = [Object { shape: Shape::Cone { base: [0.0, 0.0, 0.0], apex: [0.0, 0.0, 2.0], radius: 1.0 }, material: 3 }];
+    let cone =
+        [Object { shape: Shape::Cone { base: [0.0, 0.0, 0.0], apex: [0.0, 0.0, 2.0], radius: 1.0 }, material: 3 }];
     let h = trace(&cone, [0.1, 0.0, 5.0], [0.0, 0.0, -1.0], 0.0).unwrap();
     assert!((h.t - 3.2).abs() < 1e-9, "{}", h.t);
     let h = trace(&cone, [5.0, 0.0, 1.0], [-1.0, 0.0, 0.0], 0.0).unwrap();

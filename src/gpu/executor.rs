@@ -3,10 +3,10 @@
 //! them, wall time otherwise).
 
 use super::layout::{
-    GpuDecimation, GpuLevel, GpuStep, GpuTap, ShadeParams, FEATURE_BLOCKERS, FEATURE_HEIGHTFIELD, FEATURE_PHONG, SLOT_NONE,
-    SLOT_UNKNOWN,
+    GpuDecimation, GpuLevel, GpuStep, GpuTap, ShadeParams, FEATURE_BLOCKERS, FEATURE_HEIGHTFIELD, FEATURE_PHONG,
+    SLOT_NONE, SLOT_UNKNOWN,
 };
-use super::program::{Features, Specialisation, MarchShape, ShadeProgram, LAVAPIPE_LOOP_LIMIT, PYRAMID_WGSL};
+use super::program::{Features, MarchShape, ShadeProgram, Specialisation, LAVAPIPE_LOOP_LIMIT, PYRAMID_WGSL};
 use super::GpuError;
 use crate::heightfield::{decimation_taps, PyramidPlan};
 use crate::scene::{Frame, Material, Scene};
@@ -147,14 +147,17 @@ impl Gpu {
     }
 
     fn wait(&self, during: &str) -> Result<(), GpuError> {
-        self.device
-            .poll(wgpu::PollType::wait_indefinitely())
-            .map_err(|e| self.wgpu_error(during, e.to_string()))?;
+        self.device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| self.wgpu_error(during, e.to_string()))?;
         self.check_errors(during)
     }
 
     /// Shades one frame (the GPU counterpart of [`crate::shade::shade_frame`]).
-    pub fn shade_frame(&self, scene: &Scene, frame: &Frame, settings: &ShadingSettings) -> Result<ShadedFrame, GpuError> {
+    pub fn shade_frame(
+        &self,
+        scene: &Scene,
+        frame: &Frame,
+        settings: &ShadingSettings,
+    ) -> Result<ShadedFrame, GpuError> {
         Ok(self.shade_frame_timed(scene, frame, settings, Specialisation::Full)?.0)
     }
 
@@ -170,22 +173,29 @@ impl Gpu {
         let g = &frame.gbuffer;
         let mut rgba = vec![[0.0f32; 4]; g.width * g.height];
         let timings = self.shade_tiles(scene, frame, settings, specialisation, false, &mut |start, work, shaded| {
-            rgba[start..start + work.len()].par_iter_mut().zip(work.par_iter()).enumerate().for_each(|(i, (out, w))| {
-                *out = match *w {
-                    TileWork::Fixed(colour) => colour,
-                    TileWork::Shaded(tint) => {
-                        let (d, s) = (shaded[SHADED_VEC4S * i], shaded[SHADED_VEC4S * i + 1]);
-                        [tint[0] * (d[0] + s[0]), tint[1] * (d[1] + s[1]), tint[2] * (d[2] + s[2]), 1.0]
-                    }
-                };
-            });
+            rgba[start..start + work.len()].par_iter_mut().zip(work.par_iter()).enumerate().for_each(
+                |(i, (out, w))| {
+                    *out = match *w {
+                        TileWork::Fixed(colour) => colour,
+                        TileWork::Shaded(tint) => {
+                            let (d, s) = (shaded[SHADED_VEC4S * i], shaded[SHADED_VEC4S * i + 1]);
+                            [tint[0] * (d[0] + s[0]), tint[1] * (d[1] + s[1]), tint[2] * (d[2] + s[2]), 1.0]
+                        }
+                    };
+                },
+            );
         })?;
         Ok((ShadedFrame { width: g.width, height: g.height, rgba }, timings))
     }
 
     /// Shades one frame into compositing passes and visibility terms (the GPU
     /// counterpart of [`crate::shade::shade_frame_passes`]).
-    pub fn shade_frame_passes(&self, scene: &Scene, frame: &Frame, settings: &ShadingSettings) -> Result<ShadedPasses, GpuError> {
+    pub fn shade_frame_passes(
+        &self,
+        scene: &Scene,
+        frame: &Frame,
+        settings: &ShadingSettings,
+    ) -> Result<ShadedPasses, GpuError> {
         let g = &frame.gbuffer;
         let mut pixels = vec![Pixel::fixed([0.0; 4]); g.width * g.height];
         self.shade_tiles(scene, frame, settings, Specialisation::Full, true, &mut |start, work, shaded| {
@@ -247,7 +257,8 @@ impl Gpu {
             specialisation,
             passes,
         };
-        let march = plan.as_ref().map(|p| MarchShape::of(p, settings.horizon.reconstruction, settings.horizon.scale_max));
+        let march =
+            plan.as_ref().map(|p| MarchShape::of(p, settings.horizon.reconstruction, settings.horizon.scale_max));
         let program = ShadeProgram::new(&kernel, features, march);
         timings.add_wall("tables", started);
         if self.is_lavapipe() {
@@ -262,7 +273,10 @@ impl Gpu {
                         settings.order,
                         settings.exp,
                         frame.blockers.len(),
-                        march.map_or("no height field".to_string(), |m| format!("W {} x {} steps", m.directions, m.steps))
+                        march.map_or("no height field".to_string(), |m| format!(
+                            "W {} x {} steps",
+                            m.directions, m.steps
+                        ))
                     ),
                 });
             }
@@ -278,7 +292,11 @@ impl Gpu {
         let spheres: Vec<[f32; 4]> = if frame.blockers.is_empty() {
             vec![[0.0; 4]]
         } else {
-            frame.blockers.iter().map(|s| [s.center[0] as f32, s.center[1] as f32, s.center[2] as f32, s.radius as f32]).collect()
+            frame
+                .blockers
+                .iter()
+                .map(|s| [s.center[0] as f32, s.center[1] as f32, s.center[2] as f32, s.radius as f32])
+                .collect()
         };
         let spheres = self.storage("spheres", bytemuck::cast_slice(&spheres))?;
         timings.add_wall("upload", started);
@@ -296,13 +314,19 @@ impl Gpu {
         let dummy_levels = if heightfield.is_none() && generic {
             Some((
                 self.storage("levels", bytemuck::cast_slice(&[0.0f32]))?,
-                self.storage("level table", bytemuck::cast_slice(&[GpuLevel { columns: 1, rows: 1, ..Default::default() }]))?,
+                self.storage(
+                    "level table",
+                    bytemuck::cast_slice(&[GpuLevel { columns: 1, rows: 1, ..Default::default() }]),
+                )?,
                 self.storage("steps", bytemuck::cast_slice(&[GpuStep::default()]))?,
             ))
         } else {
             None
         };
-        let level_buffers = heightfield.as_ref().map(|h| (&h.levels, &h.level_table, &h.steps)).or(dummy_levels.as_ref().map(|d| (&d.0, &d.1, &d.2)));
+        let level_buffers = heightfield
+            .as_ref()
+            .map(|h| (&h.levels, &h.level_table, &h.steps))
+            .or(dummy_levels.as_ref().map(|d| (&d.0, &d.1, &d.2)));
 
         let feature_bits = (if features.heightfield { FEATURE_HEIGHTFIELD } else { 0 })
             | (if features.blockers { FEATURE_BLOCKERS } else { 0 })
@@ -315,9 +339,12 @@ impl Gpu {
         let tile = self.tile_points(pixels);
         let point_bytes = tile as u64 * POINT_VEC4S * 16;
         let shaded_bytes = tile as u64 * SHADED_VEC4S as u64 * 16;
-        let points_buffer = self.buffer("points", point_bytes, wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST);
-        let shaded_buffer = self.buffer("shaded", shaded_bytes, wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC);
-        let readback = self.buffer("readback", shaded_bytes, wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST);
+        let points_buffer =
+            self.buffer("points", point_bytes, wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST);
+        let shaded_buffer =
+            self.buffer("shaded", shaded_bytes, wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC);
+        let readback =
+            self.buffer("readback", shaded_bytes, wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST);
         let params_buffer = self.buffer(
             "params",
             std::mem::size_of::<ShadeParams>() as u64,
@@ -396,7 +423,8 @@ impl Gpu {
             };
             self.queue.write_buffer(&params_buffer, 0, bytemuck::bytes_of(&params));
             self.queue.write_buffer(&points_buffer, 0, bytemuck::cast_slice(&points[..count * POINT_VEC4S as usize]));
-            let mut encoder = self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("shade") });
+            let mut encoder =
+                self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("shade") });
             {
                 let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
                     label: Some("shade"),
@@ -427,7 +455,9 @@ impl Gpu {
             slice.map_async(wgpu::MapMode::Read, |_| {});
             self.wait("reading the shaded tile back")?;
             {
-                let data = slice.get_mapped_range().map_err(|e| self.wgpu_error("reading the shaded tile back", e.to_string()))?;
+                let data = slice
+                    .get_mapped_range()
+                    .map_err(|e| self.wgpu_error("reading the shaded tile back", e.to_string()))?;
                 let shaded: &[[f32; 4]] = bytemuck::cast_slice(&data);
                 consume(start, &work[..count], shaded);
             }
@@ -439,7 +469,12 @@ impl Gpu {
     }
 
     fn buffer(&self, label: &str, size: u64, usage: wgpu::BufferUsages) -> wgpu::Buffer {
-        self.device.create_buffer(&wgpu::BufferDescriptor { label: Some(label), size: size.max(16), usage, mapped_at_creation: false })
+        self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some(label),
+            size: size.max(16),
+            usage,
+            mapped_at_creation: false,
+        })
     }
 
     /// A read-only storage buffer holding `data`, after checking the adapter's limit.
@@ -513,7 +548,12 @@ impl Gpu {
 
     /// Uploads level 0 and filters the coarser levels on the GPU with the CPU path's tent
     /// taps (`shaders/pyramid.wgsl`).
-    fn build_pyramid(&self, heights: &[f32], plan: &PyramidPlan, timings: &mut StageTimings) -> Result<HeightFieldBuffers, GpuError> {
+    fn build_pyramid(
+        &self,
+        heights: &[f32],
+        plan: &PyramidPlan,
+        timings: &mut StageTimings,
+    ) -> Result<HeightFieldBuffers, GpuError> {
         let started = Instant::now();
         let n = plan.sizes[0];
         let mut level_table = Vec::with_capacity(plan.sizes.len());
@@ -560,12 +600,18 @@ impl Gpu {
         }
         self.check_size("the height-field pyramid levels", total as u64 * 4)?;
         self.check_size("the height-field pyramid scratch", scratch as u64 * 4)?;
-        let levels = self.buffer("levels", total as u64 * 4, wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST);
+        let levels =
+            self.buffer("levels", total as u64 * 4, wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST);
         self.queue.write_buffer(&levels, 0, bytemuck::cast_slice(heights));
         let steps: Vec<GpuStep> = plan
             .steps
             .iter()
-            .map(|s| GpuStep { distance: s.distance as f32, inv_distance: s.inv_distance as f32, level: s.level as u32, pad: 0 })
+            .map(|s| GpuStep {
+                distance: s.distance as f32,
+                inv_distance: s.inv_distance as f32,
+                level: s.level as u32,
+                pad: 0,
+            })
             .collect();
         let steps = if steps.is_empty() { vec![GpuStep::default()] } else { steps };
         let steps = self.storage("steps", bytemuck::cast_slice(&steps))?;
@@ -589,7 +635,8 @@ impl Gpu {
             let tap_buffer = self.storage("taps", bytemuck::cast_slice(&taps))?;
             let scratch_buffer = self.buffer("pyramid scratch", scratch as u64 * 4, wgpu::BufferUsages::STORAGE);
             let timer = self.timer();
-            let mut encoder = self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("pyramid") });
+            let mut encoder =
+                self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("pyramid") });
             {
                 let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
                     label: Some("pyramid"),

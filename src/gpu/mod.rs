@@ -67,7 +67,10 @@ pub enum Executor {
     Cpu,
     /// `fallback`: chosen by `--device auto`, so a frame the adapter cannot shade
     /// correctly goes to the CPU path instead of failing.
-    Gpu { gpu: Gpu, fallback: bool },
+    Gpu {
+        gpu: Gpu,
+        fallback: bool,
+    },
 }
 
 impl Executor {
@@ -83,7 +86,9 @@ impl Executor {
                 Ok(Self::Gpu { gpu: Gpu::new()?, fallback: false })
             }
             DeviceChoice::Auto if settings.double_precision => {
-                eprintln!("--device auto: shading on the CPU, since the GPU pass runs in f32 and --precision f64 was asked");
+                eprintln!(
+                    "--device auto: shading on the CPU, since the GPU pass runs in f32 and --precision f64 was asked"
+                );
                 Ok(Self::Cpu)
             }
             DeviceChoice::Auto => match Gpu::new() {
@@ -109,7 +114,12 @@ impl Executor {
     }
 
     /// The frame's compositing passes and visibility terms (`logsh render`).
-    pub fn shade_passes(&self, scene: &Scene, frame: &Frame, settings: &ShadingSettings) -> Result<ShadedPasses, GpuError> {
+    pub fn shade_passes(
+        &self,
+        scene: &Scene,
+        frame: &Frame,
+        settings: &ShadingSettings,
+    ) -> Result<ShadedPasses, GpuError> {
         match self {
             Self::Cpu => Ok(crate::shade::shade_frame_passes(scene, frame, settings)?),
             Self::Gpu { gpu, fallback } => match gpu.shade_frame_passes(scene, frame, settings) {

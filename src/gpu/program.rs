@@ -14,7 +14,7 @@ use super::layout::{wgsl_declarations, GpuMaterial, MATERIAL_DIFFUSE, MATERIAL_P
 use crate::heightfield::{LevelReconstruction, PyramidPlan, ScaleMax};
 use crate::scene::Material;
 use crate::sh::basis::{coefficient_count, funk_hecke_factor, nlp_scale, normalisation};
-use crate::sh::exp::{ol_node_count, ONE_DC, OL_COARSE_STEP, OL_FINE_NODES, SERIES_MAX_TERMS, Y0};
+use crate::sh::exp::{ol_node_count, OL_COARSE_STEP, OL_FINE_NODES, ONE_DC, SERIES_MAX_TERMS, Y0};
 use crate::sh::ExpMethod;
 use crate::shade::kernel::{sh_space_max_magnitude, LUMINANCE, SH_SPACE_BLEND};
 use crate::shade::ShadingKernel;
@@ -156,13 +156,18 @@ impl ShadeProgram {
                 })
             }),
         );
-        t.push("T_DOUBLE_FACTORIAL", (0..order).map(|m| (1..=m).fold(1.0f64, |acc, k| acc * (2 * k - 1) as f64) as f32));
+        t.push(
+            "T_DOUBLE_FACTORIAL",
+            (0..order).map(|m| (1..=m).fold(1.0f64, |acc, k| acc * (2 * k - 1) as f64) as f32),
+        );
         t.push("T_FUNK_HECKE", (0..order).map(|l| funk_hecke_factor(l) as f32));
         t.push("T_NLP_SCALE", (0..order).map(|l| nlp_scale(l) as f32));
         // 2 pi K_l of the cap's closed form (src/logsh/cap.rs).
         t.push(
             "T_CAP_SCALE",
-            (0..order).map(|l| (2.0 * std::f64::consts::PI * ((2 * l + 1) as f64 / (4.0 * std::f64::consts::PI)).sqrt()) as f32),
+            (0..order).map(|l| {
+                (2.0 * std::f64::consts::PI * ((2 * l + 1) as f64 / (4.0 * std::f64::consts::PI)).sqrt()) as f32
+            }),
         );
 
         // Lobes: order log-ZH values then the log of the peak.
@@ -205,7 +210,10 @@ impl ShadeProgram {
         let padded = count.div_ceil(4) * 4;
         t.push(
             "T_QUAD_BASIS",
-            quadrature.basis().chunks(count).flat_map(|y| y.iter().map(|&v| v as f32).chain(std::iter::repeat_n(0.0, padded - count))),
+            quadrature
+                .basis()
+                .chunks(count)
+                .flat_map(|y| y.iter().map(|&v| v as f32).chain(std::iter::repeat_n(0.0, padded - count))),
         );
         // L(node) = sum_i L_i y_i(node), per channel.
         t.push(

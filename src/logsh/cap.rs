@@ -13,11 +13,7 @@ pub fn cap_log_zh<T: Real>(order: usize, log_epsilon: T, alpha: T, out: &mut [T]
     legendre(order + 1, x, &mut p);
     let two_pi = T::of(2.0 * std::f64::consts::PI);
     for l in 0..order {
-        let integral = if l == 0 {
-            T::one() - x
-        } else {
-            (p[l - 1] - p[l + 1]) / T::of((2 * l + 1) as f64)
-        };
+        let integral = if l == 0 { T::one() - x } else { (p[l - 1] - p[l + 1]) / T::of((2 * l + 1) as f64) };
         let k = T::of(((2 * l + 1) as f64 / (4.0 * std::f64::consts::PI)).sqrt());
         out[l] = log_epsilon * two_pi * k * integral;
     }
@@ -41,7 +37,13 @@ pub enum BlockerView<T> {
 /// around the direction to its centre (`alpha = pi/2`, the limit of Eq. 24 at the
 /// surface) with ratio weight 1: the value stays finite and continuous across the
 /// surface. A receiver exactly at the centre has no direction to it and is culled.
-pub fn view_blocker<T: Real>(p: [T; 3], n: [T; 3], centre: [T; 3], radius: T, ratio_attenuation: bool) -> BlockerView<T> {
+pub fn view_blocker<T: Real>(
+    p: [T; 3],
+    n: [T; 3],
+    centre: [T; 3],
+    radius: T,
+    ratio_attenuation: bool,
+) -> BlockerView<T> {
     let d = [centre[0] - p[0], centre[1] - p[1], centre[2] - p[2]];
     let distance = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
     if distance <= T::zero() || !distance.is_finite() {

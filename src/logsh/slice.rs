@@ -15,11 +15,7 @@ pub fn nlp_slice<T: Real>(order: usize, log_epsilon: T, sigma: T, out: &mut [T])
     let mut p = [T::zero(); crate::sh::MAX_ORDER + 2];
     legendre(order + 1, s, &mut p);
     for l in 0..order {
-        let integral = if l == 0 {
-            s + T::one()
-        } else {
-            (p[l + 1] - p[l - 1]) / T::of((2 * l + 1) as f64)
-        };
+        let integral = if l == 0 { s + T::one() } else { (p[l + 1] - p[l - 1]) / T::of((2 * l + 1) as f64) };
         out[l] = log_epsilon * T::of(nlp_scale(l)) * integral;
     }
 }

@@ -1,6 +1,6 @@
 //! The wedge interpolation operator M_lin (paper 000, Eq. 18-23).
 
-use crate::sh::basis::{coefficient_count, eval_basis_spherical, nlp_scale, legendre, Real};
+use crate::sh::basis::{coefficient_count, eval_basis_spherical, legendre, nlp_scale, Real};
 use crate::sh::quadrature::gauss_legendre_on;
 use crate::sh::rotation::{rotate_z_with, z_rotation_phases};
 use std::f64::consts::PI;

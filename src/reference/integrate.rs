@@ -119,7 +119,9 @@ impl<'a> LightModel<'a> {
             }),
             super::ReferenceLight::ShProjected { order } => {
                 if *order == 0 || *order > MAX_REFERENCE_SH_ORDER {
-                    return Err(format!("SH-projected light order {order} is out of range 1..={MAX_REFERENCE_SH_ORDER}"));
+                    return Err(format!(
+                        "SH-projected light order {order} is out of range 1..={MAX_REFERENCE_SH_ORDER}"
+                    ));
                 }
                 Ok(LightModel::sh(*order, light.sh_coefficients(*order)))
             }

@@ -282,14 +282,8 @@ impl Context<'_> {
         let g = &self.frame.gbuffer;
         let i = g.index(x, y);
         let out = |c: [f64; 3], alpha: f32| [c[0] as f32, c[1] as f32, c[2] as f32, alpha];
-        let exact = |c: [f64; 3]| PointEstimate {
-            rgb: c,
-            error: 0.0,
-            level: 0,
-            converged: true,
-            meridians: 0,
-            evaluations: 0,
-        };
+        let exact =
+            |c: [f64; 3]| PointEstimate { rgb: c, error: 0.0, level: 0, converged: true, meridians: 0, evaluations: 0 };
         match g.material[i] {
             0 => {
                 let sky = match &self.frame.camera {

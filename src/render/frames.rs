@@ -58,7 +58,9 @@ impl FromStr for FrameSpec {
     fn from_str(text: &str) -> Result<Self, Self::Err> {
         let fail = |message: String| FrameSpecError { spec: text.to_string(), message };
         let number = |item: &str, s: &str| {
-            s.trim().parse::<i64>().map_err(|_| fail(format!("\"{item}\" is not a frame, a range A-B or A..B, or a stepped range A-BxS")))
+            s.trim()
+                .parse::<i64>()
+                .map_err(|_| fail(format!("\"{item}\" is not a frame, a range A-B or A..B, or a stepped range A-BxS")))
         };
         let mut frames = Vec::new();
         let mut seen = std::collections::HashSet::new();
@@ -125,7 +127,10 @@ mod tests {
         assert_eq!(frames("1-3,2-4"), vec![1, 2, 3, 4]);
         // Ends near the limits of i64: the step arithmetic must not overflow.
         let far = frames("-9000000000000000000-9000000000000000000x100000000000000");
-        assert_eq!((far.len(), far[0], far[far.len() - 1]), (180_001, -9_000_000_000_000_000_000, 9_000_000_000_000_000_000));
+        assert_eq!(
+            (far.len(), far[0], far[far.len() - 1]),
+            (180_001, -9_000_000_000_000_000_000, 9_000_000_000_000_000_000)
+        );
     }
 
     #[test]

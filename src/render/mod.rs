@@ -26,9 +26,9 @@
 pub mod frames;
 pub mod progress;
 
+use crate::gpu::Executor;
 use crate::scene::layers::{write_exr_layers, OutputChannel, SampleType};
 use crate::scene::{output, Scene, SceneError};
-use crate::gpu::Executor;
 use crate::shade::{ShadedPasses, ShadingSettings};
 use anyhow::Context;
 use progress::Progress;
@@ -79,10 +79,8 @@ pub fn frame_outputs(out: &Path, name: &str, frame: i64) -> [PathBuf; 2] {
 /// Refuses, before anything is rendered, an output of any frame that is an input of the
 /// scene, and a `name` that is not a plain file name.
 pub fn check_outputs(scene: &Scene, options: &SequenceOptions) -> Result<(), SceneError> {
-    let plain = !options.name.is_empty()
-        && !options.name.contains(['/', '\\'])
-        && options.name != "."
-        && options.name != "..";
+    let plain =
+        !options.name.is_empty() && !options.name.contains(['/', '\\']) && options.name != "." && options.name != "..";
     if !plain {
         return Err(SceneError::invalid(
             &options.out,
@@ -120,11 +118,17 @@ pub fn render_sequence(
             FrameStatus::Skipped { outputs: outputs.to_vec() }
         } else {
             let started = Instant::now();
-            let attempt = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| render_frame(executor, scene, frame, options, &outputs)));
+            let attempt = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                render_frame(executor, scene, frame, options, &outputs)
+            }));
             match attempt {
-                Ok(Ok(())) => FrameStatus::Rendered { seconds: started.elapsed().as_secs_f64(), outputs: outputs.to_vec() },
+                Ok(Ok(())) => {
+                    FrameStatus::Rendered { seconds: started.elapsed().as_secs_f64(), outputs: outputs.to_vec() }
+                }
                 Ok(Err(e)) => FrameStatus::Failed { error: format!("{e:#}") },
-                Err(panic) => FrameStatus::Failed { error: format!("internal error (please report): {}", panic_message(&panic)) },
+                Err(panic) => {
+                    FrameStatus::Failed { error: format!("internal error (please report): {}", panic_message(&panic)) }
+                }
             }
         };
         let outcome = FrameOutcome { frame, status };
@@ -171,7 +175,9 @@ pub fn pass_channels(passes: &ShadedPasses, colour: SampleType) -> Vec<(String, 
     };
     let beauty: Vec<[f32; 3]> = passes.beauty.iter().map(|p| [p[0], p[1], p[2]]).collect();
     rgb("", &["R", "G", "B"], &beauty, colour);
-    for (layer, values) in [("diffuse", &passes.diffuse), ("specular", &passes.specular), ("environment", &passes.environment)] {
+    for (layer, values) in
+        [("diffuse", &passes.diffuse), ("specular", &passes.specular), ("environment", &passes.environment)]
+    {
         rgb(layer, &["R", "G", "B"], values, colour);
     }
     rgb("P", &["X", "Y", "Z"], &passes.position, SampleType::Float);
@@ -190,7 +196,9 @@ pub fn pass_channels(passes: &ShadedPasses, colour: SampleType) -> Vec<(String, 
 /// Writes the multi-layer EXR of one frame.
 pub fn write_passes(path: &Path, passes: &ShadedPasses, colour: SampleType) -> Result<(), output::OutputError> {
     let channels = pass_channels(passes, colour);
-    let refs: Vec<OutputChannel> =
-        channels.iter().map(|(name, kind, values)| OutputChannel { name: name.clone(), sample_type: *kind, values }).collect();
+    let refs: Vec<OutputChannel> = channels
+        .iter()
+        .map(|(name, kind, values)| OutputChannel { name: name.clone(), sample_type: *kind, values })
+        .collect();
     write_exr_layers(path, passes.width, passes.height, &refs)
 }

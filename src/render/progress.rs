@@ -50,10 +50,16 @@ pub fn reporter(mode: ProgressMode) -> Box<dyn Progress> {
 fn describe(outcome: &FrameOutcome) -> String {
     match &outcome.status {
         FrameStatus::Rendered { seconds, outputs } => {
-            format!("rendered in {seconds:.2} s: {}", outputs.first().map(|p| p.display().to_string()).unwrap_or_default())
+            format!(
+                "rendered in {seconds:.2} s: {}",
+                outputs.first().map(|p| p.display().to_string()).unwrap_or_default()
+            )
         }
         FrameStatus::Skipped { outputs } => {
-            format!("skipped, already rendered: {}", outputs.first().map(|p| p.display().to_string()).unwrap_or_default())
+            format!(
+                "skipped, already rendered: {}",
+                outputs.first().map(|p| p.display().to_string()).unwrap_or_default()
+            )
         }
         FrameStatus::Failed { error } => format!("FAILED: {error}"),
     }
@@ -81,7 +87,8 @@ impl Progress for Bar {
     fn start(&mut self, total: usize) {
         let bar = ProgressBar::with_draw_target(Some(total as u64), ProgressDrawTarget::stderr());
         bar.set_style(
-            ProgressStyle::with_template("{msg:20} [{bar:40}] {pos}/{len} frames {elapsed}<{eta}").expect("valid template"),
+            ProgressStyle::with_template("{msg:20} [{bar:40}] {pos}/{len} frames {elapsed}<{eta}")
+                .expect("valid template"),
         );
         self.bar = Some(bar);
     }

@@ -50,7 +50,9 @@ pub fn read_blockers(file: &Path, frame: i64) -> Result<Vec<Sphere>, SceneError>
 
 fn check_frame_key(file: &Path, found: Option<i64>, frame: i64) -> Result<(), SceneError> {
     match found {
-        Some(f) if f != frame => Err(SceneError::invalid(file, format!("says frame {f} but was read for frame {frame}"))),
+        Some(f) if f != frame => {
+            Err(SceneError::invalid(file, format!("says frame {f} but was read for frame {frame}")))
+        }
         _ => Ok(()),
     }
 }
@@ -146,7 +148,8 @@ impl Camera {
         // Blender's default sensor fit (AUTO) spans the sensor width over the larger image
         // side: the width of a landscape frame, the height of a portrait one.
         let half_sensor = 0.5 * self.sensor_width_mm / self.lens_mm;
-        let (half_width, half_height) = if w >= h { (half_sensor, half_sensor * h / w) } else { (half_sensor * w / h, half_sensor) };
+        let (half_width, half_height) =
+            if w >= h { (half_sensor, half_sensor * h / w) } else { (half_sensor * w / h, half_sensor) };
         let local = [(2.0 * x / w - 1.0) * half_width, (1.0 - 2.0 * y / h) * half_height, -1.0];
         let m = &self.matrix_world;
         let world = [

@@ -68,7 +68,13 @@ impl HeightMap {
     }
 
     /// Samples `f(x, y)` on the corner-registered grid.
-    pub fn from_fn(columns: usize, rows: usize, min: [f64; 2], max: [f64; 2], f: impl Fn(f64, f64) -> f64) -> HeightMap {
+    pub fn from_fn(
+        columns: usize,
+        rows: usize,
+        min: [f64; 2],
+        max: [f64; 2],
+        f: impl Fn(f64, f64) -> f64,
+    ) -> HeightMap {
         let mut heights = Vec::with_capacity(columns * rows);
         for j in 0..rows {
             for i in 0..columns {
@@ -88,10 +94,7 @@ impl HeightMap {
 
     /// Spacing of the samples in x and y.
     pub fn cell_size(&self) -> [f64; 2] {
-        [
-            (self.max[0] - self.min[0]) / (self.columns - 1) as f64,
-            (self.max[1] - self.min[1]) / (self.rows - 1) as f64,
-        ]
+        [(self.max[0] - self.min[0]) / (self.columns - 1) as f64, (self.max[1] - self.min[1]) / (self.rows - 1) as f64]
     }
 
     /// Bilinear height at world `(x, y)`, clamped to the edge beyond the rectangle: the

@@ -10,7 +10,10 @@
 //! Compression ZIP (16 scan lines per block), lossless.
 
 use super::output::{write_atomically, OutputError};
-use exr::prelude::{f16, AnyChannel, AnyChannels, Blocks, Compression, Encoding, FlatSamples, Image, Layer, LayerAttributes, LineOrder, WritableImage};
+use exr::prelude::{
+    f16, AnyChannel, AnyChannels, Blocks, Compression, Encoding, FlatSamples, Image, Layer, LayerAttributes, LineOrder,
+    WritableImage,
+};
 use std::path::Path;
 
 /// How a channel is stored.
@@ -31,7 +34,12 @@ pub struct OutputChannel<'a> {
 
 /// Writes `channels` as one ZIP-compressed part, atomically (see [`super::output`]).
 /// Channel names must be distinct; they are sorted in the file, as EXR requires.
-pub fn write_exr_layers(path: &Path, width: usize, height: usize, channels: &[OutputChannel]) -> Result<(), OutputError> {
+pub fn write_exr_layers(
+    path: &Path,
+    width: usize,
+    height: usize,
+    channels: &[OutputChannel],
+) -> Result<(), OutputError> {
     for c in channels {
         if width.checked_mul(height) != Some(c.values.len()) || width == 0 || height == 0 {
             return Err(OutputError::SizeMismatch { file: path.to_path_buf(), width, height, count: c.values.len() });

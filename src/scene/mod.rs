@@ -55,8 +55,8 @@ pub mod error;
 mod exr_read;
 pub mod gbuffer;
 pub mod heightmap;
-pub mod light;
 pub mod layers;
+pub mod light;
 pub mod output;
 mod paths;
 
@@ -306,7 +306,10 @@ fn colour(file: &Path, what: &str, c: [f64; 3]) -> Result<[f32; 3], SceneError> 
             return Err(SceneError::NonFinite { file: file.to_path_buf(), what: what.to_string() });
         }
         if v < 0.0 {
-            return Err(SceneError::invalid(file, format!("{what} has a negative component {v}; colours must be >= 0")));
+            return Err(SceneError::invalid(
+                file,
+                format!("{what} has a negative component {v}; colours must be >= 0"),
+            ));
         }
     }
     Ok([c[0] as f32, c[1] as f32, c[2] as f32])
@@ -573,12 +576,8 @@ impl Scene {
             }
         };
         if reflection.is_none() {
-            let water: Vec<u32> = self
-                .materials
-                .iter()
-                .filter(|(_, m)| matches!(m, Material::Water { .. }))
-                .map(|(&i, _)| i)
-                .collect();
+            let water: Vec<u32> =
+                self.materials.iter().filter(|(_, m)| matches!(m, Material::Water { .. })).map(|(&i, _)| i).collect();
             if let Some(p) = gbuffer.material.iter().position(|m| water.contains(m)) {
                 return Err(SceneError::invalid(
                     &gfile,
@@ -669,11 +668,8 @@ impl Scene {
 
 /// Absolute, lexically normalised path with the existing ancestor canonicalised.
 fn normalise(path: &Path) -> PathBuf {
-    let abs = if path.is_absolute() {
-        path.to_path_buf()
-    } else {
-        std::env::current_dir().unwrap_or_default().join(path)
-    };
+    let abs =
+        if path.is_absolute() { path.to_path_buf() } else { std::env::current_dir().unwrap_or_default().join(path) };
     let mut clean = PathBuf::new();
     for c in abs.components() {
         match c {

@@ -125,5 +125,9 @@ pub fn write_png_preview(path: &Path, width: usize, height: usize, rgba: &[[f32;
 
 /// Writes a text file (CSV, JSON, SVG) atomically.
 pub fn write_text(path: &Path, text: &str) -> Result<(), OutputError> {
-    write_atomically(path, |temp| std::fs::write(temp, text), |source| OutputError::Io { file: path.to_path_buf(), source })
+    write_atomically(
+        path,
+        |temp| std::fs::write(temp, text),
+        |source| OutputError::Io { file: path.to_path_buf(), source },
+    )
 }

@@ -14,7 +14,10 @@ use std::path::{Component, Path};
 /// Refuses `path` (the value of key `key` in `file`) when it leads outside `dir`.
 pub(crate) fn check_inside(file: &Path, dir: &Path, key: &str, path: &str) -> Result<(), SceneError> {
     let refuse = |why: &str| {
-        SceneError::invalid(file, format!("\"{key}\": path \"{path}\" {why}; paths must lie inside the scene directory"))
+        SceneError::invalid(
+            file,
+            format!("\"{key}\": path \"{path}\" {why}; paths must lie inside the scene directory"),
+        )
     };
     if path.is_empty() {
         return Err(SceneError::invalid(file, format!("\"{key}\": the path is empty")));
@@ -52,7 +55,8 @@ pub(crate) fn check_inside(file: &Path, dir: &Path, key: &str, path: &str) -> Re
 
 /// `path` made absolute against the working directory, `.` and `..` resolved lexically.
 fn absolute_lexical(path: &Path) -> std::path::PathBuf {
-    let abs = if path.is_absolute() { path.to_path_buf() } else { std::env::current_dir().unwrap_or_default().join(path) };
+    let abs =
+        if path.is_absolute() { path.to_path_buf() } else { std::env::current_dir().unwrap_or_default().join(path) };
     let mut clean = std::path::PathBuf::new();
     for c in abs.components() {
         match c {

@@ -83,8 +83,8 @@ pub fn eval_basis<T: Real>(order: usize, dir: [T; 3], out: &mut [T]) {
                 q_prev = q;
                 q = z * T::of((2 * m + 1) as f64) * q_prev;
             } else if l > m + 1 {
-                let next = (T::of((2 * l - 1) as f64) * z * q - T::of((l + m - 1) as f64) * q_prev)
-                    / T::of((l - m) as f64);
+                let next =
+                    (T::of((2 * l - 1) as f64) * z * q - T::of((l + m - 1) as f64) * q_prev) / T::of((l - m) as f64);
                 q_prev = q;
                 q = next;
             }
@@ -123,10 +123,7 @@ pub fn legendre<T: Real>(count: usize, z: T, out: &mut [T]) {
         out[l] = match l {
             0 => T::one(),
             1 => z,
-            _ => {
-                (T::of((2 * l - 1) as f64) * z * out[l - 1] - T::of((l - 1) as f64) * out[l - 2])
-                    / T::of(l as f64)
-            }
+            _ => (T::of((2 * l - 1) as f64) * z * out[l - 1] - T::of((l - 1) as f64) * out[l - 2]) / T::of(l as f64),
         };
     }
 }

@@ -245,11 +245,8 @@ pub fn ol_node_count() -> usize {
 /// Table position of magnitude `m`: node index and fraction towards the next node.
 fn ol_position(m: f64) -> (usize, f64) {
     let last = ol_node_count() - 1;
-    let x = if m <= 1.0 {
-        m.max(0.0) * OL_FINE_NODES as f64
-    } else {
-        OL_FINE_NODES as f64 + (m - 1.0) / OL_COARSE_STEP
-    };
+    let x =
+        if m <= 1.0 { m.max(0.0) * OL_FINE_NODES as f64 } else { OL_FINE_NODES as f64 + (m - 1.0) / OL_COARSE_STEP };
     let i = (x.floor() as usize).min(last - 1);
     (i, (x - i as f64).min(1.0))
 }

@@ -6,8 +6,8 @@ use super::settings::ShadingSettings;
 use crate::heightfield::{HeightField, HeightFieldError, HorizonPyramid};
 use crate::scene::{Frame, GBuffer, Material, Scene};
 use crate::sh::Real;
-use rayon::prelude::*;
 use crate::timing::StageTimings;
+use rayon::prelude::*;
 use std::collections::BTreeMap;
 use std::time::Instant;
 
@@ -26,11 +26,15 @@ pub enum ShadeError {
     Settings(String),
     #[error("height field of {file}: {source}")]
     HeightField { file: String, source: HeightFieldError },
-    #[error("{file}: {count} pixel(s) have water materials but scene.json has no \"reflection_gbuffer\" to shade them with")]
+    #[error(
+        "{file}: {count} pixel(s) have water materials but scene.json has no \"reflection_gbuffer\" to shade them with"
+    )]
     WaterWithoutReflection { file: String, count: usize },
     #[error("{file}: material {material} is phong but scene.json has no \"camera\" to take the view direction from")]
     PhongWithoutCamera { file: String, material: u32 },
-    #[error("{file}: pixel ({x}, {y}) reflects material {material}, which is water; water seen in water is not supported")]
+    #[error(
+        "{file}: pixel ({x}, {y}) reflects material {material}, which is water; water seen in water is not supported"
+    )]
     WaterInWater { file: String, x: usize, y: usize, material: u32 },
 }
 
@@ -56,9 +60,13 @@ pub fn shade_frame_timed(
     let light = frame.light.sh_coefficients(settings.order);
     let occluders = Occluders { blockers: &frame.blockers, horizons: pyramid.as_ref() };
     let shaded = if settings.double_precision {
-        timed_kernel::<f64, _>(scene, settings, &light, pyramid.is_some(), Some(&mut timings), |k| shade_pixels(k, occluders, frame))
+        timed_kernel::<f64, _>(scene, settings, &light, pyramid.is_some(), Some(&mut timings), |k| {
+            shade_pixels(k, occluders, frame)
+        })
     } else {
-        timed_kernel::<f32, _>(scene, settings, &light, pyramid.is_some(), Some(&mut timings), |k| shade_pixels(k, occluders, frame))
+        timed_kernel::<f32, _>(scene, settings, &light, pyramid.is_some(), Some(&mut timings), |k| {
+            shade_pixels(k, occluders, frame)
+        })
     };
     Ok((shaded, timings))
 }
@@ -230,7 +238,13 @@ pub fn pixel_work(materials: &BTreeMap<u32, Material>, frame: &Frame, x: usize, 
     }
 }
 
-fn shade_pixel<T: Real>(kernel: &ShadingKernel<T>, occluders: Occluders, frame: &Frame, x: usize, y: usize) -> [f32; 4] {
+fn shade_pixel<T: Real>(
+    kernel: &ShadingKernel<T>,
+    occluders: Occluders,
+    frame: &Frame,
+    x: usize,
+    y: usize,
+) -> [f32; 4] {
     match pixel_work(kernel.materials(), frame, x, y) {
         PixelWork::Fixed(rgba) => rgba,
         PixelWork::Shade { point, tint } => {

@@ -4,7 +4,9 @@
 
 use super::settings::ShadingSettings;
 use crate::heightfield::HorizonPyramid;
-use crate::logsh::{cap_log_zh, lobe_log_zh_as, nlp_slice, optimal_lobe_epsilon, view_blocker, BlockerView, Lobe, WedgeOperator};
+use crate::logsh::{
+    cap_log_zh, lobe_log_zh_as, nlp_slice, optimal_lobe_epsilon, view_blocker, BlockerView, Lobe, WedgeOperator,
+};
 use crate::scene::{Material, Sphere};
 use crate::sh::exp::{exp_hyb_with, exp_series, ExactExp, OlTable};
 use crate::sh::{add_rotated_zonal, coefficient_count, ExpMethod, Real, TriplingTensor, MAX_COEFFICIENTS};
@@ -76,7 +78,8 @@ impl Exponentiator {
         match self.method {
             ExpMethod::Exact | ExpMethod::Quad => quadrature.exp_below(f, ceiling, out),
             method => {
-                let magnitude = f[1..].iter().fold(0.0f64, |acc, c| acc + c.to_f64().unwrap_or(f64::INFINITY).powi(2)).sqrt();
+                let magnitude =
+                    f[1..].iter().fold(0.0f64, |acc, c| acc + c.to_f64().unwrap_or(f64::INFINITY).powi(2)).sqrt();
                 let weight = quadrature_weight(method, magnitude);
                 if weight >= 1.0 {
                     return quadrature.exp_below(f, ceiling, out);
@@ -186,16 +189,19 @@ pub struct ShadingKernel<T> {
 impl<T: Real> ShadingKernel<T> {
     /// Builds the tables. `light` holds `order^2` RGB coefficients; `has_heightfield`
     /// decides whether the wedge operator is built at all.
-    pub fn new(settings: &ShadingSettings, materials: &BTreeMap<u32, Material>, light: &[[f64; 3]], has_heightfield: bool) -> Self {
+    pub fn new(
+        settings: &ShadingSettings,
+        materials: &BTreeMap<u32, Material>,
+        light: &[[f64; 3]],
+        has_heightfield: bool,
+    ) -> Self {
         let material_table = materials;
         let order = settings.order;
         let epsilon = settings.epsilon;
         let mut tangent = vec![T::zero(); order];
         cap_log_zh(order, T::of(epsilon.ln()), T::of(FRAC_PI_2), &mut tangent);
-        let lobe_exp = materials
-            .values()
-            .any(|m| matches!(m, Material::Phong { .. }))
-            .then(|| crate::sh::ExactExp::new(order));
+        let lobe_exp =
+            materials.values().any(|m| matches!(m, Material::Phong { .. })).then(|| crate::sh::ExactExp::new(order));
         let materials = materials
             .iter()
             .map(|(&index, material)| {
@@ -203,7 +209,11 @@ impl<T: Real> ShadingKernel<T> {
                     Material::Phong { exponent, .. } => {
                         let lobe = Lobe::Phong { exponent: *exponent as f64 };
                         let eps = settings.phong_epsilon.unwrap_or_else(|| {
-                            optimal_lobe_epsilon(order, lobe, lobe_exp.as_ref().expect("built when a phong material exists"))
+                            optimal_lobe_epsilon(
+                                order,
+                                lobe,
+                                lobe_exp.as_ref().expect("built when a phong material exists"),
+                            )
                         });
                         Some(LobeTable::new(order, lobe, eps))
                     }
@@ -299,7 +309,8 @@ impl<T: Real> ShadingKernel<T> {
         add_rotated_zonal(self.order, &lobe.zonal, T::one(), axis.map(T::of), &mut f[..count]);
         let mut e = [T::zero(); MAX_COEFFICIENTS];
         self.exp.exp(&f[..count], lobe.log_peak, &mut e[..count]);
-        let dot = |light: &[T]| light.iter().zip(&e[..count]).fold(T::zero(), |acc, (&l, &v)| acc + l * v).max(T::zero());
+        let dot =
+            |light: &[T]| light.iter().zip(&e[..count]).fold(T::zero(), |acc, (&l, &v)| acc + l * v).max(T::zero());
         [dot(&self.light[0]), dot(&self.light[1]), dot(&self.light[2])]
     }
 

@@ -6,7 +6,7 @@ pub mod passes;
 pub mod settings;
 
 pub use frame::{pixel_work, shade_frame, shade_frame_timed, PixelWork, ShadeError, ShadedFrame};
-pub use kernel::{Exponentiator, Occluders, ShadingKernel, SurfacePoint};
-pub use settings::{default_epsilon, Quality, ShadingSettings};
-pub use passes::{shade_frame_passes, ShadedPasses};
 pub use kernel::PixelPasses;
+pub use kernel::{Exponentiator, Occluders, ShadingKernel, SurfacePoint};
+pub use passes::{shade_frame_passes, ShadedPasses};
+pub use settings::{default_epsilon, Quality, ShadingSettings};

@@ -70,7 +70,11 @@ impl Pixel {
 }
 
 /// Shades one frame of `scene` into passes; the checks and errors are `shade_frame`'s.
-pub fn shade_frame_passes(scene: &Scene, frame: &Frame, settings: &ShadingSettings) -> Result<ShadedPasses, ShadeError> {
+pub fn shade_frame_passes(
+    scene: &Scene,
+    frame: &Frame,
+    settings: &ShadingSettings,
+) -> Result<ShadedPasses, ShadeError> {
     settings.validate().map_err(ShadeError::Settings)?;
     check_frame(scene, frame)?;
     let pyramid = pyramid(scene, frame, settings)?;

@@ -201,11 +201,16 @@ fn material_json(m: &Material) -> serde_json::Value {
 
 fn write_json(path: &Path, value: &serde_json::Value) -> Result<(), SynthError> {
     let text = serde_json::to_string_pretty(value).expect("JSON values serialise") + "\n";
-    write_atomically(path, |temp| std::fs::write(temp, &text), |source| OutputError::Io { file: path.to_path_buf(), source })?;
+    write_atomically(
+        path,
+        |temp| std::fs::write(temp, &text),
+        |source| OutputError::Io { file: path.to_path_buf(), source },
+    )?;
     Ok(())
 }
 
-const ZIP: Encoding = Encoding { compression: Compression::ZIP16, blocks: Blocks::ScanLines, line_order: LineOrder::Increasing };
+const ZIP: Encoding =
+    Encoding { compression: Compression::ZIP16, blocks: Blocks::ScanLines, line_order: LineOrder::Increasing };
 
 fn f32_channel(name: &str, data: Vec<f32>) -> AnyChannel<FlatSamples> {
     AnyChannel::new(name, FlatSamples::F32(data))
@@ -313,7 +318,12 @@ pub fn write_height_map_exr(path: &Path, map: &HeightMap) -> Result<(), SynthErr
 /// Writes an RGB f32 environment map (`R`, `G`, `B`), row 0 the zenith.
 pub fn write_environment_exr(path: &Path, width: usize, height: usize, texels: &[[f32; 3]]) -> Result<(), SynthError> {
     let c = |k: usize| texels.iter().map(|t| t[k]).collect::<Vec<f32>>();
-    write_exr_layers(path, width, height, vec![(None, vec![f32_channel("R", c(0)), f32_channel("G", c(1)), f32_channel("B", c(2))])])
+    write_exr_layers(
+        path,
+        width,
+        height,
+        vec![(None, vec![f32_channel("R", c(0)), f32_channel("G", c(1)), f32_channel("B", c(2))])],
+    )
 }
 
 /// Writes the scene into `out` (created if needed); see the module doc for the files.
@@ -396,13 +406,19 @@ pub const SPHERE_MATERIAL: u32 = 2;
 impl SphereOverPlane {
     /// The scene as a one-frame [`SynthScene`] (frame 1).
     pub fn scene(&self) -> SynthScene {
-        let camera = Camera::look_at(self.camera_position, [0.0, 0.0, 0.0], [0.0, 0.0, 1.0], 35.0, 36.0, [self.width, self.height]);
-        let mut objects = vec![Object { shape: Shape::Plane { z: 0.0, bounds: None }, material: PLANE_MATERIAL }];
-        objects.extend(
-            self.spheres
-                .iter()
-                .map(|s| Object { shape: Shape::Sphere { center: s.center, radius: s.radius }, material: SPHERE_MATERIAL }),
+        let camera = Camera::look_at(
+            self.camera_position,
+            [0.0, 0.0, 0.0],
+            [0.0, 0.0, 1.0],
+            35.0,
+            36.0,
+            [self.width, self.height],
         );
+        let mut objects = vec![Object { shape: Shape::Plane { z: 0.0, bounds: None }, material: PLANE_MATERIAL }];
+        objects.extend(self.spheres.iter().map(|s| Object {
+            shape: Shape::Sphere { center: s.center, radius: s.radius },
+            material: SPHERE_MATERIAL,
+        }));
         SynthScene {
             layout: self.layout,
             materials: BTreeMap::from([
@@ -547,7 +563,10 @@ fn dunes(options: ExampleOptions) -> SynthScene {
                 number: 1 + k,
                 camera: camera.clone(),
                 objects: vec![
-                    Object { shape: Shape::Plane { z: -0.45, bounds: Some(([1.0, -5.5], [6.5, 0.5])) }, material: water },
+                    Object {
+                        shape: Shape::Plane { z: -0.45, bounds: Some(([1.0, -5.5], [6.5, 0.5])) },
+                        material: water,
+                    },
                     Object { shape: resting(mover_x, 1.0, 1.0), material: red },
                     Object { shape: resting(0.5, 3.5, 0.8), material: grey },
                     Object { shape: resting(-1.5, -3.0, 0.6), material: grey },

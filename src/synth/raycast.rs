@@ -11,10 +11,20 @@ use std::sync::Arc;
 pub enum Shape {
     /// The horizontal plane at height `z`, optionally limited to the XY rectangle
     /// `bounds.0 ..= bounds.1`.
-    Plane { z: f64, bounds: Option<([f64; 2], [f64; 2])> },
-    Sphere { center: [f64; 3], radius: f64 },
+    Plane {
+        z: f64,
+        bounds: Option<([f64; 2], [f64; 2])>,
+    },
+    Sphere {
+        center: [f64; 3],
+        radius: f64,
+    },
     /// A solid cone: disk of `radius` at `base`, tip at `apex`.
-    Cone { base: [f64; 3], apex: [f64; 3], radius: f64 },
+    Cone {
+        base: [f64; 3],
+        apex: [f64; 3],
+        radius: f64,
+    },
     /// The height field of a map (bilinear, flat beyond its rectangle as the format says).
     Terrain(Arc<HeightMap>),
 }
@@ -70,7 +80,13 @@ fn intersect(shape: &Shape, o: [f64; 3], d: [f64; 3], t_min: f64, t_max: f64) ->
                     return None;
                 }
             }
-            Some(Hit { t, position: p, normal: [0.0, 0.0, 1.0], uv: [p[0].rem_euclid(1.0), p[1].rem_euclid(1.0)], material: 0 })
+            Some(Hit {
+                t,
+                position: p,
+                normal: [0.0, 0.0, 1.0],
+                uv: [p[0].rem_euclid(1.0), p[1].rem_euclid(1.0)],
+                material: 0,
+            })
         }
         Shape::Sphere { center, radius } => {
             let oc = sub(o, *center);
@@ -84,7 +100,10 @@ fn intersect(shape: &Shape, o: [f64; 3], d: [f64; 3], t_min: f64, t_max: f64) ->
             let t = [-b - s, -b + s].into_iter().find(|&t| ok(t))?;
             let p = at(o, d, t);
             let n = normalize(sub(p, *center));
-            let uv = [0.5 + n[1].atan2(n[0]) / (2.0 * std::f64::consts::PI), n[2].clamp(-1.0, 1.0).acos() / std::f64::consts::PI];
+            let uv = [
+                0.5 + n[1].atan2(n[0]) / (2.0 * std::f64::consts::PI),
+                n[2].clamp(-1.0, 1.0).acos() / std::f64::consts::PI,
+            ];
             Some(Hit { t, position: p, normal: n, uv, material: 0 })
         }
         Shape::Cone { base, apex, radius } => intersect_cone(*base, *apex, *radius, o, d, t_min, t_max),
