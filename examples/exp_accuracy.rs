@@ -18,7 +18,7 @@ fn main() {
         let ol = OlTable::fit(order, &logsh::logsh::training_log_vectors(order, 64, 1));
         let tests = logsh::logsh::training_log_vectors(order, 48, 99);
         for m in [0.25, 1.0, 2.0, 4.0, 8.0, 16.0] {
-            let mut worst = vec![0.0f64; 7];
+            let mut worst = [0.0f64; 7];
             for v in &tests {
                 let mut f = v.clone();
                 f[0] = 0.0;

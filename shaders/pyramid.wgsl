@@ -13,7 +13,7 @@
 @group(0) @binding(4) var<storage, read_write> levels: array<f32>;
 
 // Along x: in_rows rows of out_columns values into the scratch buffer.
-@compute @workgroup_size(64, 1, 1)
+@compute @workgroup_size(WORKGROUP_SIZE, 1, 1)
 fn decimate_x(@builtin(global_invocation_id) id: vec3<u32>) {
     let d = decimations[id.z];
     let column = id.x;
@@ -30,7 +30,7 @@ fn decimate_x(@builtin(global_invocation_id) id: vec3<u32>) {
 }
 
 // Along y: the level's out_rows rows from the scratch buffer.
-@compute @workgroup_size(64, 1, 1)
+@compute @workgroup_size(WORKGROUP_SIZE, 1, 1)
 fn decimate_y(@builtin(global_invocation_id) id: vec3<u32>) {
     let d = decimations[id.z];
     let column = id.x;

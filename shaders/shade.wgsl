@@ -10,16 +10,11 @@
 
 @group(0) @binding(0) var<uniform> params: ShadeParams;
 @group(0) @binding(1) var<storage, read> tables: array<f32>;
-// Three vec4 per point: (position, material slot bits), (unit normal, 0), (reflected view
-// direction, 0).
-@group(0) @binding(2) var<storage, read> points: array<vec4<f32>>;
-// Three vec4 per point: diffuse rgb, specular rgb, and with PASSES the visibility terms
-// (combined, height field, blockers).
-@group(0) @binding(3) var<storage, read_write> shaded: array<vec4<f32>>;
+@group(0) @binding(2) var<storage, read> points: array<GpuPoint>;
+@group(0) @binding(3) var<storage, read_write> shaded: array<GpuShaded>;
 @group(0) @binding(4) var<storage, read> materials: array<GpuMaterial>;
 //#if BLOCKERS
-// Centre and radius.
-@group(0) @binding(5) var<storage, read> spheres: array<vec4<f32>>;
+@group(0) @binding(5) var<storage, read> spheres: array<GpuSphere>;
 //#endif
 //#if HEIGHTFIELD
 @group(0) @binding(6) var<storage, read> levels: array<f32>;
@@ -139,7 +134,7 @@ fn visibility(p: vec3<f32>, n: vec3<f32>, caps: ptr<function, array<f32, COUNT_C
 //#endif
 //#if BLOCKERS
     for (var s = 0u; s < params.sphere_count; s++) {
-        add_sphere(p, n, spheres[s], params.log_epsilon, caps);
+        add_sphere(p, n, spheres[s].centre_radius, params.log_epsilon, caps);
     }
     for (var i = 0u; i < COUNT; i++) {
         acc[i] += (*caps)[i];
@@ -155,7 +150,7 @@ fn add_tangent(n: vec3<f32>, acc: ptr<function, array<f32, COUNT_CAP>>) {
 }
 
 // lum(lit) / lum(unoccluded), or 1 where the unoccluded receiver gets no light
-// (src/shade/kernel/passes.rs, ratio).
+// (src/shade/kernel/pixel_passes.rs, ratio).
 fn luminance_ratio(lit: vec3<f32>, unoccluded: vec3<f32>) -> f32 {
     let below = dot(LUMINANCE, unoccluded);
     if below > 1e-12 {
@@ -173,19 +168,20 @@ fn lit(visibility: ptr<function, array<f32, COUNT_CAP>>, lobe: u32, axis: vec3<f
     return exp_dot_light(&f, tables[lobe + ORDER]);
 }
 
-@compute @workgroup_size(64)
+@compute @workgroup_size(WORKGROUP_SIZE)
 fn shade(@builtin(global_invocation_id) id: vec3<u32>) {
     let point = id.x;
     if point >= params.point_count {
         return;
     }
-    let a = points[3u * point];
+    let record = points[point];
+    let a = record.position_slot;
     let slot = bitcast<u32>(a.w);
     var diffuse = vec3<f32>(0.0);
     var specular = vec3<f32>(0.0);
     var terms = vec3<f32>(1.0);
     if slot != SLOT_NONE {
-        let n = points[3u * point + 1u].xyz;
+        let n = record.normal.xyz;
         var caps: array<f32, COUNT_CAP>;
         var v = visibility(a.xyz, n, &caps);
         if slot != SLOT_UNKNOWN {
@@ -194,12 +190,12 @@ fn shade(@builtin(global_invocation_id) id: vec3<u32>) {
             diffuse = lit_diffuse * material.albedo.xyz;
 //#if PHONG
             if material.kind == MATERIAL_PHONG && enabled(FEATURE_PHONG) {
-                let reflected = points[3u * point + 2u].xyz;
+                let reflected = record.reflected.xyz;
                 specular = lit(&v, material.phong_lobe, reflected) * material.specular.xyz;
             }
 //#endif
 //#if PASSES
-            // The visibility terms (src/shade/kernel/passes.rs): diffuse light with the
+            // The visibility terms (src/shade/kernel/pixel_passes.rs): diffuse light with the
             // height field, the blockers or both, over the unoccluded receiver's.
             var unoccluded: array<f32, COUNT_CAP>;
             if TANGENT_OCCLUSION {
@@ -231,7 +227,5 @@ fn shade(@builtin(global_invocation_id) id: vec3<u32>) {
 //#endif
         }
     }
-    shaded[3u * point] = vec4<f32>(diffuse, 0.0);
-    shaded[3u * point + 1u] = vec4<f32>(specular, 0.0);
-    shaded[3u * point + 2u] = vec4<f32>(terms, 0.0);
+    shaded[point] = GpuShaded(vec4<f32>(diffuse, 0.0), vec4<f32>(specular, 0.0), vec4<f32>(terms, 0.0));
 }

@@ -1,9 +1,11 @@
 //! Command-line options: parsed by clap into these structs, then turned into settings in
 //! a separate step that checks the rules spanning several flags.
 
-pub use crate::gpu::{DeviceChoice, Specialisation};
+pub use crate::executor::DeviceChoice;
+pub use crate::gpu::Specialisation;
+use crate::scene::output::SampleType;
 use crate::sh::ExpMethod;
-use crate::shade::{default_epsilon, Quality, ShadingSettings};
+use crate::shade::{default_epsilon, Precision, Quality, SettingsError, ShadingSettings};
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use std::path::PathBuf;
 
@@ -113,52 +115,9 @@ pub struct ShadeArgs {
 }
 
 #[derive(Clone, Copy, Debug, ValueEnum, PartialEq, Eq)]
-pub enum ExpArg {
-    /// Quadrature on a coarse (2n+2)-node grid: within 1e-5 of exact.
-    Quad,
-    /// Scale until small, optimal linear, square back (the paper's choice); 2-4x faster than quad, less accurate.
-    Hyb,
-    /// Optimal linear only: fastest, least accurate at large magnitudes.
-    Ol,
-    /// DC isolation and the product series.
-    Series,
-    /// Quadrature on a fine grid: reference quality, slow.
-    Exact,
-}
-
-#[derive(Clone, Copy, Debug, ValueEnum, PartialEq, Eq)]
 pub enum Switch {
     On,
     Off,
-}
-
-#[derive(Clone, Copy, Debug, ValueEnum, PartialEq, Eq)]
-pub enum PrecisionArg {
-    F32,
-    F64,
-}
-
-#[derive(Clone, Copy, Debug, ValueEnum, PartialEq, Eq)]
-pub enum QualityArg {
-    /// Order 3, ol exponentiation, W 8, k 2, o 2: fastest.
-    Draft,
-    /// Order 4, quad, W 16, k 4, o 3.
-    Default,
-    /// Order 6, quad, W 24, k 4, o 3.
-    High,
-    /// Order 8, quad, W 32, k 8, o 4: most accurate.
-    Ultra,
-}
-
-impl From<QualityArg> for Quality {
-    fn from(q: QualityArg) -> Self {
-        match q {
-            QualityArg::Draft => Quality::Draft,
-            QualityArg::Default => Quality::Default,
-            QualityArg::High => Quality::High,
-            QualityArg::Ultra => Quality::Ultra,
-        }
-    }
 }
 
 /// The shading knobs shared by every command that shades. A knob that is not given comes
@@ -166,8 +125,8 @@ impl From<QualityArg> for Quality {
 #[derive(Args, Debug, Clone)]
 pub struct ShadingArgs {
     /// Preset of every knob below; any knob given on its own overrides it.
-    #[arg(long, value_enum, default_value_t = QualityArg::Default)]
-    pub quality: QualityArg,
+    #[arg(long, value_enum, default_value_t = Quality::Default)]
+    pub quality: Quality,
     /// SH order n (n^2 coefficients), 3 to 8. Higher is sharper and slower [default: from --quality].
     #[arg(long)]
     pub order: Option<usize>,
@@ -188,7 +147,7 @@ pub struct ShadingArgs {
     pub level_offset: Option<f64>,
     /// SH exponentiation method [default: from --quality].
     #[arg(long, value_enum)]
-    pub exp: Option<ExpArg>,
+    pub exp: Option<ExpMethod>,
     /// Scale each sphere's log visibility by r/|c-p| (the paper's Section 4.2).
     #[arg(long, value_enum, default_value_t = Switch::Off)]
     pub ratio_attenuation: Switch,
@@ -196,17 +155,17 @@ pub struct ShadingArgs {
     #[arg(long, value_enum, default_value_t = Switch::On)]
     pub tangent_occlusion: Switch,
     /// Precision of the per-pixel kernel (the GPU pass is f32 only).
-    #[arg(long, value_enum, default_value_t = PrecisionArg::F32)]
-    pub precision: PrecisionArg,
-    /// Where to shade: auto takes a GPU adapter if there is one (lavapipe counts) and otherwise the CPU, saying so; gpu fails without an adapter.
+    #[arg(long, value_enum, default_value_t = Precision::F32)]
+    pub precision: Precision,
+    /// Where to shade: auto takes a hardware GPU if there is one and otherwise the CPU, saying which and why; gpu takes any adapter (lavapipe included) or fails.
     #[arg(long, value_enum, default_value_t = DeviceChoice::Auto)]
     pub device: DeviceChoice,
 }
 
 impl ShadingArgs {
     /// The settings these flags describe, checked.
-    pub fn settings(&self) -> Result<ShadingSettings, String> {
-        let mut settings = Quality::from(self.quality).settings();
+    pub fn settings(&self) -> Result<ShadingSettings, SettingsError> {
+        let mut settings = self.quality.settings();
         if let Some(order) = self.order {
             settings.order = order;
             settings.epsilon = default_epsilon(order);
@@ -216,13 +175,7 @@ impl ShadingArgs {
         }
         settings.phong_epsilon = self.phong_epsilon;
         if let Some(exp) = self.exp {
-            settings.exp = match exp {
-                ExpArg::Quad => ExpMethod::Quad,
-                ExpArg::Hyb => ExpMethod::Hyb,
-                ExpArg::Ol => ExpMethod::Ol,
-                ExpArg::Series => ExpMethod::Series,
-                ExpArg::Exact => ExpMethod::Exact,
-            };
+            settings.exp = exp;
         }
         settings.ratio_attenuation = self.ratio_attenuation == Switch::On;
         settings.tangent_occlusion = self.tangent_occlusion == Switch::On;
@@ -235,7 +188,7 @@ impl ShadingArgs {
         if let Some(o) = self.level_offset {
             settings.horizon.level_offset = o;
         }
-        settings.double_precision = self.precision == PrecisionArg::F64;
+        settings.precision = self.precision;
         settings.validate()?;
         Ok(settings)
     }
@@ -265,14 +218,6 @@ pub struct ExampleArgs {
     pub height: u32,
 }
 
-#[derive(Clone, Copy, Debug, ValueEnum, PartialEq, Eq)]
-pub enum ColourTypeArg {
-    /// 16-bit float: half the size, relative error below 5e-4.
-    Half,
-    /// 32-bit float.
-    Float,
-}
-
 #[derive(Args, Debug)]
 pub struct RenderArgs {
     /// Scene directory holding scene.json.
@@ -296,8 +241,8 @@ pub struct RenderArgs {
     #[arg(long, value_enum, default_value_t = crate::render::progress::ProgressMode::Auto)]
     pub progress: crate::render::progress::ProgressMode,
     /// Storage of the colour passes and visibility terms (P and N are always float).
-    #[arg(long, value_enum, default_value_t = ColourTypeArg::Half)]
-    pub colour_type: ColourTypeArg,
+    #[arg(long, value_enum, default_value_t = SampleType::Half)]
+    pub colour_type: SampleType,
     #[command(flatten)]
     pub shading: ShadingArgs,
 }

@@ -4,11 +4,15 @@
 //!
 //! Layout: [`sh`] is the SH core (basis, rotation, products, exponentiation), [`logsh`]
 //! the log-SH building blocks of the paper, [`heightfield`] the horizon march of SN08,
-//! [`scene`] the format-v1 reader and output writers, [`shade`] the per-pixel pipeline on
-//! the CPU, [`gpu`] the same pipeline as one wgpu compute pass, [`render`] the sequence
-//! driver of `logsh render`, [`synth`] procedural scenes, [`info`] the EXR listing of
-//! `logsh info`, [`cli`] and [`run`] the command line.
+//! [`scene`] the format-v1 reader and output writers, [`shade`] the per-pixel pipeline
+//! (the frame plan, the kernel and the CPU executor), [`gpu`] the same pipeline as one
+//! wgpu compute pass, [`executor`] the choice between the two, [`render`] the sequence
+//! driver of `logsh render`, [`bench`] `logsh bench`, [`reference`] the ground truth,
+//! [`synth`] procedural scenes, [`info`] the EXR listing of `logsh info`, [`cli`] and
+//! [`run`] the command line.
+pub mod bench;
 pub mod cli;
+pub mod executor;
 pub mod gpu;
 pub mod heightfield;
 pub mod info;

@@ -1,7 +1,7 @@
 //! What each command does, between parsed options and the library.
 
 use crate::cli::{BenchArgs, ExampleArgs, ExampleName, ReferenceArgs, ShadeArgs, SweepArgs};
-use crate::gpu::Executor;
+use crate::executor::Executor;
 use crate::reference::{render_reference, ReferenceLight, ReferenceOptions};
 use crate::scene::{output, Scene};
 use anyhow::{anyhow, Context, Result};
@@ -12,18 +12,21 @@ use std::time::Instant;
 
 /// `logsh shade`.
 pub fn shade(args: &ShadeArgs) -> Result<()> {
-    let settings = args.shading.settings().map_err(|e| anyhow!(e))?;
+    let settings = args.shading.settings()?;
     let scene = Scene::load(&args.scene)?;
     let frame_number = args.frame.unwrap_or_else(|| scene.default_frame());
     let frame = scene.frame(frame_number)?;
     let executor = Executor::select(args.shading.device, &settings)?;
+    print_notices(&executor);
     let started = Instant::now();
-    let (shaded, timings) = executor.shade_timed(&scene, &frame, &settings, crate::gpu::Specialisation::Full)?;
+    let shaded = executor.shade_timed(&scene, &frame, &settings, crate::gpu::Specialisation::Full);
+    print_notices(&executor);
+    let (shaded, timings) = shaded?;
     let elapsed = started.elapsed();
     let stem = format!("beauty.{frame_number:04}");
     write_image(&scene, &args.out, &stem, shaded.width, shaded.height, &shaded.rgba)?;
     eprintln!(
-        "shaded frame {frame_number} ({}x{}) at order {}, eps {}, {:?} on {} in {:.2} s: {}",
+        "shaded frame {frame_number} ({}x{}) at order {}, eps {}, {:?} on {} in {:.2} s: {}, {}",
         shaded.width,
         shaded.height,
         settings.order,
@@ -31,9 +34,17 @@ pub fn shade(args: &ShadeArgs) -> Result<()> {
         settings.exp,
         timings.device,
         elapsed.as_secs_f64(),
-        args.out.join(format!("{stem}.exr")).display()
+        args.out.join(format!("{stem}.exr")).display(),
+        args.out.join(format!("{stem}.png")).display()
     );
     Ok(())
+}
+
+/// Prints what the executor has to say about where frames are shaded.
+fn print_notices(executor: &Executor) {
+    for notice in executor.take_notices() {
+        eprintln!("{notice}");
+    }
 }
 
 /// Writes `<stem>.exr` (linear RGBA) and `<stem>.png` (sRGB preview) into `dir`, after
@@ -110,12 +121,15 @@ pub fn sweep(args: &SweepArgs) -> Result<()> {
         &reference.rgba,
     )?;
     let executor = Executor::select(args.device, &crate::shade::ShadingSettings::default())?;
+    print_notices(&executor);
     eprintln!("sweep: shading on {}", executor.describe());
     let bar = progress_bar(crate::sweep::configurations().len(), "sweep");
     let rows = crate::sweep::run(&executor, &scene, &frame, &reference.rgba, args.repeats, &|done, _| {
         bar.set_position(done as u64)
-    })?;
+    });
     bar.finish_and_clear();
+    print_notices(&executor);
+    let rows = rows?;
     let name = args.scene.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| "scene".into());
     let files = [
         ("sweep.csv", crate::sweep::to_csv(&rows)),
@@ -166,24 +180,17 @@ pub fn example(args: &ExampleArgs) -> Result<()> {
     Ok(())
 }
 
-/// `logsh bench`: one warm-up run, then `--repeats` timed runs; the median of each stage.
+/// `logsh bench`.
 pub fn bench(args: &BenchArgs) -> Result<()> {
-    let settings = args.shading.settings().map_err(|e| anyhow!(e))?;
+    let settings = args.shading.settings()?;
     let scene = Scene::load(&args.scene)?;
     let frame_number = args.frame.unwrap_or_else(|| scene.default_frame());
     let frame = scene.frame(frame_number)?;
     let executor = Executor::select(args.shading.device, &settings)?;
-    let specialise = args.specialise;
-    executor.shade_timed(&scene, &frame, &settings, specialise)?;
-    let mut runs = Vec::new();
-    let mut walls = Vec::new();
-    for _ in 0..args.repeats.max(1) {
-        let started = Instant::now();
-        let (_, timings) = executor.shade_timed(&scene, &frame, &settings, specialise)?;
-        walls.push(started.elapsed().as_secs_f64() * 1e3);
-        runs.push(timings);
-    }
-    let report = crate::timing::BenchReport::new(&frame.gbuffer, frame_number, &settings, specialise, &runs, &walls);
+    print_notices(&executor);
+    let report = crate::bench::measure(&executor, &scene, &frame, &settings, args.specialise, args.repeats);
+    print_notices(&executor);
+    let report = report?;
     if args.json {
         println!("{}", serde_json::to_string_pretty(&report)?);
     } else {
@@ -195,7 +202,7 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
 /// `logsh render`.
 pub fn render(args: &crate::cli::RenderArgs) -> Result<()> {
     use crate::render::{check_outputs, progress::reporter, render_sequence, FrameStatus, SequenceOptions};
-    let settings = args.shading.settings().map_err(|e| anyhow!(e))?;
+    let settings = args.shading.settings()?;
     if args.threads == Some(0) {
         return Err(anyhow!("--threads 0: give at least 1, or leave it out for one thread per core"));
     }
@@ -239,16 +246,14 @@ pub fn render(args: &crate::cli::RenderArgs) -> Result<()> {
         out: args.out.clone(),
         name: args.name.clone(),
         skip_existing: args.skip_existing,
-        colour: match args.colour_type {
-            crate::cli::ColourTypeArg::Half => crate::scene::layers::SampleType::Half,
-            crate::cli::ColourTypeArg::Float => crate::scene::layers::SampleType::Float,
-        },
+        colour: args.colour_type,
         settings,
     };
     check_outputs(&scene, &options)?;
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create output directory {}", args.out.display()))?;
     let executor = Executor::select(args.shading.device, &settings)?;
+    print_notices(&executor);
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(args.threads.unwrap_or(0))
         .build()

@@ -6,7 +6,7 @@
 //! luminance), so 0.01 means 1% of what an open white floor would show. They are taken
 //! over the pixels the reference shades (alpha 1), on the mean of the three channels.
 
-use crate::gpu::{Executor, GpuError};
+use crate::executor::{Executor, ExecutorError};
 use crate::plot::{pareto_front, Chart, Scale, Series};
 use crate::scene::{Frame, Light, Scene};
 use crate::sh::quadrature::gauss_legendre_on;
@@ -140,7 +140,7 @@ pub fn run(
     reference: &[[f32; 4]],
     repeats: usize,
     progress: &dyn Fn(usize, usize),
-) -> Result<Vec<SweepRow>, GpuError> {
+) -> Result<Vec<SweepRow>, ExecutorError> {
     let unit = unoccluded_value(&frame.light).max(1e-12);
     let configurations = configurations();
     let total = configurations.len();

@@ -267,7 +267,7 @@ fn dunes_height_map_and_sky_match_blender() {
     );
     let d = logsh::scene::light::equirectangular_to_direction(u, v);
     let sun = [-0.5, 0.6, 0.35]; // sun_direction in blender_scripts/scenes/dunes.py
-    let length = (sun[0] * sun[0] + sun[1] * sun[1] + sun[2] * sun[2]) as f64;
+    let length: f64 = sun[0] * sun[0] + sun[1] * sun[1] + sun[2] * sun[2];
     let cos = (d[0] * sun[0] + d[1] * sun[1] + d[2] * sun[2]) / length.sqrt();
     // One texel of a 256-wide map is 1.4 degrees: the sun lands within two.
     assert!(cos > (3.0f64.to_radians()).cos(), "brightest texel at {d:?}, sun at {sun:?}");

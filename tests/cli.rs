@@ -179,4 +179,33 @@ fn bench_prints_stages_as_a_table_and_as_json() {
         .as_array()
         .is_some_and(|s| s.iter().any(|s| s["name"] == "shade" && s["milliseconds"].as_f64().unwrap() > 0.0)));
     assert!(report["megapixels_per_second"].as_f64().unwrap() > 0.0);
+    // The CPU has no program to specialise: neither the table nor the JSON claims one.
+    assert!(!text.contains("program"), "GPU wording on the CPU:\n{text}");
+    assert!(report["specialisation"].is_null(), "{}", report["specialisation"]);
+}
+
+#[test]
+fn a_blend_file_is_refused_with_the_export_step() {
+    let dir = tempfile::tempdir().unwrap();
+    let blend = dir.path().join("scene.blend");
+    std::fs::write(&blend, b"BLENDER").unwrap();
+    for command in ["shade", "render"] {
+        let output = logsh().arg(command).arg(&blend).arg("--out").arg(dir.path().join("out")).output().unwrap();
+        assert_eq!(output.status.code(), Some(1));
+        let error = stderr_of(&output);
+        assert!(error.contains("scene.blend") && error.contains("export_scene.py"), "{command}: {error}");
+        assert!(!error.contains("Not a directory"), "{command}: {error}");
+    }
+}
+
+#[test]
+fn an_unreadable_scene_names_its_cause_once() {
+    let dir = tempfile::tempdir().unwrap();
+    // A directory named like the scene file: reading it fails with one OS error.
+    std::fs::create_dir_all(dir.path().join("scene.json")).unwrap();
+    let output = logsh().arg("shade").arg(dir.path()).output().unwrap();
+    let error = stderr_of(&output);
+    let cause = error.rsplit(": ").next().unwrap_or_default().trim().to_string();
+    assert!(error.contains("cannot read"), "{error}");
+    assert_eq!(error.matches(&cause).count(), 1, "the cause is repeated: {error}");
 }

@@ -244,11 +244,11 @@ fn shade_both(
     worst: &mut Worst,
 ) -> ShadedFrame {
     let mut s = *settings;
-    s.double_precision = false;
+    s.precision = logsh::shade::Precision::F32;
     let (single, max) = shade_checked(scene, frame, &s, ctx);
     worst.value(s.exp, max, ctx);
     if compare {
-        s.double_precision = true;
+        s.precision = logsh::shade::Precision::F64;
         let (double, max) = shade_checked(scene, frame, &s, &format!("{ctx} f64"));
         worst.value(s.exp, max, &format!("{ctx} f64"));
         let d = single
@@ -348,10 +348,8 @@ fn done_when_scene(dir: &Path, width: u32, height: u32) -> (Scene, Frame) {
 /// The five settings of the done-when: `--epsilon 1e-6`, `--epsilon 0.9`, `--order 8`,
 /// `--quality draft`, `--quality ultra`.
 fn done_when_settings() -> [(&'static str, ShadingSettings); 5] {
-    let mut eps_small = ShadingSettings::default();
-    eps_small.epsilon = 1e-6;
-    let mut eps_large = ShadingSettings::default();
-    eps_large.epsilon = 0.9;
+    let eps_small = ShadingSettings { epsilon: 1e-6, ..ShadingSettings::default() };
+    let eps_large = ShadingSettings { epsilon: 0.9, ..ShadingSettings::default() };
     [
         ("--epsilon 1e-6", eps_small),
         ("--epsilon 0.9", eps_large),
@@ -690,7 +688,7 @@ fn hyb_stays_bounded_with_5000_blockers_at_small_epsilon() {
     let (scene, frame) = done_when_scene(dir.path(), 12, 7);
     for double in [false, true] {
         let mut s = settings_with(3, 1e-6, ExpMethod::Hyb, false);
-        s.double_precision = double;
+        s.precision = if double { logsh::shade::Precision::F64 } else { logsh::shade::Precision::F32 };
         let (_, max) = shade_checked(&scene, &frame, &s, &format!("hyb, 5000 blockers, eps 1e-6, f64 {double}"));
         assert!(max <= MAX_DIFFUSE, "hyb: {max}");
     }
@@ -734,7 +732,8 @@ fn non_finite_gbuffer_values_are_a_clear_error_on_surfaces_and_ignored_on_the_ba
     let (x, y) = (5, 3);
     let i = y * 16 + x;
     assert_ne!(frame.gbuffer.material[i], 0);
-    let cases: [(&str, Box<dyn Fn(&mut GBuffer)>); 4] = [
+    type Corruption = (&'static str, Box<dyn Fn(&mut GBuffer)>);
+    let cases: [Corruption; 4] = [
         ("position", Box::new(move |g: &mut GBuffer| g.position[i][0] = f32::NAN)),
         ("position", Box::new(move |g: &mut GBuffer| g.position[i][2] = f32::NEG_INFINITY)),
         ("normal", Box::new(move |g: &mut GBuffer| g.normal[i][1] = f32::INFINITY)),

@@ -230,10 +230,24 @@ fn generic_program_gives_the_specialised_image() {
     }
 }
 
+/// A device and queue the test makes itself, as an application embedding logsh would,
+/// with WebGPU's default limits rather than the adapter's and no timestamps.
+fn own_device() -> Gpu {
+    let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+    let adapter = pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions::default())).unwrap();
+    let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+        label: Some("the test's own device"),
+        required_limits: wgpu::Limits::default(),
+        ..Default::default()
+    }))
+    .unwrap();
+    Gpu::from_device(adapter.get_info(), device, queue)
+}
+
 #[test]
 fn tiles_give_the_untiled_image() {
     let Some(_) = gpu() else { return };
-    let tiled = Gpu::new().unwrap().with_max_tile_points(1000);
+    let tiled = own_device().with_max_tile_points(1000);
     let dir = tempfile::tempdir().unwrap();
     let scene = small_dunes(dir.path());
     let frame = scene.frame(scene.default_frame()).unwrap();

@@ -249,8 +249,8 @@ fn sh_light_matches_eval_expansion() {
         .collect();
     let light = Light::Sh(coefficients.clone());
     let model = LightModel::new(&light, &ReferenceLight::EnvironmentMap).unwrap();
-    for d in [[0.0, 0.0, 1.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0], [0.3, -0.5, 0.812404], [-0.7, 0.2, -0.685565]] {
-        let l = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2] as f64).sqrt();
+    for d in [[0.0f64, 0.0, 1.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0], [0.3, -0.5, 0.812404], [-0.7, 0.2, -0.685565]] {
+        let l = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
         let d = [d[0] / l, d[1] / l, d[2] / l];
         let got = model.radiance(d);
         for k in 0..3 {

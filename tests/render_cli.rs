@@ -434,3 +434,22 @@ fn huge_headers_are_refused_before_allocation() {
     let output = logsh().arg("info").arg(&file).output().unwrap();
     assert!(!stderr_of(&output).contains("panicked"), "{}", stderr_of(&output));
 }
+
+#[test]
+fn a_bar_that_cannot_be_drawn_falls_back_to_lines() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = three_frame_scene(dir.path(), 16, 9);
+    let out = dir.path().join("out");
+    // Standard error is a pipe here, where no bar can be drawn.
+    let output = logsh()
+        .arg("render")
+        .arg(&scene)
+        .args(["--frames", "1-2", "--device", "cpu", "--progress", "bar", "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(output.status.success(), "{}", stderr_of(&output));
+    for line in ["frame 1 (1/2) rendered", "frame 2 (2/2) rendered"] {
+        assert!(stderr_of(&output).contains(line), "no {line:?} in\n{}", stderr_of(&output));
+    }
+}

@@ -514,9 +514,12 @@ fn truncated_exr_says_so() {
     assert_mentions(&frame_error(dir.path()), &["ends early or is damaged"]);
 }
 
+/// An edit of scene.json and the words its error must contain.
+type SceneEdit = (Box<dyn Fn(&mut serde_json::Value)>, &'static [&'static str]);
+
 #[test]
 fn paths_outside_the_scene_directory_are_refused() {
-    let cases: Vec<(Box<dyn Fn(&mut serde_json::Value)>, &[&str])> = vec![
+    let cases: Vec<SceneEdit> = vec![
         (Box::new(|v| v["gbuffer"] = "../gbuffer.####.exr".into()), &["\"gbuffer\"", "climbs out"]),
         (Box::new(|v| v["camera"] = "cams/../../camera.####.json".into()), &["\"camera\"", "climbs out"]),
         (Box::new(|v| v["blockers"] = "/tmp/blockers.####.json".into()), &["\"blockers\"", "absolute and outside"]),

@@ -103,7 +103,7 @@ fn rotate_z_matches_projection() {
         // f'(w) = f(R_z(-angle) w)
         let q = SphereQuadrature::for_products(order);
         let direct: Vec<f64> = q.project(order, |w| {
-            let (s, c) = (-angle as f64).sin_cos();
+            let (s, c) = (-angle).sin_cos();
             let back = [c * w[0] - s * w[1], s * w[0] + c * w[1], w[2]];
             eval_expansion(order, &f, back)
         });

@@ -132,7 +132,7 @@ fn f32_and_f64_kernels_agree() {
     for order in [3, 4, 8] {
         let mut settings = ShadingSettings::for_order(order);
         let single = shade_frame(&scene, &frame, &settings).unwrap();
-        settings.double_precision = true;
+        settings.precision = logsh::shade::Precision::F64;
         let double = shade_frame(&scene, &frame, &settings).unwrap();
         let a: Vec<f32> = single.rgba.iter().flatten().copied().collect();
         let b: Vec<f32> = double.rgba.iter().flatten().copied().collect();

@@ -78,6 +78,40 @@ gpu_struct! {
 }
 
 gpu_struct! {
+    /// One point of a tile to shade, as the frame walk packs it.
+    GpuPoint {
+        /// World position (xyz) and the material slot's bits (w): a slot of the material
+        /// table, [`SLOT_NONE`] or [`SLOT_UNKNOWN`].
+        position_slot: [f32; 4],
+        /// Unit normal (xyz).
+        normal: [f32; 4],
+        /// The view direction mirrored about the normal (xyz): the Phong lobe's axis.
+        reflected: [f32; 4],
+    }
+}
+
+gpu_struct! {
+    /// One shaded point, as the pass writes it back.
+    GpuShaded {
+        /// Diffuse radiance (rgb).
+        diffuse: [f32; 4],
+        /// Phong radiance (rgb).
+        specular: [f32; 4],
+        /// With the visibility terms compiled in: combined, height field, blockers (xyz);
+        /// 1 otherwise.
+        visibility: [f32; 4],
+    }
+}
+
+gpu_struct! {
+    /// One sphere blocker.
+    GpuSphere {
+        /// Centre (xyz) and radius (w).
+        centre_radius: [f32; 4],
+    }
+}
+
+gpu_struct! {
     /// One material slot: what the shading pass needs of a [`crate::scene::Material`].
     GpuMaterial {
         /// Diffuse albedo (rgb).
@@ -143,6 +177,9 @@ gpu_struct! {
     }
 }
 
+/// Invocations per workgroup of every compute pass (`@workgroup_size(WORKGROUP_SIZE)`).
+pub const WORKGROUP_SIZE: u32 = 64;
+
 /// [`ShadeParams::feature_bits`].
 pub const FEATURE_HEIGHTFIELD: u32 = 1;
 pub const FEATURE_BLOCKERS: u32 = 2;
@@ -163,6 +200,9 @@ pub fn wgsl_declarations() -> String {
     let mut out = String::new();
     for declaration in [
         ShadeParams::wgsl(),
+        GpuPoint::wgsl(),
+        GpuShaded::wgsl(),
+        GpuSphere::wgsl(),
         GpuMaterial::wgsl(),
         GpuLevel::wgsl(),
         GpuStep::wgsl(),
@@ -171,6 +211,7 @@ pub fn wgsl_declarations() -> String {
     ] {
         out += &declaration;
     }
+    out += &format!("const WORKGROUP_SIZE: u32 = {WORKGROUP_SIZE}u;\n");
     out += &format!(
         "const FEATURE_HEIGHTFIELD: u32 = {FEATURE_HEIGHTFIELD}u;\nconst FEATURE_BLOCKERS: u32 = {FEATURE_BLOCKERS}u;\n\
          const FEATURE_PHONG: u32 = {FEATURE_PHONG}u;\n"
@@ -208,7 +249,7 @@ mod tests {
     }
 
     macro_rules! offsets {
-        ($t:ty, $($f:ident),*) => { vec![$(std::mem::offset_of!($t, $f)),*] };
+        ($t:ty, $($f:ident),*) => { [$(std::mem::offset_of!($t, $f)),*] };
     }
 
     #[test]
@@ -225,6 +266,9 @@ mod tests {
             coefficient_count,
             nodes
         ));
+        check::<GpuPoint>(&offsets!(GpuPoint, position_slot, normal, reflected));
+        check::<GpuShaded>(&offsets!(GpuShaded, diffuse, specular, visibility));
+        check::<GpuSphere>(&offsets!(GpuSphere, centre_radius));
         check::<GpuMaterial>(&offsets!(GpuMaterial, albedo, specular, kind, phong_lobe, pad0, pad1));
         check::<GpuLevel>(&offsets!(GpuLevel, offset, columns, rows, pad));
         check::<GpuStep>(&offsets!(GpuStep, distance, inv_distance, level, pad));

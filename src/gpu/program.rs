@@ -11,13 +11,14 @@
 //! source text: a sequence compiles once.
 
 use super::layout::{wgsl_declarations, GpuMaterial, MATERIAL_DIFFUSE, MATERIAL_PHONG};
-use crate::heightfield::{LevelReconstruction, PyramidPlan, ScaleMax};
+use crate::heightfield::{HorizonSettings, LevelReconstruction, PyramidPlan, ScaleMax};
+use crate::logsh::cap_scale;
 use crate::scene::Material;
-use crate::sh::basis::{coefficient_count, funk_hecke_factor, nlp_scale, normalisation};
-use crate::sh::exp::{ol_node_count, OL_COARSE_STEP, OL_FINE_NODES, ONE_DC, SERIES_MAX_TERMS, Y0};
+use crate::sh::basis::{coefficient_count, double_factorial_odd, funk_hecke_factor, nlp_scale, real_normalisation};
+use crate::sh::exp::{ol_node_count, HYB_MAX_SQUARINGS, OL_COARSE_STEP, OL_FINE_NODES, ONE_DC, SERIES_MAX_TERMS, Y0};
 use crate::sh::ExpMethod;
 use crate::shade::kernel::{sh_space_max_magnitude, LUMINANCE, SH_SPACE_BLEND};
-use crate::shade::ShadingKernel;
+use crate::shade::{FrameContents, ShadingKernel};
 use std::collections::BTreeMap;
 
 const SH_WGSL: &str = include_str!("../../shaders/sh.wgsl");
@@ -33,30 +34,34 @@ pub const PYRAMID_WGSL: &str = include_str!("../../shaders/pyramid.wgsl");
 /// What a frame's shading pass contains.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct Features {
-    pub heightfield: bool,
-    pub blockers: bool,
-    pub phong: bool,
+    /// What the frame holds (height field, blockers, Phong materials).
+    pub contents: FrameContents,
     /// How far the program is specialised; less than [`Specialisation::Full`] only to
     /// measure what specialisation saves (`logsh bench --specialise`).
     pub specialisation: Specialisation,
     /// The visibility terms of `logsh render`'s compositing passes (three more diffuse
-    /// exponentiations per point; src/shade/kernel/passes.rs).
+    /// exponentiations per point; src/shade/kernel/pixel_passes.rs).
     pub passes: bool,
 }
+
+/// The feature names the `//#if` blocks of `shaders/` test.
+const FLAG_NAMES: [&str; 8] =
+    ["HEIGHTFIELD", "BLOCKERS", "PHONG", "EXP_QUAD", "EXP_OL", "EXP_HYB", "EXP_SERIES", "PASSES"];
 
 impl Features {
     fn flags(&self, exp: ExpMethod) -> Vec<(&'static str, bool)> {
         let all = self.specialisation != Specialisation::Full;
-        vec![
-            ("HEIGHTFIELD", self.heightfield || all),
-            ("BLOCKERS", self.blockers || all),
-            ("PHONG", self.phong || all),
-            ("EXP_QUAD", matches!(exp, ExpMethod::Quad | ExpMethod::Exact)),
-            ("EXP_OL", exp == ExpMethod::Ol),
-            ("EXP_HYB", exp == ExpMethod::Hyb),
-            ("EXP_SERIES", exp == ExpMethod::Series),
-            ("PASSES", self.passes),
-        ]
+        let on = [
+            self.contents.heightfield || all,
+            self.contents.blockers || all,
+            self.contents.phong || all,
+            matches!(exp, ExpMethod::Quad | ExpMethod::Exact),
+            exp == ExpMethod::Ol,
+            exp == ExpMethod::Hyb,
+            exp == ExpMethod::Series,
+            self.passes,
+        ];
+        FLAG_NAMES.into_iter().zip(on).collect()
     }
 }
 
@@ -86,13 +91,13 @@ pub struct MarchShape {
 }
 
 impl MarchShape {
-    pub fn of(plan: &PyramidPlan, reconstruction: LevelReconstruction, scale_max: ScaleMax) -> Self {
+    pub fn of(plan: &PyramidPlan, horizon: &HorizonSettings) -> Self {
         Self {
             directions: plan.directions.len(),
             levels: plan.steps.last().map_or(1, |s| s.level + 1),
             steps: plan.steps.len(),
-            bspline_levels: reconstruction == LevelReconstruction::BicubicBSpline,
-            bspline_scale_max: scale_max == ScaleMax::BSpline,
+            bspline_levels: horizon.reconstruction == LevelReconstruction::BicubicBSpline,
+            bspline_scale_max: horizon.scale_max == ScaleMax::BSpline,
         }
     }
 }
@@ -141,211 +146,268 @@ impl ShadeProgram {
     /// Generates the program from the CPU kernel's tables. `march` is `Some` when the
     /// frame has a height field.
     pub fn new(kernel: &ShadingKernel<f32>, features: Features, march: Option<MarchShape>) -> Self {
+        let tables = ProgramTables::build(kernel, march);
+        let source = compose_source(kernel, features, march, &tables);
+        Self {
+            source,
+            features,
+            tables: tables.builder.data,
+            materials: tables.materials,
+            slots: tables.slots,
+            nodes: tables.nodes,
+            order: kernel.order,
+            exp: kernel.exp.method,
+            march,
+            tensor_entries: kernel.exp.tensor.as_ref().map_or(0, |t| t.entry_count()),
+        }
+    }
+}
+
+/// The tables of a program, each from the module that owns its math.
+struct ProgramTables {
+    builder: TableBuilder,
+    materials: Vec<GpuMaterial>,
+    slots: BTreeMap<u32, u32>,
+    nodes: usize,
+}
+
+impl ProgramTables {
+    fn build(kernel: &ShadingKernel<f32>, march: Option<MarchShape>) -> Self {
         let order = kernel.order;
-        let count = coefficient_count(order);
-        let exp = kernel.exp.method;
         let mut t = TableBuilder::default();
 
-        // The basis and rotation constants (src/sh/basis.rs).
+        // The basis and rotation constants (src/sh/basis.rs) and the cap's 2 pi K_l
+        // (src/logsh/cap.rs).
         t.push(
             "T_SH_NORMALISATION",
-            (0..order).flat_map(|l| {
-                (-(l as i64)..=l as i64).map(move |m| {
-                    let k = normalisation(l, m.unsigned_abs() as usize);
-                    (if m == 0 { k } else { std::f64::consts::SQRT_2 * k }) as f32
-                })
-            }),
+            (0..order).flat_map(|l| (-(l as i64)..=l as i64).map(move |m| real_normalisation(l, m) as f32)),
         );
-        t.push(
-            "T_DOUBLE_FACTORIAL",
-            (0..order).map(|m| (1..=m).fold(1.0f64, |acc, k| acc * (2 * k - 1) as f64) as f32),
-        );
+        t.push("T_DOUBLE_FACTORIAL", (0..order).map(|m| double_factorial_odd(m) as f32));
         t.push("T_FUNK_HECKE", (0..order).map(|l| funk_hecke_factor(l) as f32));
         t.push("T_NLP_SCALE", (0..order).map(|l| nlp_scale(l) as f32));
-        // 2 pi K_l of the cap's closed form (src/logsh/cap.rs).
-        t.push(
-            "T_CAP_SCALE",
-            (0..order).map(|l| {
-                (2.0 * std::f64::consts::PI * ((2 * l + 1) as f64 / (4.0 * std::f64::consts::PI)).sqrt()) as f32
-            }),
-        );
+        t.push("T_CAP_SCALE", (0..order).map(|l| cap_scale(l) as f32));
 
         // Lobes: order log-ZH values then the log of the peak.
         t.push("T_TANGENT", kernel.tangent.iter().copied());
         t.push("T_DIFFUSE", kernel.diffuse.zonal.iter().copied().chain([kernel.diffuse.log_peak as f32]));
-        let mut materials = Vec::new();
-        let mut slots = BTreeMap::new();
-        for (&index, lobes) in &kernel.materials {
-            let (albedo, specular, kind, phong_lobe) = match (&lobes.material, &lobes.phong) {
-                (Material::Phong { albedo, specular, .. }, Some(lobe)) => {
-                    let offset = t.push_unnamed(lobe.zonal.iter().copied().chain([lobe.log_peak as f32]));
-                    (*albedo, *specular, MATERIAL_PHONG, offset as u32)
-                }
-                (Material::Diffuse { albedo } | Material::Heightfield { albedo }, _) => {
-                    (*albedo, [0.0; 3], MATERIAL_DIFFUSE, 0)
-                }
-                // Water is never shaded itself: its pixels are the reflected points.
-                _ => continue,
-            };
-            slots.insert(index, materials.len() as u32);
-            materials.push(GpuMaterial {
-                albedo: [albedo[0], albedo[1], albedo[2], 0.0],
-                specular: [specular[0], specular[1], specular[2], 0.0],
-                kind,
-                phong_lobe,
-                ..Default::default()
-            });
-        }
-        if materials.is_empty() {
-            materials.push(GpuMaterial::default());
-        }
+        let (materials, slots) = material_slots(kernel, &mut t);
 
         // The light, channel-major, and the exponentiation's tables (src/sh/exp.rs).
-        let light = &kernel.light;
-        t.push("T_LIGHT", light.iter().flat_map(|channel| channel.iter().copied()));
-        let quadrature = kernel.exp.exact.as_ref().expect("every exponentiator carries its quadrature");
-        let nodes = quadrature.weights().len();
-        t.push("T_QUAD_WEIGHTS", quadrature.weights().iter().map(|&w| w as f32));
-        // Rows padded with zeros to a multiple of 4 (the shader reads them as vec4).
-        let padded = count.div_ceil(4) * 4;
-        t.push(
-            "T_QUAD_BASIS",
-            quadrature
-                .basis()
-                .chunks(count)
-                .flat_map(|y| y.iter().map(|&v| v as f32).chain(std::iter::repeat_n(0.0, padded - count))),
-        );
-        // L(node) = sum_i L_i y_i(node), per channel.
-        t.push(
-            "T_NODE_LIGHT",
-            quadrature.basis().chunks(count).flat_map(|y| {
-                (0..3).map(move |c| y.iter().zip(&light[c]).map(|(a, &b)| a * f64::from(b)).sum::<f64>() as f32)
-            }),
-        );
-        let ol = kernel.exp.ol.as_ref();
-        t.push("T_OL_A", ol.map(|table| table.a.iter().map(|&a| a as f32).collect::<Vec<_>>()).unwrap_or_default());
-        t.push("T_OL_B", ol.map(|table| table.b.iter().map(|&b| b as f32).collect::<Vec<_>>()).unwrap_or_default());
-        let (rows, entries) = match kernel.exp.tensor.as_ref() {
-            Some(tensor) => {
-                let mut rows = vec![0u32];
-                let mut entries = Vec::new();
-                for row in tensor.rows() {
-                    for &(j, k, gamma) in row {
-                        entries.push(f32::from_bits(u32::from(j) | (u32::from(k) << 16)));
-                        entries.push(gamma as f32);
-                    }
-                    rows.push((entries.len() / 2) as u32);
-                }
-                (rows.into_iter().map(f32::from_bits).collect(), entries)
-            }
-            None => (Vec::new(), Vec::new()),
-        };
-        t.push("T_TENSOR_ROWS", rows);
-        t.push("T_TENSOR_ENTRIES", entries);
-
-        // The height field's wedge operator, z-rotation phases and azimuths
-        // (src/logsh/wedge.rs, src/heightfield/pyramid.rs).
-        let directions = march.map_or(0, |m| m.directions);
-        match &kernel.wedge {
-            Some(wedge) => {
-                t.push("T_WEDGE", wedge.matrix.iter().map(|&m| m as f32));
-                let dphi = wedge.wedge_width();
-                t.push(
-                    "T_PHASES",
-                    (0..directions).flat_map(|k| {
-                        (0..order).flat_map(move |m| {
-                            let angle = (m * k) as f64 * dphi;
-                            [angle.cos() as f32, angle.sin() as f32]
-                        })
-                    }),
-                );
-                t.push(
-                    "T_AZIMUTHS",
-                    (0..directions).flat_map(|k| {
-                        let phi = std::f64::consts::TAU * k as f64 / directions as f64;
-                        [phi.cos() as f32, phi.sin() as f32]
-                    }),
-                );
-            }
-            None => {
-                for name in ["T_WEDGE", "T_PHASES", "T_AZIMUTHS"] {
-                    t.push(name, []);
-                }
-            }
-        }
+        let nodes = push_exponentiation(kernel, &mut t);
+        push_wedge(kernel, march, &mut t);
         if t.data.is_empty() {
             t.data.push(0.0);
         }
-
-        let march_in = march;
-        let march = march.unwrap_or_default();
-        let runtime_order = features.specialisation == Specialisation::None;
-        let order_cap = if runtime_order { crate::sh::MAX_ORDER } else { order };
-        // Coefficient arrays hold a multiple of 4 entries (the padding stays 0).
-        let count_cap = (order_cap * order_cap).div_ceil(4) * 4;
-        let mut prelude = format!(
-            "const ORDER: u32 = {order}u;\nconst ORDER_CAP: u32 = {}u;\nconst ORDER_PLUS_ONE: u32 = {}u;\n\
-             const COUNT: u32 = {count}u;\nconst COUNT_CAP: u32 = {}u;\n\
-             const NODES: u32 = {nodes}u;\nconst DIRECTIONS: u32 = {}u;\nconst LEVELS: u32 = {}u;\n\
-             const STEPS: u32 = {}u;\nconst STEP_ARRAY: u32 = {}u;\n\
-             const BSPLINE_LEVELS: bool = {};\nconst BSPLINE_SCALE_MAX: bool = {};\n\
-             const GENERIC: bool = {};\nconst TANGENT_OCCLUSION: bool = {};\nconst RATIO_ATTENUATION: bool = {};\n\
-             const Y0: f32 = {};\nconst ONE_DC: f32 = {};\n\
-             const OL_FINE_NODES: u32 = {OL_FINE_NODES}u;\nconst OL_COARSE_STEP: f32 = {};\nconst OL_NODES: u32 = {}u;\n\
-             const HYB_MAX_SQUARINGS: u32 = {}u;\nconst SERIES_MAX_TERMS: u32 = {SERIES_MAX_TERMS}u;\n\
-             const SERIES_TOLERANCE: f32 = {};\nconst SH_SPACE_MAX_MAGNITUDE: f32 = {};\n\
-             const SH_SPACE_BLEND: f32 = {};\nconst LUMINANCE: vec3<f32> = vec3<f32>({}, {}, {});\n",
-            order_cap,
-            order_cap + 1,
-            count_cap,
-            directions.max(1),
-            march.levels.max(1),
-            march.steps,
-            march.steps.max(1),
-            march.bspline_levels,
-            march.bspline_scale_max,
-            features.specialisation != Specialisation::Full,
-            kernel.tangent_occlusion,
-            kernel.ratio_attenuation,
-            wgsl_float(Y0),
-            wgsl_float(ONE_DC),
-            wgsl_float(OL_COARSE_STEP),
-            ol_node_count(),
-            crate::sh::exp::HYB_MAX_SQUARINGS,
-            wgsl_float(f64::from(f32::EPSILON) * 0.01),
-            wgsl_float(sh_space_max_magnitude(exp)),
-            wgsl_float(SH_SPACE_BLEND),
-            wgsl_float(LUMINANCE[0]),
-            wgsl_float(LUMINANCE[1]),
-            wgsl_float(LUMINANCE[2]),
-        );
-        for (name, offset) in &t.offsets {
-            prelude += &format!("const {name}: u32 = {offset}u;\n");
-        }
-
-        let flags = features.flags(exp);
-        let mut modules = vec![SH_WGSL, EXP_QUAD_WGSL];
-        if matches!(exp, ExpMethod::Ol | ExpMethod::Hyb) {
-            modules.push(EXP_OL_WGSL);
-        }
-        if matches!(exp, ExpMethod::Hyb | ExpMethod::Series) {
-            modules.push(EXP_PRODUCT_WGSL);
-        }
-        if flag(&flags, "BLOCKERS") {
-            modules.push(LOGSH_WGSL);
-        }
-        if flag(&flags, "HEIGHTFIELD") {
-            modules.push(HEIGHTFIELD_WGSL);
-        }
-        modules.push(SHADE_WGSL);
-        let mut source = wgsl_declarations() + &prelude;
-        for module in modules {
-            let module = preprocess(module, &flags);
-            source += &if runtime_order { runtime_bounds(&module) } else { module };
-        }
-        let tensor_entries = kernel.exp.tensor.as_ref().map_or(0, |t| t.entry_count());
-        Self { source, features, tables: t.data, materials, slots, nodes, order, exp, march: march_in, tensor_entries }
+        Self { builder: t, materials, slots, nodes }
     }
+}
+
+/// The material slots and the Phong lobes they point to, and the slot of each material
+/// index the scene declares. Water is never shaded itself (its pixels are the reflected
+/// points), so it has no slot.
+fn material_slots(kernel: &ShadingKernel<f32>, t: &mut TableBuilder) -> (Vec<GpuMaterial>, BTreeMap<u32, u32>) {
+    let mut materials = Vec::new();
+    let mut slots = BTreeMap::new();
+    for (&index, lobes) in &kernel.materials {
+        let (albedo, specular, kind, phong_lobe) = match (&lobes.material, &lobes.phong) {
+            (Material::Phong { albedo, specular, .. }, Some(lobe)) => {
+                let offset = t.push_unnamed(lobe.zonal.iter().copied().chain([lobe.log_peak as f32]));
+                (*albedo, *specular, MATERIAL_PHONG, offset as u32)
+            }
+            (Material::Diffuse { albedo } | Material::Heightfield { albedo }, _) => {
+                (*albedo, [0.0; 3], MATERIAL_DIFFUSE, 0)
+            }
+            _ => continue,
+        };
+        slots.insert(index, materials.len() as u32);
+        materials.push(GpuMaterial {
+            albedo: [albedo[0], albedo[1], albedo[2], 0.0],
+            specular: [specular[0], specular[1], specular[2], 0.0],
+            kind,
+            phong_lobe,
+            ..Default::default()
+        });
+    }
+    if materials.is_empty() {
+        materials.push(GpuMaterial::default());
+    }
+    (materials, slots)
+}
+
+/// The light and the tables of the kernel's exponentiation; returns the quadrature's node
+/// count.
+fn push_exponentiation(kernel: &ShadingKernel<f32>, t: &mut TableBuilder) -> usize {
+    let count = coefficient_count(kernel.order);
+    let light = &kernel.light;
+    t.push("T_LIGHT", light.iter().flat_map(|channel| channel.iter().copied()));
+    let quadrature = kernel.exp.exact.as_ref().expect("every exponentiator carries its quadrature");
+    t.push("T_QUAD_WEIGHTS", quadrature.weights().iter().map(|&w| w as f32));
+    // Rows padded with zeros to a multiple of 4 (the shader reads them as vec4).
+    let padded = count.div_ceil(4) * 4;
+    t.push(
+        "T_QUAD_BASIS",
+        quadrature
+            .basis()
+            .chunks(count)
+            .flat_map(|y| y.iter().map(|&v| v as f32).chain(std::iter::repeat_n(0.0, padded - count))),
+    );
+    // L(node) = sum_i L_i y_i(node), per channel.
+    t.push(
+        "T_NODE_LIGHT",
+        quadrature.basis().chunks(count).flat_map(|y| {
+            (0..3).map(move |c| y.iter().zip(&light[c]).map(|(a, &b)| a * f64::from(b)).sum::<f64>() as f32)
+        }),
+    );
+    let ol = kernel.exp.ol.as_ref();
+    t.push("T_OL_A", ol.map(|table| table.a.iter().map(|&a| a as f32).collect::<Vec<_>>()).unwrap_or_default());
+    t.push("T_OL_B", ol.map(|table| table.b.iter().map(|&b| b as f32).collect::<Vec<_>>()).unwrap_or_default());
+    let (rows, entries) = match kernel.exp.tensor.as_ref() {
+        Some(tensor) => {
+            let mut rows = vec![0u32];
+            let mut entries = Vec::new();
+            for row in tensor.rows() {
+                for &(j, k, gamma) in row {
+                    entries.push(f32::from_bits(u32::from(j) | (u32::from(k) << 16)));
+                    entries.push(gamma as f32);
+                }
+                rows.push((entries.len() / 2) as u32);
+            }
+            (rows.into_iter().map(f32::from_bits).collect(), entries)
+        }
+        None => (Vec::new(), Vec::new()),
+    };
+    t.push("T_TENSOR_ROWS", rows);
+    t.push("T_TENSOR_ENTRIES", entries);
+    quadrature.weights().len()
+}
+
+/// The height field's wedge operator, z-rotation phases and azimuths
+/// (src/logsh/wedge.rs, src/heightfield/pyramid.rs); empty without a height field.
+fn push_wedge(kernel: &ShadingKernel<f32>, march: Option<MarchShape>, t: &mut TableBuilder) {
+    let order = kernel.order;
+    let directions = march.map_or(0, |m| m.directions);
+    let Some(wedge) = &kernel.wedge else {
+        for name in ["T_WEDGE", "T_PHASES", "T_AZIMUTHS"] {
+            t.push(name, []);
+        }
+        return;
+    };
+    t.push("T_WEDGE", wedge.matrix.iter().map(|&m| m as f32));
+    let dphi = wedge.wedge_width();
+    t.push(
+        "T_PHASES",
+        (0..directions).flat_map(|k| {
+            (0..order).flat_map(move |m| {
+                let angle = (m * k) as f64 * dphi;
+                [angle.cos() as f32, angle.sin() as f32]
+            })
+        }),
+    );
+    t.push(
+        "T_AZIMUTHS",
+        (0..directions).flat_map(|k| {
+            let phi = std::f64::consts::TAU * k as f64 / directions as f64;
+            [phi.cos() as f32, phi.sin() as f32]
+        }),
+    );
+}
+
+/// A constant of the generated prelude.
+enum Constant {
+    U32(usize),
+    F32(f64),
+    Bool(bool),
+    Vec3([f64; 3]),
+}
+
+impl Constant {
+    fn declare(&self, name: &str) -> String {
+        match self {
+            Constant::U32(v) => format!("const {name}: u32 = {v}u;\n"),
+            Constant::F32(v) => format!("const {name}: f32 = {};\n", wgsl_float(*v)),
+            Constant::Bool(v) => format!("const {name}: bool = {v};\n"),
+            Constant::Vec3(v) => {
+                let [x, y, z] = v.map(wgsl_float);
+                format!("const {name}: vec3<f32> = vec3<f32>({x}, {y}, {z});\n")
+            }
+        }
+    }
+}
+
+/// The constants every module reads: the order and loop bounds, the march's shape, the
+/// switches, and the exponentiation's limits (each from the module that defines it).
+fn prelude(kernel: &ShadingKernel<f32>, features: Features, march: Option<MarchShape>, nodes: usize) -> String {
+    use Constant::*;
+    let order = kernel.order;
+    let march = march.unwrap_or_default();
+    let generic = features.specialisation != Specialisation::Full;
+    let order_cap = if features.specialisation == Specialisation::None { crate::sh::MAX_ORDER } else { order };
+    let constants = [
+        ("ORDER", U32(order)),
+        ("ORDER_CAP", U32(order_cap)),
+        ("ORDER_PLUS_ONE", U32(order_cap + 1)),
+        ("COUNT", U32(coefficient_count(order))),
+        // Coefficient arrays hold a multiple of 4 entries (the padding stays 0).
+        ("COUNT_CAP", U32(coefficient_count(order_cap).div_ceil(4) * 4)),
+        ("NODES", U32(nodes)),
+        ("DIRECTIONS", U32(march.directions.max(1))),
+        ("LEVELS", U32(march.levels.max(1))),
+        ("STEPS", U32(march.steps)),
+        ("STEP_ARRAY", U32(march.steps.max(1))),
+        ("BSPLINE_LEVELS", Bool(march.bspline_levels)),
+        ("BSPLINE_SCALE_MAX", Bool(march.bspline_scale_max)),
+        ("GENERIC", Bool(generic)),
+        ("TANGENT_OCCLUSION", Bool(kernel.tangent_occlusion)),
+        ("RATIO_ATTENUATION", Bool(kernel.ratio_attenuation)),
+        ("Y0", F32(Y0)),
+        ("ONE_DC", F32(ONE_DC)),
+        ("OL_FINE_NODES", U32(OL_FINE_NODES)),
+        ("OL_COARSE_STEP", F32(OL_COARSE_STEP)),
+        ("OL_NODES", U32(ol_node_count())),
+        ("HYB_MAX_SQUARINGS", U32(HYB_MAX_SQUARINGS as usize)),
+        ("SERIES_MAX_TERMS", U32(SERIES_MAX_TERMS)),
+        ("SERIES_TOLERANCE", F32(f64::from(f32::EPSILON) * 0.01)),
+        ("SH_SPACE_MAX_MAGNITUDE", F32(sh_space_max_magnitude(kernel.exp.method))),
+        ("SH_SPACE_BLEND", F32(SH_SPACE_BLEND)),
+        ("LUMINANCE", Vec3(LUMINANCE)),
+    ];
+    constants.iter().map(|(name, value)| value.declare(name)).collect()
+}
+
+/// The WGSL of a program: the shared declarations, the prelude, the table offsets, and
+/// the modules the features need with their inactive blocks removed.
+fn compose_source(
+    kernel: &ShadingKernel<f32>,
+    features: Features,
+    march: Option<MarchShape>,
+    tables: &ProgramTables,
+) -> String {
+    let exp = kernel.exp.method;
+    let mut source = wgsl_declarations() + &prelude(kernel, features, march, tables.nodes);
+    for (name, offset) in &tables.builder.offsets {
+        source += &Constant::U32(*offset).declare(name);
+    }
+    let flags = features.flags(exp);
+    let mut modules = vec![SH_WGSL, EXP_QUAD_WGSL];
+    if matches!(exp, ExpMethod::Ol | ExpMethod::Hyb) {
+        modules.push(EXP_OL_WGSL);
+    }
+    if matches!(exp, ExpMethod::Hyb | ExpMethod::Series) {
+        modules.push(EXP_PRODUCT_WGSL);
+    }
+    if flag(&flags, "BLOCKERS") {
+        modules.push(LOGSH_WGSL);
+    }
+    if flag(&flags, "HEIGHTFIELD") {
+        modules.push(HEIGHTFIELD_WGSL);
+    }
+    modules.push(SHADE_WGSL);
+    let runtime_order = features.specialisation == Specialisation::None;
+    for module in modules {
+        let module = preprocess(module, &flags).expect("the shaders test only the features of FLAG_NAMES");
+        source += &if runtime_order { runtime_bounds(&module) } else { module };
+    }
+    source
 }
 
 impl ShadeProgram {
@@ -427,13 +489,23 @@ fn runtime_bounds(source: &str) -> String {
     out
 }
 
+/// A `//#if` naming a feature the program does not know.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("line {line}: //#if {name}: unknown feature (known: {known})")]
+pub struct UnknownFeature {
+    pub line: usize,
+    pub name: String,
+    pub known: String,
+}
+
 /// Keeps the lines of `source` whose enclosing `//#if FEATURE` / `//#if !FEATURE` /
-/// `//#else` / `//#endif` blocks are active for `flags`; unknown features are off.
-pub fn preprocess(source: &str, flags: &[(&str, bool)]) -> String {
+/// `//#else` / `//#endif` blocks are active for `flags`; a feature `flags` does not name
+/// is an error, never silently off.
+pub fn preprocess(source: &str, flags: &[(&str, bool)]) -> Result<String, UnknownFeature> {
     let mut out = String::with_capacity(source.len());
     let mut stack: Vec<(bool, bool)> = Vec::new(); // (this block's condition, parent active)
     let active = |stack: &[(bool, bool)]| stack.last().is_none_or(|&(condition, parent)| condition && parent);
-    for line in source.lines() {
+    for (number, line) in source.lines().enumerate() {
         let directive = line.trim_start();
         if let Some(name) = directive.strip_prefix("//#if ") {
             let name = name.trim();
@@ -441,8 +513,12 @@ pub fn preprocess(source: &str, flags: &[(&str, bool)]) -> String {
                 Some(rest) => (true, rest),
                 None => (false, name),
             };
+            let Some(&(_, on)) = flags.iter().find(|(n, _)| *n == name) else {
+                let known = flags.iter().map(|(n, _)| *n).collect::<Vec<_>>().join(", ");
+                return Err(UnknownFeature { line: number + 1, name: name.to_string(), known });
+            };
             let parent = active(&stack);
-            stack.push((flag(flags, name) != negated, parent));
+            stack.push((on != negated, parent));
         } else if directive.starts_with("//#else") {
             if let Some(top) = stack.last_mut() {
                 top.0 = !top.0;
@@ -454,7 +530,7 @@ pub fn preprocess(source: &str, flags: &[(&str, bool)]) -> String {
             out.push('\n');
         }
     }
-    out
+    Ok(out)
 }
 
 #[cfg(test)]
@@ -464,9 +540,34 @@ mod tests {
     #[test]
     fn preprocess_keeps_active_blocks_only() {
         let source = "a\n//#if X\nb\n//#if Y\nc\n//#else\nd\n//#endif\n//#else\ne\n//#endif\nf\n";
-        assert_eq!(preprocess(source, &[("X", true), ("Y", false)]), "a\nb\nd\nf\n");
-        assert_eq!(preprocess(source, &[("X", false), ("Y", true)]), "a\ne\nf\n");
-        assert_eq!(preprocess(source, &[("X", true), ("Y", true)]), "a\nb\nc\nf\n");
+        assert_eq!(preprocess(source, &[("X", true), ("Y", false)]).unwrap(), "a\nb\nd\nf\n");
+        assert_eq!(preprocess(source, &[("X", false), ("Y", true)]).unwrap(), "a\ne\nf\n");
+        assert_eq!(preprocess(source, &[("X", true), ("Y", true)]).unwrap(), "a\nb\nc\nf\n");
+    }
+
+    #[test]
+    fn preprocess_refuses_an_unknown_feature() {
+        let error = preprocess("a\n//#if X\nb\n//#if !TYPO\nc\n//#endif\n//#endif\n", &[("X", true)]).unwrap_err();
+        assert_eq!((error.line, error.name.as_str()), (4, "TYPO"));
+    }
+
+    #[test]
+    fn every_shader_tests_known_features_only() {
+        let flags: Vec<(&str, bool)> = FLAG_NAMES.iter().map(|&n| (n, true)).collect();
+        for (name, source) in [
+            ("sh.wgsl", SH_WGSL),
+            ("logsh.wgsl", LOGSH_WGSL),
+            ("heightfield.wgsl", HEIGHTFIELD_WGSL),
+            ("exp_quad.wgsl", EXP_QUAD_WGSL),
+            ("exp_ol.wgsl", EXP_OL_WGSL),
+            ("exp_product.wgsl", EXP_PRODUCT_WGSL),
+            ("shade.wgsl", SHADE_WGSL),
+            ("pyramid.wgsl", PYRAMID_WGSL),
+        ] {
+            if let Err(e) = preprocess(source, &flags) {
+                panic!("shaders/{name}: {e}");
+            }
+        }
     }
 
     #[test]

@@ -149,20 +149,6 @@ impl HeightField {
         std::array::from_fn(|a| if n[a] > 1 { (self.max[a] - self.min[a]) / (n[a] - 1) as f64 } else { 0.0 })
     }
 
-    /// The world point of a sample, `(x, y, height)`.
-    pub fn sample_position(&self, column: usize, row: usize) -> [f64; 3] {
-        let n = [self.columns, self.rows];
-        let idx = [column, row];
-        let xy: [f64; 2] = std::array::from_fn(|a| {
-            if n[a] > 1 {
-                self.min[a] + (self.max[a] - self.min[a]) * idx[a] as f64 / (n[a] - 1) as f64
-            } else {
-                self.min[a]
-            }
-        });
-        [xy[0], xy[1], f64::from(self.heights[row * self.columns + column])]
-    }
-
     /// Surface height at world `(x, y)`: the bilinear interpolant of the samples,
     /// with the flat (clamp-to-edge) continuation outside the rectangle. Exact at the
     /// samples. A NaN coordinate gives NaN.

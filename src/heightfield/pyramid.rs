@@ -350,7 +350,11 @@ impl HorizonPyramid {
     /// Builds the pyramid levels and step table (module doc, "What is built").
     /// Cost: about `4 n_x n_y` multiply-adds per level, levels built in parallel.
     pub fn new(field: &HeightField, settings: HorizonSettings) -> Result<Self, HeightFieldError> {
-        let plan = PyramidPlan::new(field, settings)?;
+        Ok(Self::from_plan(field, &PyramidPlan::new(field, settings)?, settings))
+    }
+
+    /// Filters the levels of `plan`, made for `field` with `settings`.
+    pub fn from_plan(field: &HeightField, plan: &PyramidPlan, settings: HorizonSettings) -> Self {
         let n = [field.columns(), field.rows()];
         let (min, max) = (field.min(), field.max());
         let levels: Vec<PyramidLevel> = plan
@@ -364,7 +368,7 @@ impl HorizonPyramid {
                 PyramidLevel { columns: size[0], rows: size[1], spacing, heights }
             })
             .collect();
-        Ok(Self { settings, min, max, levels, steps: plan.steps, directions: plan.directions })
+        Self { settings, min, max, levels, steps: plan.steps.clone(), directions: plan.directions.clone() }
     }
 
     /// The settings it was built with.

@@ -1,6 +1,11 @@
 //! Log visibility of a spherical blocker (paper 000, Eq. 24-26, Section 4.2).
 
-use crate::sh::basis::{legendre, Real};
+use crate::sh::basis::{legendre, normalisation, Real};
+
+/// `2 pi K_l`, `K_l = sqrt((2l+1)/(4 pi))`: the factor of band `l` in the cap's closed form.
+pub fn cap_scale(l: usize) -> f64 {
+    std::f64::consts::TAU * normalisation(l, 0)
+}
 
 /// Writes the `order` ZH coefficients of the log visibility of a cap of angular radius
 /// `alpha` around +Z: `log(eps)` inside the cap, 0 outside (Eq. 26):
@@ -11,11 +16,9 @@ pub fn cap_log_zh<T: Real>(order: usize, log_epsilon: T, alpha: T, out: &mut [T]
     let x = alpha.cos();
     let mut p = [T::zero(); crate::sh::MAX_ORDER + 2];
     legendre(order + 1, x, &mut p);
-    let two_pi = T::of(2.0 * std::f64::consts::PI);
     for l in 0..order {
         let integral = if l == 0 { T::one() - x } else { (p[l - 1] - p[l + 1]) / T::of((2 * l + 1) as f64) };
-        let k = T::of(((2 * l + 1) as f64 / (4.0 * std::f64::consts::PI)).sqrt());
-        out[l] = log_epsilon * two_pi * k * integral;
+        out[l] = log_epsilon * T::of(cap_scale(l)) * integral;
     }
 }
 

@@ -21,13 +21,13 @@
 //! | `P.{X,Y,Z}`, `N.{X,Y,Z}` | float | world position and normal of the G-buffer |
 //!
 //! "colour" is half by default (`--colour-type float` stores f32); see
-//! [`crate::shade::passes`] and docs/design.md for the pass definitions.
+//! [`crate::shade::compositing`] and docs/design.md for the pass definitions.
 
 pub mod frames;
 pub mod progress;
 
-use crate::gpu::Executor;
-use crate::scene::layers::{write_exr_layers, OutputChannel, SampleType};
+use crate::executor::Executor;
+use crate::scene::output::{write_exr_layers, OutputChannel, SampleType};
 use crate::scene::{output, Scene, SceneError};
 use crate::shade::{ShadedPasses, ShadingSettings};
 use anyhow::Context;
@@ -131,6 +131,9 @@ pub fn render_sequence(
                 }
             }
         };
+        for notice in executor.take_notices() {
+            progress.notice(&notice.0);
+        }
         let outcome = FrameOutcome { frame, status };
         progress.frame_finished(&outcome, index, total);
         outcomes.push(outcome);

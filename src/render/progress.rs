@@ -5,7 +5,8 @@
 //! N}`, then per frame `{"event": "frame", "frame": F, "index": I, "total": N, "status":
 //! "rendered" | "skipped" | "failed", "seconds": S, "outputs": [...], "error": "..."}`
 //! (`error` only when failed), and last `{"event": "done", "rendered": R, "skipped": K,
-//! "failed": [F, ...]}`. Everything else goes to standard error.
+//! "failed": [F, ...]}`. Everything else goes to standard error, notices included (a
+//! frame shaded on the CPU by the fall-back of `--device auto`), in every mode.
 
 use super::{FrameOutcome, FrameStatus};
 use clap::ValueEnum;
@@ -18,7 +19,8 @@ use std::io::{IsTerminal, Write};
 pub enum ProgressMode {
     /// A bar when standard error is a terminal, lines otherwise.
     Auto,
-    /// An indicatif bar on standard error.
+    /// An indicatif bar on standard error; lines where standard error is not a terminal,
+    /// since no bar can be drawn there.
     Bar,
     /// One plain line per frame on standard error.
     Lines,
@@ -33,15 +35,16 @@ pub trait Progress: Send {
     fn start(&mut self, total: usize);
     fn frame_started(&mut self, frame: i64, index: usize);
     fn frame_finished(&mut self, outcome: &FrameOutcome, index: usize, total: usize);
+    /// Something the user should know about how a frame was shaded.
+    fn notice(&mut self, message: &str);
     fn finish(&mut self, outcomes: &[FrameOutcome]);
 }
 
 /// The reporter for `mode`.
 pub fn reporter(mode: ProgressMode) -> Box<dyn Progress> {
     match mode {
-        ProgressMode::Auto if std::io::stderr().is_terminal() => Box::new(Bar::default()),
-        ProgressMode::Auto | ProgressMode::Lines => Box::new(Lines),
-        ProgressMode::Bar => Box::new(Bar::default()),
+        ProgressMode::Auto | ProgressMode::Bar if std::io::stderr().is_terminal() => Box::new(Bar::default()),
+        ProgressMode::Auto | ProgressMode::Bar | ProgressMode::Lines => Box::new(Lines),
         ProgressMode::Json => Box::new(Json),
         ProgressMode::None => Box::new(Silent),
     }
@@ -75,6 +78,9 @@ impl Progress for Lines {
     fn frame_finished(&mut self, outcome: &FrameOutcome, index: usize, total: usize) {
         eprintln!("frame {} ({}/{total}) {}", outcome.frame, index + 1, describe(outcome));
     }
+    fn notice(&mut self, message: &str) {
+        eprintln!("{message}");
+    }
     fn finish(&mut self, _: &[FrameOutcome]) {}
 }
 
@@ -103,6 +109,12 @@ impl Progress for Bar {
                 bar.println(format!("frame {} {}", outcome.frame, describe(outcome)));
             }
             bar.inc(1);
+        }
+    }
+    fn notice(&mut self, message: &str) {
+        match &self.bar {
+            Some(bar) => bar.println(message),
+            None => eprintln!("{message}"),
         }
     }
     fn finish(&mut self, _: &[FrameOutcome]) {
@@ -145,6 +157,9 @@ impl Progress for Json {
         }
         emit(event);
     }
+    fn notice(&mut self, message: &str) {
+        eprintln!("{message}");
+    }
     fn finish(&mut self, outcomes: &[FrameOutcome]) {
         let count = |f: fn(&FrameStatus) -> bool| outcomes.iter().filter(|o| f(&o.status)).count();
         let failed: Vec<i64> =
@@ -164,5 +179,8 @@ impl Progress for Silent {
     fn start(&mut self, _: usize) {}
     fn frame_started(&mut self, _: i64, _: usize) {}
     fn frame_finished(&mut self, _: &FrameOutcome, _: usize, _: usize) {}
+    fn notice(&mut self, message: &str) {
+        eprintln!("{message}");
+    }
     fn finish(&mut self, _: &[FrameOutcome]) {}
 }

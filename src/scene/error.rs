@@ -16,9 +16,13 @@ pub enum SceneError {
     #[error("{}: file not found ({what})", .file.display())]
     MissingFile { file: PathBuf, what: String },
 
+    /// A scene was asked for at a path that is a file, not a scene directory.
+    #[error("{}: {what}", .path.display())]
+    NotASceneDirectory { path: PathBuf, what: String },
+
     /// The operating system refused to read a file.
-    #[error("{}: cannot read: {source}", .file.display())]
-    Io { file: PathBuf, source: std::io::Error },
+    #[error("{}: cannot read: {cause}", .file.display())]
+    Io { file: PathBuf, cause: std::io::Error },
 
     /// A JSON file is malformed, has an unknown key or a value of the wrong type.
     #[error("{}:{line}:{column}: {message}", .file.display())]
@@ -89,7 +93,7 @@ impl SceneError {
         if source.kind() == std::io::ErrorKind::NotFound {
             Self::MissingFile { file: file.to_path_buf(), what: what.to_string() }
         } else {
-            Self::Io { file: file.to_path_buf(), source }
+            Self::Io { file: file.to_path_buf(), cause: source }
         }
     }
 
@@ -109,6 +113,7 @@ impl SceneError {
         match self {
             Self::MissingFile { file, .. }
             | Self::Io { file, .. }
+            | Self::NotASceneDirectory { path: file, .. }
             | Self::Json { file, .. }
             | Self::Version { file, .. }
             | Self::Image { file, .. }

@@ -129,14 +129,6 @@ impl EnvironmentMap {
         Ok(EnvironmentMap { file: file.to_path_buf(), width, height, texels })
     }
 
-    /// Unit direction at the centre of texel `(column, row)`.
-    pub fn texel_direction(&self, column: usize, row: usize) -> [f64; 3] {
-        equirectangular_to_direction(
-            (column as f64 + 0.5) / self.width as f64,
-            1.0 - (row as f64 + 0.5) / self.height as f64,
-        )
-    }
-
     /// Exact solid angle of a texel of row `row`.
     pub fn texel_solid_angle(&self, row: usize) -> f64 {
         let t0 = PI * row as f64 / self.height as f64;

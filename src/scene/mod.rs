@@ -55,7 +55,6 @@ pub mod error;
 mod exr_read;
 pub mod gbuffer;
 pub mod heightmap;
-pub mod layers;
 pub mod light;
 pub mod output;
 mod paths;
@@ -415,6 +414,16 @@ impl Scene {
     /// Reads and validates `dir/scene.json`, and the light and height map when they are
     /// the same for every frame.
     pub fn load(dir: &Path) -> Result<Scene, SceneError> {
+        if dir.is_file() {
+            let blend = dir.extension().is_some_and(|e| e.eq_ignore_ascii_case("blend"));
+            let what = if blend {
+                "is a .blend file; logsh reads the scene directory exported from it: \
+                 `blender -b scene.blend -P blender_scripts/export_scene.py -- --out DIR`, then give DIR"
+            } else {
+                "is a file; give the scene directory that holds scene.json"
+            };
+            return Err(SceneError::NotASceneDirectory { path: dir.to_path_buf(), what: what.into() });
+        }
         let file = dir.join(SCENE_FILE);
         let text = std::fs::read_to_string(&file).map_err(|e| SceneError::io(&file, "the scene description", e))?;
         let probe: VersionProbe = serde_json::from_str(&text).map_err(|e| SceneError::json(&file, e))?;

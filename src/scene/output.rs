@@ -1,19 +1,35 @@
-//! Writing output images: linear float EXR and an sRGB 8-bit PNG preview.
+//! Writing output images: linear float EXR (single- and multi-layer) and an sRGB 8-bit
+//! PNG preview.
 //!
 //! Every write is atomic: the image goes to a temporary file in the destination's
 //! directory (`.<name>.<pid>.<n>.tmp`), which is then renamed over the destination, so a
 //! reader never sees half a file and a failed write leaves the old file in place. These
 //! functions do not know the scene; call [`super::Scene::check_output_path`] first so
 //! that no input is ever overwritten.
+//!
+//! Multi-layer EXR: one part, channels named `<layer>.<channel>`, the way
+//! Blender's compositor and Nuke read compositing passes.
+//!
+//! Names: the beauty is plain `R`, `G`, `B`, `A` (Blender reads it as the Combined pass,
+//! Nuke as `rgba`); every other pass is `<pass>.<channel>`, which Blender's multilayer
+//! reader splits at the last dot into pass and channel (`imb_exr_split_channel_name` in
+//! `source/blender/imbuf/intern/openexr/openexr_api.cc`) and Nuke reads as layer
+//! `<pass>`. One part rather than Blender 5's part per pass, because every reader of
+//! multilayer files accepts it (Blender 4 and 5, Nuke, oiiotool, the `exr` crate).
+//! Compression ZIP (16 scan lines per block), lossless.
 
+use exr::prelude::{
+    f16, AnyChannel, AnyChannels, Blocks, Compression, Encoding, FlatSamples, Image, Layer, LayerAttributes, LineOrder,
+    WritableImage,
+};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
 
 /// Why an output image could not be written.
 #[derive(Debug, thiserror::Error)]
 pub enum OutputError {
-    #[error("{}: cannot write: {source}", .file.display())]
-    Io { file: PathBuf, source: std::io::Error },
+    #[error("{}: cannot write: {cause}", .file.display())]
+    Io { file: PathBuf, cause: std::io::Error },
     #[error("{}: cannot encode the image: {message}", .file.display())]
     Encode { file: PathBuf, message: String },
     #[error("{}: {count} pixel values given for a {width}x{height} image", .file.display())]
@@ -41,7 +57,7 @@ pub fn write_atomically<E>(
     }
     std::fs::rename(&temp, path).map_err(|source| {
         let _ = std::fs::remove_file(&temp);
-        OutputError::Io { file: path.to_path_buf(), source }
+        OutputError::Io { file: path.to_path_buf(), cause: source }
     })
 }
 
@@ -72,15 +88,62 @@ pub fn write_exr_channels(
     for (_, data) in channels {
         check_len(path, width, height, data.len())?;
     }
-    let list: Vec<super::layers::OutputChannel> = channels
+    let list: Vec<OutputChannel> = channels
         .iter()
-        .map(|(name, values)| super::layers::OutputChannel {
-            name: name.to_string(),
-            sample_type: super::layers::SampleType::Float,
-            values,
+        .map(|(name, values)| OutputChannel { name: name.to_string(), sample_type: SampleType::Float, values })
+        .collect();
+    write_exr_layers(path, width, height, &list)
+}
+
+/// How a channel is stored (`logsh render --colour-type`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum SampleType {
+    /// 16-bit float: half the size, 11 significant bits, plenty for colour (relative error below 5e-4).
+    Half,
+    /// 32-bit float: for data (positions, normals) that needs its precision.
+    Float,
+}
+
+/// One output channel: full name, storage type, values row-major from the top row.
+pub struct OutputChannel<'a> {
+    pub name: String,
+    pub sample_type: SampleType,
+    pub values: &'a [f32],
+}
+
+/// Writes `channels` as one ZIP-compressed part, atomically (see the module doc).
+/// Channel names must be distinct; they are sorted in the file, as EXR requires.
+pub fn write_exr_layers(
+    path: &Path,
+    width: usize,
+    height: usize,
+    channels: &[OutputChannel],
+) -> Result<(), OutputError> {
+    for c in channels {
+        check_len(path, width, height, c.values.len())?;
+    }
+    let list: Vec<AnyChannel<FlatSamples>> = channels
+        .iter()
+        .map(|c| {
+            let samples = match c.sample_type {
+                SampleType::Half => FlatSamples::F16(c.values.iter().map(|&v| f16::from_f32(v)).collect()),
+                SampleType::Float => FlatSamples::F32(c.values.to_vec()),
+            };
+            AnyChannel::new(c.name.as_str(), samples)
         })
         .collect();
-    super::layers::write_exr_layers(path, width, height, &list)
+    let layer = Layer::new(
+        (width, height),
+        LayerAttributes::default(),
+        Encoding { compression: Compression::ZIP16, blocks: Blocks::ScanLines, line_order: LineOrder::Increasing },
+        AnyChannels::sort(list.into_iter().collect()),
+    );
+    let image = Image::from_layer(layer);
+    write_atomically(
+        path,
+        |temp| image.write().to_file(temp),
+        |e| OutputError::Encode { file: path.to_path_buf(), message: e.to_string() },
+    )
 }
 
 /// The sRGB transfer function (IEC 61966-2-1) of a linear value in `[0, 1]`.
@@ -128,6 +191,6 @@ pub fn write_text(path: &Path, text: &str) -> Result<(), OutputError> {
     write_atomically(
         path,
         |temp| std::fs::write(temp, text),
-        |source| OutputError::Io { file: path.to_path_buf(), source },
+        |source| OutputError::Io { file: path.to_path_buf(), cause: source },
     )
 }

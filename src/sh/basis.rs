@@ -46,11 +46,6 @@ pub const fn index(l: usize, m: i32) -> usize {
     ((l * (l + 1)) as isize + m as isize) as usize
 }
 
-/// Band `l` of the coefficient at `i`.
-pub fn band_of(i: usize) -> usize {
-    (i as f64).sqrt() as usize
-}
-
 /// Normalisation `K_l^m` for `m >= 0`.
 pub fn normalisation(l: usize, m: usize) -> f64 {
     let mut ratio = 1.0; // (l - m)! / (l + m)!
@@ -58,6 +53,17 @@ pub fn normalisation(l: usize, m: usize) -> f64 {
         ratio /= k as f64;
     }
     ((2 * l + 1) as f64 / (4.0 * std::f64::consts::PI) * ratio).sqrt()
+}
+
+/// The factor of the real basis function `y_l^m`: `K_l^|m|`, times `sqrt(2)` for
+/// `m != 0` (what [`eval_basis`] multiplies `P_l^|m|` and `cos`/`sin(m phi)` by).
+pub fn real_normalisation(l: usize, m: i64) -> f64 {
+    let k = normalisation(l, m.unsigned_abs() as usize);
+    if m == 0 {
+        k
+    } else {
+        std::f64::consts::SQRT_2 * k
+    }
 }
 
 /// Evaluates all `order * order` basis functions at the unit direction `(x, y, z)` into
@@ -139,7 +145,8 @@ pub fn funk_hecke_factor(l: usize) -> f64 {
     (4.0 * std::f64::consts::PI / (2 * l + 1) as f64).sqrt()
 }
 
-fn double_factorial_odd(m: usize) -> f64 {
-    // (2m - 1)!! with (-1)!! = 1.
+/// `(2m - 1)!!` with `(-1)!! = 1`: `Q_m^m`, where [`eval_basis`]'s recurrence in `l`
+/// starts.
+pub fn double_factorial_odd(m: usize) -> f64 {
     (1..=m).fold(1.0, |acc, k| acc * (2 * k - 1) as f64)
 }

@@ -28,19 +28,19 @@ pub const Y0: f64 = 0.28209479177387814; // 1 / (2 sqrt(pi))
 /// The SH vector of the constant function 1 has `ONE_DC` as its only non-zero entry.
 pub const ONE_DC: f64 = 3.5449077018110318; // 2 sqrt(pi)
 
-/// How `exp*` is computed per pixel.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+/// How `exp*` is computed per pixel (`--exp`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, clap::ValueEnum)]
 pub enum ExpMethod {
-    /// Quadrature: exact up to the grid's resolution; slow (thousands of exp per pixel).
-    Exact,
+    /// Quadrature on a coarse (2n+2)-node grid: within 1e-5 of exact.
+    Quad,
+    /// Scale until small, optimal linear, square back (the paper's choice); 2-4x faster than quad, less accurate.
+    Hyb,
+    /// Optimal linear only (one table lookup, no product): fastest, least accurate at large magnitudes.
+    Ol,
     /// DC isolation and the product series.
     Series,
-    /// Quadrature on a coarse grid of `2n + 2` by `4n + 4` nodes.
-    Quad,
-    /// Optimal linear (one table lookup, no product).
-    Ol,
-    /// Scale, OL, square (the paper's choice).
-    Hyb,
+    /// Quadrature on a fine grid: reference quality, slow (thousands of exp per pixel).
+    Exact,
 }
 
 /// Splits `f` into its DC factor `exp(f_0 y_0)` and its non-DC part, returning the factor
@@ -83,11 +83,6 @@ impl ExactExp {
     /// Gauss nodes in `cos theta` of [`ExactExp::fast`].
     pub fn fast_nodes(order: usize) -> usize {
         2 * order + 2
-    }
-
-    /// Number of quadrature nodes: the exponentials evaluated per call.
-    pub fn node_count(&self) -> usize {
-        self.weights.len()
     }
 
     pub fn with_grid(order: usize, nz: usize) -> Self {

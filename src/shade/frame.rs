@@ -1,15 +1,12 @@
-//! Shading a whole frame on the CPU: material lookup, water through the reflection
-//! G-buffer, background from the light, parallel over rows with rayon.
+//! The frame walk both executors share: what a frame must satisfy before it is shaded,
+//! and what each pixel is (the background from the light, water through the reflection
+//! G-buffer, or a surface point to shade).
 
-use super::kernel::{Occluders, ShadingKernel, SurfacePoint};
-use super::settings::ShadingSettings;
-use crate::heightfield::{HeightField, HeightFieldError, HorizonPyramid};
+use super::kernel::SurfacePoint;
+use super::settings::SettingsError;
+use crate::heightfield::{HeightField, HeightFieldError};
 use crate::scene::{Frame, GBuffer, Material, Scene};
-use crate::sh::Real;
-use crate::timing::StageTimings;
-use rayon::prelude::*;
 use std::collections::BTreeMap;
-use std::time::Instant;
 
 /// A shaded frame: linear RGBA, row-major from the top row. Alpha is 1 where a surface
 /// was shaded and 0 on the background.
@@ -22,10 +19,10 @@ pub struct ShadedFrame {
 
 #[derive(Debug, thiserror::Error)]
 pub enum ShadeError {
-    #[error("{0}")]
-    Settings(String),
-    #[error("height field of {file}: {source}")]
-    HeightField { file: String, source: HeightFieldError },
+    #[error(transparent)]
+    Settings(#[from] SettingsError),
+    #[error("height field of {file}: {cause}")]
+    HeightField { file: String, cause: HeightFieldError },
     #[error(
         "{file}: {count} pixel(s) have water materials but scene.json has no \"reflection_gbuffer\" to shade them with"
     )]
@@ -36,72 +33,6 @@ pub enum ShadeError {
         "{file}: pixel ({x}, {y}) reflects material {material}, which is water; water seen in water is not supported"
     )]
     WaterInWater { file: String, x: usize, y: usize, material: u32 },
-}
-
-/// Shades one frame of `scene` with `settings`.
-pub fn shade_frame(scene: &Scene, frame: &Frame, settings: &ShadingSettings) -> Result<ShadedFrame, ShadeError> {
-    Ok(shade_frame_timed(scene, frame, settings)?.0)
-}
-
-/// [`shade_frame`], timing its stages: the tables, the height-field pyramid, the pixels.
-pub fn shade_frame_timed(
-    scene: &Scene,
-    frame: &Frame,
-    settings: &ShadingSettings,
-) -> Result<(ShadedFrame, StageTimings), ShadeError> {
-    settings.validate().map_err(ShadeError::Settings)?;
-    check_frame(scene, frame)?;
-    let mut timings = StageTimings::default();
-    let started = Instant::now();
-    let pyramid = pyramid(scene, frame, settings)?;
-    if pyramid.is_some() {
-        timings.add_wall("pyramid", started);
-    }
-    let light = frame.light.sh_coefficients(settings.order);
-    let occluders = Occluders { blockers: &frame.blockers, horizons: pyramid.as_ref() };
-    let shaded = if settings.double_precision {
-        timed_kernel::<f64, _>(scene, settings, &light, pyramid.is_some(), Some(&mut timings), |k| {
-            shade_pixels(k, occluders, frame)
-        })
-    } else {
-        timed_kernel::<f32, _>(scene, settings, &light, pyramid.is_some(), Some(&mut timings), |k| {
-            shade_pixels(k, occluders, frame)
-        })
-    };
-    Ok((shaded, timings))
-}
-
-/// Builds the kernel at precision `T` and shades with it, timing each as the stages
-/// "tables" and "shade" when `timings` is given.
-pub(crate) fn timed_kernel<T: Real, R>(
-    scene: &Scene,
-    settings: &ShadingSettings,
-    light: &[[f64; 3]],
-    has_heightfield: bool,
-    mut timings: Option<&mut StageTimings>,
-    shade: impl FnOnce(&ShadingKernel<T>) -> R,
-) -> R {
-    let started = Instant::now();
-    let kernel = ShadingKernel::<T>::new(settings, &scene.materials, light, has_heightfield);
-    if let Some(t) = timings.as_deref_mut() {
-        t.add_wall("tables", started);
-    }
-    let started = Instant::now();
-    let shaded = shade(&kernel);
-    if let Some(t) = timings {
-        t.add_wall("shade", started);
-    }
-    shaded
-}
-
-/// The frame's horizon pyramid, if the scene has a height field.
-pub fn pyramid(scene: &Scene, frame: &Frame, settings: &ShadingSettings) -> Result<Option<HorizonPyramid>, ShadeError> {
-    height_field(scene, frame)?
-        .map(|field| {
-            HorizonPyramid::new(&field, settings.horizon)
-                .map_err(|source| ShadeError::HeightField { file: height_map_file(scene), source })
-        })
-        .transpose()
 }
 
 /// The name of the scene's height map, for messages.
@@ -117,7 +48,7 @@ pub fn height_field(scene: &Scene, frame: &Frame) -> Result<Option<HeightField>,
         .as_ref()
         .map(|map| {
             HeightField::new(map.heights.clone(), map.columns, map.rows, map.min, map.max)
-                .map_err(|source| ShadeError::HeightField { file: height_map_file(scene), source })
+                .map_err(|source| ShadeError::HeightField { file: height_map_file(scene), cause: source })
         })
         .transpose()
 }
@@ -160,18 +91,6 @@ pub fn unit_or_up(n: [f32; 3]) -> [f64; 3] {
     } else {
         [0.0, 0.0, 1.0]
     }
-}
-
-fn shade_pixels<T: Real>(kernel: &ShadingKernel<T>, occluders: Occluders, frame: &Frame) -> ShadedFrame {
-    let g = &frame.gbuffer;
-    let (width, height) = (g.width, g.height);
-    let mut rgba = vec![[0.0f32; 4]; width * height];
-    rgba.par_chunks_mut(width).enumerate().for_each(|(y, row)| {
-        for (x, out) in row.iter_mut().enumerate() {
-            *out = shade_pixel(kernel, occluders, frame, x, y);
-        }
-    });
-    ShadedFrame { width, height, rgba }
 }
 
 /// The eye position, or a point far along the normal when the scene has no camera (only
@@ -235,21 +154,5 @@ pub fn pixel_work(materials: &BTreeMap<u32, Material>, frame: &Frame, x: usize, 
             }
             _ => PixelWork::Shade { point: surface_at(g, i, None, frame), tint: [1.0; 3] },
         },
-    }
-}
-
-fn shade_pixel<T: Real>(
-    kernel: &ShadingKernel<T>,
-    occluders: Occluders,
-    frame: &Frame,
-    x: usize,
-    y: usize,
-) -> [f32; 4] {
-    match pixel_work(kernel.materials(), frame, x, y) {
-        PixelWork::Fixed(rgba) => rgba,
-        PixelWork::Shade { point, tint } => {
-            let c = kernel.shade(occluders, &point);
-            [tint[0] * c[0], tint[1] * c[1], tint[2] * c[2], 1.0]
-        }
     }
 }

@@ -2,7 +2,7 @@
 //! (paper 000, Sections 4-5 and Eq. 9). The CPU executor of the pipeline; the tables it
 //! holds are the ones a GPU executor uploads.
 
-use super::settings::ShadingSettings;
+use super::settings::{ShadingSettings, MAX_DIRECTIONS};
 use crate::heightfield::HorizonPyramid;
 use crate::logsh::{
     cap_log_zh, lobe_log_zh_as, nlp_slice, optimal_lobe_epsilon, view_blocker, BlockerView, Lobe, WedgeOperator,
@@ -12,9 +12,6 @@ use crate::sh::exp::{exp_hyb_with, exp_series, ExactExp, OlTable};
 use crate::sh::{add_rotated_zonal, coefficient_count, ExpMethod, Real, TriplingTensor, MAX_COEFFICIENTS};
 use std::collections::BTreeMap;
 use std::f64::consts::FRAC_PI_2;
-
-/// Most azimuthal directions a kernel accepts (per-pixel buffers are on the stack).
-pub const MAX_DIRECTIONS: usize = 64;
 
 /// Largest non-DC magnitude `|f^|` given to the SH-space methods; a pixel beyond it is
 /// exponentiated by `quad` instead, which the lobe's peak bounds. Pixels at the default
@@ -181,7 +178,6 @@ pub struct ShadingKernel<T> {
     /// Log-ZH of the hemisphere behind the tangent plane, around -Z before rotation.
     pub(crate) tangent: Vec<T>,
     pub(crate) materials: BTreeMap<u32, MaterialLobes<T>>,
-    material_table: BTreeMap<u32, Material>,
     /// Light SH coefficients per colour channel.
     pub(crate) light: [Vec<T>; 3],
 }
@@ -195,7 +191,6 @@ impl<T: Real> ShadingKernel<T> {
         light: &[[f64; 3]],
         has_heightfield: bool,
     ) -> Self {
-        let material_table = materials;
         let order = settings.order;
         let epsilon = settings.epsilon;
         let mut tangent = vec![T::zero(); order];
@@ -233,22 +228,12 @@ impl<T: Real> ShadingKernel<T> {
             diffuse: LobeTable::new(order, Lobe::Diffuse, epsilon),
             tangent,
             materials,
-            material_table: material_table.clone(),
             light: [channel(0), channel(1), channel(2)],
         }
     }
 
     pub fn order(&self) -> usize {
         self.order
-    }
-
-    pub fn material(&self, index: u32) -> Option<&Material> {
-        self.materials.get(&index).map(|m| &m.material)
-    }
-
-    /// The material table the kernel was built with.
-    pub fn materials(&self) -> &BTreeMap<u32, Material> {
-        &self.material_table
     }
 
     /// Log visibility at `p` with unit normal `n` (Eq. 9 before exponentiation): the
@@ -355,5 +340,5 @@ pub fn reflect_view(eye: [f64; 3], p: [f64; 3], n: [f64; 3]) -> [f64; 3] {
 }
 
 // The same shading split into compositing passes and visibility terms (`logsh render`).
-mod passes;
-pub use passes::{PixelPasses, LUMINANCE};
+mod pixel_passes;
+pub use pixel_passes::{PixelPasses, LUMINANCE};

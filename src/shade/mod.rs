@@ -1,12 +1,18 @@
-//! Per-pixel shading on the CPU: the oracle the GPU pass is compared with and the
-//! fallback on machines without a GPU adapter.
+//! The per-pixel pipeline, in the order a frame meets it: [`plan`] prepares a frame once
+//! for either executor (settings, checks, height field, pyramid plan, light, kernel
+//! tables); [`frame`] says what each pixel is; [`kernel`] shades one surface point (the
+//! math both executors share); [`cpu`] is the CPU executor (the GPU one is
+//! `gpu`); [`compositing`] assembles the passes of `logsh render`.
+pub mod compositing;
+pub mod cpu;
 pub mod frame;
 pub mod kernel;
-pub mod passes;
+pub mod plan;
 pub mod settings;
 
-pub use frame::{pixel_work, shade_frame, shade_frame_timed, PixelWork, ShadeError, ShadedFrame};
-pub use kernel::PixelPasses;
-pub use kernel::{Exponentiator, Occluders, ShadingKernel, SurfacePoint};
-pub use passes::{shade_frame_passes, ShadedPasses};
-pub use settings::{default_epsilon, Quality, ShadingSettings};
+pub use compositing::ShadedPasses;
+pub use cpu::{shade_frame, shade_frame_passes, shade_frame_timed};
+pub use frame::{pixel_work, PixelWork, ShadeError, ShadedFrame};
+pub use kernel::{Exponentiator, Occluders, PixelPasses, ShadingKernel, SurfacePoint};
+pub use plan::{FrameContents, FramePlan, PlannedKernel, Terrain};
+pub use settings::{default_epsilon, Precision, Quality, SettingsError, ShadingSettings};

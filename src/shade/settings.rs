@@ -4,6 +4,9 @@
 use crate::heightfield::HorizonSettings;
 use crate::sh::{ExpMethod, MAX_ORDER, MIN_ORDER};
 
+/// Most azimuthal directions W a kernel accepts (per-pixel buffers are on the stack).
+pub const MAX_DIRECTIONS: usize = 64;
+
 /// Smallest accepted eps. `log(1e-6) = -13.8` per clamped term keeps sums of thousands of
 /// terms and their exponentials within f32's range.
 pub const MIN_EPSILON: f64 = 1e-6;
@@ -35,8 +38,36 @@ pub struct ShadingSettings {
     pub tangent_occlusion: bool,
     /// Height-field march: W, k, o.
     pub horizon: HorizonSettings,
-    /// Run the kernel in f64 instead of f32.
-    pub double_precision: bool,
+    /// The precision of the per-pixel kernel.
+    pub precision: Precision,
+}
+
+/// Precision of the per-pixel kernel (`--precision`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, clap::ValueEnum)]
+pub enum Precision {
+    /// Single precision, as the GPU pass runs.
+    F32,
+    /// Double precision, on the CPU only: the oracle for rounding.
+    F64,
+}
+
+/// A setting outside what the kernel accepts, named by its flag.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum SettingsError {
+    #[error("--order {0} is outside {MIN_ORDER}..={MAX_ORDER}")]
+    Order(usize),
+    #[error("--epsilon {0} must lie in [{MIN_EPSILON:e}, 1)")]
+    Epsilon(f64),
+    #[error("--phong-epsilon {0} must lie in [{MIN_EPSILON:e}, 1)")]
+    PhongEpsilon(f64),
+    #[error("HYB threshold {0} must be positive")]
+    HybThreshold(f64),
+    #[error("--directions {0} is outside 3..={MAX_DIRECTIONS}")]
+    Directions(usize),
+    #[error("--level-step {0} must be positive")]
+    LevelStep(f64),
+    #[error("--level-offset {0} must be zero or positive")]
+    LevelOffset(f64),
 }
 
 /// Default eps per order: the value minimising the mean absolute error on the
@@ -69,35 +100,34 @@ impl ShadingSettings {
             ratio_attenuation: false,
             tangent_occlusion: true,
             horizon: HorizonSettings::default(),
-            double_precision: false,
+            precision: Precision::F32,
         }
     }
 
-    /// Checks the rules that span the whole settings, with a message naming the flag.
-    pub fn validate(&self) -> Result<(), String> {
+    /// Checks the rules that span the whole settings.
+    pub fn validate(&self) -> Result<(), SettingsError> {
         if !(MIN_ORDER..=MAX_ORDER).contains(&self.order) {
-            return Err(format!("--order {} is outside {MIN_ORDER}..={MAX_ORDER}", self.order));
+            return Err(SettingsError::Order(self.order));
         }
-        if !(self.epsilon >= MIN_EPSILON && self.epsilon < 1.0) {
-            return Err(format!("--epsilon {} must lie in [{MIN_EPSILON:e}, 1)", self.epsilon));
+        if !(MIN_EPSILON..1.0).contains(&self.epsilon) {
+            return Err(SettingsError::Epsilon(self.epsilon));
         }
         if let Some(e) = self.phong_epsilon {
-            if !(e >= MIN_EPSILON && e < 1.0) {
-                return Err(format!("--phong-epsilon {e} must lie in [{MIN_EPSILON:e}, 1)"));
+            if !(MIN_EPSILON..1.0).contains(&e) {
+                return Err(SettingsError::PhongEpsilon(e));
             }
         }
         if !(self.hyb_threshold > 0.0 && self.hyb_threshold.is_finite()) {
-            return Err(format!("HYB threshold {} must be positive", self.hyb_threshold));
+            return Err(SettingsError::HybThreshold(self.hyb_threshold));
         }
-        let w = self.horizon.directions;
-        if !(3..=super::kernel::MAX_DIRECTIONS).contains(&w) {
-            return Err(format!("--directions {w} is outside 3..={}", super::kernel::MAX_DIRECTIONS));
+        if !(3..=MAX_DIRECTIONS).contains(&self.horizon.directions) {
+            return Err(SettingsError::Directions(self.horizon.directions));
         }
         if !(self.horizon.level_step > 0.0 && self.horizon.level_step.is_finite()) {
-            return Err(format!("--level-step {} must be positive", self.horizon.level_step));
+            return Err(SettingsError::LevelStep(self.horizon.level_step));
         }
         if !(self.horizon.level_offset >= 0.0 && self.horizon.level_offset.is_finite()) {
-            return Err(format!("--level-offset {} must be zero or positive", self.horizon.level_offset));
+            return Err(SettingsError::LevelOffset(self.horizon.level_offset));
         }
         Ok(())
     }
@@ -110,16 +140,16 @@ impl Default for ShadingSettings {
 }
 
 /// Named trade-offs between speed and accuracy. Every knob of a preset can still be set
-/// on its own; the preset only supplies what is not given.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+/// on its own; the preset only supplies what is not given (`--quality`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, clap::ValueEnum)]
 pub enum Quality {
-    /// Order 3, `ol` exponentiation (a table lookup), W = 8, k = 2, o = 2.
+    /// Order 3, ol exponentiation (a table lookup), W 8, k 2, o 2: fastest.
     Draft,
-    /// Order 4, `quad`, W = 16, k = 4, o = 3.
+    /// Order 4, quad, W 16, k 4, o 3.
     Default,
-    /// Order 6, `quad`, W = 24, k = 4, o = 3.
+    /// Order 6, quad, W 24, k 4, o 3.
     High,
-    /// Order 8, `quad`, W = 32, k = 8, o = 4.
+    /// Order 8, quad, W 32, k 8, o 4: most accurate.
     Ultra,
 }
 

@@ -43,8 +43,8 @@ use std::sync::Arc;
 pub enum SynthError {
     #[error(transparent)]
     Output(#[from] OutputError),
-    #[error("{}: cannot write: {source}", .file.display())]
-    Io { file: PathBuf, source: std::io::Error },
+    #[error("{}: cannot write: {cause}", .file.display())]
+    Io { file: PathBuf, cause: std::io::Error },
     #[error("unknown example scene \"{name}\" (known: {})", EXAMPLE_NAMES.join(", "))]
     UnknownScene { name: String },
     #[error("invalid synthetic scene: {0}")]
@@ -204,7 +204,7 @@ fn write_json(path: &Path, value: &serde_json::Value) -> Result<(), SynthError> 
     write_atomically(
         path,
         |temp| std::fs::write(temp, &text),
-        |source| OutputError::Io { file: path.to_path_buf(), source },
+        |source| OutputError::Io { file: path.to_path_buf(), cause: source },
     )?;
     Ok(())
 }
@@ -334,7 +334,7 @@ pub fn write_scene(out: &Path, scene: &SynthScene) -> Result<(), SynthError> {
             return Err(SynthError::Invalid("frame numbers must be consecutive".into()));
         }
     }
-    std::fs::create_dir_all(out).map_err(|source| SynthError::Io { file: out.to_path_buf(), source })?;
+    std::fs::create_dir_all(out).map_err(|source| SynthError::Io { file: out.to_path_buf(), cause: source })?;
     let water = !scene.water_materials().is_empty();
     let mut description = json!({
         "version": 1,

@@ -13,12 +13,8 @@
 //! `tint * (d + s)` and `tint * d + tint * s` can differ in the last bit.
 //! Visibility terms are 1 on the background and, for water, those of the reflected point.
 
-use super::frame::{check_frame, pixel_work, pyramid, timed_kernel, PixelWork, ShadeError};
-use super::kernel::{Occluders, PixelPasses, ShadingKernel};
-use super::settings::ShadingSettings;
-use crate::scene::{Frame, Scene};
-use crate::sh::Real;
-use rayon::prelude::*;
+use super::kernel::PixelPasses;
+use crate::scene::Frame;
 
 /// A shaded frame by pass, row-major from the top row; every vector has `width * height`
 /// entries.
@@ -42,7 +38,7 @@ pub struct ShadedPasses {
 
 /// One pixel of [`ShadedPasses`], as either executor produces it.
 #[derive(Clone, Copy)]
-pub(crate) struct Pixel {
+pub struct Pixel {
     passes: PixelPasses,
     environment: [f32; 3],
     alpha: f32,
@@ -51,7 +47,7 @@ pub(crate) struct Pixel {
 impl Pixel {
     /// A pixel of fixed colour ([`PixelWork::Fixed`]): the background is the environment
     /// pass, water mirroring the sky is specular.
-    pub(crate) fn fixed(colour: [f32; 4]) -> Self {
+    pub fn fixed(colour: [f32; 4]) -> Self {
         let rgb = [colour[0], colour[1], colour[2]];
         if colour[3] == 0.0 {
             Pixel { passes: PixelPasses::UNSHADED, environment: rgb, alpha: 0.0 }
@@ -62,35 +58,15 @@ impl Pixel {
 
     /// A shaded point's passes times its tint ([`PixelWork::Shade`]); the visibility
     /// terms are the point's own.
-    pub(crate) fn shaded(seen: PixelPasses, tint: [f32; 3]) -> Self {
+    pub fn shaded(seen: PixelPasses, tint: [f32; 3]) -> Self {
         let tinted = |c: [f32; 3]| [0, 1, 2].map(|k| tint[k] * c[k]);
         let passes = PixelPasses { diffuse: tinted(seen.diffuse), specular: tinted(seen.specular), ..seen };
         Pixel { passes, environment: [0.0; 3], alpha: 1.0 }
     }
 }
 
-/// Shades one frame of `scene` into passes; the checks and errors are `shade_frame`'s.
-pub fn shade_frame_passes(
-    scene: &Scene,
-    frame: &Frame,
-    settings: &ShadingSettings,
-) -> Result<ShadedPasses, ShadeError> {
-    settings.validate().map_err(ShadeError::Settings)?;
-    check_frame(scene, frame)?;
-    let pyramid = pyramid(scene, frame, settings)?;
-    let light = frame.light.sh_coefficients(settings.order);
-    let occluders = Occluders { blockers: &frame.blockers, horizons: pyramid.as_ref() };
-    let has_heightfield = pyramid.is_some();
-    let pixels = if settings.double_precision {
-        timed_kernel::<f64, _>(scene, settings, &light, has_heightfield, None, |k| shade_pixels(k, occluders, frame))
-    } else {
-        timed_kernel::<f32, _>(scene, settings, &light, has_heightfield, None, |k| shade_pixels(k, occluders, frame))
-    };
-    Ok(assemble(frame, &pixels))
-}
-
 /// The passes of a frame from its pixels, row-major from the top row.
-pub(crate) fn assemble(frame: &Frame, pixels: &[Pixel]) -> ShadedPasses {
+pub fn assemble(frame: &Frame, pixels: &[Pixel]) -> ShadedPasses {
     let g = &frame.gbuffer;
     let scalar = |f: fn(&PixelPasses) -> f32| pixels.iter().map(|p| f(&p.passes)).collect::<Vec<f32>>();
     ShadedPasses {
@@ -111,24 +87,5 @@ pub(crate) fn assemble(frame: &Frame, pixels: &[Pixel]) -> ShadedPasses {
         visibility_blockers: scalar(|q| q.visibility_blockers),
         position: g.position.clone(),
         normal: g.normal.clone(),
-    }
-}
-
-fn shade_pixels<T: Real>(kernel: &ShadingKernel<T>, occluders: Occluders, frame: &Frame) -> Vec<Pixel> {
-    let width = frame.gbuffer.width;
-    let mut pixels = vec![Pixel::fixed([0.0; 4]); width * frame.gbuffer.height];
-    pixels.par_chunks_mut(width).enumerate().for_each(|(y, row)| {
-        for (x, out) in row.iter_mut().enumerate() {
-            *out = shade_pixel(kernel, occluders, frame, x, y);
-        }
-    });
-    pixels
-}
-
-/// The pixel `shade_frame` computes, by pass (its `shade_pixel`, branch for branch).
-fn shade_pixel<T: Real>(kernel: &ShadingKernel<T>, occluders: Occluders, frame: &Frame, x: usize, y: usize) -> Pixel {
-    match pixel_work(kernel.materials(), frame, x, y) {
-        PixelWork::Fixed(colour) => Pixel::fixed(colour),
-        PixelWork::Shade { point, tint } => Pixel::shaded(kernel.shade_passes(occluders, &point), tint),
     }
 }

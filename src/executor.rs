@@ -1,0 +1,205 @@
+//! Where a frame is shaded: `--device` resolved to the CPU executor ([`crate::shade::cpu`])
+//! or the GPU one ([`crate::gpu`]), and the fall-back from the second to the first.
+//!
+//! `auto` takes a hardware GPU only: a software adapter (lavapipe, llvmpipe, WARP) runs
+//! the shading pass on the CPU, about twice as slowly as the CPU executor on the same
+//! cores, so it is used only when asked for by `--device gpu`. Under `auto`, a frame the
+//! adapter cannot shade correctly goes to the CPU executor instead of failing.
+//!
+//! The library prints nothing: what the user should know about the choice and every
+//! fall-back is queued as a [`Notice`] for the command line to print
+//! ([`Executor::take_notices`]).
+
+use crate::gpu::{Gpu, GpuError, Specialisation};
+use crate::scene::{Frame, Scene};
+use crate::shade::{Precision, ShadeError, ShadedFrame, ShadedPasses, ShadingSettings};
+use crate::timing::StageTimings;
+use std::sync::Mutex;
+
+/// Where shading runs (`--device`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum DeviceChoice {
+    /// A hardware GPU if there is one, the CPU otherwise (saying which, and why).
+    Auto,
+    /// A GPU adapter, software ones such as lavapipe included, or an error.
+    Gpu,
+    /// The CPU.
+    Cpu,
+}
+
+/// Something the user should know about where frames are shaded: which executor was
+/// chosen and why, or that a frame fell back to the CPU.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Notice(pub String);
+
+impl std::fmt::Display for Notice {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum ExecutorError {
+    #[error(transparent)]
+    Shade(#[from] ShadeError),
+    #[error(transparent)]
+    Gpu(GpuError),
+}
+
+impl From<GpuError> for ExecutorError {
+    fn from(error: GpuError) -> Self {
+        match error {
+            GpuError::Shade(e) => Self::Shade(e),
+            e => Self::Gpu(e),
+        }
+    }
+}
+
+enum Device {
+    Cpu,
+    /// `fallback`: chosen by `--device auto`, so a frame the adapter cannot shade
+    /// correctly goes to the CPU executor instead of failing.
+    Gpu {
+        gpu: Box<Gpu>,
+        fallback: bool,
+    },
+}
+
+/// The executor `--device` chose.
+pub struct Executor {
+    device: Device,
+    notices: Mutex<Vec<Notice>>,
+}
+
+fn cpu_description() -> String {
+    format!("cpu ({} threads)", rayon::current_num_threads())
+}
+
+impl Executor {
+    /// The CPU executor.
+    pub fn cpu() -> Self {
+        Self { device: Device::Cpu, notices: Mutex::new(Vec::new()) }
+    }
+
+    /// Resolves `--device`. `auto` takes a hardware GPU, and otherwise the CPU with a
+    /// notice saying why; `gpu` takes any adapter, software included, or fails.
+    pub fn select(choice: DeviceChoice, settings: &ShadingSettings) -> Result<Self, ExecutorError> {
+        let on_cpu = |why: String| {
+            let executor = Self::cpu();
+            let threads = rayon::current_num_threads();
+            executor.notify(format!("--device auto: shading on the CPU ({threads} threads), {why}"));
+            executor
+        };
+        match choice {
+            DeviceChoice::Cpu => Ok(Self::cpu()),
+            DeviceChoice::Gpu => {
+                if settings.precision == Precision::F64 {
+                    return Err(GpuError::Unsupported("--precision f64 (the GPU pass runs in f32)".into()).into());
+                }
+                Ok(Self {
+                    device: Device::Gpu { gpu: Box::new(Gpu::new()?), fallback: false },
+                    notices: Mutex::new(Vec::new()),
+                })
+            }
+            DeviceChoice::Auto if settings.precision == Precision::F64 => {
+                Ok(on_cpu("since the GPU pass runs in f32 and --precision f64 was asked".into()))
+            }
+            DeviceChoice::Auto => match Gpu::new_hardware() {
+                Ok(gpu) => {
+                    let executor = Self {
+                        device: Device::Gpu { gpu: Box::new(gpu), fallback: true },
+                        notices: Mutex::new(Vec::new()),
+                    };
+                    executor.notify(format!("--device auto: shading on {}, a hardware GPU", executor.describe()));
+                    Ok(executor)
+                }
+                Err(e) => Ok(on_cpu(format!("since {e}"))),
+            },
+        }
+    }
+
+    /// "cpu (N threads)" or "gpu: adapter".
+    pub fn describe(&self) -> String {
+        match &self.device {
+            Device::Cpu => cpu_description(),
+            Device::Gpu { gpu, .. } => format!("gpu: {}", gpu.adapter()),
+        }
+    }
+
+    /// The notices queued since the last call, oldest first.
+    pub fn take_notices(&self) -> Vec<Notice> {
+        std::mem::take(&mut *self.notices.lock().expect("notice list"))
+    }
+
+    fn notify(&self, message: String) {
+        self.notices.lock().expect("notice list").push(Notice(message));
+    }
+
+    /// Runs `on_gpu` on the GPU, or `on_cpu` on the CPU executor: by choice, or as the
+    /// fall-back of `--device auto` for a frame the adapter cannot shade correctly.
+    fn run<R>(
+        &self,
+        frame: &Frame,
+        on_gpu: impl FnOnce(&Gpu) -> Result<R, GpuError>,
+        on_cpu: impl FnOnce() -> Result<R, ShadeError>,
+    ) -> Result<R, ExecutorError> {
+        match &self.device {
+            Device::Cpu => Ok(on_cpu()?),
+            Device::Gpu { gpu, fallback } => match on_gpu(gpu) {
+                Err(e @ GpuError::LoopBudget { .. }) if *fallback => {
+                    self.notify(format!("--device auto: shading frame {} on the CPU: {e}", frame.number));
+                    Ok(on_cpu()?)
+                }
+                other => Ok(other?),
+            },
+        }
+    }
+
+    pub fn shade(
+        &self,
+        scene: &Scene,
+        frame: &Frame,
+        settings: &ShadingSettings,
+    ) -> Result<ShadedFrame, ExecutorError> {
+        Ok(self.shade_timed(scene, frame, settings, Specialisation::Full)?.0)
+    }
+
+    /// The frame's compositing passes and visibility terms (`logsh render`).
+    pub fn shade_passes(
+        &self,
+        scene: &Scene,
+        frame: &Frame,
+        settings: &ShadingSettings,
+    ) -> Result<ShadedPasses, ExecutorError> {
+        self.run(
+            frame,
+            |gpu| gpu.shade_frame_passes(scene, frame, settings),
+            || crate::shade::shade_frame_passes(scene, frame, settings),
+        )
+    }
+
+    /// Shades and times each stage; `specialisation` only matters on the GPU (see
+    /// [`Gpu::shade_frame_timed`]). The timings name the executor that really ran.
+    pub fn shade_timed(
+        &self,
+        scene: &Scene,
+        frame: &Frame,
+        settings: &ShadingSettings,
+        specialisation: Specialisation,
+    ) -> Result<(ShadedFrame, StageTimings), ExecutorError> {
+        self.run(
+            frame,
+            |gpu| {
+                let (shaded, mut timings) = gpu.shade_frame_timed(scene, frame, settings, specialisation)?;
+                timings.device = format!("gpu: {}", gpu.adapter());
+                timings.on_gpu = true;
+                Ok((shaded, timings))
+            },
+            || {
+                let (shaded, mut timings) = crate::shade::shade_frame_timed(scene, frame, settings)?;
+                timings.device = cpu_description();
+                Ok((shaded, timings))
+            },
+        )
+    }
+}

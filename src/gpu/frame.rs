@@ -1,0 +1,399 @@
+//! One frame on the GPU, in the steps of wgpu's compute examples: prepare (the frame plan
+//! turned into a program and its pipeline), bind (tables, pyramid and tile buffers), then
+//! per tile: pack (the frame walk writes the points) and run (dispatch, read back).
+
+use super::device::{entry, PassTimer};
+use super::layout::{
+    GpuLevel, GpuPoint, GpuShaded, GpuSphere, GpuStep, ShadeParams, FEATURE_BLOCKERS, FEATURE_HEIGHTFIELD,
+    FEATURE_PHONG, SLOT_NONE, SLOT_UNKNOWN, WORKGROUP_SIZE,
+};
+use super::program::{Features, MarchShape, ShadeProgram, Specialisation, LAVAPIPE_LOOP_LIMIT};
+use super::pyramid::HeightFieldBuffers;
+use super::{Gpu, GpuError};
+use crate::scene::{Frame, Scene};
+use crate::shade::compositing::{assemble, Pixel};
+use crate::shade::kernel::reflect_view;
+use crate::shade::ShadingSettings;
+use crate::shade::{pixel_work, FramePlan, PixelPasses, PixelWork, PlannedKernel, ShadedFrame, ShadedPasses};
+use crate::timing::{Clock, StageTimings};
+use rayon::prelude::*;
+use std::sync::Arc;
+use std::time::Instant;
+
+/// What a pixel of a tile is: a colour known without shading, or a shaded point whose
+/// result is multiplied by a tint.
+#[derive(Clone, Copy, Debug)]
+enum TileWork {
+    Fixed([f32; 4]),
+    Shaded([f32; 3]),
+}
+
+/// Receives each shaded tile: its first pixel, what each of its pixels is, its shaded
+/// points.
+type ConsumeTile<'c> = dyn FnMut(usize, &[TileWork], &[GpuShaded]) + 'c;
+
+/// A frame's plan with the program generated from it and its compiled pipeline.
+struct PreparedFrame<'a> {
+    plan: FramePlan<'a>,
+    program: ShadeProgram,
+    pipeline: Arc<wgpu::ComputePipeline>,
+}
+
+/// The buffers of one frame's shading pass and the bind group over them.
+struct BoundFrame {
+    pipeline: Arc<wgpu::ComputePipeline>,
+    /// Points per tile.
+    tile: usize,
+    points: wgpu::Buffer,
+    shaded: wgpu::Buffer,
+    readback: wgpu::Buffer,
+    params: wgpu::Buffer,
+    bind_group: wgpu::BindGroup,
+    /// The parameters of every tile but its point count.
+    frame_params: ShadeParams,
+    timer: Option<PassTimer>,
+    /// The frame's read-only inputs, alive as long as the bind group.
+    _inputs: Vec<wgpu::Buffer>,
+    _heightfield: Option<HeightFieldBuffers>,
+}
+
+impl Gpu {
+    /// Shades one frame (the GPU counterpart of [`crate::shade::shade_frame`]).
+    pub fn shade_frame(
+        &self,
+        scene: &Scene,
+        frame: &Frame,
+        settings: &ShadingSettings,
+    ) -> Result<ShadedFrame, GpuError> {
+        Ok(self.shade_frame_timed(scene, frame, settings, Specialisation::Full)?.0)
+    }
+
+    /// Shades one frame and times each stage; `specialisation` below
+    /// [`Specialisation::Full`] only measures what specialisation saves.
+    pub fn shade_frame_timed(
+        &self,
+        scene: &Scene,
+        frame: &Frame,
+        settings: &ShadingSettings,
+        specialisation: Specialisation,
+    ) -> Result<(ShadedFrame, StageTimings), GpuError> {
+        let g = &frame.gbuffer;
+        let mut rgba = vec![[0.0f32; 4]; g.width * g.height];
+        let timings = self.shade_tiles(scene, frame, settings, specialisation, false, &mut |start, work, shaded| {
+            rgba[start..start + work.len()].par_iter_mut().zip(work.par_iter().zip(shaded)).for_each(
+                |(out, (w, s))| {
+                    *out = match *w {
+                        TileWork::Fixed(colour) => colour,
+                        TileWork::Shaded(tint) => {
+                            let (d, s) = (s.diffuse, s.specular);
+                            [tint[0] * (d[0] + s[0]), tint[1] * (d[1] + s[1]), tint[2] * (d[2] + s[2]), 1.0]
+                        }
+                    };
+                },
+            );
+        })?;
+        Ok((ShadedFrame { width: g.width, height: g.height, rgba }, timings))
+    }
+
+    /// Shades one frame into compositing passes and visibility terms (the GPU
+    /// counterpart of [`crate::shade::shade_frame_passes`]).
+    pub fn shade_frame_passes(
+        &self,
+        scene: &Scene,
+        frame: &Frame,
+        settings: &ShadingSettings,
+    ) -> Result<ShadedPasses, GpuError> {
+        let g = &frame.gbuffer;
+        let mut pixels = vec![Pixel::fixed([0.0; 4]); g.width * g.height];
+        self.shade_tiles(scene, frame, settings, Specialisation::Full, true, &mut |start, work, shaded| {
+            for ((w, s), out) in work.iter().zip(shaded).zip(&mut pixels[start..]) {
+                *out = match *w {
+                    TileWork::Fixed(colour) => Pixel::fixed(colour),
+                    TileWork::Shaded(tint) => {
+                        let rgb = |v: [f32; 4]| [v[0], v[1], v[2]];
+                        let seen = PixelPasses {
+                            diffuse: rgb(s.diffuse),
+                            specular: rgb(s.specular),
+                            visibility: s.visibility[0],
+                            visibility_heightfield: s.visibility[1],
+                            visibility_blockers: s.visibility[2],
+                        };
+                        Pixel::shaded(seen, tint)
+                    }
+                };
+            }
+        })?;
+        Ok(assemble(frame, &pixels))
+    }
+
+    /// The frame tile by tile: `consume(first pixel, what each pixel of the tile is, its
+    /// shaded points)`.
+    fn shade_tiles(
+        &self,
+        scene: &Scene,
+        frame: &Frame,
+        settings: &ShadingSettings,
+        specialisation: Specialisation,
+        passes: bool,
+        consume: &mut ConsumeTile,
+    ) -> Result<StageTimings, GpuError> {
+        let prepared = self.prepare(scene, frame, settings, specialisation, passes)?;
+        let mut timings = prepared.plan.timings.clone();
+        let bound = self.bind(&prepared, &mut timings)?;
+        let pixels = frame.gbuffer.width * frame.gbuffer.height;
+        let mut points = vec![GpuPoint::default(); bound.tile];
+        let mut work = vec![TileWork::Fixed([0.0; 4]); bound.tile];
+        for start in (0..pixels).step_by(bound.tile) {
+            let count = bound.tile.min(pixels - start);
+            let started = Instant::now();
+            pack_tile(&prepared, start, &mut points[..count], &mut work[..count]);
+            timings.add_wall("frame walk", started);
+            self.run_tile(&bound, &points[..count], &mut timings, |shaded| consume(start, &work[..count], shaded))?;
+        }
+        Ok(timings)
+    }
+
+    /// The frame's plan, its program (refused where lavapipe's loop budget would cut it
+    /// short) and the program's pipeline, timing "tables" and "compile".
+    fn prepare<'a>(
+        &self,
+        scene: &'a Scene,
+        frame: &'a Frame,
+        settings: &ShadingSettings,
+        specialisation: Specialisation,
+        passes: bool,
+    ) -> Result<PreparedFrame<'a>, GpuError> {
+        let mut plan = FramePlan::new(scene, frame, settings)?;
+        let started = Instant::now();
+        let PlannedKernel::F32(kernel) = &plan.kernel else {
+            return Err(GpuError::Unsupported("--precision f64 (the GPU pass runs in f32)".into()));
+        };
+        let march = plan.terrain.as_ref().map(|t| MarchShape::of(&t.pyramid, &settings.horizon));
+        let program = ShadeProgram::new(kernel, Features { contents: plan.contents, specialisation, passes }, march);
+        plan.timings.add_wall("tables", started);
+        if self.is_lavapipe() {
+            self.check_loop_budget(&program, &plan, march)?;
+        }
+        let started = Instant::now();
+        let pipeline = self.shade_pipeline(&program.source)?;
+        plan.timings.add_wall("compile", started);
+        Ok(PreparedFrame { plan, program, pipeline })
+    }
+
+    /// lavapipe ends an invocation's loops after [`LAVAPIPE_LOOP_LIMIT`] iterations: a
+    /// program that may need more would silently shade a wrong image.
+    fn check_loop_budget(
+        &self,
+        program: &ShadeProgram,
+        plan: &FramePlan,
+        march: Option<MarchShape>,
+    ) -> Result<(), GpuError> {
+        let blockers = plan.frame.blockers.len();
+        let needed = program.loop_iterations(blockers);
+        if needed <= LAVAPIPE_LOOP_LIMIT {
+            return Ok(());
+        }
+        let settings = &plan.settings;
+        Err(GpuError::LoopBudget {
+            adapter: self.info.name.clone(),
+            needed,
+            limit: LAVAPIPE_LOOP_LIMIT,
+            what: format!(
+                "order {}, {:?}, {blockers} blocker(s), {}",
+                settings.order,
+                settings.exp,
+                march.map_or("no height field".to_string(), |m| format!("W {} x {} steps", m.directions, m.steps))
+            ),
+        })
+    }
+
+    /// Uploads the program's tables, the spheres and the pyramid, allocates the tile
+    /// buffers and binds them all, timing "upload" (and "pyramid").
+    fn bind(&self, prepared: &PreparedFrame, timings: &mut StageTimings) -> Result<BoundFrame, GpuError> {
+        let PreparedFrame { plan, program, pipeline } = prepared;
+        let features = program.features;
+        let generic = features.specialisation != Specialisation::Full;
+        let started = Instant::now();
+        let [tables, materials, spheres] = self.upload_inputs(plan, program)?;
+        timings.add_wall("upload", started);
+
+        // The height field: level 0 uploaded, the other levels filtered on the GPU. The
+        // generic program binds placeholders when the frame has none.
+        let heightfield = plan.terrain.as_ref().map(|terrain| self.build_pyramid(terrain, timings)).transpose()?;
+        let placeholders = if heightfield.is_none() && generic {
+            Some(HeightFieldBuffers {
+                levels: self.storage("levels", bytemuck::cast_slice(&[0.0f32]))?,
+                level_table: self.storage(
+                    "level table",
+                    bytemuck::cast_slice(&[GpuLevel { columns: 1, rows: 1, ..Default::default() }]),
+                )?,
+                steps: self.storage("steps", bytemuck::cast_slice(&[GpuStep::default()]))?,
+            })
+        } else {
+            None
+        };
+
+        let pixels = plan.frame.gbuffer.width * plan.frame.gbuffer.height;
+        let tile = self.tile_points(pixels);
+        let point_bytes = (tile * std::mem::size_of::<GpuPoint>()) as u64;
+        let shaded_bytes = (tile * std::mem::size_of::<GpuShaded>()) as u64;
+        use wgpu::BufferUsages as Usage;
+        let points = self.buffer("points", point_bytes, Usage::STORAGE | Usage::COPY_DST);
+        let shaded = self.buffer("shaded", shaded_bytes, Usage::STORAGE | Usage::COPY_SRC);
+        let readback = self.buffer("readback", shaded_bytes, Usage::MAP_READ | Usage::COPY_DST);
+        let params = self.buffer("params", std::mem::size_of::<ShadeParams>() as u64, Usage::UNIFORM | Usage::COPY_DST);
+
+        let mut entries =
+            vec![entry(0, &params), entry(1, &tables), entry(2, &points), entry(3, &shaded), entry(4, &materials)];
+        if features.contents.blockers || generic {
+            entries.push(entry(5, &spheres));
+        }
+        if let Some(h) = heightfield.as_ref().or(placeholders.as_ref()) {
+            entries.extend([entry(6, &h.levels), entry(7, &h.level_table), entry(8, &h.steps)]);
+        }
+        let bind_group = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("shade"),
+            layout: &pipeline.get_bind_group_layout(0),
+            entries: &entries,
+        });
+        self.check_errors("binding the shading pass")?;
+        drop(entries);
+
+        Ok(BoundFrame {
+            pipeline: pipeline.clone(),
+            tile,
+            points,
+            shaded,
+            readback,
+            params,
+            bind_group,
+            frame_params: frame_params(plan, program),
+            timer: self.timer(),
+            _inputs: vec![tables, materials, spheres],
+            _heightfield: heightfield.or(placeholders),
+        })
+    }
+
+    /// The program's tables and material slots, and the frame's spheres.
+    fn upload_inputs(&self, plan: &FramePlan, program: &ShadeProgram) -> Result<[wgpu::Buffer; 3], GpuError> {
+        let mut spheres: Vec<GpuSphere> = plan
+            .frame
+            .blockers
+            .iter()
+            .map(|s| GpuSphere { centre_radius: [s.center[0], s.center[1], s.center[2], s.radius].map(|v| v as f32) })
+            .collect();
+        if spheres.is_empty() {
+            spheres.push(GpuSphere::default());
+        }
+        Ok([
+            self.storage("tables", bytemuck::cast_slice(&program.tables))?,
+            self.storage("materials", bytemuck::cast_slice(&program.materials))?,
+            self.storage("spheres", bytemuck::cast_slice(&spheres))?,
+        ])
+    }
+
+    /// Shades one tile of packed points and hands the shaded points to `consume`, timing
+    /// "shade" (GPU timestamps where the adapter has them), "upload + readback" and
+    /// "readback".
+    fn run_tile(
+        &self,
+        bound: &BoundFrame,
+        points: &[GpuPoint],
+        timings: &mut StageTimings,
+        consume: impl FnOnce(&[GpuShaded]),
+    ) -> Result<(), GpuError> {
+        let count = points.len();
+        let started = Instant::now();
+        let params = ShadeParams { point_count: count as u32, ..bound.frame_params };
+        self.queue.write_buffer(&bound.params, 0, bytemuck::bytes_of(&params));
+        self.queue.write_buffer(&bound.points, 0, bytemuck::cast_slice(points));
+        let mut encoder = self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("shade") });
+        {
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("shade"),
+                timestamp_writes: bound.timer.as_ref().map(|t| t.writes()),
+            });
+            pass.set_pipeline(&bound.pipeline);
+            pass.set_bind_group(0, &bound.bind_group, &[]);
+            pass.dispatch_workgroups((count as u32).div_ceil(WORKGROUP_SIZE), 1, 1);
+        }
+        let out_bytes = (count * std::mem::size_of::<GpuShaded>()) as u64;
+        encoder.copy_buffer_to_buffer(&bound.shaded, 0, &bound.readback, 0, out_bytes);
+        if let Some(t) = &bound.timer {
+            t.resolve(&mut encoder);
+        }
+        self.queue.submit([encoder.finish()]);
+        self.wait("the shading pass")?;
+        let shade_wall = started.elapsed().as_secs_f64() * 1e3;
+        match bound.timer.as_ref().map(|t| t.read(self)).transpose()? {
+            Some(ms) => {
+                timings.add("shade", ms, Clock::Gpu);
+                timings.add("upload + readback", (shade_wall - ms).max(0.0), Clock::Wall);
+            }
+            None => timings.add("shade", shade_wall, Clock::Wall),
+        }
+
+        let started = Instant::now();
+        let slice = bound.readback.slice(..out_bytes);
+        slice.map_async(wgpu::MapMode::Read, |_| {});
+        self.wait("reading the shaded tile back")?;
+        {
+            let data =
+                slice.get_mapped_range().map_err(|e| self.wgpu_error("reading the shaded tile back", e.to_string()))?;
+            consume(bytemuck::cast_slice(&data));
+        }
+        bound.readback.unmap();
+        timings.add_wall("readback", started);
+        Ok(())
+    }
+}
+
+/// The parameters of every tile of the frame but its point count.
+fn frame_params(plan: &FramePlan, program: &ShadeProgram) -> ShadeParams {
+    let rect = plan.terrain.as_ref().map_or([0.0; 4], |t| {
+        let (min, max) = (t.field.min(), t.field.max());
+        [min[0], min[1], max[0], max[1]].map(|v| v as f32)
+    });
+    let contents = program.features.contents;
+    let settings = &plan.settings;
+    ShadeParams {
+        point_count: 0,
+        sphere_count: plan.frame.blockers.len() as u32,
+        log_epsilon: settings.epsilon.ln() as f32,
+        hyb_threshold: settings.hyb_threshold as f32,
+        heightfield_rect: rect,
+        feature_bits: (if contents.heightfield { FEATURE_HEIGHTFIELD } else { 0 })
+            | (if contents.blockers { FEATURE_BLOCKERS } else { 0 })
+            | (if contents.phong { FEATURE_PHONG } else { 0 }),
+        order: settings.order as u32,
+        coefficient_count: (settings.order * settings.order) as u32,
+        nodes: program.nodes as u32,
+    }
+}
+
+/// The frame walk (shared with the CPU executor) over pixels `start..start + points.len()`:
+/// fixed colours wait in `work` with the tint of each shaded point until its result is
+/// back.
+fn pack_tile(prepared: &PreparedFrame, start: usize, points: &mut [GpuPoint], work: &mut [TileWork]) {
+    let PreparedFrame { plan, program, .. } = prepared;
+    let width = plan.frame.gbuffer.width;
+    points.par_iter_mut().zip(work.par_iter_mut()).enumerate().for_each(|(i, (point, out))| {
+        let pixel = start + i;
+        match pixel_work(&plan.scene.materials, plan.frame, pixel % width, pixel / width) {
+            PixelWork::Fixed(colour) => {
+                *out = TileWork::Fixed(colour);
+                *point = GpuPoint { position_slot: [0.0, 0.0, 0.0, f32::from_bits(SLOT_NONE)], ..Default::default() };
+            }
+            PixelWork::Shade { point: p, tint } => {
+                *out = TileWork::Shaded(tint);
+                let slot = program.slots.get(&p.material).copied().unwrap_or(SLOT_UNKNOWN);
+                let vec4 = |v: [f64; 3], w: f32| [v[0] as f32, v[1] as f32, v[2] as f32, w];
+                *point = GpuPoint {
+                    position_slot: vec4(p.position, f32::from_bits(slot)),
+                    normal: vec4(p.normal, 0.0),
+                    reflected: vec4(reflect_view(p.view_origin, p.position, p.normal), 0.0),
+                };
+            }
+        }
+    });
+}

@@ -1,0 +1,105 @@
+//! The CPU executor: a [`FramePlan`] shaded row-parallel with rayon, into a beauty image
+//! (`logsh shade`, `bench`) or compositing passes (`logsh render`). It is the oracle the
+//! GPU pass is compared with, and the fallback where no GPU can shade a frame.
+
+use super::compositing::{assemble, Pixel, ShadedPasses};
+use super::frame::{pixel_work, PixelWork, ShadeError, ShadedFrame};
+use super::kernel::{Occluders, ShadingKernel, SurfacePoint};
+use super::plan::{FramePlan, PlannedKernel};
+use super::settings::ShadingSettings;
+use crate::scene::{Frame, Scene};
+use crate::sh::Real;
+use crate::timing::StageTimings;
+use rayon::prelude::*;
+use std::time::Instant;
+
+/// Shades one frame of `scene` with `settings`.
+pub fn shade_frame(scene: &Scene, frame: &Frame, settings: &ShadingSettings) -> Result<ShadedFrame, ShadeError> {
+    Ok(shade_frame_timed(scene, frame, settings)?.0)
+}
+
+/// [`shade_frame`], timing its stages: the tables, the height-field pyramid, the pixels.
+pub fn shade_frame_timed(
+    scene: &Scene,
+    frame: &Frame,
+    settings: &ShadingSettings,
+) -> Result<(ShadedFrame, StageTimings), ShadeError> {
+    let plan = FramePlan::new(scene, frame, settings)?;
+    let (rgba, timings) = shade_plan::<[f32; 4]>(&plan);
+    let g = &frame.gbuffer;
+    Ok((ShadedFrame { width: g.width, height: g.height, rgba }, timings))
+}
+
+/// Shades one frame of `scene` into compositing passes; the checks and errors are
+/// [`shade_frame`]'s.
+pub fn shade_frame_passes(
+    scene: &Scene,
+    frame: &Frame,
+    settings: &ShadingSettings,
+) -> Result<ShadedPasses, ShadeError> {
+    let plan = FramePlan::new(scene, frame, settings)?;
+    let (pixels, _) = shade_plan::<Pixel>(&plan);
+    Ok(assemble(frame, &pixels))
+}
+
+/// What the CPU executor writes per pixel.
+trait PixelResult: Copy + Send + Sync {
+    fn fixed(colour: [f32; 4]) -> Self;
+    fn shaded<T: Real>(kernel: &ShadingKernel<T>, occluders: Occluders, point: &SurfacePoint, tint: [f32; 3]) -> Self;
+}
+
+/// The beauty: RGBA, alpha 1 where a surface was shaded.
+impl PixelResult for [f32; 4] {
+    fn fixed(colour: [f32; 4]) -> Self {
+        colour
+    }
+
+    fn shaded<T: Real>(kernel: &ShadingKernel<T>, occluders: Occluders, point: &SurfacePoint, tint: [f32; 3]) -> Self {
+        let c = kernel.shade(occluders, point);
+        [tint[0] * c[0], tint[1] * c[1], tint[2] * c[2], 1.0]
+    }
+}
+
+/// The passes, the same pixels split (module doc of [`super::compositing`]).
+impl PixelResult for Pixel {
+    fn fixed(colour: [f32; 4]) -> Self {
+        Pixel::fixed(colour)
+    }
+
+    fn shaded<T: Real>(kernel: &ShadingKernel<T>, occluders: Occluders, point: &SurfacePoint, tint: [f32; 3]) -> Self {
+        Pixel::shaded(kernel.shade_passes(occluders, point), tint)
+    }
+}
+
+/// Filters the pyramid and shades every pixel of the plan, timing "pyramid" and "shade"
+/// after the plan's own "tables".
+fn shade_plan<P: PixelResult>(plan: &FramePlan) -> (Vec<P>, StageTimings) {
+    let mut timings = plan.timings.clone();
+    let started = Instant::now();
+    let pyramid = plan.terrain.as_ref().map(|terrain| terrain.horizon_pyramid(&plan.settings));
+    if pyramid.is_some() {
+        timings.add_wall("pyramid", started);
+    }
+    let occluders = Occluders { blockers: &plan.frame.blockers, horizons: pyramid.as_ref() };
+    let started = Instant::now();
+    let pixels = match &plan.kernel {
+        PlannedKernel::F32(kernel) => shade_pixels::<P, f32>(kernel, occluders, plan),
+        PlannedKernel::F64(kernel) => shade_pixels::<P, f64>(kernel, occluders, plan),
+    };
+    timings.add_wall("shade", started);
+    (pixels, timings)
+}
+
+fn shade_pixels<P: PixelResult, T: Real>(kernel: &ShadingKernel<T>, occluders: Occluders, plan: &FramePlan) -> Vec<P> {
+    let g = &plan.frame.gbuffer;
+    let mut pixels = vec![P::fixed([0.0; 4]); g.width * g.height];
+    pixels.par_chunks_mut(g.width).enumerate().for_each(|(y, row)| {
+        for (x, out) in row.iter_mut().enumerate() {
+            *out = match pixel_work(&plan.scene.materials, plan.frame, x, y) {
+                PixelWork::Fixed(colour) => P::fixed(colour),
+                PixelWork::Shade { point, tint } => P::shaded(kernel, occluders, &point, tint),
+            };
+        }
+    });
+    pixels
+}

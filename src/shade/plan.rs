@@ -1,0 +1,94 @@
+//! Everything that happens to a frame before its pixels, built once and consumed by both
+//! executors: the settings validated, the frame checked against the materials it shows,
+//! the height field read and its pyramid planned, the light projected and the kernel's
+//! tables built at the chosen precision.
+//!
+//! What stays per executor is only what runs on it: the CPU filters the pyramid with
+//! rayon and shades rows ([`super::cpu`]); the GPU filters the same plan with the same
+//! taps and composes its program from the same kernel tables (`gpu`).
+
+use super::frame::{check_frame, height_field, height_map_file, ShadeError};
+use super::kernel::ShadingKernel;
+use super::settings::{Precision, ShadingSettings};
+use crate::heightfield::{HeightField, HorizonPyramid, PyramidPlan};
+use crate::scene::{Frame, Material, Scene};
+use crate::timing::StageTimings;
+use std::time::Instant;
+
+/// The height field of a frame and the plan of its pyramid (level sizes, march steps,
+/// azimuths), before any level is filtered.
+pub struct Terrain {
+    pub field: HeightField,
+    pub pyramid: PyramidPlan,
+}
+
+impl Terrain {
+    /// The pyramid filtered on the CPU.
+    pub fn horizon_pyramid(&self, settings: &ShadingSettings) -> HorizonPyramid {
+        HorizonPyramid::from_plan(&self.field, &self.pyramid, settings.horizon)
+    }
+}
+
+/// What a frame contains that the shading must handle; a program or loop for a feature
+/// the frame lacks is never run.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct FrameContents {
+    pub heightfield: bool,
+    pub blockers: bool,
+    /// A Phong material is declared (a second exponentiation per glossy point).
+    pub phong: bool,
+}
+
+/// The kernel at the precision the settings ask for.
+pub enum PlannedKernel {
+    F32(ShadingKernel<f32>),
+    F64(ShadingKernel<f64>),
+}
+
+/// One frame, ready for its pixels.
+pub struct FramePlan<'a> {
+    pub scene: &'a Scene,
+    pub frame: &'a Frame,
+    pub settings: ShadingSettings,
+    pub contents: FrameContents,
+    /// `Some` when the scene has a height map.
+    pub terrain: Option<Terrain>,
+    pub kernel: PlannedKernel,
+    /// The plan's own cost, as the stage "tables".
+    pub timings: StageTimings,
+}
+
+impl<'a> FramePlan<'a> {
+    /// Validates and prepares `frame` of `scene`: every error a frame can have is
+    /// reported here, before any pixel is shaded on either executor.
+    pub fn new(scene: &'a Scene, frame: &'a Frame, settings: &ShadingSettings) -> Result<Self, ShadeError> {
+        let started = Instant::now();
+        settings.validate()?;
+        check_frame(scene, frame)?;
+        let terrain = match height_field(scene, frame)? {
+            Some(field) => {
+                let pyramid = PyramidPlan::new(&field, settings.horizon)
+                    .map_err(|source| ShadeError::HeightField { file: height_map_file(scene), cause: source })?;
+                Some(Terrain { field, pyramid })
+            }
+            None => None,
+        };
+        let contents = FrameContents {
+            heightfield: terrain.is_some(),
+            blockers: !frame.blockers.is_empty(),
+            phong: scene.materials.values().any(|m| matches!(m, Material::Phong { .. })),
+        };
+        let light = frame.light.sh_coefficients(settings.order);
+        let kernel = match settings.precision {
+            Precision::F32 => {
+                PlannedKernel::F32(ShadingKernel::new(settings, &scene.materials, &light, contents.heightfield))
+            }
+            Precision::F64 => {
+                PlannedKernel::F64(ShadingKernel::new(settings, &scene.materials, &light, contents.heightfield))
+            }
+        };
+        let mut timings = StageTimings::default();
+        timings.add_wall("tables", started);
+        Ok(Self { scene, frame, settings: *settings, contents, terrain, kernel, timings })
+    }
+}
