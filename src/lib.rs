@@ -7,9 +7,9 @@
 //! [`scene`] the format-v1 reader and output writers, [`shade`] the per-pixel pipeline
 //! (the frame plan, the kernel and the CPU executor), [`gpu`] the same pipeline as one
 //! wgpu compute pass, [`executor`] the choice between the two, [`render`] the sequence
-//! driver of `logsh render`, [`bench`] `logsh bench`, [`reference`] the ground truth,
-//! [`synth`] procedural scenes, [`info`] the EXR listing of `logsh info`, [`cli`] and
-//! [`run`] the command line.
+//! driver of `logsh render`, [`bench`](mod@bench) `logsh bench`,
+//! [`reference`](mod@reference) the ground truth, [`synth`] procedural scenes, [`info`]
+//! the EXR listing of `logsh info`, [`cli`] and [`run`] the command line.
 pub mod bench;
 pub mod cli;
 pub mod executor;

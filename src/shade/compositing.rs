@@ -45,7 +45,7 @@ pub struct Pixel {
 }
 
 impl Pixel {
-    /// A pixel of fixed colour ([`PixelWork::Fixed`]): the background is the environment
+    /// A pixel of fixed colour ([`PixelWork::Fixed`](super::PixelWork::Fixed)): the background is the environment
     /// pass, water mirroring the sky is specular.
     pub fn fixed(colour: [f32; 4]) -> Self {
         let rgb = [colour[0], colour[1], colour[2]];
@@ -56,7 +56,7 @@ impl Pixel {
         }
     }
 
-    /// A shaded point's passes times its tint ([`PixelWork::Shade`]); the visibility
+    /// A shaded point's passes times its tint ([`PixelWork::Shade`](super::PixelWork::Shade)); the visibility
     /// terms are the point's own.
     pub fn shaded(seen: PixelPasses, tint: [f32; 3]) -> Self {
         let tinted = |c: [f32; 3]| [0, 1, 2].map(|k| tint[k] * c[k]);

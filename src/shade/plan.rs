@@ -5,7 +5,7 @@
 //!
 //! What stays per executor is only what runs on it: the CPU filters the pyramid with
 //! rayon and shades rows ([`super::cpu`]); the GPU filters the same plan with the same
-//! taps and composes its program from the same kernel tables (`gpu`).
+//! taps and composes its program from the same kernel tables (`src/gpu/`).
 
 use super::frame::{check_frame, height_field, height_map_file, ShadeError};
 use super::kernel::ShadingKernel;
