@@ -78,7 +78,11 @@ fn cpu_description() -> String {
 impl Executor {
     /// The CPU executor.
     pub fn cpu() -> Self {
-        Self { device: Device::Cpu, notices: Mutex::new(Vec::new()) }
+        Self::on(Device::Cpu)
+    }
+
+    fn on(device: Device) -> Self {
+        Self { device, notices: Mutex::new(Vec::new()) }
     }
 
     /// Resolves `--device`. `auto` takes a hardware GPU, and otherwise the CPU with a
@@ -94,22 +98,16 @@ impl Executor {
             DeviceChoice::Cpu => Ok(Self::cpu()),
             DeviceChoice::Gpu => {
                 if settings.precision == Precision::F64 {
-                    return Err(GpuError::Unsupported("--precision f64 (the GPU pass runs in f32)".into()).into());
+                    return Err(GpuError::double_precision().into());
                 }
-                Ok(Self {
-                    device: Device::Gpu { gpu: Box::new(Gpu::new()?), fallback: false },
-                    notices: Mutex::new(Vec::new()),
-                })
+                Ok(Self::on(Device::Gpu { gpu: Box::new(Gpu::new()?), fallback: false }))
             }
             DeviceChoice::Auto if settings.precision == Precision::F64 => {
                 Ok(on_cpu("since the GPU pass runs in f32 and --precision f64 was asked".into()))
             }
             DeviceChoice::Auto => match Gpu::new_hardware() {
                 Ok(gpu) => {
-                    let executor = Self {
-                        device: Device::Gpu { gpu: Box::new(gpu), fallback: true },
-                        notices: Mutex::new(Vec::new()),
-                    };
+                    let executor = Self::on(Device::Gpu { gpu: Box::new(gpu), fallback: true });
                     executor.notify(format!("--device auto: shading on {}, a hardware GPU", executor.describe()));
                     Ok(executor)
                 }
@@ -191,7 +189,7 @@ impl Executor {
             frame,
             |gpu| {
                 let (shaded, mut timings) = gpu.shade_frame_timed(scene, frame, settings, specialisation)?;
-                timings.device = format!("gpu: {}", gpu.adapter());
+                timings.device = self.describe();
                 timings.on_gpu = true;
                 Ok((shaded, timings))
             },

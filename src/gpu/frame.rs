@@ -166,7 +166,7 @@ impl Gpu {
         let mut plan = FramePlan::new(scene, frame, settings)?;
         let started = Instant::now();
         let PlannedKernel::F32(kernel) = &plan.kernel else {
-            return Err(GpuError::Unsupported("--precision f64 (the GPU pass runs in f32)".into()));
+            return Err(GpuError::double_precision());
         };
         let march = plan.terrain.as_ref().map(|t| MarchShape::of(&t.pyramid, &settings.horizon));
         let program = ShadeProgram::new(kernel, Features { contents: plan.contents, specialisation, passes }, march);

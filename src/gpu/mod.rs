@@ -26,6 +26,13 @@ pub use program::Specialisation;
 
 use crate::shade::ShadeError;
 
+impl GpuError {
+    /// The GPU pass runs in f32 only.
+    pub fn double_precision() -> Self {
+        Self::Unsupported("--precision f64 (the GPU pass runs in f32)".into())
+    }
+}
+
 #[derive(Debug, thiserror::Error)]
 pub enum GpuError {
     #[error(

@@ -35,8 +35,15 @@ pub enum ShadeError {
     WaterInWater { file: String, x: usize, y: usize, material: u32 },
 }
 
+impl ShadeError {
+    /// A height field of `scene` refused by the height-field module.
+    pub fn height_field(scene: &Scene, cause: HeightFieldError) -> Self {
+        Self::HeightField { file: height_map_file(scene), cause }
+    }
+}
+
 /// The name of the scene's height map, for messages.
-pub fn height_map_file(scene: &Scene) -> String {
+fn height_map_file(scene: &Scene) -> String {
     scene.heightfield.as_ref().map(|h| h.heights.0.clone()).unwrap_or_default()
 }
 
@@ -48,7 +55,7 @@ pub fn height_field(scene: &Scene, frame: &Frame) -> Result<Option<HeightField>,
         .as_ref()
         .map(|map| {
             HeightField::new(map.heights.clone(), map.columns, map.rows, map.min, map.max)
-                .map_err(|source| ShadeError::HeightField { file: height_map_file(scene), cause: source })
+                .map_err(|cause| ShadeError::height_field(scene, cause))
         })
         .transpose()
 }

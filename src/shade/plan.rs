@@ -7,7 +7,7 @@
 //! rayon and shades rows ([`super::cpu`]); the GPU filters the same plan with the same
 //! taps and composes its program from the same kernel tables (`src/gpu/`).
 
-use super::frame::{check_frame, height_field, height_map_file, ShadeError};
+use super::frame::{check_frame, height_field, ShadeError};
 use super::kernel::ShadingKernel;
 use super::settings::{Precision, ShadingSettings};
 use crate::heightfield::{HeightField, HorizonPyramid, PyramidPlan};
@@ -68,7 +68,7 @@ impl<'a> FramePlan<'a> {
         let terrain = match height_field(scene, frame)? {
             Some(field) => {
                 let pyramid = PyramidPlan::new(&field, settings.horizon)
-                    .map_err(|source| ShadeError::HeightField { file: height_map_file(scene), cause: source })?;
+                    .map_err(|cause| ShadeError::height_field(scene, cause))?;
                 Some(Terrain { field, pyramid })
             }
             None => None,
