@@ -10,8 +10,8 @@ per-frame sphere blockers and camera, height map, materials and the World's ligh
     --out DIR               output directory; must not already hold a scene.json
     --frames A-B | N        frame range (default: the scene's)
     --resolution WxH        output size in pixels (default: the scene's, with its percentage)
-    --spheres N             blocker spheres per object without a logsh_spheres property (8)
-    --samples-per-sphere N  surface samples per sphere for the k-means fit (40)
+    --spheres N             most blocker spheres per object without a logsh_spheres property (16)
+    --fit-error E           relative volume error at which an object's fit stops adding spheres (0.1)
     --heightfield NAME      the terrain object (default: the one with logsh_heightfield set)
     --heightmap-size N      height map samples along the terrain's longer side (256)
 
@@ -55,7 +55,7 @@ def main(argv):
     parser.add_argument("--frames", type=frame_range)
     parser.add_argument("--resolution", type=size)
     parser.add_argument("--spheres", type=int, default=Options.spheres)
-    parser.add_argument("--samples-per-sphere", type=int, default=Options.samples_per_sphere)
+    parser.add_argument("--fit-error", type=float, default=Options.fit_error)
     parser.add_argument("--heightfield")
     parser.add_argument("--heightmap-size", type=int, default=Options.heightmap_size)
     args = parser.parse_args(argv)
@@ -67,10 +67,10 @@ def main(argv):
     elif not bpy.data.filepath:
         sys.exit("error: no .blend given; pass --blend FILE (or open one: blender -b FILE -P export_scene.py -- ...)")
     scene = bpy.context.scene
-    if args.spheres < 1 or args.samples_per_sphere < 1 or args.heightmap_size < 2:
-        sys.exit("error: --spheres and --samples-per-sphere must be >= 1, --heightmap-size >= 2")
+    if args.spheres < 1 or not 0.0 < args.fit_error < 1.0 or args.heightmap_size < 2:
+        sys.exit("error: --spheres must be >= 1, --fit-error in (0, 1), --heightmap-size >= 2")
     options = Options(out=args.out, frames=args.frames, resolution=args.resolution, spheres=args.spheres,
-                      samples_per_sphere=args.samples_per_sphere, heightfield=args.heightfield,
+                      fit_error=args.fit_error, heightfield=args.heightfield,
                       heightmap_size=args.heightmap_size)
     try:
         export(scene, options)

@@ -79,12 +79,14 @@ fn main() {
     }
     println!("| scene | settings | pixels | mean abs error | p95 | mean signed |");
     println!("| --- | --- | --- | --- | --- | --- |");
-    let ratio = ShadingSettings { ratio_attenuation: true, ..Quality::Default.settings() };
+    let default = Quality::Default.settings();
     let runs = [
-        ("default", Quality::Default.settings()),
+        ("default", default),
         ("high", Quality::High.settings()),
         ("ultra", Quality::Ultra.settings()),
-        ("default, ratio attenuation", ratio),
+        ("default, ratio attenuation", ShadingSettings { ratio_attenuation: true, ..default }),
+        ("default, overlap floor off", ShadingSettings { overlap_floor: false, ..default }),
+        ("default, no clusters", ShadingSettings { cluster_ratio: 0.0, ..default }),
     ];
     for dir in dirs {
         let scene = Scene::load(&dir).unwrap_or_else(|e| panic!("{e}"));
@@ -130,6 +132,25 @@ fn main() {
             errors.sort_by(|a, b| a.total_cmp(b));
             let p95 = errors[(0.95 * (count - 1) as f64).round() as usize];
             println!("| {scene_name} | {name} | {count} | {mean:.3} | {p95:.3} | {:+.3} |", signed / count as f64);
+            if std::env::var_os("LOGSH_COMPARE_BY_MATERIAL").is_some() {
+                let mut by_material: std::collections::BTreeMap<u32, (f64, f64, usize)> = Default::default();
+                for (i, &m) in frame.gbuffer.material.iter().enumerate() {
+                    if m == 0 {
+                        continue;
+                    }
+                    let entry = by_material.entry(m).or_default();
+                    for k in 0..3 {
+                        let d = (image[i][k] as f64 - cycles[i][k] as f64) / unoccluded[k] / 3.0;
+                        entry.0 += d.abs();
+                        entry.1 += d;
+                    }
+                    entry.2 += 1;
+                }
+                for (m, (abs, signed, n)) in by_material {
+                    let n_f = n as f64;
+                    eprintln!("    material {m}: {n} pixels, mean abs {:.3}, signed {:+.3}", abs / n_f, signed / n_f);
+                }
+            }
         }
     }
 }

@@ -35,3 +35,44 @@ fn add_sphere(p: vec3<f32>, n: vec3<f32>, sphere: vec4<f32>, log_epsilon: f32, a
     }
     add_rotated_zonal(&zonal, weight, direction, acc);
 }
+
+// The receiver's own spheres within OWN_SPHERE_REACH radii cast nothing on it (cap.rs,
+// own_sphere_holds).
+fn own_sphere_holds(p: vec3<f32>, sphere: vec4<f32>) -> bool {
+    let reach = OWN_SPHERE_REACH * sphere.w;
+    let d = sphere.xyz - p;
+    return dot(d, d) <= reach * reach;
+}
+
+// Walks the blocker tree without a stack and adds every sphere or cluster the receiver
+// sees (src/shade/blocker_tree.rs, BlockerTree::visit): subtrees wholly behind the
+// tangent plane skipped, leaves seen unless they are the receiver's own and hold it,
+// distant clusters seen as their equivalent sphere or dropped when negligible.
+fn visit_blockers(p: vec3<f32>, n: vec3<f32>, object: u32, log_epsilon: f32, acc: ptr<function, array<f32, COUNT_CAP>>) {
+    var i = 0u;
+    while i < params.node_count {
+        let node = blocker_tree[i];
+        let d = node.bounds.xyz - p;
+        let r = node.bounds.w;
+        if dot(d, n) < -r {
+            i = node.skip;
+            continue;
+        }
+        if node.leaf != 0u {
+            if !(object != 0u && node.object == object && own_sphere_holds(p, node.equivalent)) {
+                add_sphere(p, n, node.equivalent, log_epsilon, acc);
+            }
+            i = node.skip;
+            continue;
+        }
+        let distance = length(d);
+        if distance > r && r <= params.cluster_ratio * distance {
+            if node.equivalent.w >= NEGLIGIBLE_RATIO * length(node.equivalent.xyz - p) {
+                add_sphere(p, n, node.equivalent, log_epsilon, acc);
+            }
+            i = node.skip;
+            continue;
+        }
+        i++;
+    }
+}

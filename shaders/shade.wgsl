@@ -14,7 +14,7 @@
 @group(0) @binding(3) var<storage, read_write> shaded: array<GpuShaded>;
 @group(0) @binding(4) var<storage, read> materials: array<GpuMaterial>;
 //#if BLOCKERS
-@group(0) @binding(5) var<storage, read> spheres: array<GpuSphere>;
+@group(0) @binding(5) var<storage, read> blocker_tree: array<GpuBlockerNode>;
 //#endif
 //#if HEIGHTFIELD
 @group(0) @binding(6) var<storage, read> levels: array<f32>;
@@ -29,10 +29,11 @@ fn enabled(feature: u32) -> bool {
 }
 
 // exp*(f) . light per colour channel (kernel.rs, Exponentiator::exp and lit). SH-space
-// methods hand pixels with |f^| beyond their range to the quadrature, as on the CPU.
-fn exp_dot_light(f: ptr<function, array<f32, COUNT_CAP>>, ceiling: f32) -> vec3<f32> {
+// methods hand pixels with |f^| beyond their range to the quadrature, as on the CPU. `v`
+// is the log visibility within f, which the quadrature floors (exp_quad.wgsl).
+fn exp_dot_light(f: ptr<function, array<f32, COUNT_CAP>>, v: ptr<function, array<f32, COUNT_CAP>>, ceiling: f32) -> vec3<f32> {
 //#if EXP_QUAD
-    return max(quad_exp_dot_light(f, ceiling), vec3<f32>(0.0));
+    return max(quad_exp_dot_light(f, v, ceiling), vec3<f32>(0.0));
 //#else
     // Blended into quad over the band below the method's range (kernel.rs,
     // quadrature_weight), so the hand-over leaves no seam.
@@ -42,7 +43,7 @@ fn exp_dot_light(f: ptr<function, array<f32, COUNT_CAP>>, ceiling: f32) -> vec3<
         weight = clamp((magnitude - (SH_SPACE_MAX_MAGNITUDE - SH_SPACE_BLEND)) / SH_SPACE_BLEND, 0.0, 1.0);
     }
     if weight >= 1.0 {
-        return max(quad_exp_dot_light(f, ceiling), vec3<f32>(0.0));
+        return max(quad_exp_dot_light(f, v, ceiling), vec3<f32>(0.0));
     }
     var hat = *f;
     hat[0] = 0.0;
@@ -107,7 +108,7 @@ fn exp_dot_light(f: ptr<function, array<f32, COUNT_CAP>>, ceiling: f32) -> vec3<
 //#endif
     var lit = dot_light(&e);
     if weight > 0.0 {
-        lit = mix(lit, quad_exp_dot_light(f, ceiling), weight);
+        lit = mix(lit, quad_exp_dot_light(f, v, ceiling), weight);
     }
     // Clamped at 0: ringing of a band-limited product can dip below it (kernel.rs, lit).
     return max(lit, vec3<f32>(0.0));
@@ -116,9 +117,10 @@ fn exp_dot_light(f: ptr<function, array<f32, COUNT_CAP>>, ceiling: f32) -> vec3<
 
 // Log visibility at p with unit normal n (kernel.rs, add_visibility): the tangent plane
 // clamped once (a hemisphere cap around -n, or folded into the height field's horizons
-// for an upward-facing receiver), the height field's wedges, every sphere's cap. The
+// for an upward-facing receiver), the height field's wedges, the caps of the blocker
+// tree's spheres and clusters the receiver sees. The
 // caps' sum goes to `caps` too, which the visibility passes read.
-fn visibility(p: vec3<f32>, n: vec3<f32>, caps: ptr<function, array<f32, COUNT_CAP>>) -> array<f32, COUNT_CAP> {
+fn visibility(p: vec3<f32>, n: vec3<f32>, object: u32, caps: ptr<function, array<f32, COUNT_CAP>>) -> array<f32, COUNT_CAP> {
     var acc: array<f32, COUNT_CAP>;
     var fold_tangent = false;
 //#if HEIGHTFIELD
@@ -133,9 +135,7 @@ fn visibility(p: vec3<f32>, n: vec3<f32>, caps: ptr<function, array<f32, COUNT_C
     }
 //#endif
 //#if BLOCKERS
-    for (var s = 0u; s < params.sphere_count; s++) {
-        add_sphere(p, n, spheres[s].centre_radius, params.log_epsilon, caps);
-    }
+    visit_blockers(p, n, object, params.log_epsilon, caps);
     for (var i = 0u; i < COUNT; i++) {
         acc[i] += (*caps)[i];
     }
@@ -165,7 +165,7 @@ fn lit(visibility: ptr<function, array<f32, COUNT_CAP>>, lobe: u32, axis: vec3<f
     var f = *visibility;
     var zonal = load_zonal(lobe);
     add_rotated_zonal(&zonal, 1.0, axis, &f);
-    return exp_dot_light(&f, tables[lobe + ORDER]);
+    return exp_dot_light(&f, visibility, tables[lobe + ORDER]);
 }
 
 @compute @workgroup_size(WORKGROUP_SIZE)
@@ -183,7 +183,7 @@ fn shade(@builtin(global_invocation_id) id: vec3<u32>) {
     if slot != SLOT_NONE {
         let n = record.normal.xyz;
         var caps: array<f32, COUNT_CAP>;
-        var v = visibility(a.xyz, n, &caps);
+        var v = visibility(a.xyz, n, bitcast<u32>(record.normal.w), &caps);
         if slot != SLOT_UNKNOWN {
             let material = materials[slot];
             let lit_diffuse = lit(&v, T_DIFFUSE, n);
@@ -207,7 +207,7 @@ fn shade(@builtin(global_invocation_id) id: vec3<u32>) {
 //#if HEIGHTFIELD
             has_heightfield = enabled(FEATURE_HEIGHTFIELD);
 //#endif
-            let has_blockers = params.sphere_count > 0u;
+            let has_blockers = params.node_count > 0u;
             terms = vec3<f32>(combined, 1.0, 1.0);
             if has_heightfield && !has_blockers {
                 terms.y = combined;

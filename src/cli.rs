@@ -154,6 +154,12 @@ pub struct ShadingArgs {
     /// Clamp the hemisphere behind each receiver's tangent plane in log space.
     #[arg(long, value_enum, default_value_t = Switch::On)]
     pub tangent_occlusion: Switch,
+    /// Floor each quadrature node's log visibility at log(eps), so a direction behind several caps is clamped once (quad and exact only).
+    #[arg(long, value_enum, default_value_t = Switch::On)]
+    pub overlap_floor: Switch,
+    /// Sphere clusters whose radius is at most this fraction of their distance are one cap; 0 sees every sphere.
+    #[arg(long)]
+    pub cluster_ratio: Option<f64>,
     /// Precision of the per-pixel kernel (the GPU pass is f32 only).
     #[arg(long, value_enum, default_value_t = Precision::F32)]
     pub precision: Precision,
@@ -179,6 +185,10 @@ impl ShadingArgs {
         }
         settings.ratio_attenuation = self.ratio_attenuation == Switch::On;
         settings.tangent_occlusion = self.tangent_occlusion == Switch::On;
+        settings.overlap_floor = self.overlap_floor == Switch::On;
+        if let Some(ratio) = self.cluster_ratio {
+            settings.cluster_ratio = ratio;
+        }
         if let Some(w) = self.directions {
             settings.horizon.directions = w;
         }

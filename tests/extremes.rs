@@ -84,7 +84,7 @@ fn surface_pixels(g: &GBuffer) -> Vec<usize> {
 fn overlapping_blockers(g: &GBuffer, count: usize, seed: u64) -> Vec<Sphere> {
     let mut rng = TestRng(seed);
     let surface = surface_pixels(g);
-    let mut out = vec![Sphere { center: [0.0, 0.0, 1.0], radius: 2.0 }];
+    let mut out = vec![Sphere::new([0.0, 0.0, 1.0], 2.0)];
     while out.len() < count {
         let k = out.len();
         let i = surface[(rng.next() * surface.len() as f64) as usize % surface.len()];
@@ -103,7 +103,7 @@ fn overlapping_blockers(g: &GBuffer, count: usize, seed: u64) -> Vec<Sphere> {
                 [p[0] + o[0], p[1] + o[1], p[2] + o[2]]
             }
         };
-        out.push(Sphere { center, radius: r });
+        out.push(Sphere::new(center, r));
     }
     out.truncate(count);
     out
@@ -159,6 +159,7 @@ fn point_frame(base: &Frame, points: &[([f64; 3], [f64; 3], u32)]) -> Frame {
         normal: points.iter().map(|p| p.1.map(|c| c as f32)).collect(),
         uv: None,
         material: points.iter().map(|p| p.2).collect(),
+        object: None,
     };
     frame
 }
@@ -428,8 +429,7 @@ fn receivers_inside_touching_and_just_outside_one_blocker() {
     let heights = [0.25, 0.5, 0.999, 1.0 - 1e-7, 1.0, 1.0 + 1e-7, 1.0 + 1e-6, 1.0 + 1e-3, 1.01];
     let points: Vec<_> = (0..heights.len()).map(|k| ([1e4 * k as f64, 0.0, 0.0], [0.0, 0.0, 1.0], 1)).collect();
     let mut frame = point_frame(&base, &points);
-    frame.blockers =
-        heights.iter().enumerate().map(|(k, &z)| Sphere { center: [1e4 * k as f64, 0.0, z], radius: 1.0 }).collect();
+    frame.blockers = heights.iter().enumerate().map(|(k, &z)| Sphere::new([1e4 * k as f64, 0.0, z], 1.0)).collect();
     let mut worst = Worst::default();
     for order in [3, 8] {
         for epsilon in EPSILONS {
@@ -478,15 +478,15 @@ fn blockers_behind_the_surface_change_nothing() {
     let frame = point_frame(&base, &points);
     let mut behind = frame.clone();
     let mut rng = TestRng(0xbe41d);
-    behind.blockers.push(Sphere { center: p, radius: 0.5 });
+    behind.blockers.push(Sphere::new(p, 0.5));
     for n in normals {
-        behind.blockers.push(Sphere { center: add(p, n, -1e-6), radius: 3.0 });
+        behind.blockers.push(Sphere::new(add(p, n, -1e-6), 3.0));
         for _ in 0..200 {
             let r = 0.01 + 2.0 * rng.next();
             let d = unit([rng.next() - 0.5, rng.next() - 0.5, rng.next() - 0.5]);
             let along = d[0] * n[0] + d[1] * n[1] + d[2] * n[2];
             let d = if along > 0.0 { d.map(|c| -c) } else { d };
-            behind.blockers.push(Sphere { center: add(p, d, 0.01 + 5.0 * rng.next()), radius: r });
+            behind.blockers.push(Sphere::new(add(p, d, 0.01 + 5.0 * rng.next()), r));
         }
     }
     // Keep only blockers behind every receiver's tangent plane.

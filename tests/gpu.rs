@@ -190,6 +190,38 @@ fn every_knob_matches() {
     }
 }
 
+/// The blocker tree's paths on both executors: a cloud of 3,000 small spheres over the
+/// `spheres` sample (clusters seen as one cap, negligible ones dropped, subtrees behind the
+/// tangent plane skipped), and object indices on pixels and spheres (own spheres that hold
+/// a receiver cast nothing on it), with the overlap floor on and off.
+#[test]
+fn blocker_tree_and_own_spheres_match() {
+    let Some(gpu) = gpu() else { return };
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("gbuffers/spheres");
+    let scene = Scene::load(&dir).unwrap();
+    let mut frame = scene.frame(scene.default_frame()).unwrap();
+    let mut state = 0x9e37_79b9_7f4a_7c15u64;
+    let mut next = move || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let objects = frame.gbuffer.material.clone();
+    for (k, sphere) in frame.blockers.iter_mut().enumerate() {
+        sphere.object = 1 + k as u32 % 3;
+    }
+    for _ in 0..3000 {
+        let centre = [next() * 8.0 - 4.0, next() * 8.0 - 4.0, 2.0 + 2.0 * next()];
+        frame.blockers.push(logsh::scene::Sphere { center: centre, radius: 0.01 + 0.03 * next(), object: 0 });
+    }
+    frame.gbuffer.object = Some(objects);
+    for overlap_floor in [true, false] {
+        let settings = ShadingSettings { overlap_floor, ..ShadingSettings::default() };
+        check_parity(gpu, &scene, &frame, &settings, &format!("cloud, overlap floor {overlap_floor}"));
+    }
+}
+
 #[test]
 fn analytic_scenes_match() {
     let Some(gpu) = gpu() else { return };
@@ -279,6 +311,7 @@ fn frame_of_8192_squared_is_shaded_in_tiles() {
         normal: vec![[0.0, 0.0, 1.0]; SIDE * SIDE],
         uv: None,
         material: vec![0; SIDE * SIDE],
+        object: None,
     };
     for y in 0..h {
         for x in 0..w {

@@ -116,7 +116,7 @@ fn diffuse_fraction(field: &HeightField, spheres: &[Sphere], p: [f64; 3], n: [f6
     let light = Light::Constant([1.0; 3]);
     let model = LightModel::new(&light, &ReferenceLight::EnvironmentMap).unwrap();
     let term = LobeTerm { lobe: Lobe::Diffuse, axis: n, scale: [1.0; 3] };
-    let occ = ReferenceOccluders { spheres, field: Some(field) };
+    let occ = ReferenceOccluders { spheres, field: Some(field), receiver_object: 0 };
     let e = integrate_point(occ, &model, p, n, &[term], 1e-4, 10);
     assert!(e.converged, "did not converge: {e:?}");
     (e.rgb[0], e.error)
@@ -184,8 +184,8 @@ fn height_field_wall_and_valley_match_closed_forms() {
 fn receivers_on_and_inside_spheres() {
     let light = Light::Constant([1.0; 3]);
     let model = LightModel::new(&light, &ReferenceLight::EnvironmentMap).unwrap();
-    let sphere = Sphere { center: [0.0, 0.0, 2.0], radius: 1.0 };
-    let occ = ReferenceOccluders { spheres: std::slice::from_ref(&sphere), field: None };
+    let sphere = Sphere::new([0.0, 0.0, 2.0], 1.0);
+    let occ = ReferenceOccluders { spheres: std::slice::from_ref(&sphere), field: None, receiver_object: 0 };
     let term = |n: [f64; 3]| [LobeTerm { lobe: Lobe::Diffuse, axis: n, scale: [1.0; 3] }];
     // The top of the sphere, its own normal, rounded slightly inside: unshadowed.
     let top = [0.0, 0.0, 3.0 - 1e-7];

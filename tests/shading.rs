@@ -145,7 +145,7 @@ fn receivers_inside_and_touching_blockers_stay_finite() {
     // Spheres cutting through the plane, touching it, and one centred on it: plane pixels
     // inside a blocker see it as a hemisphere; nothing may be NaN or blow up.
     let dir = tempfile::tempdir().unwrap();
-    let s = |center: [f64; 3], radius: f64| Sphere { center, radius };
+    let s = |center: [f64; 3], radius: f64| Sphere::new(center, radius);
     let spec = SphereOverPlane {
         spheres: vec![s([0.0, 0.0, 0.5], 1.0), s([2.5, 0.0, 1.0], 1.0), s([-2.5, 0.0, 0.0], 0.8)],
         width: 64,

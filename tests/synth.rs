@@ -107,10 +107,7 @@ fn sphere_over_plane_closed_form() {
     let below = spec.expected_at([0.0, 0.0, 0.0]).unwrap();
     assert!((below - 0.75).abs() < 1e-12, "{below}");
     // A sphere that cuts the plane: far away its cap crosses the horizon, no closed form.
-    let low = SphereOverPlane {
-        spheres: vec![logsh::scene::Sphere { center: [0.0, 0.0, 0.5], radius: 1.0 }],
-        ..spec.clone()
-    };
+    let low = SphereOverPlane { spheres: vec![logsh::scene::Sphere::new([0.0, 0.0, 0.5], 1.0)], ..spec.clone() };
     assert!(low.expected_at([5.0, 0.0, 0.0]).is_none());
     assert!(low.expected_at([0.0, 0.0, 0.0]).is_none(), "inside the sphere");
     // beta = 45 deg at horizontal distance 2: sin^2(alpha) = 1/8, cos(beta) = 1/sqrt(2).

@@ -10,7 +10,7 @@ Install: zip this folder (`blender --command extension build` inside it, or any 
 the folder), then Edit > Preferences > Get Extensions > Install from Disk.
 """
 import bpy
-from bpy.props import BoolProperty, IntProperty, StringProperty
+from bpy.props import BoolProperty, FloatProperty, IntProperty, StringProperty
 from bpy_extras.io_utils import ExportHelper
 
 from . import exporter
@@ -43,9 +43,10 @@ class LOGSH_OT_export_scene(bpy.types.Operator, ExportHelper):
     use_scene_resolution: BoolProperty(name="Scene resolution", default=True)
     width: IntProperty(name="Width", default=480, min=1)
     height: IntProperty(name="Height", default=270, min=1)
-    spheres: IntProperty(name="Spheres per object", default=exporter.Options.spheres, min=1,
-                         description="Blocker spheres for objects without a logsh_spheres property")
-    samples_per_sphere: IntProperty(name="Samples per sphere", default=exporter.Options.samples_per_sphere, min=4)
+    spheres: IntProperty(name="Most spheres per object", default=exporter.Options.spheres, min=1,
+                         description="Most blocker spheres for objects without a logsh_spheres property")
+    fit_error: FloatProperty(name="Fit error", default=exporter.Options.fit_error, min=0.01, max=0.99,
+                             description="Relative volume error at which an object's sphere fit stops")
     heightfield: bpy.props.EnumProperty(name="Height field", items=_heightfield_items)
     heightmap_size: IntProperty(name="Height map size", default=exporter.Options.heightmap_size, min=2)
 
@@ -59,7 +60,7 @@ class LOGSH_OT_export_scene(bpy.types.Operator, ExportHelper):
             frames=None if self.use_scene_frames else (self.frame_start, self.frame_end),
             resolution=None if self.use_scene_resolution else (self.width, self.height),
             spheres=self.spheres,
-            samples_per_sphere=self.samples_per_sphere,
+            fit_error=self.fit_error,
             heightfield=self.heightfield or None,
             heightmap_size=self.heightmap_size,
         )
@@ -83,7 +84,7 @@ class LOGSH_OT_export_scene(bpy.types.Operator, ExportHelper):
             row.prop(self, "width")
             row.prop(self, "height")
         layout.prop(self, "spheres")
-        layout.prop(self, "samples_per_sphere")
+        layout.prop(self, "fit_error")
         layout.prop(self, "heightfield")
         layout.prop(self, "heightmap_size")
 

@@ -87,9 +87,11 @@ class Options:
     frames: tuple = None
     # (width, height) in pixels; None takes the scene's output size.
     resolution: tuple = None
-    # Blocker spheres per object without `logsh_spheres`.
-    spheres: int = 8
-    samples_per_sphere: int = 40
+    # Most blocker spheres per object without `logsh_spheres` (the fit stops earlier when
+    # it reaches `fit_error`).
+    spheres: int = 16
+    # Relative volume error at which an object's fit stops adding spheres.
+    fit_error: float = 0.1
     # Name of the height field object; None uses the `logsh_heightfield` property.
     heightfield: str = None
     # Height map samples along the longer side of the terrain.
@@ -154,6 +156,7 @@ def export(scene, options, log=print):
         objects = renderable_objects(scene, view_layer)
         terrain = find_heightfield(objects, options)
         table, index_of = material_table(objects, terrain, changes)
+        object_index = object_indices(objects, changes)
         water = {i for i, m in table.items() if m["type"] == "water"}
         width, height = output_size(scene)
         description = {
@@ -181,7 +184,8 @@ def export(scene, options, log=print):
             bpy.ops.render.render(write_still=True, scene=scene.name, layer=view_layer.name)
             camera = camera_json(scene, frame, width, height)
             write_json(new_file(out, f"camera.{frame:04d}.json"), camera)
-            spheres = export_blockers(scene, depsgraph, objects, terrain, index_of, table, options, fits, frame, log)
+            spheres = export_blockers(scene, depsgraph, objects, terrain, index_of, table, object_index, options, fits,
+                                      frame, log)
             write_blockers(new_file(out, f"blockers.{frame:04d}.json"), frame, spheres)
             if water:
                 write_reflection(scene, depsgraph, camera, index_of, water, new_file(out, f"reflection.{frame:04d}.exr"))
@@ -244,7 +248,8 @@ def configure_render(scene, options, changes):
     changes.set(layer, "use", True)
     for attribute in dir(layer):
         if attribute.startswith("use_pass_"):
-            wanted = attribute in ("use_pass_position", "use_pass_normal", "use_pass_uv", "use_pass_material_index")
+            wanted = attribute in ("use_pass_position", "use_pass_normal", "use_pass_uv", "use_pass_material_index",
+                                   "use_pass_object_index")
             changes.set(layer, attribute, wanted)
     for attribute in dir(layer.cycles):  # Cycles' own passes (denoising data, debug, ...)
         if attribute.startswith("use_pass_") or attribute in ("denoising_store_passes", "pass_debug_sample_count"):
@@ -419,7 +424,35 @@ def is_flat(triangles):
     return extents[-1] <= 0 or extents[0] < FLAT_THICKNESS * extents[-1]
 
 
-def export_blockers(scene, depsgraph, objects, terrain, index_of, table, options, fits, frame, log):
+def object_indices(objects, changes):
+    """Gives every renderable object its own pass index 1..N (undone after the export), so
+    that the G-buffer's Object Index pass and the blocker spheres name the same object: a
+    receiver takes no shadow from its own spheres that hold it (docs/design.md)."""
+    index_of = {}
+    for i, obj in enumerate(sorted(objects, key=lambda o: o.name), start=1):
+        changes.set(obj, "pass_index", i)
+        index_of[obj.name] = i
+    return index_of
+
+
+def volume_sample(triangles, count=16000, seed=0):
+    """Uniform points over the mesh's grown bounding box, whether each lies inside the mesh
+    (the side of the nearest surface point's face it lies on) and its distance to the
+    surface; and the volume each point stands for."""
+    points, box_volume = blocker_fit.sample_box(triangles, count, seed)
+    vertices = triangles.reshape(-1, 3)
+    tree = BVHTree.FromPolygons([tuple(v) for v in vertices], [(3 * i, 3 * i + 1, 3 * i + 2) for i in range(len(triangles))])
+    inside = np.zeros(count, dtype=bool)
+    depth = np.zeros(count)
+    for i, p in enumerate(points):
+        location, normal, _, distance = tree.find_nearest(mathutils.Vector(p))
+        if location is not None:
+            inside[i] = (mathutils.Vector(p) - location).dot(normal) < 0.0
+            depth[i] = distance
+    return points, inside, depth, box_volume / count
+
+
+def export_blockers(scene, depsgraph, objects, terrain, index_of, table, object_index, options, fits, frame, log):
     """Spheres of every blocker object at this frame; prints each fit's error."""
     allowed = {o.name for o in objects}
     spheres, reports = [], []
@@ -432,14 +465,17 @@ def export_blockers(scene, depsgraph, objects, terrain, index_of, table, options
             continue
         instancer = instance.parent.original.name if instance.is_instance and instance.parent else ""
         key = (original.name, instancer, tuple(instance.persistent_id) if instance.is_instance else ())
+        matrix = np.array(instance.matrix_world)
         triangles = world_triangles(instance.object, instance.matrix_world)
         if triangles is None:
             continue
         fit = fits.get(key)
         if fit == "skip":
             continue
-        if fit is None or not fit.fits(triangles):
-            if count is None:
+        inverse = np.linalg.inv(matrix)
+        local = triangles.reshape(-1, 3) @ inverse[:3, :3].T + inverse[:3, 3]
+        if fit is None or not fit.follows(local):
+            if count is None and fit is None:
                 materials = {s.material.name for s in original.material_slots if s.material}
                 if materials and all(table[index_of[m]]["type"] == "water" for m in materials):
                     fits[key] = "skip"
@@ -450,52 +486,38 @@ def export_blockers(scene, depsgraph, objects, terrain, index_of, table, options
                     log(f"note: \"{original.name}\" is flat; not a blocker (set its logsh_spheres property to force it)")
                     continue
             name = original.name + (f" (instanced by {instancer}, {instance.persistent_id[0]})" if instance.is_instance else "")
-            fit = blocker_fit.SphereFit(name, triangles, int(count) if count is not None else options.spheres,
-                                        options.samples_per_sphere)
+            points, inside, depth, point_volume = volume_sample(triangles)
+            try:
+                volume = blocker_fit.VolumeFit(name, points, inside, depth, point_volume,
+                                               count=int(count) if count is not None else None,
+                                               error_target=options.fit_error, max_count=options.spheres,
+                                               moments=blocker_fit.mesh_moments(triangles))
+            except ValueError as e:
+                raise ExportError(str(e)) from None
+            fit = blocker_fit.ObjectSpheres(name, volume, matrix, local)
             fits[key] = fit
-        centres, radii = fit.spheres(triangles)
-        spheres += [{"center": [float(v) for v in c], "radius": float(r)} for c, r in zip(centres, radii)]
-        reports.append((fit.name, len(radii), fit_error(fit, triangles, centres, radii)))
+            reports.append((name, fit.count, fit.error))
+        centres, radii = fit.spheres(matrix)
+        object_id = object_index.get(original.name, 0)
+        spheres += [{"center": [float(v) for v in c], "radius": float(r), "object": object_id}
+                    for c, r in zip(centres, radii)]
     report_fit_errors(reports, frame, log)
     return spheres
 
 
-def fit_error(fit, triangles, centres, radii):
-    """The two ways a union of spheres can miss its mesh, as (coverage, mean reach, max
-    reach, size): the fraction of fresh surface samples inside the union (1 when no light
-    leaks through), and the distances from the union's boundary points that lie outside
-    the mesh to the mesh surface (how far the blocker is fatter than the object), read
-    against the object's size (bounding-box diagonal)."""
-    surface = fit.surface_points(triangles)
-    inside = (np.linalg.norm(surface[:, None, :] - centres[None], axis=2) <= radii[None] * (1 + 1e-9)).any(axis=1)
-    vertices = triangles.reshape(-1, 3)
-    tree = BVHTree.FromPolygons([tuple(v) for v in vertices], [(3 * i, 3 * i + 1, 3 * i + 2) for i in range(len(triangles))])
-    outside = []
-    for p in blocker_fit.union_boundary_points(centres, radii):
-        location, normal, _, distance = tree.find_nearest(mathutils.Vector(p))
-        if location is not None and (mathutils.Vector(p) - location).dot(normal) > 0:
-            outside.append(distance)
-    size = float(np.linalg.norm(np.ptp(vertices, axis=0)))
-    mean, worst = (float(np.mean(outside)), float(np.max(outside))) if outside else (0.0, 0.0)
-    return float(inside.mean()), mean, worst, size
-
-
 def report_fit_errors(reports, frame, log):
+    """Each new fit's sphere count and its error: the volume of the symmetric difference
+    between the spheres' union and the mesh, relative to the mesh's volume."""
     if not reports:
         return
     if len(reports) <= 12:
-        for name, count, (coverage, mean, worst, size) in reports:
-            log(f"frame {frame}: {name}: {count} spheres hold {100 * coverage:.1f}% of its surface and reach "
-                f"{mean:.3g} (mean) and {worst:.3g} (max) beyond it, {100 * mean / size:.1f}% and "
-                f"{100 * worst / size:.1f}% of its size {size:.3g}")
+        for name, count, error in reports:
+            log(f"frame {frame}: {name}: {count} sphere(s), volume error {100 * error:.1f}%")
     else:
-        coverage = np.array([c for _, _, (c, _, _, _) in reports])
-        relative = np.array([[m / s, w / s] for _, _, (_, m, w, s) in reports])
-        worst = reports[int(np.argmax(relative[:, 1]))][0]
-        log(f"frame {frame}: {len(reports)} objects, {sum(c for _, c, _ in reports)} spheres hold "
-            f"{100 * coverage.mean():.1f}% of their surfaces (least {100 * coverage.min():.1f}%); they reach "
-            f"{100 * relative[:, 0].mean():.1f}% of an object's size beyond it on average, "
-            f"{100 * relative[:, 1].max():.1f}% at worst ({worst})")
+        errors = np.array([e for _, _, e in reports])
+        worst = reports[int(np.argmax(errors))][0]
+        log(f"frame {frame}: {len(reports)} objects fitted with {sum(c for _, c, _ in reports)} spheres; volume error "
+            f"{100 * errors.mean():.1f}% on average, {100 * errors.max():.1f}% at worst ({worst})")
 
 
 def export_heightmap(terrain, depsgraph, out, options, log):
@@ -665,6 +687,7 @@ def write_reflection(scene, depsgraph, camera, index_of, water, path):
     position = np.zeros((h, w, 3), dtype=np.float32)
     normal = np.zeros((h, w, 3), dtype=np.float32)
     index = np.zeros((h, w), dtype=np.float32)
+    objects = np.zeros((h, w), dtype=np.float32)
     scale = max(1.0, origin.length)
     for y in range(h):
         for x in range(w):
@@ -683,7 +706,8 @@ def write_reflection(scene, depsgraph, camera, index_of, water, path):
             n, material = lookup.at(obj, face, location, matrix, mirror)
             position[y, x], normal[y, x] = location, n
             index[y, x] = index_of.get(material, 0)
-    channels = {"ViewLayer.IndexMA.X": index}
+            objects[y, x] = obj.original.pass_index
+    channels = {"ViewLayer.IndexMA.X": index, "ViewLayer.IndexOB.X": objects}
     for k, axis in enumerate("XYZ"):
         channels[f"ViewLayer.Position.{axis}"] = position[..., k]
         channels[f"ViewLayer.Normal.{axis}"] = normal[..., k]

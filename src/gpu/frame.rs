@@ -4,7 +4,7 @@
 
 use super::device::{entry, PassTimer};
 use super::layout::{
-    GpuLevel, GpuPoint, GpuShaded, GpuSphere, GpuStep, ShadeParams, FEATURE_BLOCKERS, FEATURE_HEIGHTFIELD,
+    GpuBlockerNode, GpuLevel, GpuPoint, GpuShaded, GpuStep, ShadeParams, FEATURE_BLOCKERS, FEATURE_HEIGHTFIELD,
     FEATURE_PHONG, SLOT_NONE, SLOT_UNKNOWN, WORKGROUP_SIZE,
 };
 use super::program::{Features, MarchShape, ShadeProgram, Specialisation, LAVAPIPE_LOOP_LIMIT};
@@ -274,21 +274,29 @@ impl Gpu {
         })
     }
 
-    /// The program's tables and material slots, and the frame's spheres.
+    /// The program's tables and material slots, and the frame's blocker tree.
     fn upload_inputs(&self, plan: &FramePlan, program: &ShadeProgram) -> Result<[wgpu::Buffer; 3], GpuError> {
-        let mut spheres: Vec<GpuSphere> = plan
-            .frame
+        let vec4 = |s: &crate::scene::Sphere| [s.center[0], s.center[1], s.center[2], s.radius].map(|v| v as f32);
+        let mut nodes: Vec<GpuBlockerNode> = plan
             .blockers
+            .nodes
             .iter()
-            .map(|s| GpuSphere { centre_radius: [s.center[0], s.center[1], s.center[2], s.radius].map(|v| v as f32) })
+            .map(|node| GpuBlockerNode {
+                bounds: vec4(&node.bounds),
+                equivalent: vec4(&node.equivalent),
+                skip: node.skip,
+                leaf: node.leaf as u32,
+                object: node.equivalent.object,
+                pad: 0,
+            })
             .collect();
-        if spheres.is_empty() {
-            spheres.push(GpuSphere::default());
+        if nodes.is_empty() {
+            nodes.push(GpuBlockerNode::default());
         }
         Ok([
             self.storage("tables", bytemuck::cast_slice(&program.tables))?,
             self.storage("materials", bytemuck::cast_slice(&program.materials))?,
-            self.storage("spheres", bytemuck::cast_slice(&spheres))?,
+            self.storage("blocker tree", bytemuck::cast_slice(&nodes))?,
         ])
     }
 
@@ -358,7 +366,7 @@ fn frame_params(plan: &FramePlan, program: &ShadeProgram) -> ShadeParams {
     let settings = &plan.settings;
     ShadeParams {
         point_count: 0,
-        sphere_count: plan.frame.blockers.len() as u32,
+        node_count: plan.blockers.nodes.len() as u32,
         log_epsilon: settings.epsilon.ln() as f32,
         hyb_threshold: settings.hyb_threshold as f32,
         heightfield_rect: rect,
@@ -368,6 +376,8 @@ fn frame_params(plan: &FramePlan, program: &ShadeProgram) -> ShadeParams {
         order: settings.order as u32,
         coefficient_count: (settings.order * settings.order) as u32,
         nodes: program.nodes as u32,
+        cluster_ratio: settings.cluster_ratio as f32,
+        ..Default::default()
     }
 }
 
@@ -390,7 +400,7 @@ fn pack_tile(prepared: &PreparedFrame, start: usize, points: &mut [GpuPoint], wo
                 let vec4 = |v: [f64; 3], w: f32| [v[0] as f32, v[1] as f32, v[2] as f32, w];
                 *point = GpuPoint {
                     position_slot: vec4(p.position, f32::from_bits(slot)),
-                    normal: vec4(p.normal, 0.0),
+                    normal: vec4(p.normal, f32::from_bits(p.object)),
                     reflected: vec4(reflect_view(p.view_origin, p.position, p.normal), 0.0),
                 };
             }

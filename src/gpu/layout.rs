@@ -58,8 +58,8 @@ gpu_struct! {
     ShadeParams {
         /// Shading points in this tile.
         point_count: u32,
-        /// Sphere blockers of the frame.
-        sphere_count: u32,
+        /// Nodes of the frame's blocker tree ([`crate::shade::blocker_tree`]).
+        node_count: u32,
         /// `log(eps)` of the visibility terms (paper 000, Eq. 7).
         log_epsilon: f32,
         /// HYB's scaling threshold on `|f^|`.
@@ -74,6 +74,11 @@ gpu_struct! {
         order: u32,
         coefficient_count: u32,
         nodes: u32,
+        /// [`crate::shade::ShadingSettings::cluster_ratio`].
+        cluster_ratio: f32,
+        pad0: u32,
+        pad1: u32,
+        pad2: u32,
     }
 }
 
@@ -83,7 +88,7 @@ gpu_struct! {
         /// World position (xyz) and the material slot's bits (w): a slot of the material
         /// table, [`SLOT_NONE`] or [`SLOT_UNKNOWN`].
         position_slot: [f32; 4],
-        /// Unit normal (xyz).
+        /// Unit normal (xyz) and the bits of the object index (w).
         normal: [f32; 4],
         /// The view direction mirrored about the normal (xyz): the Phong lobe's axis.
         reflected: [f32; 4],
@@ -104,10 +109,19 @@ gpu_struct! {
 }
 
 gpu_struct! {
-    /// One sphere blocker.
-    GpuSphere {
-        /// Centre (xyz) and radius (w).
-        centre_radius: [f32; 4],
+    /// One node of the blocker tree ([`crate::shade::blocker_tree::BlockerNode`]).
+    GpuBlockerNode {
+        /// Bounding sphere: centre (xyz) and radius (w).
+        bounds: [f32; 4],
+        /// The subtree seen as one sphere (a leaf's own sphere).
+        equivalent: [f32; 4],
+        /// The node after this subtree.
+        skip: u32,
+        /// 1 for a leaf.
+        leaf: u32,
+        /// Object index of the equivalent sphere (0: none).
+        object: u32,
+        pad: u32,
     }
 }
 
@@ -202,7 +216,7 @@ pub fn wgsl_declarations() -> String {
         ShadeParams::wgsl(),
         GpuPoint::wgsl(),
         GpuShaded::wgsl(),
-        GpuSphere::wgsl(),
+        GpuBlockerNode::wgsl(),
         GpuMaterial::wgsl(),
         GpuLevel::wgsl(),
         GpuStep::wgsl(),
@@ -257,18 +271,22 @@ mod tests {
         check::<ShadeParams>(&offsets!(
             ShadeParams,
             point_count,
-            sphere_count,
+            node_count,
             log_epsilon,
             hyb_threshold,
             heightfield_rect,
             feature_bits,
             order,
             coefficient_count,
-            nodes
+            nodes,
+            cluster_ratio,
+            pad0,
+            pad1,
+            pad2
         ));
         check::<GpuPoint>(&offsets!(GpuPoint, position_slot, normal, reflected));
         check::<GpuShaded>(&offsets!(GpuShaded, diffuse, specular, visibility));
-        check::<GpuSphere>(&offsets!(GpuSphere, centre_radius));
+        check::<GpuBlockerNode>(&offsets!(GpuBlockerNode, bounds, equivalent, skip, leaf, object, pad));
         check::<GpuMaterial>(&offsets!(GpuMaterial, albedo, specular, kind, phong_lobe, pad0, pad1));
         check::<GpuLevel>(&offsets!(GpuLevel, offset, columns, rows, pad));
         check::<GpuStep>(&offsets!(GpuStep, distance, inv_distance, level, pad));

@@ -140,6 +140,7 @@ pub struct ShadeProgram {
     exp: ExpMethod,
     march: Option<MarchShape>,
     tensor_entries: usize,
+    overlap_floor: bool,
 }
 
 impl ShadeProgram {
@@ -156,6 +157,7 @@ impl ShadeProgram {
             slots: tables.slots,
             nodes: tables.nodes,
             order: kernel.order,
+            overlap_floor: kernel.overlap_floor,
             exp: kernel.exp.method,
             march,
             tensor_entries: kernel.exp.tensor.as_ref().map_or(0, |t| t.entry_count()),
@@ -359,6 +361,9 @@ fn prelude(kernel: &ShadingKernel<f32>, features: Features, march: Option<MarchS
         ("GENERIC", Bool(generic)),
         ("TANGENT_OCCLUSION", Bool(kernel.tangent_occlusion)),
         ("RATIO_ATTENUATION", Bool(kernel.ratio_attenuation)),
+        ("OVERLAP_FLOOR", Bool(kernel.overlap_floor)),
+        ("OWN_SPHERE_REACH", F32(crate::logsh::OWN_SPHERE_REACH)),
+        ("NEGLIGIBLE_RATIO", F32(crate::shade::blocker_tree::NEGLIGIBLE_RATIO)),
         ("Y0", F32(Y0)),
         ("ONE_DC", F32(ONE_DC)),
         ("OL_FINE_NODES", U32(OL_FINE_NODES)),
@@ -420,7 +425,9 @@ impl ShadeProgram {
         let c = n * n;
         let eval_basis = n + n * (n + 1) / 2;
         let add_rotated = eval_basis + n + c;
-        let quad = self.nodes as u64 * (c.div_ceil(4) + 1);
+        // With the overlap floor, a second dot product per node for the visibility.
+        let dots = if self.overlap_floor { 2 } else { 1 };
+        let quad = self.nodes as u64 * (dots * c.div_ceil(4) + 1);
         let product = c + self.tensor_entries as u64;
         // SH-space methods blend into the quadrature near their range's end (both run).
         let exp = match self.exp {
@@ -432,7 +439,12 @@ impl ShadeProgram {
         };
         let lit = n + add_rotated + exp;
         let tangent = n + add_rotated;
-        let sphere = 1 + 2 * n + add_rotated;
+        // The blocker tree has 2 spheres - 1 nodes. Lanes that walk it in lockstep (lavapipe
+        // runs 8 invocations per SIMD thread) take different paths, and a cap's loops run
+        // at every step where any lane adds one: measured, a frame whose lanes each add far
+        // fewer caps than there are nodes still ran into the limit. So every node counts as
+        // a cap.
+        let sphere = 2 * (1 + 2 * n + add_rotated);
         let heightfield = self.march.map_or(0, |m| {
             let sample = if m.bspline_levels { 21 } else { 1 };
             let steps = m.steps as u64;

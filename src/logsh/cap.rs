@@ -61,3 +61,21 @@ pub fn view_blocker<T: Real>(
     let weight = if ratio_attenuation { ratio } else { T::one() };
     BlockerView::Cap { direction, alpha, weight }
 }
+
+/// How far from its centre, relative to its radius, a sphere of the receiver's own object
+/// still holds the receiver. The exporter's proxies approximate the object's volume
+/// (docs/design.md, "Blocker proxies"), so a pixel of the object lies near the boundary of
+/// the union of its spheres, inside some and just outside others, by up to the fit error.
+pub const OWN_SPHERE_REACH: f64 = 1.1;
+
+/// Self-shadowing rule, the same in the CPU path, the GPU path and the reference: a
+/// receiver takes no shadow from a sphere of its own object (`object != 0`) whose centre
+/// lies within [`OWN_SPHERE_REACH`] radii of it. Together with the cull of spheres behind
+/// the tangent plane, a convex object (every centre inside it, so behind every tangent
+/// plane of its surface) shades as its tangent plane says, and a concave one (a torus,
+/// Suzanne) still shadows itself through its spheres across the concavity.
+pub fn own_sphere_holds(p: [f64; 3], centre: [f64; 3], radius: f64) -> bool {
+    let d = [centre[0] - p[0], centre[1] - p[1], centre[2] - p[2]];
+    let reach = OWN_SPHERE_REACH * radius;
+    d[0] * d[0] + d[1] * d[1] + d[2] * d[2] <= reach * reach
+}

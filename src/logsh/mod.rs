@@ -7,7 +7,7 @@ pub mod slice;
 pub mod training;
 pub mod wedge;
 
-pub use cap::{cap_log_zh, cap_scale, view_blocker, BlockerView};
+pub use cap::{cap_log_zh, cap_scale, own_sphere_holds, view_blocker, BlockerView, OWN_SPHERE_REACH};
 pub use lobe::{lobe_exp_error, lobe_log_zh, lobe_log_zh_as, lobe_zh, optimal_lobe_epsilon, Lobe};
 pub use slice::nlp_slice;
 pub use training::training_log_vectors;

@@ -3,7 +3,7 @@
 //! its measured accuracy).
 
 use crate::heightfield::{brute_force_horizon, HeightField};
-use crate::logsh::Lobe;
+use crate::logsh::{own_sphere_holds, Lobe};
 use crate::scene::{Light, Sphere};
 use crate::sh::quadrature::gauss_legendre;
 use std::f64::consts::{FRAC_PI_2, PI, TAU};
@@ -156,6 +156,10 @@ impl<'a> LightModel<'a> {
 pub struct ReferenceOccluders<'a> {
     pub spheres: &'a [Sphere],
     pub field: Option<&'a HeightField>,
+    /// The receiver's object index (0: none). Its own spheres follow the fast path's
+    /// self-shadowing rule: those that hold it ([`own_sphere_holds`]) or whose centre lies
+    /// on or behind its tangent plane cast nothing on it; every other sphere is exact.
+    pub receiver_object: u32,
 }
 
 /// One BRDF term of the integrand: `scale * lobe(axis . w)`.
@@ -442,7 +446,8 @@ impl PointIntegrand<'_> {
 /// Visibility `V` is the product of: the tangent plane (`n . w > 0`: the receiver's own
 /// surface is opaque), every sphere (a ray from `p` blocked when it hits the sphere; a
 /// receiver on a sphere's surface, within [`SURFACE_BAND`], sees the half-space towards
-/// its centre; deeper inside it sees nothing), and the height field
+/// its centre; deeper inside it sees nothing; the receiver's own spheres follow
+/// [`ReferenceOccluders::receiver_object`]'s rule), and the height field
 /// (`elevation(w) > brute_force_horizon(p, azimuth(w))`, with `p` first lifted onto the
 /// bilinear surface where it lies below it).
 pub fn integrate_point(
@@ -476,6 +481,10 @@ pub fn integrate_point(
             continue;
         }
         let d = [s.center[0] - p[0], s.center[1] - p[1], s.center[2] - p[2]];
+        let own = occluders.receiver_object != 0 && s.object == occluders.receiver_object;
+        if own && (own_sphere_holds(p, s.center, s.radius) || dot(d, n) <= 0.0) {
+            continue;
+        }
         let dist = dot(d, d).sqrt();
         if dist < s.radius * (1.0 - SURFACE_BAND) {
             return PointEstimate::exact([0.0; 3]);

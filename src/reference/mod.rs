@@ -205,7 +205,7 @@ pub fn render_reference(
     let ctx = Context {
         scene,
         frame,
-        occluders: ReferenceOccluders { spheres: &frame.blockers, field: field.as_ref() },
+        occluders: ReferenceOccluders { spheres: &frame.blockers, field: field.as_ref(), receiver_object: 0 },
         light: &light,
         options,
     };
@@ -275,7 +275,8 @@ impl Context<'_> {
             ],
             Some(Material::Water { .. }) | None => Vec::new(),
         };
-        integrate_point(self.occluders, self.light, p, n, &terms, self.options.tolerance, self.options.max_level)
+        let occluders = ReferenceOccluders { receiver_object: point.object, ..self.occluders };
+        integrate_point(occluders, self.light, p, n, &terms, self.options.tolerance, self.options.max_level)
     }
 
     fn pixel(&self, x: usize, y: usize) -> ([f32; 4], PointEstimate) {

@@ -20,6 +20,18 @@ pub struct Sphere {
     pub center: [f64; 3],
     /// `>= 0`; 0 is a degenerate sphere that blocks nothing.
     pub radius: f64,
+    /// The object the sphere approximates, as the G-buffer's object index names it;
+    /// 0 (the default) for none. A receiver does not take shadow from the spheres of its
+    /// own object that hold it ([`crate::logsh::view_blocker`]).
+    #[serde(default)]
+    pub object: u32,
+}
+
+impl Sphere {
+    /// A sphere of no particular object.
+    pub fn new(center: [f64; 3], radius: f64) -> Self {
+        Self { center, radius, object: 0 }
+    }
 }
 
 #[derive(Deserialize)]
@@ -34,6 +46,16 @@ struct BlockersFile {
 pub fn read_blockers(file: &Path, frame: i64) -> Result<Vec<Sphere>, SceneError> {
     let raw: BlockersFile = read_json(file, "the sphere blockers")?;
     check_frame_key(file, raw.frame, frame)?;
+    let most = crate::shade::blocker_tree::MAX_BLOCKERS;
+    if raw.spheres.len() > most {
+        return Err(SceneError::invalid(
+            file,
+            format!(
+                "{} spheres is more than the {most} a frame may hold; merge small blockers into larger spheres",
+                raw.spheres.len()
+            ),
+        ));
+    }
     for (i, s) in raw.spheres.iter().enumerate() {
         if s.center.iter().any(|v| !v.is_finite()) {
             return Err(SceneError::NonFinite { file: file.to_path_buf(), what: format!("centre of sphere {i}") });
@@ -175,8 +197,13 @@ impl Camera {
 
 /// The blockers file contents, as the exporter writes them.
 pub fn blockers_json(frame: i64, spheres: &[Sphere]) -> serde_json::Value {
-    let list: Vec<serde_json::Value> =
-        spheres.iter().map(|s| serde_json::json!({"center": s.center, "radius": s.radius})).collect();
+    let list: Vec<serde_json::Value> = spheres
+        .iter()
+        .map(|s| match s.object {
+            0 => serde_json::json!({"center": s.center, "radius": s.radius}),
+            object => serde_json::json!({"center": s.center, "radius": s.radius, "object": object}),
+        })
+        .collect();
     serde_json::json!({"frame": frame, "spheres": list})
 }
 

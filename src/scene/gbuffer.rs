@@ -28,6 +28,7 @@ pub struct ChannelOverrides {
     pub normal: Option<[String; 3]>,
     pub uv: Option<[String; 2]>,
     pub material_index: Option<String>,
+    pub object_index: Option<String>,
 }
 
 /// The full channel names the G-buffer reader looks up.
@@ -40,6 +41,10 @@ pub struct ChannelNames {
     pub uv_required: bool,
     /// Tried in order; the first present is used.
     pub material_index: Vec<String>,
+    /// Tried in order; the first present is used. Optional unless overridden.
+    pub object_index: Vec<String>,
+    /// True when `object_index` came from an override, which makes it required.
+    pub object_index_required: bool,
 }
 
 /// Blender's default channel names for view layer `ViewLayer`.
@@ -50,6 +55,10 @@ pub const UV: [&str; 2] = ["ViewLayer.UV.U", "ViewLayer.UV.V"];
 pub const MATERIAL_INDEX_BLENDER5: &str = "ViewLayer.Material Index.X";
 /// Blender 4 name of the material index pass.
 pub const MATERIAL_INDEX_BLENDER4: &str = "ViewLayer.IndexMA.X";
+/// Blender 5 name of the object index pass.
+pub const OBJECT_INDEX_BLENDER5: &str = "ViewLayer.Object Index.X";
+/// Blender 4 name of the object index pass.
+pub const OBJECT_INDEX_BLENDER4: &str = "ViewLayer.IndexOB.X";
 
 impl Default for ChannelNames {
     fn default() -> Self {
@@ -71,6 +80,11 @@ impl ChannelNames {
                 Some(m) => vec![m],
                 None => owned(&[MATERIAL_INDEX_BLENDER5, MATERIAL_INDEX_BLENDER4]),
             },
+            object_index_required: o.object_index.is_some(),
+            object_index: match o.object_index {
+                Some(m) => vec![m],
+                None => owned(&[OBJECT_INDEX_BLENDER5, OBJECT_INDEX_BLENDER4]),
+            },
         }
     }
 }
@@ -90,6 +104,9 @@ pub struct GBuffer {
     pub uv: Option<Vec<[f32; 2]>>,
     /// Material index, 0 = background.
     pub material: Vec<u32>,
+    /// Object index (Blender's Object Index pass, the `object` of the blocker spheres),
+    /// 0 = no object; `None` when the file has no such channel.
+    pub object: Option<Vec<u32>>,
 }
 
 impl GBuffer {
@@ -120,6 +137,13 @@ impl GBuffer {
         };
         let index_name = names.material_index.iter().find(|n| exr.has(n)).unwrap_or(&names.material_index[0]).clone();
         let raw_index = exr.take(file, &index_name)?;
+        let object_name = names.object_index.iter().find(|n| exr.has(n));
+        let raw_object = match object_name {
+            Some(name) => Some(exr.take(file, &name.clone())?),
+            None if names.object_index_required => Some(exr.take(file, &names.object_index[0])?),
+            None => None,
+        };
+        let object = raw_object.map(|raw| whole_indices(file, &raw, width, "object index")).transpose()?;
 
         let mut material = Vec::with_capacity(raw_index.len());
         for (i, &value) in raw_index.iter().enumerate() {
@@ -169,6 +193,29 @@ impl GBuffer {
             }
             material.push(m);
         }
-        Ok(GBuffer { file: file.to_path_buf(), width, height, position, normal, uv, material })
+        Ok(GBuffer { file: file.to_path_buf(), width, height, position, normal, uv, material, object })
     }
+
+    /// The object index of pixel `i`, 0 when the G-buffer has none.
+    pub fn object_at(&self, i: usize) -> u32 {
+        self.object.as_ref().map_or(0, |o| o[i])
+    }
+}
+
+/// An index pass as whole numbers `>= 0`; a value off a whole number by more than 1e-3,
+/// negative or not finite is an error naming the pixel.
+fn whole_indices(file: &Path, raw: &[f32], width: usize, what: &str) -> Result<Vec<u32>, SceneError> {
+    raw.iter()
+        .enumerate()
+        .map(|(i, &value)| {
+            let rounded = value.round();
+            if !value.is_finite() || (value - rounded).abs() > 1e-3 || rounded < 0.0 || rounded > u32::MAX as f32 {
+                return Err(SceneError::invalid(
+                    file,
+                    format!("{what} {value} of pixel ({}, {}) is not a whole number >= 0", i % width, i / width),
+                ));
+            }
+            Ok(rounded as u32)
+        })
+        .collect()
 }

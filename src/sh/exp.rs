@@ -123,15 +123,35 @@ impl ExactExp {
     /// clamp bounds the result by `exp(ceiling)` times the light while leaving every
     /// node below the ceiling exact.
     pub fn exp_below<T: Real>(&self, f: &[T], ceiling: f64, out: &mut [T]) {
+        self.exp_floored(f, None, ceiling, out)
+    }
+
+    /// [`exp_below`](Self::exp_below), with the part `v` of `f` floored at `floor` at every
+    /// node when `floored = Some((v, floor))`: the node value is `f - v + max(v, floor)`.
+    /// With `v` the log visibility and `floor = log(eps)`, a direction behind several
+    /// clamped terms (overlapping caps, a cap and the tangent plane) is clamped once, as
+    /// the exact visibility `max(product of the terms, eps)` would be, instead of once per
+    /// term (paper 000, Section 4.2).
+    pub fn exp_floored<T: Real>(&self, f: &[T], floored: Option<(&[T], f64)>, ceiling: f64, out: &mut [T]) {
         let count = coefficient_count(self.order);
         let mut acc = [0.0f64; MAX_COEFFICIENTS];
         let mut f64s = [0.0f64; MAX_COEFFICIENTS];
         for (a, c) in f64s.iter_mut().zip(&f[..count]) {
             *a = c.to_f64().unwrap_or(f64::NAN);
         }
+        let mut v64s = [0.0f64; MAX_COEFFICIENTS];
+        if let Some((v, _)) = floored {
+            for (a, c) in v64s.iter_mut().zip(&v[..count]) {
+                *a = c.to_f64().unwrap_or(f64::NAN);
+            }
+        }
         for (node, w) in self.weights.iter().enumerate() {
             let y = &self.basis[node * count..(node + 1) * count];
-            let value: f64 = y.iter().zip(&f64s[..count]).map(|(a, b)| a * b).sum();
+            let mut value: f64 = y.iter().zip(&f64s[..count]).map(|(a, b)| a * b).sum();
+            if let Some((_, floor)) = floored {
+                let v: f64 = y.iter().zip(&v64s[..count]).map(|(a, b)| a * b).sum();
+                value += (floor - v).max(0.0);
+            }
             let e = w * value.min(ceiling).exp();
             for (a, b) in acc.iter_mut().zip(y) {
                 *a += e * b;

@@ -80,7 +80,8 @@ fn shade_plan<P: PixelResult>(plan: &FramePlan) -> (Vec<P>, StageTimings) {
     if pyramid.is_some() {
         timings.add_wall("pyramid", started);
     }
-    let occluders = Occluders { blockers: &plan.frame.blockers, horizons: pyramid.as_ref() };
+    let blockers = (!plan.blockers.is_empty()).then_some(&plan.blockers);
+    let occluders = Occluders { blockers, horizons: pyramid.as_ref() };
     let started = Instant::now();
     let pixels = match &plan.kernel {
         PlannedKernel::F32(kernel) => shade_pixels::<P, f32>(kernel, occluders, plan),

@@ -119,6 +119,7 @@ pub fn surface_at(buffer: &GBuffer, i: usize, view_origin: Option<[f64; 3]>, fra
         normal,
         view_origin: view_origin.unwrap_or_else(|| eye(frame, position, normal)),
         material: buffer.material[i],
+        object: buffer.object_at(i),
     }
 }
 

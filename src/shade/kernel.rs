@@ -2,12 +2,13 @@
 //! (paper 000, Sections 4-5 and Eq. 9). The CPU executor of the pipeline; the tables it
 //! holds are the ones a GPU executor uploads.
 
+use super::blocker_tree::BlockerTree;
 use super::settings::{ShadingSettings, MAX_DIRECTIONS};
 use crate::heightfield::HorizonPyramid;
 use crate::logsh::{
     cap_log_zh, lobe_log_zh_as, nlp_slice, optimal_lobe_epsilon, view_blocker, BlockerView, Lobe, WedgeOperator,
 };
-use crate::scene::{Material, Sphere};
+use crate::scene::Material;
 use crate::sh::exp::{exp_hyb_with, exp_series, ExactExp, OlTable};
 use crate::sh::{add_rotated_zonal, coefficient_count, ExpMethod, Real, TriplingTensor, MAX_COEFFICIENTS};
 use std::collections::BTreeMap;
@@ -69,22 +70,26 @@ impl Exponentiator {
     /// `out = exp*(f)` for a log function known never to exceed `ceiling` (the log of the
     /// lobe's peak); the quadrature methods clamp their nodes there
     /// ([`ExactExp::exp_below`]), the SH-space ones cannot.
-    pub fn exp<T: Real>(&self, f: &[T], ceiling: f64, out: &mut [T]) {
+    ///
+    /// With `floored = Some((v, floor))`, the quadrature floors the part `v` of `f` at
+    /// `floor` at every node ([`ExactExp::exp_floored`]); the SH-space methods cannot, and
+    /// leave it as it is.
+    pub fn exp<T: Real>(&self, f: &[T], floored: Option<(&[T], f64)>, ceiling: f64, out: &mut [T]) {
         let quadrature = self.exact.as_ref().expect("always built");
         let count = f.len();
         match self.method {
-            ExpMethod::Exact | ExpMethod::Quad => quadrature.exp_below(f, ceiling, out),
+            ExpMethod::Exact | ExpMethod::Quad => quadrature.exp_floored(f, floored, ceiling, out),
             method => {
                 let magnitude =
                     f[1..].iter().fold(0.0f64, |acc, c| acc + c.to_f64().unwrap_or(f64::INFINITY).powi(2)).sqrt();
                 let weight = quadrature_weight(method, magnitude);
                 if weight >= 1.0 {
-                    return quadrature.exp_below(f, ceiling, out);
+                    return quadrature.exp_floored(f, floored, ceiling, out);
                 }
                 self.exp_sh_space(f, out);
                 if weight > 0.0 {
                     let mut quad = [T::zero(); MAX_COEFFICIENTS];
-                    quadrature.exp_below(f, ceiling, &mut quad[..count]);
+                    quadrature.exp_floored(f, floored, ceiling, &mut quad[..count]);
                     let w = T::of(weight);
                     for (o, q) in out[..count].iter_mut().zip(&quad[..count]) {
                         *o = *o + w * (*q - *o);
@@ -151,7 +156,8 @@ pub(crate) struct MaterialLobes<T> {
 /// What occludes a frame: its sphere blockers and its height-field pyramid.
 #[derive(Clone, Copy)]
 pub struct Occluders<'a> {
-    pub blockers: &'a [Sphere],
+    /// `None` without blockers.
+    pub blockers: Option<&'a BlockerTree>,
     pub horizons: Option<&'a HorizonPyramid>,
 }
 
@@ -164,6 +170,9 @@ pub struct SurfacePoint {
     /// The eye (or, for a point seen in water, the water surface point).
     pub view_origin: [f64; 3],
     pub material: u32,
+    /// Object index (0: none); the spheres of this object that hold the point cast no
+    /// shadow on it.
+    pub object: u32,
 }
 
 /// Tables and settings for one frame's shading at precision `T`.
@@ -172,6 +181,9 @@ pub struct ShadingKernel<T> {
     pub(crate) log_epsilon: T,
     pub(crate) ratio_attenuation: bool,
     pub(crate) tangent_occlusion: bool,
+    /// Floor the log visibility at `log(eps)` per quadrature node
+    /// ([`ShadingSettings::overlap_floor`]).
+    pub(crate) overlap_floor: bool,
     pub(crate) exp: Exponentiator,
     pub(crate) wedge: Option<WedgeOperator>,
     pub(crate) diffuse: LobeTable<T>,
@@ -223,6 +235,7 @@ impl<T: Real> ShadingKernel<T> {
             log_epsilon: T::of(epsilon.ln()),
             ratio_attenuation: settings.ratio_attenuation,
             tangent_occlusion: settings.tangent_occlusion,
+            overlap_floor: settings.overlap_floor,
             exp: Exponentiator::new(order, settings.exp, settings.hyb_threshold),
             wedge: has_heightfield.then(|| WedgeOperator::new(order, settings.horizon.directions)),
             diffuse: LobeTable::new(order, Lobe::Diffuse, epsilon),
@@ -238,7 +251,9 @@ impl<T: Real> ShadingKernel<T> {
 
     /// Log visibility at `p` with unit normal `n` (Eq. 9 before exponentiation): the
     /// height field's wedges, every sphere cap in front of the tangent plane, and the
-    /// hemisphere behind the tangent plane.
+    /// hemisphere behind the tangent plane. `object` is the receiver's object index: its
+    /// own spheres that hold it are skipped ([`crate::logsh::own_sphere_holds`]); distant
+    /// clusters of spheres are one cap each ([`BlockerTree::visit`]).
     ///
     /// The tangent plane is clamped once. Without a height field (or for a receiver facing
     /// down, `n_z <= 0`) it is a hemisphere cap around `-n`. With one, every slice already
@@ -247,7 +262,7 @@ impl<T: Real> ShadingKernel<T> {
     /// own elevation along that azimuth, `atan(-(n . u_k) / n_z)`. Adding the cap on top
     /// would clamp the overlap twice (`eps^2`), which paper 000 Section 4.2 warns about and
     /// which measurably brightens unoccluded terrain (1.06 instead of 1.03 at order 4).
-    pub fn add_visibility(&self, occluders: Occluders, p: [f64; 3], n: [f64; 3], acc: &mut [T]) {
+    pub fn add_visibility(&self, occluders: Occluders, p: [f64; 3], n: [f64; 3], object: u32, acc: &mut [T]) {
         let order = self.order;
         let nt = n.map(T::of);
         let marched = match (occluders.horizons, &self.wedge) {
@@ -275,13 +290,16 @@ impl<T: Real> ShadingKernel<T> {
         }
         let pt = p.map(T::of);
         let mut zonal = [T::zero(); crate::sh::MAX_ORDER];
-        for sphere in occluders.blockers {
+        let Some(tree) = occluders.blockers else {
+            return;
+        };
+        tree.visit(p, n, object, |sphere| {
             let view = view_blocker(pt, nt, sphere.center.map(T::of), T::of(sphere.radius), self.ratio_attenuation);
             if let BlockerView::Cap { direction, alpha, weight } = view {
                 cap_log_zh(order, self.log_epsilon, alpha, &mut zonal[..order]);
                 add_rotated_zonal(order, &zonal[..order], weight, direction, acc);
             }
-        }
+        });
     }
 
     /// `exp*(visibility + lobe) . light` per colour channel, clamped at 0 (ringing of a
@@ -293,7 +311,8 @@ impl<T: Real> ShadingKernel<T> {
         f[..count].copy_from_slice(&visibility[..count]);
         add_rotated_zonal(self.order, &lobe.zonal, T::one(), axis.map(T::of), &mut f[..count]);
         let mut e = [T::zero(); MAX_COEFFICIENTS];
-        self.exp.exp(&f[..count], lobe.log_peak, &mut e[..count]);
+        let floored = self.overlap_floor.then(|| (&visibility[..count], self.log_epsilon.to_f64().unwrap_or(0.0)));
+        self.exp.exp(&f[..count], floored, lobe.log_peak, &mut e[..count]);
         let dot =
             |light: &[T]| light.iter().zip(&e[..count]).fold(T::zero(), |acc, (&l, &v)| acc + l * v).max(T::zero());
         [dot(&self.light[0]), dot(&self.light[1]), dot(&self.light[2])]
@@ -304,7 +323,7 @@ impl<T: Real> ShadingKernel<T> {
     pub fn shade(&self, occluders: Occluders, point: &SurfacePoint) -> [f32; 3] {
         let count = coefficient_count(self.order);
         let mut visibility = [T::zero(); MAX_COEFFICIENTS];
-        self.add_visibility(occluders, point.position, point.normal, &mut visibility[..count]);
+        self.add_visibility(occluders, point.position, point.normal, point.object, &mut visibility[..count]);
         let Some(lobes) = self.materials.get(&point.material) else {
             return [0.0; 3];
         };

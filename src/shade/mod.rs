@@ -1,8 +1,9 @@
 //! The per-pixel pipeline, in the order a frame meets it: [`plan`] prepares a frame once
 //! for either executor (settings, checks, height field, pyramid plan, light, kernel
-//! tables); [`frame`] says what each pixel is; [`kernel`] shades one surface point (the
+//! tables, the blockers' [`blocker_tree`]); [`frame`] says what each pixel is; [`kernel`] shades one surface point (the
 //! math both executors share); [`cpu`] is the CPU executor (the GPU one is in
 //! `src/gpu/`); [`compositing`] assembles the passes of `logsh render`.
+pub mod blocker_tree;
 pub mod compositing;
 pub mod cpu;
 pub mod frame;

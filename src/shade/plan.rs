@@ -7,6 +7,7 @@
 //! rayon and shades rows ([`super::cpu`]); the GPU filters the same plan with the same
 //! taps and composes its program from the same kernel tables (`src/gpu/`).
 
+use super::blocker_tree::BlockerTree;
 use super::frame::{check_frame, height_field, ShadeError};
 use super::kernel::ShadingKernel;
 use super::settings::{Precision, ShadingSettings};
@@ -54,6 +55,8 @@ pub struct FramePlan<'a> {
     /// `Some` when the scene has a height map.
     pub terrain: Option<Terrain>,
     pub kernel: PlannedKernel,
+    /// The frame's sphere blockers as a hierarchy.
+    pub blockers: BlockerTree,
     /// The plan's own cost, as the stage "tables".
     pub timings: StageTimings,
 }
@@ -87,8 +90,9 @@ impl<'a> FramePlan<'a> {
                 PlannedKernel::F64(ShadingKernel::new(settings, &scene.materials, &light, contents.heightfield))
             }
         };
+        let blockers = BlockerTree::new(&frame.blockers, settings.cluster_ratio);
         let mut timings = StageTimings::default();
         timings.add_wall("tables", started);
-        Ok(Self { scene, frame, settings: *settings, contents, terrain, kernel, timings })
+        Ok(Self { scene, frame, settings: *settings, contents, terrain, kernel, blockers, timings })
     }
 }

@@ -150,7 +150,7 @@ impl SynthFrame {
         self.objects
             .iter()
             .filter_map(|o| match o.shape {
-                Shape::Sphere { center, radius } => Some(Sphere { center, radius }),
+                Shape::Sphere { center, radius } => Some(Sphere::new(center, radius)),
                 _ => None,
             })
             .collect()
@@ -388,7 +388,7 @@ pub struct SphereOverPlane {
 impl Default for SphereOverPlane {
     fn default() -> Self {
         SphereOverPlane {
-            spheres: vec![Sphere { center: [0.0, 0.0, 2.0], radius: 1.0 }],
+            spheres: vec![Sphere::new([0.0, 0.0, 2.0], 1.0)],
             width: 320,
             height: 180,
             layout: GBufferLayout::Blender5,
@@ -588,7 +588,7 @@ fn dunes(options: ExampleOptions) -> SynthScene {
 /// `examples/sphere_accuracy.rs`): single spheres from close to the plane to small and
 /// high, a large offset one, and a pair whose shadows do not overlap.
 pub fn analytic_placements() -> Vec<Vec<Sphere>> {
-    let s = |center: [f64; 3], radius: f64| Sphere { center, radius };
+    let s = |center: [f64; 3], radius: f64| Sphere::new(center, radius);
     vec![
         vec![s([0.0, 0.0, 2.0], 1.0)],
         vec![s([0.0, 0.0, 1.3], 1.0)],

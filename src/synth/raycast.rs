@@ -268,6 +268,7 @@ fn gbuffer_from(width: usize, height: usize, samples: Vec<Sample>) -> GBuffer {
         normal: samples.iter().map(|s| s.1).collect(),
         uv: Some(samples.iter().map(|s| s.2).collect()),
         material: samples.iter().map(|s| s.3).collect(),
+        object: None,
     }
 }
 

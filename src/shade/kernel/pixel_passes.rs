@@ -69,7 +69,7 @@ impl<T: Real> ShadingKernel<T> {
         let count = coefficient_count(self.order);
         let (p, n) = (point.position, point.normal);
         let mut full = [T::zero(); MAX_COEFFICIENTS];
-        self.add_visibility(occluders, p, n, &mut full[..count]);
+        self.add_visibility(occluders, p, n, point.object, &mut full[..count]);
         let Some(lobes) = self.materials.get(&point.material) else {
             return PixelPasses::UNSHADED;
         };
@@ -85,13 +85,13 @@ impl<T: Real> ShadingKernel<T> {
             Material::Water { .. } => return PixelPasses::UNSHADED,
         };
 
-        let none = Occluders { blockers: &[], horizons: None };
+        let none = Occluders { blockers: None, horizons: None };
         let mut unoccluded = [T::zero(); MAX_COEFFICIENTS];
-        self.add_visibility(none, p, n, &mut unoccluded[..count]);
+        self.add_visibility(none, p, n, point.object, &mut unoccluded[..count]);
         let lit_unoccluded = self.lit(&unoccluded, &self.diffuse, n);
         let visibility = ratio(lit_diffuse, lit_unoccluded);
         let has_heightfield = occluders.horizons.is_some() && self.wedge.is_some();
-        let has_blockers = !occluders.blockers.is_empty();
+        let has_blockers = occluders.blockers.is_some();
         let (visibility_heightfield, visibility_blockers) = match (has_heightfield, has_blockers) {
             (false, false) => (1.0, 1.0),
             (true, false) => (visibility, 1.0),
@@ -99,7 +99,7 @@ impl<T: Real> ShadingKernel<T> {
             (true, true) => {
                 let spheres_only = Occluders { blockers: occluders.blockers, horizons: None };
                 let mut blockers = [T::zero(); MAX_COEFFICIENTS];
-                self.add_visibility(spheres_only, p, n, &mut blockers[..count]);
+                self.add_visibility(spheres_only, p, n, point.object, &mut blockers[..count]);
                 let mut heightfield = [T::zero(); MAX_COEFFICIENTS];
                 for i in 0..count {
                     heightfield[i] = full[i] - blockers[i] + unoccluded[i];

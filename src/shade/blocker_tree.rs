@@ -1,0 +1,238 @@
+//! The sphere blockers of a frame as a bounding-sphere hierarchy, so that a receiver's
+//! cost grows with the blockers near it rather than with all of them: distant clusters
+//! are seen as one cap (Ren et al. 2006, "Real-time Soft Shadows in Dynamic Scenes using
+//! Spherical Harmonic Exponentiation", Section 5's sphere hierarchy; paper 000's future
+//! work), clusters wholly behind the receiver's tangent plane are skipped, and caps too
+//! small to matter are dropped.
+//!
+//! The tree is flattened depth first with a skip link per node (the node after its
+//! subtree), so both executors walk it without a stack: the CPU kernel here
+//! ([`BlockerTree::visit`]) and the WGSL pass (`shaders/logsh.wgsl`, `visit_blockers`),
+//! from the same node array.
+//!
+//! What a receiver at `p` with normal `n` does at a node of bounding sphere `(c, R)`,
+//! `d = |c - p|`:
+//!
+//! - `n . (c - p) < -R`: every centre below lies behind the tangent plane, where each
+//!   sphere is culled anyway (paper 000, end of Section 4.2): skipped, exactly.
+//! - a leaf: its sphere is seen as it is.
+//! - `d > R` and `R <= cluster_ratio d` (the node spans at most about `2 cluster_ratio`
+//!   radians): one cap, of the node's equivalent sphere: centred at the children's
+//!   centres weighted by `r^2`, radius `min(sqrt(sum r^2), R)`, which keeps the summed
+//!   solid angle `pi r^2 / d^2` of disjoint distant spheres and never exceeds the cluster's
+//!   bounds (its members' overlap is then counted once, not once per member). Dropped
+//!   instead when that radius is below [`NEGLIGIBLE_RATIO`] `d`.
+//! - otherwise: its children.
+//!
+//! `cluster_ratio = 0` merges nothing: every sphere in front of the tangent plane is
+//! seen, as without the tree.
+
+use crate::logsh::own_sphere_holds;
+use crate::scene::Sphere;
+
+/// A cap whose sphere's radius is below this fraction of its distance (solid angle below
+/// `pi 0.004^2 = 5e-5` sr) is dropped when it is a cluster's: it would change an open
+/// receiver's diffuse light by less than 2e-5 at the default epsilon.
+pub const NEGLIGIBLE_RATIO: f64 = 0.004;
+
+/// Most blocker spheres a frame may hold: the tree of a million spheres takes about
+/// 100 MB, the most one GPU storage binding is guaranteed to hold (WebGPU's default
+/// 128 MiB), and about a second to build per frame on 2 cores.
+pub const MAX_BLOCKERS: usize = 1_000_000;
+
+/// One node of the flattened tree.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BlockerNode {
+    /// Bounding sphere of the subtree (for a leaf, its sphere).
+    pub bounds: Sphere,
+    /// The subtree seen from afar as one sphere (for a leaf, its sphere).
+    pub equivalent: Sphere,
+    /// Index of the node after this subtree.
+    pub skip: u32,
+    pub leaf: bool,
+}
+
+/// The hierarchy of one frame's spheres.
+#[derive(Clone, Debug, Default)]
+pub struct BlockerTree {
+    pub nodes: Vec<BlockerNode>,
+    /// Ratio of a cluster's bounding radius to its distance below which it is one cap.
+    pub cluster_ratio: f64,
+}
+
+impl BlockerTree {
+    /// Builds the tree of `spheres` by median splits along the longest axis of their
+    /// centres (`O(N log^2 N)`). Spheres of radius 0 block nothing and are left out.
+    pub fn new(spheres: &[Sphere], cluster_ratio: f64) -> Self {
+        let mut items: Vec<Sphere> = spheres.iter().copied().filter(|s| s.radius > 0.0).collect();
+        let mut nodes = Vec::with_capacity(2 * items.len());
+        if !items.is_empty() {
+            build(&mut items, &mut nodes);
+        }
+        Self { nodes, cluster_ratio }
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.nodes.is_empty()
+    }
+
+    /// Calls `see` with every sphere (or cluster's equivalent sphere) that a receiver of
+    /// object `object` at `p` with unit normal `n` sees (module doc). The receiver's own
+    /// spheres that hold it are not seen ([`own_sphere_holds`]).
+    pub fn visit(&self, p: [f64; 3], n: [f64; 3], object: u32, mut see: impl FnMut(&Sphere)) {
+        let mut i = 0;
+        while i < self.nodes.len() {
+            let node = &self.nodes[i];
+            let next = node.skip as usize;
+            let c = node.bounds.center;
+            let r = node.bounds.radius;
+            let d = [c[0] - p[0], c[1] - p[1], c[2] - p[2]];
+            if d[0] * n[0] + d[1] * n[1] + d[2] * n[2] < -r {
+                i = next;
+                continue;
+            }
+            if node.leaf {
+                let s = &node.equivalent;
+                if !(object != 0 && s.object == object && own_sphere_holds(p, s.center, s.radius)) {
+                    see(s);
+                }
+                i = next;
+                continue;
+            }
+            let distance = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+            if distance > r && r <= self.cluster_ratio * distance {
+                let e = &node.equivalent;
+                let q = [e.center[0] - p[0], e.center[1] - p[1], e.center[2] - p[2]];
+                if e.radius >= NEGLIGIBLE_RATIO * (q[0] * q[0] + q[1] * q[1] + q[2] * q[2]).sqrt() {
+                    see(e);
+                }
+                i = next;
+                continue;
+            }
+            i += 1;
+        }
+    }
+}
+
+/// Appends the subtree of `items` in depth-first order; returns its root's index.
+fn build(items: &mut [Sphere], nodes: &mut Vec<BlockerNode>) -> usize {
+    let index = nodes.len();
+    if items.len() == 1 {
+        nodes.push(BlockerNode { bounds: items[0], equivalent: items[0], skip: index as u32 + 1, leaf: true });
+        return index;
+    }
+    nodes.push(BlockerNode { bounds: items[0], equivalent: items[0], skip: 0, leaf: false });
+    let (lo, hi) = centre_bounds(items);
+    let axis = (0..3).max_by(|&a, &b| (hi[a] - lo[a]).total_cmp(&(hi[b] - lo[b]))).expect("three axes");
+    let middle = items.len() / 2;
+    items.select_nth_unstable_by(middle, |a, b| a.center[axis].total_cmp(&b.center[axis]));
+    let (left, right) = items.split_at_mut(middle);
+    let a = build(left, nodes);
+    let b = build(right, nodes);
+    let bounds = enclosing(&nodes[a].bounds, &nodes[b].bounds);
+    let equivalent = combined(&nodes[a].equivalent, &nodes[b].equivalent, bounds.radius);
+    nodes[index] = BlockerNode { bounds, equivalent, skip: nodes.len() as u32, leaf: false };
+    index
+}
+
+fn centre_bounds(items: &[Sphere]) -> ([f64; 3], [f64; 3]) {
+    let mut lo = [f64::INFINITY; 3];
+    let mut hi = [f64::NEG_INFINITY; 3];
+    for s in items {
+        for k in 0..3 {
+            lo[k] = lo[k].min(s.center[k]);
+            hi[k] = hi[k].max(s.center[k]);
+        }
+    }
+    (lo, hi)
+}
+
+/// The smallest sphere holding spheres `a` and `b`.
+fn enclosing(a: &Sphere, b: &Sphere) -> Sphere {
+    let d = [b.center[0] - a.center[0], b.center[1] - a.center[1], b.center[2] - a.center[2]];
+    let distance = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+    let object = if a.object == b.object { a.object } else { 0 };
+    if distance + b.radius <= a.radius {
+        return Sphere { object, ..*a };
+    }
+    if distance + a.radius <= b.radius {
+        return Sphere { object, ..*b };
+    }
+    let radius = 0.5 * (distance + a.radius + b.radius);
+    let t = (radius - a.radius) / distance;
+    let center = [0, 1, 2].map(|k| a.center[k] + t * d[k]);
+    Sphere { center, radius, object }
+}
+
+/// The equivalent sphere of two clusters (module doc), at most `bound` in radius.
+fn combined(a: &Sphere, b: &Sphere, bound: f64) -> Sphere {
+    let (wa, wb) = (a.radius * a.radius, b.radius * b.radius);
+    let total = wa + wb;
+    let center = [0, 1, 2].map(|k| (wa * a.center[k] + wb * b.center[k]) / total);
+    let object = if a.object == b.object { a.object } else { 0 };
+    Sphere { center, radius: total.sqrt().min(bound), object }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn cloud(count: usize) -> Vec<Sphere> {
+        let mut state = 0x2545_f491_4f6c_dd1du64;
+        let mut next = move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        (0..count).map(|_| Sphere::new([next() * 4.0 - 2.0, next() * 4.0 - 2.0, 1.0 + next()], 0.02)).collect()
+    }
+
+    #[test]
+    fn without_clusters_every_sphere_in_front_is_seen() {
+        let spheres = cloud(500);
+        let tree = BlockerTree::new(&spheres, 0.0);
+        let (p, n) = ([0.3, -0.2, 0.0], [0.0, 0.6, 0.8]);
+        let mut seen = Vec::new();
+        tree.visit(p, n, 0, |s| seen.push(*s));
+        let mut expected: Vec<Sphere> = spheres
+            .iter()
+            .copied()
+            .filter(|s| (0..3).map(|k| (s.center[k] - p[k]) * n[k]).sum::<f64>() >= -s.radius)
+            .collect();
+        let key = |s: &Sphere| (s.center[0].to_bits(), s.center[1].to_bits(), s.center[2].to_bits());
+        seen.sort_by_key(key);
+        expected.sort_by_key(key);
+        assert_eq!(seen, expected);
+    }
+
+    #[test]
+    fn distant_clusters_are_few_caps_of_the_same_solid_angle() {
+        let spheres = cloud(10_000);
+        let tree = BlockerTree::new(&spheres, 0.15);
+        let p = [0.0, 0.0, -40.0];
+        let mut seen = Vec::new();
+        tree.visit(p, [0.0, 0.0, 1.0], 0, |s| seen.push(*s));
+        assert!(seen.len() < 100, "{} caps seen", seen.len());
+        let solid_angle = |list: &[Sphere]| -> f64 {
+            list.iter()
+                .map(|s| {
+                    let d = (0..3).map(|k| (s.center[k] - p[k]).powi(2)).sum::<f64>();
+                    std::f64::consts::PI * s.radius * s.radius / d
+                })
+                .sum()
+        };
+        let (merged, all) = (solid_angle(&seen), solid_angle(&spheres));
+        assert!((merged / all - 1.0).abs() < 0.05, "merged {merged} against {all}");
+    }
+
+    #[test]
+    fn own_spheres_holding_the_receiver_are_not_seen() {
+        let mut spheres = vec![Sphere { center: [0.0, 0.0, 1.0], radius: 1.0, object: 3 }];
+        spheres.push(Sphere { center: [0.0, 0.0, 1.0], radius: 1.0, object: 4 });
+        let tree = BlockerTree::new(&spheres, 0.15);
+        let mut seen = Vec::new();
+        tree.visit([0.0, 0.0, 0.0], [0.0, 0.0, 1.0], 3, |s| seen.push(s.object));
+        assert_eq!(seen, vec![4]);
+    }
+}

@@ -1,0 +1,33 @@
+"""Fits blocker spheres to Blender's primitive meshes with the exporter's own code and
+prints, per primitive, the sphere count, the fit's volume error and the spheres, as one
+JSON object (read by `tests/blender.rs::primitives_fit_their_volume`)."""
+import json
+import os
+import sys
+
+import bpy
+import numpy as np
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "blender_scripts"))
+from logsh_exporter import blockers, exporter  # noqa: E402
+
+bpy.ops.wm.read_factory_settings(use_empty=True)
+add = {
+    "uv_sphere": lambda: bpy.ops.mesh.primitive_uv_sphere_add(radius=1.0, segments=32, ring_count=16),
+    "cube": lambda: bpy.ops.mesh.primitive_cube_add(size=2.0),
+    "cone": lambda: bpy.ops.mesh.primitive_cone_add(radius1=1.0, depth=2.0),
+    "torus": lambda: bpy.ops.mesh.primitive_torus_add(major_radius=1.0, minor_radius=0.25),
+}
+result = {}
+for name, make in add.items():
+    make()
+    obj = bpy.context.active_object
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    triangles = exporter.world_triangles(obj.evaluated_get(depsgraph), obj.matrix_world)
+    points, inside, depth, point_volume = exporter.volume_sample(triangles)
+    fit = blockers.VolumeFit(name, points, inside, depth, point_volume, moments=blockers.mesh_moments(triangles))
+    result[name] = {"count": len(fit.radii), "error": fit.error,
+                    "centres": fit.centres.tolist(), "radii": fit.radii.tolist(),
+                    "mesh_volume": blockers.mesh_moments(triangles)[0]}
+    bpy.data.objects.remove(obj)
+print(json.dumps(result))
