@@ -417,6 +417,12 @@ def world_triangles(obj_eval, matrix):
     return world[tris.reshape(-1, 3)]
 
 
+def triangle_tree(triangles):
+    """Blender's BVH over (T, 3, 3) triangles, for nearest-point and ray queries."""
+    vertices = triangles.reshape(-1, 3)
+    return BVHTree.FromPolygons([tuple(v) for v in vertices], [(3 * i, 3 * i + 1, 3 * i + 2) for i in range(len(triangles))])
+
+
 def is_flat(triangles):
     points = triangles.reshape(-1, 3)
     centred = points - points.mean(axis=0)
@@ -440,8 +446,7 @@ def volume_sample(triangles, count=16000, seed=0):
     (the side of the nearest surface point's face it lies on) and its distance to the
     surface; and the volume each point stands for."""
     points, box_volume = blocker_fit.sample_box(triangles, count, seed)
-    vertices = triangles.reshape(-1, 3)
-    tree = BVHTree.FromPolygons([tuple(v) for v in vertices], [(3 * i, 3 * i + 1, 3 * i + 2) for i in range(len(triangles))])
+    tree = triangle_tree(triangles)
     inside = np.zeros(count, dtype=bool)
     depth = np.zeros(count)
     for i, p in enumerate(points):
@@ -532,7 +537,7 @@ def export_heightmap(terrain, depsgraph, out, options, log):
     long_side = max(hi[0] - lo[0], hi[1] - lo[1])
     columns = max(2, int(round(options.heightmap_size * (hi[0] - lo[0]) / long_side)))
     rows = max(2, int(round(options.heightmap_size * (hi[1] - lo[1]) / long_side)))
-    tree = BVHTree.FromPolygons([tuple(v) for v in vertices], [(3 * i, 3 * i + 1, 3 * i + 2) for i in range(len(triangles))])
+    tree = triangle_tree(triangles)
     top = hi[2] + 1.0 + 0.01 * long_side
     heights = np.full((rows, columns), np.nan, dtype=np.float32)
     down = mathutils.Vector((0.0, 0.0, -1.0))

@@ -92,25 +92,22 @@ def camera(location, target, lens=35.0):
     return obj
 
 
-def sky_world(path, sun_direction=(0.4, -0.3, 0.6), strength=1.0, width=256):
-    """A procedural sky (zenith blue to a pale horizon, a dim ground, a soft sun) written
-    to `path` as an equirectangular EXR in Blender's orientation (first row the zenith,
-    the centre column +X) and set as the World's Environment Texture."""
+def sky_directions(width):
+    """The unit direction of every texel of a `width` x `width / 2` equirectangular map in
+    Blender's orientation (first row the zenith, the centre column +X), (rows, columns, 3)."""
     height = width // 2
     u = (np.arange(width) + 0.5) / width
     v = 1.0 - (np.arange(height) + 0.5) / height
     phi = -2.0 * np.pi * u[None, :] + np.pi
     theta = -np.pi * v[:, None] + np.pi
-    d = np.stack(np.broadcast_arrays(np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi), np.cos(theta)), axis=-1)
-    up = np.clip(d[..., 2], 0.0, 1.0)[..., None]
-    sky = (1.0 - up) * np.array([0.95, 0.95, 0.9]) + up * np.array([0.35, 0.55, 0.95])
-    ground = np.array([0.25, 0.22, 0.2])
-    rgb = np.where(d[..., 2:3] >= 0.0, sky, ground)
-    sun = np.array(sun_direction) / np.linalg.norm(sun_direction)
-    angle = np.arccos(np.clip(d @ sun, -1.0, 1.0))
-    rgb = rgb + np.exp(-(angle / 0.12) ** 2)[..., None] * np.array([6.0, 5.5, 4.5])
+    return np.stack(np.broadcast_arrays(np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi), np.cos(theta)), axis=-1)
+
+
+def environment_world(name, path, rgb, strength):
+    """Writes `rgb` (rows, columns, 3) to `path` as an EXR and makes it the World's
+    Environment Texture at `strength`."""
     write_exr(path, {c: rgb[..., k] for k, c in enumerate("RGB")})
-    world = bpy.data.worlds.new("sky")
+    world = bpy.data.worlds.new(name)
     world.use_nodes = True
     nodes = world.node_tree.nodes
     texture = nodes.new("ShaderNodeTexEnvironment")
@@ -120,6 +117,21 @@ def sky_world(path, sun_direction=(0.4, -0.3, 0.6), strength=1.0, width=256):
     world.node_tree.links.new(texture.outputs["Color"], background.inputs["Color"])
     bpy.context.scene.world = world
     return world
+
+
+def sky_world(path, sun_direction=(0.4, -0.3, 0.6), strength=1.0, width=256):
+    """A procedural sky (zenith blue to a pale horizon, a dim ground, a soft sun) written
+    to `path` as an equirectangular EXR in Blender's orientation (first row the zenith,
+    the centre column +X) and set as the World's Environment Texture."""
+    d = sky_directions(width)
+    up = np.clip(d[..., 2], 0.0, 1.0)[..., None]
+    sky = (1.0 - up) * np.array([0.95, 0.95, 0.9]) + up * np.array([0.35, 0.55, 0.95])
+    ground = np.array([0.25, 0.22, 0.2])
+    rgb = np.where(d[..., 2:3] >= 0.0, sky, ground)
+    sun = np.array(sun_direction) / np.linalg.norm(sun_direction)
+    angle = np.arccos(np.clip(d @ sun, -1.0, 1.0))
+    rgb = rgb + np.exp(-(angle / 0.12) ** 2)[..., None] * np.array([6.0, 5.5, 4.5])
+    return environment_world("sky", path, rgb, strength)
 
 
 def grey_world(value=1.0):

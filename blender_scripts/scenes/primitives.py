@@ -16,7 +16,7 @@ import os
 import bpy
 import numpy as np
 
-from common import assign, camera, empty_scene, material, parse_args, save, write_exr
+from common import assign, camera, empty_scene, environment_world, material, parse_args, save, sky_directions
 
 
 def soft_sky_world(path, bright_direction=(0.5, -0.35, 0.8), strength=1.0, width=256):
@@ -24,12 +24,7 @@ def soft_sky_world(path, bright_direction=(0.5, -0.35, 0.8), strength=1.0, width
     orientation, as `common.sky_world`) and set as the World's Environment Texture: a pale
     horizon rising smoothly to a brighter zenith, plus a broad brighter region (a Gaussian
     lobe of 0.6 rad, about 34 degrees) around `bright_direction`; a dim ground below."""
-    height = width // 2
-    u = (np.arange(width) + 0.5) / width
-    v = 1.0 - (np.arange(height) + 0.5) / height
-    phi = -2.0 * np.pi * u[None, :] + np.pi
-    theta = -np.pi * v[:, None] + np.pi
-    d = np.stack(np.broadcast_arrays(np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi), np.cos(theta)), axis=-1)
+    d = sky_directions(width)
     up = np.clip(d[..., 2], 0.0, 1.0)[..., None]
     sky = (1.0 - up) * np.array([0.25, 0.26, 0.28]) + up * np.array([0.42, 0.46, 0.52])
     ground = np.array([0.1, 0.095, 0.09])
@@ -39,17 +34,7 @@ def soft_sky_world(path, bright_direction=(0.5, -0.35, 0.8), strength=1.0, width
     bright = np.array(bright_direction) / np.linalg.norm(bright_direction)
     angle = np.arccos(np.clip(d @ bright, -1.0, 1.0))
     rgb = rgb + np.exp(-(angle / 0.6) ** 2)[..., None] * np.array([1.7, 1.6, 1.4])
-    write_exr(path, {c: rgb[..., k] for k, c in enumerate("RGB")})
-    world = bpy.data.worlds.new("soft sky")
-    world.use_nodes = True
-    nodes = world.node_tree.nodes
-    texture = nodes.new("ShaderNodeTexEnvironment")
-    texture.image = bpy.data.images.load(path)
-    background = nodes["Background"]
-    background.inputs["Strength"].default_value = strength
-    world.node_tree.links.new(texture.outputs["Color"], background.inputs["Color"])
-    bpy.context.scene.world = world
-    return world
+    return environment_world("soft sky", path, rgb, strength)
 
 
 def diffuse(name, colour):

@@ -178,13 +178,8 @@ mod tests {
     use super::*;
 
     fn cloud(count: usize) -> Vec<Sphere> {
-        let mut state = 0x2545_f491_4f6c_dd1du64;
-        let mut next = move || {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            (state >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut rng = crate::logsh::training::SplitMix(0x2545_f491_4f6c_dd1d);
+        let mut next = move || rng.next();
         (0..count).map(|_| Sphere::new([next() * 4.0 - 2.0, next() * 4.0 - 2.0, 1.0 + next()], 0.02)).collect()
     }
 
