@@ -7,19 +7,24 @@
 //!
 //!     cargo run --release --example cycles_compare -- gbuffers/dunes gbuffers/wrecking_ball
 //!
+//! With `--reference TOLERANCE`, also the ground-truth renderer (`logsh reference`: exact
+//! visibility of the same proxies, the environment importance-sampled to `TOLERANCE`):
+//! the proxy floor, what the sphere proxies alone cost against the meshes.
+//!
 //! With `--noise DIR`, the same measure between the stored render and a second one of the
 //! same scene with another seed, `DIR/<scene name>/cycles.NNNN.exr`
 //! (`render_cycles.py --seed 1`): the Cycles noise floor under these figures.
 //!
 //! Error: mean over non-background pixels and over R, G, B of |logsh - Cycles| divided by
 //! the unoccluded value, the radiance an open, upward-facing white diffuse floor receives
-//! from the scene's light (`(1/pi) * integral of L max(w.z, 0)`), so that 0.01 reads as
+//! from the scene's light and suns (`(1/pi) * integral of L max(w.z, 0)`), so that 0.01 reads as
 //! 1% of an unshadowed white floor whatever the light's brightness. Albedo is not divided
 //! out: both renders carry the same albedo, and dividing would blow up dark materials and
 //! mix the diffuse and specular parts of Phong pixels. Also printed: the 95th percentile
 //! and the mean signed difference (positive: logsh brighter).
 
 use exr::prelude::read_first_rgba_layer_from_file;
+use logsh::reference::{render_reference, ReferenceOptions};
 use logsh::scene::{Light, Scene};
 use logsh::shade::shade_frame;
 use logsh::shade::{Quality, ShadingSettings};
@@ -72,9 +77,14 @@ fn main() {
         args.drain(i..i + 2);
         dir
     });
+    let reference_tolerance = args.iter().position(|a| a == "--reference").map(|i| {
+        let tolerance: f64 = args.get(i + 1).and_then(|t| t.parse().ok()).expect("--reference needs a tolerance");
+        args.drain(i..i + 2);
+        tolerance
+    });
     let dirs: Vec<PathBuf> = args.into_iter().map(PathBuf::from).collect();
     if dirs.is_empty() {
-        eprintln!("usage: cycles_compare [--noise DIR] SCENE_DIR...");
+        eprintln!("usage: cycles_compare [--noise DIR] [--reference TOLERANCE] SCENE_DIR...");
         std::process::exit(2);
     }
     println!("| scene | settings | pixels | mean abs error | p95 | mean signed |");
@@ -93,7 +103,15 @@ fn main() {
         let number = scene.default_frame();
         let frame = scene.frame(number).unwrap_or_else(|e| panic!("{e}"));
         let (width, height, cycles) = read_rgb(&dir.join(format!("cycles.{number:04}.exr")));
-        let unoccluded = unoccluded_value(&frame.light);
+        let mut unoccluded = unoccluded_value(&frame.light);
+        for sun in &frame.suns {
+            // A sun's disk on an open, upward-facing white floor: its irradiance times the
+            // cosine at the disk's centre (exact to 2e-5 for a disk a degree wide), over pi.
+            let power = sun.disk_integral();
+            for k in 0..3 {
+                unoccluded[k] += power[k] * sun.direction[2].max(0.0) / std::f64::consts::PI;
+            }
+        }
         eprintln!("{}: frame {number}, unoccluded value {unoccluded:.3?}", dir.display());
         let scene_name =
             dir.file_name().map_or_else(|| dir.display().to_string(), |n| n.to_string_lossy().into_owned());
@@ -107,6 +125,20 @@ fn main() {
                 dir.display()
             );
             images.push((name.to_string(), shaded.rgba.iter().map(|p| [p[0], p[1], p[2]]).collect()));
+        }
+        if let Some(tolerance) = reference_tolerance {
+            let options = ReferenceOptions { tolerance, ..Default::default() };
+            let started = std::time::Instant::now();
+            let truth = render_reference(&scene, &frame, &options, &|_| {}).unwrap_or_else(|e| panic!("{e}"));
+            eprintln!(
+                "{}: reference ({:?}) {:.1} s, {} pixel(s) above the tolerance {tolerance}",
+                dir.display(),
+                truth.integration,
+                started.elapsed().as_secs_f64(),
+                truth.unconverged_pixels
+            );
+            let name = "reference (exact visibility of the proxies)".to_string();
+            images.push((name, truth.rgba.iter().map(|p| [p[0], p[1], p[2]]).collect()));
         }
         if let Some(noise) = &noise {
             let (_, _, second) = read_rgb(&noise.join(&scene_name).join(format!("cycles.{number:04}.exr")));

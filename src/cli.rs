@@ -3,6 +3,7 @@
 
 pub use crate::executor::DeviceChoice;
 pub use crate::gpu::Specialisation;
+pub use crate::reference::Integration;
 use crate::scene::output::SampleType;
 use crate::sh::ExpMethod;
 use crate::shade::{default_epsilon, Precision, Quality, SettingsError, ShadingSettings};
@@ -54,9 +55,12 @@ pub struct ReferenceArgs {
     /// Convergence target per pixel, absolute (unoccluded white floor under a white sky = 1).
     #[arg(long, default_value_t = 1e-3)]
     pub tolerance: f64,
-    /// Most refinements per pixel (each doubles the azimuthal samples).
+    /// Most refinements per pixel (each doubles the meridians or the samples).
     #[arg(long, default_value_t = 6)]
     pub max_level: u32,
+    /// How each pixel is integrated: `sampled` (importance sampling of the map and the BRDF, exact visibility; statistical error estimate), `meridians` (deterministic, slow under a map), `auto` (meridians under a constant light, sampled otherwise).
+    #[arg(long, value_enum, default_value_t = Integration::Auto)]
+    pub integration: Integration,
 }
 
 #[derive(Args, Debug)]
@@ -75,6 +79,9 @@ pub struct SweepArgs {
     /// Convergence target of the reference, per pixel.
     #[arg(long, default_value_t = 1e-3)]
     pub tolerance: f64,
+    /// How the reference integrates each pixel (see `logsh reference --help`).
+    #[arg(long, value_enum, default_value_t = Integration::Auto)]
+    pub integration: Integration,
     /// Where the configurations are shaded (their times are that device's).
     #[arg(long, value_enum, default_value_t = DeviceChoice::Auto)]
     pub device: DeviceChoice,

@@ -84,15 +84,21 @@ pub fn reference(args: &ReferenceArgs) -> Result<()> {
         (ReferenceLight::EnvironmentMap, format!("reference.{frame_number:04}")),
         (ReferenceLight::ShProjected { order: args.sh_order }, format!("reference_sh.{frame_number:04}")),
     ] {
-        let options = ReferenceOptions { light: light.clone(), tolerance: args.tolerance, max_level: args.max_level };
+        let options = ReferenceOptions {
+            light: light.clone(),
+            integration: args.integration,
+            tolerance: args.tolerance,
+            max_level: args.max_level,
+        };
         let bar = progress_bar(height, &format!("reference ({light:?})"));
         let started = Instant::now();
         let image = render_reference(&scene, &frame, &options, &|rows| bar.set_position(rows as u64))?;
         bar.finish_and_clear();
         write_image(&scene, &args.out, &stem, image.width, image.height, &image.rgba)?;
         eprintln!(
-            "{stem}: {:?} light, {:.1} s, {} pixel(s) above the tolerance {} (largest error estimate {:.2e})",
+            "{stem}: {:?} light, {:?}, {:.1} s, {} pixel(s) above the tolerance {} (largest error estimate {:.2e})",
             light,
+            image.integration,
             started.elapsed().as_secs_f64(),
             image.unconverged_pixels,
             args.tolerance,
@@ -107,8 +113,12 @@ pub fn sweep(args: &SweepArgs) -> Result<()> {
     let scene = Scene::load(&args.scene)?;
     let frame_number = args.frame.unwrap_or_else(|| scene.default_frame());
     let frame = scene.frame(frame_number)?;
-    let options =
-        ReferenceOptions { light: ReferenceLight::EnvironmentMap, tolerance: args.tolerance, ..Default::default() };
+    let options = ReferenceOptions {
+        light: ReferenceLight::EnvironmentMap,
+        integration: args.integration,
+        tolerance: args.tolerance,
+        ..Default::default()
+    };
     let bar = progress_bar(frame.gbuffer.height, "reference");
     let reference = render_reference(&scene, &frame, &options, &|rows| bar.set_position(rows as u64))?;
     bar.finish_and_clear();

@@ -231,10 +231,89 @@ fn export_fails_clearly() {
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert!(stderr.contains("error: the scene has no camera"), "{stderr}");
 
+    // A Point lamp: logsh would leave it out, so the export stops and names it, leaving no
+    // output directory behind.
+    let blend = dir.path().join("point.blend");
+    let make = format!(
+        "import bpy; bpy.ops.wm.read_factory_settings(use_empty=True); bpy.ops.mesh.primitive_cube_add(); \
+         bpy.ops.object.camera_add(location=(6, -6, 4)); bpy.context.scene.camera = bpy.context.object; \
+         bpy.ops.object.light_add(type='POINT'); bpy.context.object.name = 'Bulb'; \
+         bpy.ops.wm.save_as_mainfile(filepath={:?})",
+        blend.to_str().unwrap()
+    );
+    assert_ok(&std::process::Command::new(&python).args(["-c", &make]).output().unwrap(), "making a .blend");
+    let output = run_python(
+        &python,
+        "blender_scripts/export_scene.py",
+        &[Path::new("--blend"), &blend, Path::new("--out"), &out],
+    );
+    assert_eq!(output.status.code(), Some(1));
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(stderr.contains("error: light \"Bulb\" is a Point lamp"), "{stderr}");
+    assert!(!out.exists(), "a failed export left {} behind", out.display());
+
     // No .blend at all.
     let output = run_python(&python, "blender_scripts/export_scene.py", &[Path::new("--out"), &out]);
     assert_eq!(output.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&output.stderr).contains("error: no .blend given"));
+}
+
+/// A Sun lamp becomes a `sun` light of scene.json (direction towards it, Angle, Strength,
+/// Color), and logsh shades the scene with it.
+#[test]
+fn sun_lamp_exports_as_a_sun_light() {
+    let Some(python) = bpy_python() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let blend = dir.path().join("sun.blend");
+    let make = format!(
+        "import bpy, math; bpy.ops.wm.read_factory_settings(use_empty=True); \
+         bpy.ops.mesh.primitive_plane_add(size=8); bpy.ops.mesh.primitive_cube_add(location=(0, 0, 1)); \
+         bpy.ops.object.camera_add(location=(7, -7, 5), rotation=(math.radians(63), 0, math.radians(45))); \
+         bpy.context.scene.camera = bpy.context.object; \
+         bpy.ops.object.light_add(type='SUN', rotation=(math.radians(40), 0, math.radians(30))); \
+         sun = bpy.context.object.data; sun.energy = 3.5; sun.angle = math.radians(2); sun.color = (1, 0.9, 0.8); \
+         w = bpy.data.worlds.new('World'); bpy.context.scene.world = w; w.use_nodes = True; \
+         w.node_tree.nodes['Background'].inputs['Color'].default_value = (0.2, 0.2, 0.2, 1); \
+         bpy.ops.wm.save_as_mainfile(filepath={:?})",
+        blend.to_str().unwrap()
+    );
+    assert_ok(&std::process::Command::new(&python).args(["-c", &make]).output().unwrap(), "making a .blend");
+    let out = dir.path().join("scene");
+    let output = run_python(
+        &python,
+        "blender_scripts/export_scene.py",
+        &[
+            Path::new("--blend"),
+            &blend,
+            Path::new("--out"),
+            &out,
+            Path::new("--resolution"),
+            Path::new("48x27"),
+            Path::new("--frames"),
+            Path::new("1-1"),
+        ],
+    );
+    assert_ok(&output, "exporting a scene with a Sun lamp");
+    let scene = Scene::load(&out).unwrap();
+    assert_eq!(scene.suns.len(), 1);
+    let sun = scene.suns[0];
+    let (a, b) = (40f64.to_radians(), 30f64.to_radians());
+    let expected = [a.sin() * b.sin(), -a.sin() * b.cos(), a.cos()];
+    for k in 0..3 {
+        assert!((sun.direction[k] - expected[k]).abs() < 1e-5, "direction {:?}, expected {expected:?}", sun.direction);
+    }
+    assert!((sun.half_angle - 1f64.to_radians()).abs() < 1e-6);
+    assert_eq!(sun.strength, 3.5);
+    assert!((sun.color[1] - 0.9).abs() < 1e-6 && (sun.color[2] - 0.8).abs() < 1e-6);
+    let shaded = dir.path().join("shaded");
+    let output = Command::cargo_bin("logsh")
+        .unwrap()
+        .args(["shade", "--device", "cpu", "--out"])
+        .arg(&shaded)
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert_ok(&output, "logsh shade");
 }
 
 /// The `dunes` sample built and exported small: the height map lies where the G-buffer

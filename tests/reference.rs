@@ -7,10 +7,10 @@
 use logsh::heightfield::HeightField;
 use logsh::logsh::Lobe;
 use logsh::reference::{
-    integrate_point, render_reference, LightModel, LobeTerm, ReferenceError, ReferenceFrame, ReferenceLight,
-    ReferenceOccluders, ReferenceOptions,
+    integrate_point, render_reference, sample_point, Integration, LightModel, LobeTerm, ReferenceError, ReferenceFrame,
+    ReferenceLight, ReferenceOccluders, ReferenceOptions, TexelSampler,
 };
-use logsh::scene::{Light, Material, Scene, Sphere};
+use logsh::scene::{EnvironmentMap, Light, Material, Scene, Sphere};
 use logsh::shade::ShadeError;
 use logsh::synth::{
     analytic_placements, example_scene, sphere_over_plane, ExampleOptions, SphereOverPlane, PLANE_MATERIAL,
@@ -19,7 +19,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
 
 fn options(tolerance: f64, max_level: u32) -> ReferenceOptions {
-    ReferenceOptions { light: ReferenceLight::EnvironmentMap, tolerance, max_level }
+    ReferenceOptions { light: ReferenceLight::EnvironmentMap, integration: Integration::Auto, tolerance, max_level }
 }
 
 fn render(scene: &Scene, frame: &logsh::scene::Frame, options: &ReferenceOptions) -> ReferenceFrame {
@@ -213,7 +213,7 @@ fn dunes_render_in_both_light_modes() {
     let sh = render(
         &scene,
         &frame,
-        &ReferenceOptions { light: ReferenceLight::ShProjected { order: 8 }, tolerance: 1e-2, max_level: 3 },
+        &ReferenceOptions { light: ReferenceLight::ShProjected { order: 8 }, ..options(1e-2, 3) },
     );
     let t_sh = start.elapsed().as_secs_f64();
     let (mut sum, mut n, mut worst, mut mean_value) = (0.0, 0usize, 0.0f64, 0.0);
@@ -273,7 +273,7 @@ fn errors_name_what_is_wrong() {
         assert!(matches!(e, ReferenceError::Options(_)), "{e}");
         println!("{e}");
     }
-    let bad = ReferenceOptions { light: ReferenceLight::ShProjected { order: 0 }, tolerance: 1e-3, max_level: 3 };
+    let bad = ReferenceOptions { light: ReferenceLight::ShProjected { order: 0 }, ..options(1e-3, 3) };
     assert!(render_reference(&scene, &frame, &bad, &|_| {}).is_err());
     // Water without a reflection G-buffer (the loader refuses that file, so edit the
     // loaded scene), and phong without a camera.
@@ -290,4 +290,101 @@ fn errors_name_what_is_wrong() {
     let e = render_reference(&phong, &no_camera, &options(1e-3, 3), &|_| {}).unwrap_err();
     println!("{e}");
     assert!(matches!(e, ReferenceError::Frame(ShadeError::PhongWithoutCamera { material: PLANE_MATERIAL, .. })), "{e}");
+}
+
+/// A 64 x 32 sky with a dim gradient, a bright warm patch 20 degrees up and a small very
+/// bright spot (the kind of feature importance sampling must find).
+fn patchy_sky() -> Light {
+    let (width, height) = (64, 32);
+    let texels = (0..width * height)
+        .map(|i| {
+            let (c, r) = (i % width, i / width);
+            let sky = 0.2 + 0.6 * (1.0 - r as f32 / height as f32);
+            if (10..14).contains(&r) && (20..28).contains(&c) {
+                [6.0, 4.0, 2.0]
+            } else if r == 6 && c == 45 {
+                [200.0, 200.0, 180.0]
+            } else {
+                [sky * 0.8, sky * 0.9, sky]
+            }
+        })
+        .collect();
+    Light::Environment { map: EnvironmentMap { file: "patchy.exr".into(), width, height, texels }, strength: 1.0 }
+}
+
+/// Importance sampling against the deterministic meridians on the same points: a map
+/// with a bright patch and spot, two spheres (one half over the patch), a diffuse and a
+/// Phong lobe, with and without a height field. The sampled value must lie within three
+/// of its own error estimates (plus the meridians' tolerance) of the meridians' value,
+/// and its estimate must be honest (not above 3e-3 at this sample budget).
+#[test]
+fn sampled_matches_meridians_under_a_map() {
+    let light = patchy_sky();
+    let model = LightModel::new(&light, &ReferenceLight::EnvironmentMap).unwrap();
+    let sampler = TexelSampler::of(&model).expect("a lit map has a sampler");
+    let spheres = [Sphere::new([0.8, -0.3, 0.9], 0.5), Sphere::new([-1.5, 1.0, 0.4], 0.4)];
+    let field =
+        field_from(33, 33, [-4.0, -4.0], [4.0, 4.0], |x, y| (if x > 2.0 { 0.8 * (x - 2.0) } else { 0.0 }) + 0.05 * y);
+    let p = [0.0, 0.0, 0.0];
+    let n = [0.1f64, -0.2, 0.97];
+    let view_reflected = [0.35f64, 0.1, 0.93];
+    let terms = [
+        LobeTerm { lobe: Lobe::Diffuse, axis: n, scale: [0.8, 0.7, 0.6] },
+        LobeTerm { lobe: Lobe::Phong { exponent: 40.0 }, axis: view_reflected, scale: [0.3, 0.3, 0.3] },
+    ];
+    for (what, field) in [("spheres", None), ("spheres and terrain", Some(&field))] {
+        let occ = ReferenceOccluders { spheres: &spheres, field, receiver_object: 0 };
+        let lifted = [p[0], p[1], field.map_or(0.0, |f| f.height_at(0.0, 0.0)) + 1e-9];
+        let start = Instant::now();
+        let exact = integrate_point(occ, &model, lifted, n, &terms, 1e-4, 8);
+        let t_exact = start.elapsed().as_secs_f64();
+        let start = Instant::now();
+        let sampled = sample_point(occ, &model, Some(&sampler), lifted, n, &terms, 1e-3, 8, 7);
+        let t_sampled = start.elapsed().as_secs_f64();
+        let worst = (0..3).map(|k| (sampled.rgb[k] - exact.rgb[k]).abs()).fold(0.0, f64::max);
+        println!(
+            "{what}: meridians {:?} ({t_exact:.2} s, {} evaluations), sampled {:?} +- {:.1e} ({t_sampled:.2} s, {} samples), |diff| {worst:.1e}",
+            exact.rgb, exact.evaluations, sampled.rgb, sampled.error, sampled.evaluations
+        );
+        assert!(exact.converged, "{what}: meridians did not converge: {exact:?}");
+        assert!(sampled.error <= 3e-3, "{what}: sampled error estimate {}", sampled.error);
+        assert!(worst <= 3.0 * sampled.error + 1e-4, "{what}: sampled off by {worst}, estimate {}", sampled.error);
+    }
+}
+
+/// The sampled integration on the analytic sphere-over-plane frames against the closed
+/// form: unbiased (mean signed error within noise) and within its estimates.
+#[test]
+fn sampled_sphere_over_plane_matches_the_closed_form() {
+    let dir = tempfile::tempdir().unwrap();
+    let spheres = analytic_placements().into_iter().nth(1).unwrap();
+    let spec = SphereOverPlane { spheres, width: 32, height: 18, ..Default::default() };
+    sphere_over_plane(dir.path(), &spec).unwrap();
+    let scene = Scene::load(dir.path()).unwrap();
+    let frame = scene.frame(1).unwrap();
+    let expected = spec.expected_image(&frame.gbuffer);
+    let sampled = ReferenceOptions { integration: Integration::Sampled, ..options(2e-3, 7) };
+    let out = render(&scene, &frame, &sampled);
+    assert_eq!(out.integration, Integration::Sampled);
+    let (mut signed, mut abs, mut n, mut outside) = (0.0, 0.0, 0usize, 0usize);
+    for ((px, e), &estimate) in out.rgba.iter().zip(&expected).zip(&out.estimated_error) {
+        if let Some(e) = e {
+            let d = px[0] as f64 - e;
+            signed += d;
+            abs += d.abs();
+            n += 1;
+            outside += usize::from(d.abs() > 2.0 * estimate as f64 + 1e-6);
+        }
+    }
+    println!(
+        "sampled sphere over plane: {n} pixels, mean signed {:.1e}, mean abs {:.1e}, {outside} beyond twice their estimate, {} unconverged",
+        signed / n as f64,
+        abs / n as f64,
+        out.unconverged_pixels
+    );
+    assert!(n > 200);
+    assert!((signed / n as f64).abs() <= 1e-4, "biased: mean signed {}", signed / n as f64);
+    assert!(abs / n as f64 <= 1.5e-3, "mean abs {}", abs / n as f64);
+    // Two standard errors cover about 95 % of pixels; allow for the estimate's own noise.
+    assert!(outside * 10 <= n, "{outside} of {n} pixels beyond twice their estimate");
 }

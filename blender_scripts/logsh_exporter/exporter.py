@@ -20,7 +20,9 @@ What is written into the output directory, per frame `####`:
   that frame (modifiers, armatures, shape keys, animation applied); see `blockers.py`.
 - `heightmap.exr`: the height field object sampled on a grid by vertical rays (frame
   `start`; the terrain is static).
-- `sky.exr` when the World uses an environment texture; `scene.json`.
+- `sky.exr` when the World uses an environment texture; `scene.json`, whose `lights`
+  holds every Sun lamp that renders (direction towards the sun, Angle, Strength, Color;
+  not animated). Any other lamp (Point, Spot, Area) stops the export with its name.
 
 Scene markup, all optional (custom properties, set in the Object or Material tab):
 
@@ -55,7 +57,9 @@ material on objects without one) is undone before `export` returns, so the add-o
 leaves the user's file as it was, and the .blend on disk is never written.
 """
 import json
+import math
 import os
+import shutil
 import time
 from dataclasses import dataclass
 
@@ -147,12 +151,14 @@ def export(scene, options, log=print):
     start, end = options.frames or (scene.frame_start, scene.frame_end)
     if start > end:
         raise ExportError(f"frame range {start}-{end} is empty")
+    created = not os.path.exists(out)
     os.makedirs(out, exist_ok=True)
 
     changes = Changes()
     frame_before = scene.frame_current
     try:
         view_layer = configure_render(scene, options, changes)
+        lights = export_lamps(scene, view_layer, start, end)
         objects = renderable_objects(scene, view_layer)
         terrain = find_heightfield(objects, options)
         table, index_of = material_table(objects, terrain, changes)
@@ -168,6 +174,11 @@ def export(scene, options, log=print):
             "materials": {str(i): m for i, m in sorted(table.items())},
             "light": export_world(scene, out, options, log),
         }
+        if lights:
+            description["lights"] = lights
+            for light in lights:
+                log(f"sun lamp: direction {[round(c, 4) for c in light['direction']]}, angle {light['angle']:.3g} deg, "
+                    f"strength {light['strength']:.4g}")
         if water:
             description["reflection_gbuffer"] = "reflection.####.exr"
 
@@ -191,6 +202,11 @@ def export(scene, options, log=print):
                 write_reflection(scene, depsgraph, camera, index_of, water, new_file(out, f"reflection.{frame:04d}.exr"))
             log(f"frame {frame}: {len(spheres)} blocker spheres, {time.time() - began:.1f} s")
         write_json(new_file(out, "scene.json"), description)
+    except BaseException:
+        if created:
+            # Only this export wrote there: leave no half-written scene behind.
+            shutil.rmtree(out, ignore_errors=True)
+        raise
     finally:
         changes.undo()
         scene.frame_set(frame_before)
@@ -263,6 +279,47 @@ def output_size(scene):
 
 
 # ---- objects and materials -------------------------------------------------------------
+
+LAMP_NAMES = {"SUN": "Sun", "POINT": "Point", "SPOT": "Spot", "AREA": "Area"}
+
+
+def export_lamps(scene, view_layer, start, end):
+    """The lamps that light the render, as scene.json's `lights`: each Sun lamp becomes a
+    `sun` (direction towards it, Blender's Angle, Strength and Color). Any other lamp stops
+    the export, naming it: a lamp left out would make every frame silently too dark."""
+    names = {o.name for o in view_layer.objects}
+    lights = []
+    for obj in scene.objects:
+        if obj.type != "LIGHT" or obj.hide_render or obj.name not in names or obj.data.energy <= 0.0:
+            continue
+        lamp = obj.data
+        kind = LAMP_NAMES.get(lamp.type, lamp.type.title())
+        if lamp.type != "SUN":
+            raise ExportError(f"light \"{obj.name}\" is a {kind} lamp; logsh shades Sun lamps and the World only. "
+                              "Replace it with a Sun lamp, or disable it in renders (Object Properties > "
+                              "Visibility) or set its Power to 0")
+        if getattr(lamp, "use_nodes", False):
+            raise ExportError(f"Sun lamp \"{obj.name}\" uses nodes; logsh reads its Strength and Color only. "
+                              "Switch Use Nodes off")
+        directions = []
+        for frame in range(start, end + 1):
+            scene.frame_set(frame)
+            axis = obj.matrix_world.to_3x3() @ mathutils.Vector((0.0, 0.0, 1.0))
+            directions.append((axis.normalized(), lamp.energy, tuple(lamp.color), lamp.angle))
+        if any((d[0] - directions[0][0]).length > 1e-6 or d[1:] != directions[0][1:] for d in directions):
+            raise ExportError(f"Sun lamp \"{obj.name}\" is animated (its direction, strength, colour or angle "
+                              f"changes within frames {start}-{end}); logsh's lights are the same for "
+                              "every frame. Export the frames in parts, or remove the animation")
+        axis, energy, color, angle = directions[0]
+        lights.append({
+            "type": "sun",
+            "direction": [float(axis.x), float(axis.y), float(axis.z)],
+            "angle": max(math.degrees(angle), 1e-3),
+            "strength": float(energy),
+            "color": [float(c) for c in color],
+        })
+    return lights
+
 
 def renderable_objects(scene, view_layer):
     """Geometry objects that render in this view layer, and the sources of instances

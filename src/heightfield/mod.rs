@@ -43,7 +43,7 @@ pub use pyramid::{
     decimation_taps, HorizonPyramid, HorizonSettings, LevelReconstruction, MarchStep, PyramidLevel, PyramidPlan,
     ScaleMax, MAX_LEVELS, MAX_STEPS,
 };
-pub use reference::brute_force_horizon;
+pub use reference::{brute_force_horizon, horizon_reaches};
 
 /// What can be wrong with a height map or with horizon settings.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -81,6 +81,8 @@ pub struct HeightField {
     rows: usize,
     min: [f64; 2],
     max: [f64; 2],
+    /// The highest sample: no point of the surface is above it.
+    highest: f64,
 }
 
 impl HeightField {
@@ -114,7 +116,8 @@ impl HeightField {
         if !rectangle_ok {
             return Err(HeightFieldError::BadRectangle { min, max });
         }
-        Ok(Self { heights, columns, rows, min, max })
+        let highest = heights.iter().fold(f64::NEG_INFINITY, |m, &h| m.max(f64::from(h)));
+        Ok(Self { heights, columns, rows, min, max, highest })
     }
 
     /// Number of samples along x.
@@ -135,6 +138,11 @@ impl HeightField {
     /// World XY of sample (last column, last row).
     pub fn max(&self) -> [f64; 2] {
         self.max
+    }
+
+    /// The highest sample, which bounds the bilinear surface and its continuation.
+    pub fn highest(&self) -> f64 {
+        self.highest
     }
 
     /// The level-0 samples, row-major.

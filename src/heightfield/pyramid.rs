@@ -438,30 +438,52 @@ impl HorizonPyramid {
             *r = self.sample_level(level, x, y);
         }
 
-        let mut omega = [0.0f64; MAX_STEPS];
         for (k, out_k) in out.iter_mut().enumerate() {
-            let dir = self.directions[k];
-            let t_far = self.far_distance(x, y, dir);
-            let mut max_tan = f64::NEG_INFINITY;
-            let mut m = 0;
-            for step in &self.steps {
-                let q = self.sample_level(step.level, x + step.distance * dir[0], y + step.distance * dir[1]);
-                let tangent = (q - receiver[step.level] - above) * step.inv_distance;
-                match self.settings.scale_max {
-                    ScaleMax::BSpline => omega[m] = tangent.atan(),
-                    ScaleMax::Steps => max_tan = max_tan.max(tangent),
-                }
-                m += 1;
-                if step.distance > t_far {
-                    break;
-                }
-            }
-            let horizon = match self.settings.scale_max {
-                ScaleMax::Steps => max_tan.atan(),
-                ScaleMax::BSpline => bspline_max(&omega[..m]),
-            };
-            *out_k = horizon.max(0.0);
+            *out_k = self.march(x, y, above, &receiver, self.directions[k]);
         }
+    }
+
+    /// The horizon elevation from `p` along one azimuth, unit `dir` in the xy plane: the
+    /// same march as [`Self::horizon_elevations`] (SN08's swath, here a single azimuth, as
+    /// its Section 6 does for a key light). 0 for a non-finite `p` or an empty pyramid.
+    pub fn horizon_along(&self, p: [f64; 3], dir: [f64; 2]) -> f64 {
+        if self.steps.is_empty() || !p.iter().chain(&dir).all(|v| v.is_finite()) {
+            return 0.0;
+        }
+        let (x, y) = (p[0], p[1]);
+        let above = (p[2] - self.height_at(x, y)).max(0.0);
+        let used_levels = self.steps.last().map_or(1, |s| s.level + 1);
+        let mut receiver = [0.0f64; MAX_LEVELS];
+        for (level, r) in receiver.iter_mut().enumerate().take(used_levels) {
+            *r = self.sample_level(level, x, y);
+        }
+        self.march(x, y, above, &receiver, dir)
+    }
+
+    /// One azimuth's march from `(x, y)`, `above` the surface, with the receiver term
+    /// per level already sampled.
+    fn march(&self, x: f64, y: f64, above: f64, receiver: &[f64; MAX_LEVELS], dir: [f64; 2]) -> f64 {
+        let mut omega = [0.0f64; MAX_STEPS];
+        let t_far = self.far_distance(x, y, dir);
+        let mut max_tan = f64::NEG_INFINITY;
+        let mut m = 0;
+        for step in &self.steps {
+            let q = self.sample_level(step.level, x + step.distance * dir[0], y + step.distance * dir[1]);
+            let tangent = (q - receiver[step.level] - above) * step.inv_distance;
+            match self.settings.scale_max {
+                ScaleMax::BSpline => omega[m] = tangent.atan(),
+                ScaleMax::Steps => max_tan = max_tan.max(tangent),
+            }
+            m += 1;
+            if step.distance > t_far {
+                break;
+            }
+        }
+        let horizon = match self.settings.scale_max {
+            ScaleMax::Steps => max_tan.atan(),
+            ScaleMax::BSpline => bspline_max(&omega[..m]),
+        };
+        horizon.max(0.0)
     }
 
     /// Ray distance after which the clamped footprint of `(x, y) + t dir` stops

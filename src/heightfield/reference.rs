@@ -29,7 +29,24 @@ use std::f64::consts::FRAC_PI_2;
 /// this azimuth is blocked). Cost: one quadratic fit per grid cell crossed, about
 /// `columns + rows` cells for a ray across the map; it allocates nothing.
 pub fn brute_force_horizon(field: &HeightField, p: [f64; 3], azimuth: f64) -> f64 {
+    horizon_up_to(field, p, azimuth, FRAC_PI_2)
+}
+
+/// Whether the exact horizon of [`brute_force_horizon`] reaches `elevation` (radians):
+/// the direction `(azimuth, elevation)` from `p` is then blocked. The same walk, stopped
+/// as soon as the answer is known: when the surface reaches the elevation, or when the
+/// ray at that elevation has climbed above the highest sample (nothing further can reach
+/// it). An upward direction from low terrain costs a few cells instead of the map.
+pub fn horizon_reaches(field: &HeightField, p: [f64; 3], azimuth: f64, elevation: f64) -> bool {
+    horizon_up_to(field, p, azimuth, elevation) >= elevation
+}
+
+/// The exact horizon while it is below `stop`; once it reaches `stop`, or once nothing
+/// further along the ray can, some value `>= stop` or the (exact) horizon so far.
+fn horizon_up_to(field: &HeightField, p: [f64; 3], azimuth: f64, stop: f64) -> f64 {
     let z = p[2];
+    // The slope of a ray at the elevation `stop`, when it climbs.
+    let climb = (stop > 0.0 && stop < FRAC_PI_2).then(|| stop.tan());
     let dir = [azimuth.cos(), azimuth.sin()];
     let at = |t: f64| field.height_at(p[0] + t * dir[0], p[1] + t * dir[1]);
 
@@ -63,11 +80,24 @@ pub fn brute_force_horizon(field: &HeightField, p: [f64; 3], azimuth: f64) -> f6
     let mut t0 = 0.0;
     let mut y0 = c0 + z;
     while t0 < t_far {
+        if best >= stop || climb.is_some_and(|k| z + t0 * k > field.highest()) {
+            return best;
+        }
         let t1 = crossings[0].peek().min(crossings[1].peek()).min(t_far);
         for c in crossings.iter_mut() {
             c.advance_past(t1);
         }
         if t1 <= t0 {
+            continue;
+        }
+        if t1 - t0 <= 1e-9 * t1 {
+            // Two grid lines crossed at the same point up to rounding: a fit through
+            // three points this close is all rounding (it once gave a horizon of 0.756
+            // where the surface reaches 0.608); only the end counts.
+            let y1 = at(t1);
+            best = best.max((y1 - z).atan2(t1));
+            t0 = t1;
+            y0 = y1;
             continue;
         }
         let tm = 0.5 * (t0 + t1);
@@ -154,5 +184,41 @@ impl LineCrossings {
             self.next += self.step;
             self.remaining -= 1;
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The early-stopping test against the full walk, over points on and above a bumpy
+    /// field and directions up, down and level with the horizon.
+    #[test]
+    fn horizon_reaches_agrees_with_the_full_walk() {
+        let (columns, rows) = (23, 17);
+        let heights: Vec<f32> = (0..columns * rows)
+            .map(|i| {
+                let (x, y) = ((i % columns) as f32, (i / columns) as f32);
+                (0.7 * x).sin() * (0.4 * y).cos() + 0.05 * x
+            })
+            .collect();
+        let field = HeightField::new(heights, columns, rows, [-3.0, -2.0], [4.0, 3.0]).unwrap();
+        let mut checked = 0;
+        for (x, y, lift) in [(0.1, 0.2, 0.0), (-2.5, 1.0, 0.0), (3.0, -1.5, 0.3), (0.7, 2.9, 2.0), (6.0, 0.0, 0.1)] {
+            let p = [x, y, field.height_at(x, y) + lift];
+            for k in 0..24 {
+                let azimuth = std::f64::consts::TAU * k as f64 / 24.0;
+                let horizon = brute_force_horizon(&field, p, azimuth);
+                for elevation in [-0.3, 0.0, 0.05, 0.2, 0.5, 1.2, horizon - 1e-9, horizon + 1e-9] {
+                    assert_eq!(
+                        horizon_reaches(&field, p, azimuth, elevation),
+                        horizon >= elevation,
+                        "p {p:?}, azimuth {azimuth}, elevation {elevation}, horizon {horizon}"
+                    );
+                    checked += 1;
+                }
+            }
+        }
+        assert_eq!(checked, 5 * 24 * 8);
     }
 }

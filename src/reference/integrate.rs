@@ -210,7 +210,7 @@ fn rules() -> &'static Rules {
     })
 }
 
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
+pub(super) fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 
@@ -224,7 +224,7 @@ fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
 }
 
 /// Two unit vectors completing `e3` to a right-handed orthonormal frame.
-fn frame_around(e3: [f64; 3]) -> ([f64; 3], [f64; 3]) {
+pub(super) fn frame_around(e3: [f64; 3]) -> ([f64; 3], [f64; 3]) {
     let helper = if e3[2].abs() < 0.9 { [0.0, 0.0, 1.0] } else { [1.0, 0.0, 0.0] };
     let e1 = unit(cross(helper, e3)).expect("helper is not parallel to e3");
     (e1, cross(e3, e1))
@@ -459,40 +459,121 @@ pub fn integrate_point(
     tolerance: f64,
     max_level: u32,
 ) -> PointEstimate {
-    let terms: Vec<LobeTerm> = terms
-        .iter()
-        .filter(|t| t.scale.iter().any(|&s| s != 0.0))
-        .filter_map(|t| unit(t.axis).map(|axis| LobeTerm { axis, ..*t }))
-        .collect();
-    if terms.is_empty() {
+    match PreparedPoint::new(occluders, p, n, terms) {
+        Ok(point) => integrate_prepared(point, light, tolerance, max_level),
+        Err(exact) => exact,
+    }
+}
+
+/// The same integral as [`integrate_point`] by importance sampling (`super::sampled`):
+/// directions drawn from `environment` (the light's texel sampler, if it has one) and from
+/// every lobe, with the same exact visibility. `seed` fixes the randomisation.
+#[allow(clippy::too_many_arguments)]
+pub fn sample_point(
+    occluders: ReferenceOccluders,
+    light: &LightModel,
+    environment: Option<&super::TexelSampler>,
+    p: [f64; 3],
+    n: [f64; 3],
+    terms: &[LobeTerm],
+    tolerance: f64,
+    max_level: u32,
+    seed: u64,
+) -> PointEstimate {
+    match PreparedPoint::new(occluders, p, n, terms) {
+        Ok(point) => super::sampled::sample_point(&point, light, environment, tolerance, max_level, seed),
+        Err(exact) => exact,
+    }
+}
+
+/// The sharp lights' part of the integral (each sun's disk, exact visibility), by
+/// sampling the disks (`super::sampled`); added to either integration's environment part.
+#[allow(clippy::too_many_arguments)]
+pub fn sample_suns(
+    occluders: ReferenceOccluders,
+    suns: &[crate::scene::SunLight],
+    p: [f64; 3],
+    n: [f64; 3],
+    terms: &[LobeTerm],
+    tolerance: f64,
+    max_level: u32,
+    seed: u64,
+) -> PointEstimate {
+    if suns.is_empty() {
         return PointEstimate::exact([0.0; 3]);
     }
-    let n = unit(n).unwrap_or([0.0, 0.0, 1.0]);
-    let mut p = p;
-    if let Some(field) = occluders.field {
-        let h = field.height_at(p[0], p[1]);
-        if p[2] < h {
-            p[2] = h;
-        }
+    match PreparedPoint::new(occluders, p, n, terms) {
+        Ok(point) => super::sampled::sample_suns(&point, suns, tolerance, max_level, seed),
+        Err(exact) => exact,
     }
-    let mut caps = Vec::with_capacity(occluders.spheres.len());
-    for s in occluders.spheres {
-        if !(s.radius > 0.0) {
-            continue;
+}
+
+/// A receiver ready to integrate: unit normal and lobe axes, the point lifted onto the
+/// height field, and the caps of the spheres that can block it.
+pub(super) struct PreparedPoint<'a> {
+    pub p: [f64; 3],
+    pub n: [f64; 3],
+    /// Cap axes and `cos(alpha)` of the spheres that block something.
+    pub caps: Vec<([f64; 3], f64)>,
+    pub terms: Vec<LobeTerm>,
+    pub field: Option<&'a HeightField>,
+}
+
+impl<'a> PreparedPoint<'a> {
+    /// `Err` holds the exact answer when there is nothing to integrate: no lobe with a
+    /// nonzero scale, or a receiver enclosed by a sphere (black).
+    fn new(
+        occluders: ReferenceOccluders<'a>,
+        p: [f64; 3],
+        n: [f64; 3],
+        terms: &[LobeTerm],
+    ) -> Result<PreparedPoint<'a>, PointEstimate> {
+        let terms: Vec<LobeTerm> = terms
+            .iter()
+            .filter(|t| t.scale.iter().any(|&s| s != 0.0))
+            .filter_map(|t| unit(t.axis).map(|axis| LobeTerm { axis, ..*t }))
+            .collect();
+        if terms.is_empty() {
+            return Err(PointEstimate::exact([0.0; 3]));
         }
-        let d = [s.center[0] - p[0], s.center[1] - p[1], s.center[2] - p[2]];
-        let own = occluders.receiver_object != 0 && s.object == occluders.receiver_object;
-        if own && (own_sphere_holds(p, s.center, s.radius) || dot(d, n) <= 0.0) {
-            continue;
+        let n = unit(n).unwrap_or([0.0, 0.0, 1.0]);
+        let mut p = p;
+        if let Some(field) = occluders.field {
+            let h = field.height_at(p[0], p[1]);
+            if p[2] < h {
+                p[2] = h;
+            }
         }
-        let dist = dot(d, d).sqrt();
-        if dist < s.radius * (1.0 - SURFACE_BAND) {
-            return PointEstimate::exact([0.0; 3]);
+        let mut caps = Vec::with_capacity(occluders.spheres.len());
+        for s in occluders.spheres {
+            if !(s.radius > 0.0) {
+                continue;
+            }
+            let d = [s.center[0] - p[0], s.center[1] - p[1], s.center[2] - p[2]];
+            let own = occluders.receiver_object != 0 && s.object == occluders.receiver_object;
+            if own && (own_sphere_holds(p, s.center, s.radius) || dot(d, n) <= 0.0) {
+                continue;
+            }
+            let dist = dot(d, d).sqrt();
+            if dist < s.radius * (1.0 - SURFACE_BAND) {
+                return Err(PointEstimate::exact([0.0; 3]));
+            }
+            let k = if dist <= s.radius { 0.0 } else { (1.0 - (s.radius / dist).powi(2)).max(0.0).sqrt() };
+            caps.push((d.map(|c| c / dist), k));
         }
-        let k = if dist <= s.radius { 0.0 } else { (1.0 - (s.radius / dist).powi(2)).max(0.0).sqrt() };
-        caps.push((d.map(|c| c / dist), k));
+        Ok(PreparedPoint { p, n, caps, terms, field: occluders.field })
     }
 
+    /// Whether unit direction `w` clears the tangent plane and every cap (the height
+    /// field is tested apart: it needs a horizon).
+    pub fn sees(&self, w: [f64; 3]) -> bool {
+        dot(self.n, w) > 0.0 && self.caps.iter().all(|&(axis, k)| dot(axis, w) <= k)
+    }
+}
+
+/// [`integrate_point`] by meridians, at a prepared point.
+fn integrate_prepared(point: PreparedPoint, light: &LightModel, tolerance: f64, max_level: u32) -> PointEstimate {
+    let PreparedPoint { p, n, caps, terms, field } = point;
     // The pole: world +Z with a height field (one horizon per meridian), else the axis of
     // the sharpest lobe (its falloff is then along the meridians, resolved by the
     // adaptive rule, and the meridian spacing only sees the rotationally symmetric part).
@@ -503,7 +584,7 @@ pub fn integrate_point(
             Lobe::Phong { exponent } => (exponent, t.axis),
         })
         .fold((0.0, n), |acc, x| if x.0 > acc.0 { x } else { acc });
-    let (e1, e2, e3) = if occluders.field.is_some() {
+    let (e1, e2, e3) = if field.is_some() {
         ([1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0])
     } else {
         let (e1, e2) = frame_around(sharpest.1);
@@ -513,7 +594,7 @@ pub fn integrate_point(
     let lobe_width = 1.18 / (sharpest.0 + 1.0).sqrt();
     let mut piece = (PI / 8.0).min(2.0 * lobe_width);
     let mut base = BASE_MERIDIANS;
-    if occluders.field.is_some() && sharpest.0 > 1.0 {
+    if field.is_some() && sharpest.0 > 1.0 {
         // Meridians about z must resolve a lobe that is off the pole.
         base = base.max((4.0 * TAU / lobe_width).ceil() as usize);
     }
@@ -535,7 +616,7 @@ pub fn integrate_point(
     let base = base.min(MAX_BASE_MERIDIANS);
     let integrand = PointIntegrand {
         light,
-        field: occluders.field,
+        field,
         p,
         n,
         caps,

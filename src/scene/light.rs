@@ -159,6 +159,34 @@ impl EnvironmentMap {
     }
 }
 
+/// Most sharp lights a scene may hold (each costs every pixel a disk test).
+pub const MAX_SUNS: usize = 16;
+
+/// A distant light of finite angular size, in Blender's Sun lamp units: a uniform disk of
+/// half-angle `half_angle` about `direction` whose irradiance on a surface facing it is
+/// `strength * color` (so its radiance is `strength color / (pi sin^2 half_angle)`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SunLight {
+    /// Unit vector towards the sun's centre.
+    pub direction: [f64; 3],
+    /// Radians, in `(0, pi/2]`.
+    pub half_angle: f64,
+    /// W/m^2 on a surface facing the sun.
+    pub strength: f32,
+    pub color: [f32; 3],
+}
+
+impl SunLight {
+    /// `integral over the disk of L dw`, RGB: radiance times the disk's solid angle,
+    /// `strength color 2 pi (1 - cos a) / (pi sin^2 a) = strength color 2 / (1 + cos a)`.
+    /// The light a surface reflects is this times the mean of `V * BRDF` over directions
+    /// spread uniformly on the disk.
+    pub fn disk_integral(&self) -> [f64; 3] {
+        let k = 2.0 / (1.0 + self.half_angle.cos()) * f64::from(self.strength);
+        self.color.map(|c| k * f64::from(c))
+    }
+}
+
 /// The scene's light, ready to be projected or evaluated.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Light {

@@ -21,6 +21,12 @@
 //! - Light: exactly one of `{"environment": path, "strength": s}` (`strength` optional,
 //!   default 1, finite and `>= 0`), `{"constant": [r, g, b]}` or `{"sh": [[r, g, b], ...]}`
 //!   with a perfect-square count of triples. See [`light`] for the map orientation.
+//! - Sharp lights: an optional list `"lights"` beside `light`, of
+//!   `{"type": "sun", "direction": [x, y, z], "angle": degrees, "strength": s, "color":
+//!   [r, g, b]}` in Blender's units: `direction` points towards the sun (any length but
+//!   0), `angle` is the disk's angular diameter (Blender's Sun "Angle", in `(0, 180]`),
+//!   `strength` the irradiance on a surface facing it (Blender's Sun "Strength", W/m^2,
+//!   finite and `>= 0`), `color` optional (default white). At most [`MAX_SUNS`].
 //! - G-buffers: see [`gbuffer`] for channel names, layouts and per-pixel checks.
 //!
 //! # Channel-name overrides
@@ -63,7 +69,7 @@ pub use camera::{Camera, Sphere};
 pub use error::{SceneError, MAX_IMAGE_PIXELS, MAX_IMAGE_SIDE};
 pub use gbuffer::{ChannelNames, GBuffer};
 pub use heightmap::HeightMap;
-pub use light::{EnvironmentMap, Light};
+pub use light::{EnvironmentMap, Light, SunLight, MAX_SUNS};
 
 use serde::Deserialize;
 use std::collections::BTreeMap;
@@ -197,6 +203,8 @@ pub struct Frame {
     pub blockers: Vec<Sphere>,
     pub height_map: Option<Arc<HeightMap>>,
     pub light: Arc<Light>,
+    /// The scene's sharp lights (`lights` in scene.json).
+    pub suns: Vec<SunLight>,
 }
 
 /// A loaded and validated `scene.json`.
@@ -213,6 +221,8 @@ pub struct Scene {
     /// Material table by index (all `>= 1`).
     pub materials: BTreeMap<u32, Material>,
     pub light_spec: LightSpec,
+    /// Sharp lights beside `light` (empty without `lights`).
+    pub suns: Vec<SunLight>,
     pub channels: ChannelNames,
     static_light: Option<Arc<Light>>,
     static_height_map: Option<Arc<HeightMap>>,
@@ -238,7 +248,19 @@ struct SceneFile {
     heightfield: Option<HeightfieldFile>,
     materials: BTreeMap<String, MaterialFile>,
     light: LightFile,
+    lights: Option<Vec<SharpLightFile>>,
     channels: Option<gbuffer::ChannelOverrides>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SharpLightFile {
+    #[serde(rename = "type")]
+    kind: String,
+    direction: Option<[f64; 3]>,
+    angle: Option<f64>,
+    strength: Option<f64>,
+    color: Option<[f64; 3]>,
 }
 
 #[derive(Deserialize)]
@@ -370,6 +392,43 @@ fn parse_material(file: &Path, key: &str, m: &MaterialFile) -> Result<(u32, Mate
     Ok((index, material))
 }
 
+fn parse_sun(file: &Path, i: usize, l: &SharpLightFile) -> Result<SunLight, SceneError> {
+    let name = format!("lights[{i}]");
+    if l.kind != "sun" {
+        return Err(SceneError::invalid(file, format!("{name}: type \"{}\" is not \"sun\"", l.kind)));
+    }
+    let missing = |key: &str| SceneError::invalid(file, format!("{name}: sun needs \"{key}\""));
+    let direction = l.direction.ok_or_else(|| missing("direction"))?;
+    let angle = l.angle.ok_or_else(|| missing("angle"))?;
+    let strength = l.strength.ok_or_else(|| missing("strength"))?;
+    if direction.iter().chain([&angle, &strength]).any(|v| !v.is_finite()) {
+        return Err(SceneError::NonFinite {
+            file: file.to_path_buf(),
+            what: format!("{name} direction, angle or strength"),
+        });
+    }
+    let length = direction.iter().map(|v| v * v).sum::<f64>().sqrt();
+    if !(length > 0.0) {
+        return Err(SceneError::invalid(file, format!("{name}: direction {direction:?} has no length")));
+    }
+    if !(angle > 0.0 && angle <= 180.0) {
+        return Err(SceneError::invalid(file, format!("{name}: angle {angle} must be in (0, 180] degrees")));
+    }
+    if strength < 0.0 {
+        return Err(SceneError::invalid(file, format!("{name}: strength {strength} must be >= 0")));
+    }
+    let color = match l.color {
+        Some(c) => colour(file, &format!("{name} color"), c)?,
+        None => [1.0; 3],
+    };
+    Ok(SunLight {
+        direction: direction.map(|v| v / length),
+        half_angle: (0.5 * angle).to_radians(),
+        strength: strength as f32,
+        color,
+    })
+}
+
 fn parse_light(file: &Path, l: &LightFile) -> Result<LightSpec, SceneError> {
     let count = l.environment.is_some() as u8 + l.constant.is_some() as u8 + l.sh.is_some() as u8;
     if count != 1 {
@@ -465,6 +524,11 @@ impl Scene {
             }
         };
         let light_spec = parse_light(&file, &raw.light)?;
+        let lights = raw.lights.unwrap_or_default();
+        if lights.len() > MAX_SUNS {
+            return Err(SceneError::invalid(&file, format!("{} lights; at most {MAX_SUNS}", lights.len())));
+        }
+        let suns = lights.iter().enumerate().map(|(i, l)| parse_sun(&file, i, l)).collect::<Result<Vec<_>, _>>()?;
         let channels = ChannelNames::from_overrides(raw.channels.as_ref());
 
         let mut scene = Scene {
@@ -477,6 +541,7 @@ impl Scene {
             heightfield,
             materials,
             light_spec,
+            suns,
             channels,
             static_light: None,
             static_height_map: None,
@@ -628,6 +693,7 @@ impl Scene {
             blockers,
             height_map: self.height_map(frame)?,
             light: self.light(frame)?,
+            suns: self.suns.clone(),
         })
     }
 

@@ -114,6 +114,53 @@ impl BlockerTree {
     }
 }
 
+impl BlockerTree {
+    /// Calls `see` with every sphere that may block some direction of the cone of unit
+    /// axis `axis` and half-angle `half_angle` from `p` (a sun's disk), never a cluster:
+    /// sharp lights need the spheres themselves. A subtree is skipped when its bounds lie
+    /// wholly behind the tangent plane of `n` or wholly outside the cone. The receiver's own
+    /// spheres follow the same rule as [`Self::visit`].
+    pub fn visit_cone(
+        &self,
+        p: [f64; 3],
+        n: [f64; 3],
+        object: u32,
+        axis: [f64; 3],
+        half_angle: f64,
+        mut see: impl FnMut(&Sphere),
+    ) {
+        let mut i = 0;
+        while i < self.nodes.len() {
+            let node = &self.nodes[i];
+            let next = node.skip as usize;
+            let c = node.bounds.center;
+            let r = node.bounds.radius;
+            let d = [c[0] - p[0], c[1] - p[1], c[2] - p[2]];
+            let distance = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+            let behind = d[0] * n[0] + d[1] * n[1] + d[2] * n[2] < -r;
+            // Outside the cone: the angle to the bounds' centre exceeds the cone's
+            // half-angle plus the bounds' own angular radius.
+            let outside = distance > r && {
+                let cos = ((d[0] * axis[0] + d[1] * axis[1] + d[2] * axis[2]) / distance).clamp(-1.0, 1.0);
+                cos.acos() > half_angle + (r / distance).asin()
+            };
+            if behind || outside {
+                i = next;
+                continue;
+            }
+            if node.leaf {
+                let s = &node.equivalent;
+                if !(object != 0 && s.object == object && own_sphere_holds(p, s.center, s.radius)) {
+                    see(s);
+                }
+                i = next;
+                continue;
+            }
+            i += 1;
+        }
+    }
+}
+
 /// Appends the subtree of `items` in depth-first order; returns its root's index.
 fn build(items: &mut [Sphere], nodes: &mut Vec<BlockerNode>) -> usize {
     let index = nodes.len();

@@ -4,11 +4,12 @@
 
 use super::blocker_tree::BlockerTree;
 use super::settings::{ShadingSettings, MAX_DIRECTIONS};
+use super::sun::SunDisk;
 use crate::heightfield::HorizonPyramid;
 use crate::logsh::{
     cap_log_zh, lobe_log_zh_as, nlp_slice, optimal_lobe_epsilon, view_blocker, BlockerView, Lobe, WedgeOperator,
 };
-use crate::scene::Material;
+use crate::scene::{Material, SunLight};
 use crate::sh::exp::{exp_hyb_with, exp_series, ExactExp, OlTable};
 use crate::sh::{add_rotated_zonal, coefficient_count, ExpMethod, Real, TriplingTensor, MAX_COEFFICIENTS};
 use std::collections::BTreeMap;
@@ -192,16 +193,19 @@ pub struct ShadingKernel<T> {
     pub(crate) materials: BTreeMap<u32, MaterialLobes<T>>,
     /// Light SH coefficients per colour channel.
     pub(crate) light: [Vec<T>; 3],
+    /// The sharp lights, shaded outside SH ([`super::sun`]).
+    pub(crate) suns: Vec<SunDisk>,
 }
 
 impl<T: Real> ShadingKernel<T> {
     /// Builds the tables. `light` holds `order^2` RGB coefficients; `has_heightfield`
-    /// decides whether the wedge operator is built at all.
+    /// decides whether the wedge operator is built at all; `suns` are the sharp lights.
     pub fn new(
         settings: &ShadingSettings,
         materials: &BTreeMap<u32, Material>,
         light: &[[f64; 3]],
         has_heightfield: bool,
+        suns: &[SunLight],
     ) -> Self {
         let order = settings.order;
         let epsilon = settings.epsilon;
@@ -242,6 +246,7 @@ impl<T: Real> ShadingKernel<T> {
             tangent,
             materials,
             light: [channel(0), channel(1), channel(2)],
+            suns: suns.iter().map(SunDisk::new).collect(),
         }
     }
 
@@ -329,19 +334,52 @@ impl<T: Real> ShadingKernel<T> {
         };
         let n = point.normal;
         let scale = |c: [T; 3], k: [f32; 3]| [0, 1, 2].map(|i| c[i].to_f32().unwrap_or(0.0) * k[i]);
-        match &lobes.material {
+        let (diffuse, glossy) = match &lobes.material {
             Material::Diffuse { albedo } | Material::Heightfield { albedo } => {
-                scale(self.lit(&visibility, &self.diffuse, n), *albedo)
+                (scale(self.lit(&visibility, &self.diffuse, n), *albedo), [0.0; 3])
             }
             Material::Phong { albedo, specular, .. } => {
                 let diffuse = scale(self.lit(&visibility, &self.diffuse, n), *albedo);
                 let phong = lobes.phong.as_ref().expect("phong materials carry their lobe");
                 let reflected = reflect_view(point.view_origin, point.position, n);
-                let glossy = scale(self.lit(&visibility, phong, reflected), *specular);
-                [0, 1, 2].map(|i| diffuse[i] + glossy[i])
+                (diffuse, scale(self.lit(&visibility, phong, reflected), *specular))
             }
-            Material::Water { .. } => [0.0; 3],
+            Material::Water { .. } => return [0.0; 3],
+        };
+        let (sun_diffuse, sun_glossy) = self.sunlit(occluders, point, &lobes.material);
+        [0, 1, 2].map(|i| (diffuse[i] + sun_diffuse[i]) + (glossy[i] + sun_glossy[i]))
+    }
+
+    /// The sharp lights' diffuse and specular radiance at `point` ([`super::sun`]), each
+    /// times the material's albedo or specular colour.
+    pub(crate) fn sunlit(
+        &self,
+        occluders: Occluders,
+        point: &SurfacePoint,
+        material: &Material,
+    ) -> ([f32; 3], [f32; 3]) {
+        let (mut diffuse, mut glossy) = ([0.0f64; 3], [0.0f64; 3]);
+        let (albedo, phong) = match material {
+            Material::Diffuse { albedo } | Material::Heightfield { albedo } => (*albedo, None),
+            Material::Phong { albedo, specular, exponent } => (*albedo, Some((*specular, *exponent))),
+            Material::Water { .. } => return ([0.0; 3], [0.0; 3]),
+        };
+        let n = point.normal;
+        for sun in &self.suns {
+            let v = sun.visibility(occluders.blockers, occluders.horizons, point.position, n, point.object);
+            let d = sun.reflected(&v, Lobe::Diffuse, n);
+            for i in 0..3 {
+                diffuse[i] += d[i] * f64::from(albedo[i]);
+            }
+            if let Some((specular, exponent)) = phong {
+                let axis = reflect_view(point.view_origin, point.position, n);
+                let g = sun.reflected(&v, Lobe::Phong { exponent: f64::from(exponent) }, axis);
+                for i in 0..3 {
+                    glossy[i] += g[i] * f64::from(specular[i]);
+                }
+            }
         }
+        (diffuse.map(|c| c as f32), glossy.map(|c| c as f32))
     }
 }
 

@@ -83,12 +83,20 @@ impl<'a> FramePlan<'a> {
         };
         let light = frame.light.sh_coefficients(settings.order);
         let kernel = match settings.precision {
-            Precision::F32 => {
-                PlannedKernel::F32(ShadingKernel::new(settings, &scene.materials, &light, contents.heightfield))
-            }
-            Precision::F64 => {
-                PlannedKernel::F64(ShadingKernel::new(settings, &scene.materials, &light, contents.heightfield))
-            }
+            Precision::F32 => PlannedKernel::F32(ShadingKernel::new(
+                settings,
+                &scene.materials,
+                &light,
+                contents.heightfield,
+                &frame.suns,
+            )),
+            Precision::F64 => PlannedKernel::F64(ShadingKernel::new(
+                settings,
+                &scene.materials,
+                &light,
+                contents.heightfield,
+                &frame.suns,
+            )),
         };
         let blockers = BlockerTree::new(&frame.blockers, settings.cluster_ratio);
         let mut timings = StageTimings::default();

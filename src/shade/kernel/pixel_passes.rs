@@ -1,8 +1,10 @@
 //! The kernel's radiance split into compositing passes, and the visibility terms
 //! (docs/design.md, "Compositing passes").
 //!
-//! The diffuse and specular terms are the very values [`ShadingKernel::shade`] sums, so
-//! `diffuse + specular` is its result bit for bit. The visibility terms are scalar
+//! The diffuse and specular terms are the very values [`ShadingKernel::shade`] sums (the
+//! sharp lights' included), so `diffuse + specular` is its result bit for bit. The
+//! visibility terms are the environment's: a sun's shadow is in the beauty and the
+//! diffuse and specular passes, not in these ratios. The visibility terms are scalar
 //! ratios, one per occluder set `x`:
 //!
 //! ```text
@@ -84,6 +86,9 @@ impl<T: Real> ShadingKernel<T> {
             }
             Material::Water { .. } => return PixelPasses::UNSHADED,
         };
+        let (sun_diffuse, sun_glossy) = self.sunlit(occluders, point, &lobes.material);
+        let diffuse = [0, 1, 2].map(|i| diffuse[i] + sun_diffuse[i]);
+        let specular = [0, 1, 2].map(|i| specular[i] + sun_glossy[i]);
 
         let none = Occluders { blockers: None, horizons: None };
         let mut unoccluded = [T::zero(); MAX_COEFFICIENTS];

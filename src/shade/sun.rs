@@ -1,0 +1,226 @@
+//! Sharp lights shaded outside SH: a sun is a disk too narrow for order-n SH (its
+//! projection rings, and exponentiated visibility blurs its shadow over tens of degrees),
+//! so it is treated apart from the environment, as SN08 (paper 004, Sections 4 and 6)
+//! treats key lights, with its own visibility per pixel.
+//!
+//! # The disk integral
+//!
+//! A sun of half-angle `a` and strength `S` reflects `disk_integral * mean(V * BRDF)`
+//! ([`SunLight::disk_integral`]), the mean taken over [`DISK_DIRECTIONS`] directions spread
+//! uniformly by solid angle over the disk (a golden-angle spiral; see [`disk_pattern`]).
+//! Each direction stands for a patch of the disk of angular radius `rho = a /
+//! sqrt(DISK_DIRECTIONS)`, and its visibility is that patch's uncovered fraction,
+//! approximated from the signed angle to the nearest occluder boundary, `clamp(1/2 +
+//! (boundary - angle) / (2 rho))` per occluder, the largest one taken (so overlapping
+//! occluders are not counted twice). Penumbrae are therefore continuous and as wide as
+//! the disk, whatever the SH order. The occluders:
+//!
+//! - the tangent plane: the boundary is elevation 0 above it;
+//! - every sphere that reaches the disk's cone, exactly (not the clusters of the
+//!   environment's hierarchy: [`BlockerTree::visit_cone`]): a cap of half-angle
+//!   `asin(r / d)` about the sphere's direction; a receiver inside a sphere sees it as the
+//!   half-space towards its centre (as the reference's surface band does); the receiver's
+//!   own spheres behind its tangent plane cast nothing (the self-shadowing rule);
+//! - the height field: its horizon marched once along the sun's azimuth
+//!   ([`HorizonPyramid::horizon_along`], SN08's single-azimuth swath), against each
+//!   direction's elevation.
+//!
+//! The BRDF is evaluated per direction (the cosine lobe, the Phong lobe), so a sun that
+//! grazes the surface or a highlight narrower than the disk is integrated, not sampled at
+//! the centre.
+
+use super::blocker_tree::BlockerTree;
+use crate::heightfield::HorizonPyramid;
+use crate::logsh::Lobe;
+use crate::scene::SunLight;
+use std::f64::consts::PI;
+
+/// Directions per sun disk (per pixel, each tested against the disk's occluders).
+pub const DISK_DIRECTIONS: usize = 32;
+
+/// Points spread uniformly over the unit disk: point `i` at radius `sqrt((i + 1/2)/K)`
+/// and angle `i` times the golden angle. Mapped to a cap by solid angle, they are
+/// uniform on it.
+pub fn disk_pattern() -> [[f64; 2]; DISK_DIRECTIONS] {
+    let golden = PI * (3.0 - 5f64.sqrt());
+    std::array::from_fn(|i| {
+        let r = ((i as f64 + 0.5) / DISK_DIRECTIONS as f64).sqrt();
+        let (s, c) = (golden * i as f64).sin_cos();
+        [r * c, r * s]
+    })
+}
+
+/// A sun prepared for shading: its disk's directions and what they integrate to.
+#[derive(Clone, Debug)]
+pub struct SunDisk {
+    pub light: SunLight,
+    /// Unit directions over the disk, uniform by solid angle.
+    pub directions: [[f64; 3]; DISK_DIRECTIONS],
+    /// Angular radius of the patch each direction stands for.
+    pub patch: f64,
+    /// Unit xy of the sun's azimuth (for the horizon), `None` for a sun at the zenith or
+    /// nadir, where every azimuth's horizon is the same to the disk.
+    pub azimuth: Option<[f64; 2]>,
+    /// [`SunLight::disk_integral`].
+    pub disk_integral: [f64; 3],
+}
+
+impl SunDisk {
+    pub fn new(light: &SunLight) -> Self {
+        let axis = light.direction;
+        let helper = if axis[2].abs() < 0.9 { [0.0, 0.0, 1.0] } else { [1.0, 0.0, 0.0] };
+        let e1 = normalised(cross(helper, axis));
+        let e2 = cross(axis, e1);
+        let one_minus_cos = 1.0 - light.half_angle.cos();
+        let directions = disk_pattern().map(|[x, y]| {
+            let r2 = x * x + y * y;
+            let cos_theta = 1.0 - one_minus_cos * r2;
+            let sin_theta = (1.0 - cos_theta * cos_theta).max(0.0).sqrt();
+            let (cos_phi, sin_phi) = if r2 > 0.0 { (x / r2.sqrt(), y / r2.sqrt()) } else { (1.0, 0.0) };
+            [0, 1, 2].map(|k| cos_theta * axis[k] + sin_theta * (cos_phi * e1[k] + sin_phi * e2[k]))
+        });
+        let horizontal = axis[0].hypot(axis[1]);
+        Self {
+            light: *light,
+            directions,
+            patch: light.half_angle / (DISK_DIRECTIONS as f64).sqrt(),
+            azimuth: (horizontal > 1e-9).then(|| [axis[0] / horizontal, axis[1] / horizontal]),
+            disk_integral: light.disk_integral(),
+        }
+    }
+
+    /// Visibility of each disk direction, in `[0, 1]`, at `p` with unit normal `n` on
+    /// object `object` (module doc).
+    pub fn visibility(
+        &self,
+        blockers: Option<&BlockerTree>,
+        horizons: Option<&HorizonPyramid>,
+        p: [f64; 3],
+        n: [f64; 3],
+        object: u32,
+    ) -> [f64; DISK_DIRECTIONS] {
+        let two_patches = 2.0 * self.patch;
+        let covered = |boundary_minus_angle: f64| (0.5 + boundary_minus_angle / two_patches).clamp(0.0, 1.0);
+        // Blocked share per direction, the largest over the occluders.
+        let mut blocked = self.directions.map(|w| covered(-dot(n, w).clamp(-1.0, 1.0).asin()));
+        if let (Some(pyramid), Some(azimuth)) = (horizons, self.azimuth) {
+            let horizon = pyramid.horizon_along(p, azimuth);
+            for (b, w) in blocked.iter_mut().zip(&self.directions) {
+                *b = b.max(covered(horizon - w[2].clamp(-1.0, 1.0).asin()));
+            }
+        }
+        if let Some(tree) = blockers {
+            tree.visit_cone(p, n, object, self.light.direction, self.light.half_angle + self.patch, |sphere| {
+                let d = [0, 1, 2].map(|k| sphere.center[k] - p[k]);
+                let distance = dot(d, d).sqrt();
+                if !(distance > 0.0) || (object != 0 && sphere.object == object && dot(d, n) <= 0.0) {
+                    return;
+                }
+                let axis = d.map(|c| c / distance);
+                let cap = if distance > sphere.radius { (sphere.radius / distance).asin() } else { PI / 2.0 };
+                for (b, w) in blocked.iter_mut().zip(&self.directions) {
+                    *b = b.max(covered(cap - dot(axis, *w).clamp(-1.0, 1.0).acos()));
+                }
+            });
+        }
+        blocked.map(|b| 1.0 - b)
+    }
+
+    /// `integral over the disk of L V lobe(axis . w) dw` for each lobe, given the disk's
+    /// visibility: `disk_integral * mean(V lobe)`, RGB.
+    pub fn reflected(&self, visibility: &[f64; DISK_DIRECTIONS], lobe: Lobe, axis: [f64; 3]) -> [f64; 3] {
+        let mean = self.directions.iter().zip(visibility).map(|(w, v)| v * lobe.value(dot(axis, *w))).sum::<f64>()
+            / DISK_DIRECTIONS as f64;
+        self.disk_integral.map(|c| c * mean)
+    }
+}
+
+fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+}
+
+fn normalised(v: [f64; 3]) -> [f64; 3] {
+    let l = dot(v, v).sqrt();
+    v.map(|c| c / l)
+}
+
+/// Solid angle of the intersection of two spherical caps of half-angles `a` and `b`
+/// whose axes are `gamma` apart (Tovchigrechko and Vakser 2001, Eq. 4; the lune formula
+/// of Mazonka 2012): the closed form the sun's disk test is checked against.
+pub fn cap_overlap(a: f64, b: f64, gamma: f64) -> f64 {
+    let cap = |x: f64| 2.0 * PI * (1.0 - x.cos());
+    if gamma >= a + b {
+        return 0.0;
+    }
+    if gamma <= (a - b).abs() {
+        return cap(a.min(b));
+    }
+    let (ca, cb, cg) = (a.cos(), b.cos(), gamma.cos());
+    let (sa, sb, sg) = (a.sin(), b.sin(), gamma.sin());
+    let clamp = |x: f64| x.clamp(-1.0, 1.0);
+    2.0 * (PI
+        - clamp((cg - ca * cb) / (sa * sb)).acos()
+        - ca * clamp((cb - cg * ca) / (sg * sa)).acos()
+        - cb * clamp((ca - cg * cb) / (sg * sb)).acos())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::Sphere;
+
+    /// The closed form against counting a fine uniform spiral of directions over cap `a`.
+    #[test]
+    fn cap_overlap_matches_counting() {
+        let count = 400_000;
+        for (a, b, gamma) in
+            [(0.3f64, 0.2, 0.35f64), (0.05, 0.5, 0.5), (0.8, 0.8, 1.2), (1.2, 0.4, 1.0), (0.1, 0.1, 0.15)]
+        {
+            let golden = PI * (3.0 - 5f64.sqrt());
+            let one_minus_cos = 1.0 - f64::cos(a);
+            let axis_b = [gamma.sin(), 0.0, gamma.cos()];
+            let inside = (0..count)
+                .filter(|&i| {
+                    let z = 1.0 - one_minus_cos * (i as f64 + 0.5) / count as f64;
+                    let s = (1.0 - z * z).sqrt();
+                    let phi = golden * i as f64;
+                    let w = [s * phi.cos(), s * phi.sin(), z];
+                    dot(w, axis_b) > f64::cos(b)
+                })
+                .count();
+            let counted = 2.0 * PI * one_minus_cos * inside as f64 / count as f64;
+            let closed = cap_overlap(a, b, gamma);
+            assert!(
+                (counted - closed).abs() < 1e-4 * 2.0 * PI * one_minus_cos + 1e-7,
+                "{a} {b} {gamma}: {counted} vs {closed}"
+            );
+        }
+    }
+
+    /// A sun half behind a sphere: the disk's visible share against the closed-form cap
+    /// overlap, within the pattern's resolution.
+    #[test]
+    fn disk_behind_a_sphere_matches_the_cap_overlap() {
+        let half_angle = 4f64.to_radians();
+        let light = SunLight { direction: [0.0, 0.0, 1.0], half_angle, strength: 1.0, color: [1.0; 3] };
+        let disk = SunDisk::new(&light);
+        let distance = 10.0;
+        for (offset, radius) in [(0.0, 0.3), (0.5, 0.6), (0.7, 0.4), (0.9, 0.2), (0.3, 1.5)] {
+            let tree = BlockerTree::new(&[Sphere::new([offset, 0.0, distance], radius)], 0.0);
+            let v = disk.visibility(Some(&tree), None, [0.0; 3], [0.0, 0.0, 1.0], 0);
+            let visible = v.iter().sum::<f64>() / DISK_DIRECTIONS as f64;
+            let cap = (radius / distance.hypot(offset)).asin();
+            let gamma = (offset / distance).atan();
+            let disk_solid_angle = 2.0 * PI * (1.0 - half_angle.cos());
+            let expected = 1.0 - cap_overlap(half_angle, cap, gamma) / disk_solid_angle;
+            assert!(
+                (visible - expected).abs() < 0.04,
+                "offset {offset}, radius {radius}: visible {visible:.3}, closed form {expected:.3}"
+            );
+        }
+    }
+}
