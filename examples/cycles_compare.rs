@@ -1,6 +1,7 @@
 //! logsh against Cycles on exported Blender scenes: shades a scene's first frame at the
-//! `default`, `high` and `ultra` presets and at `default` with ratio attenuation, and
-//! compares each with the direct-lighting Cycles render stored beside it
+//! `default`, `high` and `ultra` presets, at `default` with ratio attenuation, without the
+//! overlap floor and without clusters (and, where `--sharp-lights` takes suns out of the
+//! map, `default` and `high` without that), and compares each with the direct-lighting Cycles render stored beside it
 //! (`cycles.NNNN.exr`, written by `blender_scripts/render_cycles.py` with the exported
 //! material table turned back into Cycles shaders, so that both sides use the same albedo,
 //! specular colour and lobe width).
@@ -27,6 +28,7 @@ use exr::prelude::read_first_rgba_layer_from_file;
 use logsh::reference::{render_reference, ReferenceOptions};
 use logsh::scene::{Light, Scene};
 use logsh::shade::shade_frame;
+use logsh::shade::sharp_lights::extract_suns;
 use logsh::shade::{Quality, ShadingSettings};
 use std::path::{Path, PathBuf};
 
@@ -116,7 +118,18 @@ fn main() {
         let scene_name =
             dir.file_name().map_or_else(|| dir.display().to_string(), |n| n.to_string_lossy().into_owned());
         let mut images: Vec<(String, Vec<[f32; 3]>)> = Vec::new();
-        for (name, settings) in &runs {
+        // Where --sharp-lights takes suns out of the map, also without that.
+        let has_map_suns = match frame.light.as_ref() {
+            Light::Environment { map, strength } => !extract_suns(map, *strength).suns.is_empty(),
+            _ => false,
+        };
+        let whole_map = [
+            ("default, sharp lights off", ShadingSettings { sharp_lights: false, ..default }),
+            ("high, sharp lights off", ShadingSettings { sharp_lights: false, ..Quality::High.settings() }),
+        ];
+        let runs: Vec<&(&str, ShadingSettings)> =
+            runs.iter().chain(if has_map_suns { &whole_map[..] } else { &[] }).collect();
+        for (name, settings) in runs {
             let shaded = shade_frame(&scene, &frame, settings).unwrap_or_else(|e| panic!("{e}"));
             assert_eq!(
                 [width, height],

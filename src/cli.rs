@@ -39,6 +39,13 @@ pub enum Command {
     Info(InfoArgs),
 }
 
+/// `--sharp-lights`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum SharpLights {
+    Auto,
+    Off,
+}
+
 #[derive(Args, Debug)]
 pub struct ReferenceArgs {
     /// Scene directory holding scene.json.
@@ -167,6 +174,9 @@ pub struct ShadingArgs {
     /// Sphere clusters whose radius is at most this fraction of their distance are one cap; 0 sees every sphere.
     #[arg(long)]
     pub cluster_ratio: Option<f64>,
+    /// auto: take the suns out of an environment map and shade them as sharp lights (printed); off: keep the whole map in SH.
+    #[arg(long, value_enum, default_value_t = SharpLights::Auto)]
+    pub sharp_lights: SharpLights,
     /// Precision of the per-pixel kernel (the GPU pass is f32 only).
     #[arg(long, value_enum, default_value_t = Precision::F32)]
     pub precision: Precision,
@@ -193,6 +203,7 @@ impl ShadingArgs {
         settings.ratio_attenuation = self.ratio_attenuation == Switch::On;
         settings.tangent_occlusion = self.tangent_occlusion == Switch::On;
         settings.overlap_floor = self.overlap_floor == Switch::On;
+        settings.sharp_lights = self.sharp_lights == SharpLights::Auto;
         if let Some(ratio) = self.cluster_ratio {
             settings.cluster_ratio = ratio;
         }

@@ -16,6 +16,7 @@ pub fn shade(args: &ShadeArgs) -> Result<()> {
     let scene = Scene::load(&args.scene)?;
     let frame_number = args.frame.unwrap_or_else(|| scene.default_frame());
     let frame = scene.frame(frame_number)?;
+    print_sharp_lights(&frame.light, &settings);
     let executor = Executor::select(args.shading.device, &settings)?;
     print_notices(&executor);
     let started = Instant::now();
@@ -38,6 +39,29 @@ pub fn shade(args: &ShadeArgs) -> Result<()> {
         args.out.join(format!("{stem}.png")).display()
     );
     Ok(())
+}
+
+/// Says which suns `--sharp-lights auto` takes out of an environment map (the same
+/// decomposition each frame's plan makes).
+fn print_sharp_lights(light: &crate::scene::Light, settings: &crate::shade::ShadingSettings) {
+    let crate::scene::Light::Environment { map, strength } = light else {
+        return;
+    };
+    if !settings.sharp_lights {
+        return;
+    }
+    let split = crate::shade::sharp_lights::extract_suns(map, *strength);
+    for (sun, share) in split.suns.iter().zip(&split.shares) {
+        let [x, y, z] = sun.direction;
+        eprintln!(
+            "sharp lights: took a sun out of {}: azimuth {:.1} deg, elevation {:.1} deg, {:.2} deg wide, {:.0}% of its light (--sharp-lights off keeps it in SH)",
+            map.file.display(),
+            y.atan2(x).to_degrees(),
+            z.clamp(-1.0, 1.0).asin().to_degrees(),
+            2.0 * sun.half_angle.to_degrees(),
+            100.0 * share
+        );
+    }
 }
 
 /// Prints what the executor has to say about where frames are shaded.
@@ -260,6 +284,10 @@ pub fn render(args: &crate::cli::RenderArgs) -> Result<()> {
         settings,
     };
     check_outputs(&scene, &options)?;
+    // A frame's light that cannot be read fails that frame, in the sequence below.
+    if let Some(light) = options.frames.first().and_then(|&first| scene.light(first).ok()) {
+        print_sharp_lights(&light, &settings);
+    }
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create output directory {}", args.out.display()))?;
     let executor = Executor::select(args.shading.device, &settings)?;

@@ -164,8 +164,8 @@ impl Gpu {
         passes: bool,
     ) -> Result<PreparedFrame<'a>, GpuError> {
         let mut plan = FramePlan::new(scene, frame, settings)?;
-        if !frame.suns.is_empty() {
-            return Err(GpuError::SharpLights { adapter: self.info.name.clone(), count: frame.suns.len() });
+        if !plan.suns.is_empty() {
+            return Err(GpuError::SharpLights { adapter: self.info.name.clone(), count: plan.suns.len() });
         }
         let started = Instant::now();
         let PlannedKernel::F32(kernel) = &plan.kernel else {

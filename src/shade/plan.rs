@@ -1,7 +1,8 @@
 //! Everything that happens to a frame before its pixels, built once and consumed by both
 //! executors: the settings validated, the frame checked against the materials it shows,
-//! the height field read and its pyramid planned, the light projected and the kernel's
-//! tables built at the chosen precision.
+//! the height field read and its pyramid planned, the suns taken out of the light
+//! ([`super::sharp_lights`]), the rest projected, and the kernel's tables built at the
+//! chosen precision.
 //!
 //! What stays per executor is only what runs on it: the CPU filters the pyramid with
 //! rayon and shades rows ([`super::cpu`]); the GPU filters the same plan with the same
@@ -12,7 +13,7 @@ use super::frame::{check_frame, height_field, ShadeError};
 use super::kernel::ShadingKernel;
 use super::settings::{Precision, ShadingSettings};
 use crate::heightfield::{HeightField, HorizonPyramid, PyramidPlan};
-use crate::scene::{Frame, Material, Scene};
+use crate::scene::{Frame, Light, Material, Scene, SunLight};
 use crate::timing::StageTimings;
 use std::time::Instant;
 
@@ -57,6 +58,10 @@ pub struct FramePlan<'a> {
     pub kernel: PlannedKernel,
     /// The frame's sphere blockers as a hierarchy.
     pub blockers: BlockerTree,
+    /// The sharp lights the kernel shades: the scene's, then those taken out of its map.
+    pub suns: Vec<SunLight>,
+    /// How many of `suns` came out of the environment map, and each one's share of its power.
+    pub extracted_shares: Vec<f64>,
     /// The plan's own cost, as the stage "tables".
     pub timings: StageTimings,
 }
@@ -81,26 +86,39 @@ impl<'a> FramePlan<'a> {
             blockers: !frame.blockers.is_empty(),
             phong: scene.materials.values().any(|m| matches!(m, Material::Phong { .. })),
         };
-        let light = frame.light.sh_coefficients(settings.order);
+        let mut suns = frame.suns.clone();
+        let mut extracted_shares = Vec::new();
+        let light = match frame.light.as_ref() {
+            Light::Environment { map, strength } if settings.sharp_lights => {
+                let split = super::sharp_lights::extract_suns(map, *strength);
+                suns.extend(&split.suns);
+                extracted_shares = split.shares;
+                Light::Environment { map: split.residual, strength: *strength }.sh_coefficients(settings.order)
+            }
+            other => other.sh_coefficients(settings.order),
+        };
         let kernel = match settings.precision {
-            Precision::F32 => PlannedKernel::F32(ShadingKernel::new(
-                settings,
-                &scene.materials,
-                &light,
-                contents.heightfield,
-                &frame.suns,
-            )),
-            Precision::F64 => PlannedKernel::F64(ShadingKernel::new(
-                settings,
-                &scene.materials,
-                &light,
-                contents.heightfield,
-                &frame.suns,
-            )),
+            Precision::F32 => {
+                PlannedKernel::F32(ShadingKernel::new(settings, &scene.materials, &light, contents.heightfield, &suns))
+            }
+            Precision::F64 => {
+                PlannedKernel::F64(ShadingKernel::new(settings, &scene.materials, &light, contents.heightfield, &suns))
+            }
         };
         let blockers = BlockerTree::new(&frame.blockers, settings.cluster_ratio);
         let mut timings = StageTimings::default();
         timings.add_wall("tables", started);
-        Ok(Self { scene, frame, settings: *settings, contents, terrain, kernel, blockers, timings })
+        Ok(Self {
+            scene,
+            frame,
+            settings: *settings,
+            contents,
+            terrain,
+            kernel,
+            blockers,
+            suns,
+            extracted_shares,
+            timings,
+        })
     }
 }

@@ -44,6 +44,9 @@ pub struct ShadingSettings {
     /// Sphere clusters whose bounding radius is at most this fraction of their distance
     /// are seen as one cap ([`super::blocker_tree`]); 0 sees every sphere.
     pub cluster_ratio: f64,
+    /// Take the suns out of an environment map and shade them as sharp lights
+    /// ([`super::sharp_lights`]); off keeps the whole map in SH.
+    pub sharp_lights: bool,
     /// Height-field march: W, k, o.
     pub horizon: HorizonSettings,
     /// The precision of the per-pixel kernel.
@@ -120,6 +123,7 @@ impl ShadingSettings {
             tangent_occlusion: true,
             overlap_floor: true,
             cluster_ratio: DEFAULT_CLUSTER_RATIO,
+            sharp_lights: true,
             horizon: HorizonSettings::default(),
             precision: Precision::F32,
         }

@@ -1,0 +1,257 @@
+//! Light decomposition: the compact bright regions of an environment map (suns, which
+//! HDRI libraries ship a few texels wide and carrying most of the light) are taken out
+//! into [`SunLight`]s, shaded per pixel by [`super::sun`], and the residual stays in SH.
+//! Order-n SH cannot hold a light a degree wide: its projection rings, and the
+//! exponentiated visibility blurs its shadow over tens of degrees (SN08, paper 004,
+//! Section 4, treats such key lights apart from the environment).
+//!
+//! # Which regions are suns
+//!
+//! Repeatedly, from the brightest texel left (Rec. 709 luminance), while it is at least
+//! [`SUN_CONTRAST`] times the map's median luminance: its 8-connected region of texels
+//! at least [`REGION_FLOOR`] of its luminance (wrapping in azimuth) is a sun when it lies
+//! within [`MAX_SUN_RADIUS`] of its centre and carries at least [`MIN_SUN_SHARE`] of the
+//! map's power. Its light is what it carries above the mean radiance of the texels
+//! around it (the background, which the region's texels are set to in the residual), so
+//! the residual plus the suns hold exactly the map's power. The sun's direction is the
+//! power-weighted mean of its texels' directions; its angular radius is
+//! `sqrt(2 <theta^2>)` (a uniform disk's, from the power-weighted second moment about
+//! that direction), at least the radius of one texel, which is all a map can say of a
+//! sun narrower than a texel.
+
+use crate::scene::light::equirectangular_to_direction;
+use crate::scene::{EnvironmentMap, SunLight};
+
+/// The brightest texel must be this many times the median luminance to start a sun.
+pub const SUN_CONTRAST: f64 = 50.0;
+/// A sun's region: the texels at least this fraction of its peak's luminance.
+pub const REGION_FLOOR: f64 = 0.01;
+/// A region reaching further than this from its centre (radians, 10 degrees) is a bright
+/// area of the sky (a window, an overcast glow), which SH holds well enough, not a sun.
+pub const MAX_SUN_RADIUS: f64 = 10.0 * std::f64::consts::PI / 180.0;
+/// A region below this share of the map's power is left in SH.
+pub const MIN_SUN_SHARE: f64 = 0.02;
+/// Most suns taken from one map.
+pub const MAX_EXTRACTED_SUNS: usize = 4;
+/// Most candidate regions examined (each costs a pass over the map).
+const MAX_REGIONS_TRIED: usize = 16;
+
+const LUMINANCE: [f64; 3] = [0.2126, 0.7152, 0.0722];
+
+/// What was taken out of a map, and what is left.
+#[derive(Clone, Debug)]
+pub struct Decomposition {
+    /// The map with every sun's region set to its background.
+    pub residual: EnvironmentMap,
+    /// The suns, in the map's units times `strength`.
+    pub suns: Vec<SunLight>,
+    /// Each sun's share of the map's power (luminance), in the same order.
+    pub shares: Vec<f64>,
+}
+
+/// Splits `map` (times `strength`) into suns and a residual (module doc).
+pub fn extract_suns(map: &EnvironmentMap, strength: f32) -> Decomposition {
+    let (width, height) = (map.width, map.height);
+    let mut residual = map.clone();
+    let lum = |t: [f32; 3]| (0..3).map(|k| LUMINANCE[k] * f64::from(t[k])).sum::<f64>();
+    let solid_angle: Vec<f64> = (0..height).map(|r| map.texel_solid_angle(r)).collect();
+    let direction = |i: usize| {
+        let (c, r) = (i % width, i / width);
+        equirectangular_to_direction((c as f64 + 0.5) / width as f64, 1.0 - (r as f64 + 0.5) / height as f64)
+    };
+    let total: f64 = map.texels.iter().enumerate().map(|(i, &t)| lum(t) * solid_angle[i / width]).sum();
+    let mut sorted: Vec<f64> = map.texels.iter().map(|&t| lum(t)).collect();
+    sorted.sort_by(f64::total_cmp);
+    let median = sorted[sorted.len() / 2];
+    let mut out = Decomposition { residual: map.clone(), suns: Vec::new(), shares: Vec::new() };
+    if !(total > 0.0 && strength > 0.0) {
+        return out;
+    }
+    let mut tried = vec![false; width * height];
+    for _ in 0..MAX_REGIONS_TRIED {
+        if out.suns.len() == MAX_EXTRACTED_SUNS {
+            break;
+        }
+        let Some(peak) = (0..width * height)
+            .filter(|&i| !tried[i])
+            .max_by(|&a, &b| lum(residual.texels[a]).total_cmp(&lum(residual.texels[b])))
+        else {
+            break;
+        };
+        let peak_lum = lum(residual.texels[peak]);
+        if !(peak_lum >= SUN_CONTRAST * median && peak_lum > 0.0) {
+            break;
+        }
+        // The region: flood fill from the peak.
+        let floor = REGION_FLOOR * peak_lum;
+        let mut inside = vec![false; width * height];
+        let mut region = vec![peak];
+        inside[peak] = true;
+        let mut next = 0;
+        while next < region.len() {
+            let i = region[next];
+            next += 1;
+            for j in neighbours(i, width, height) {
+                if !inside[j] && lum(residual.texels[j]) >= floor {
+                    inside[j] = true;
+                    region.push(j);
+                }
+            }
+        }
+        for &i in &region {
+            tried[i] = true;
+        }
+        // The background: the mean radiance of the texels around the region.
+        let mut ring = vec![false; width * height];
+        let (mut background, mut ring_count) = ([0.0f64; 3], 0usize);
+        for &i in &region {
+            for j in neighbours(i, width, height) {
+                if !inside[j] && !ring[j] {
+                    ring[j] = true;
+                    ring_count += 1;
+                    for k in 0..3 {
+                        background[k] += f64::from(residual.texels[j][k]);
+                    }
+                }
+            }
+        }
+        let background = background.map(|b| if ring_count > 0 { b / ring_count as f64 } else { 0.0 });
+        // Power above the background, its centre and spread.
+        let mut power = [0.0f64; 3];
+        let (mut centre, mut weight_sum) = ([0.0f64; 3], 0.0);
+        for &i in &region {
+            let t = residual.texels[i];
+            let above = [0, 1, 2].map(|k| (f64::from(t[k]) - background[k]).max(0.0) * solid_angle[i / width]);
+            let weight = (0..3).map(|k| LUMINANCE[k] * above[k]).sum::<f64>();
+            let d = direction(i);
+            for k in 0..3 {
+                power[k] += above[k];
+                centre[k] += weight * d[k];
+            }
+            weight_sum += weight;
+        }
+        let share = weight_sum / total;
+        let length = (centre[0] * centre[0] + centre[1] * centre[1] + centre[2] * centre[2]).sqrt();
+        if !(share >= MIN_SUN_SHARE && length > 0.0) {
+            continue;
+        }
+        let axis = centre.map(|c| c / length);
+        let angle_to = |i: usize| {
+            let d = direction(i);
+            (d[0] * axis[0] + d[1] * axis[1] + d[2] * axis[2]).clamp(-1.0, 1.0).acos()
+        };
+        if region.iter().any(|&i| angle_to(i) > MAX_SUN_RADIUS) {
+            continue;
+        }
+        let second_moment = region
+            .iter()
+            .map(|&i| {
+                let t = residual.texels[i];
+                let above = (0..3)
+                    .map(|k| LUMINANCE[k] * (f64::from(t[k]) - background[k]).max(0.0) * solid_angle[i / width])
+                    .sum::<f64>();
+                above * angle_to(i).powi(2)
+            })
+            .sum::<f64>()
+            / weight_sum;
+        let row = peak / width;
+        let texel_radius = (solid_angle[row] / std::f64::consts::PI).sqrt();
+        let half_angle = (2.0 * second_moment).sqrt().max(texel_radius).min(std::f64::consts::FRAC_PI_2);
+        for &i in &region {
+            residual.texels[i] = background.map(|b| b as f32);
+        }
+        let scaled = power.map(|p| p * f64::from(strength));
+        let peak_power = scaled.iter().copied().fold(0.0f64, f64::max);
+        out.suns.push(SunLight {
+            direction: axis,
+            half_angle,
+            strength: peak_power as f32,
+            color: scaled.map(|p| (p / peak_power) as f32),
+        });
+        out.shares.push(share);
+    }
+    out.residual = residual;
+    out
+}
+
+/// The 8 neighbours of texel `i`, wrapping in azimuth and stopping at the poles' rows.
+fn neighbours(i: usize, width: usize, height: usize) -> impl Iterator<Item = usize> {
+    let (c, r) = ((i % width) as i64, (i / width) as i64);
+    (-1i64..=1).flat_map(move |dr| (-1i64..=1).map(move |dc| (dr, dc))).filter_map(move |(dr, dc)| {
+        let rr = r + dr;
+        if (dr == 0 && dc == 0) || rr < 0 || rr >= height as i64 {
+            return None;
+        }
+        Some(rr as usize * width + (c + dc).rem_euclid(width as i64) as usize)
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::light::direction_to_equirectangular;
+
+    fn sky(width: usize, sun: Option<([f64; 3], f32)>) -> EnvironmentMap {
+        let height = width / 2;
+        let mut texels: Vec<[f32; 3]> = (0..width * height)
+            .map(|i| {
+                let up = 1.0 - (i / width) as f32 / height as f32;
+                [0.3 + 0.5 * up, 0.4 + 0.4 * up, 0.8]
+            })
+            .collect();
+        if let Some((d, radiance)) = sun {
+            let [u, v] = direction_to_equirectangular(d);
+            let (c, r) = ((u * width as f64) as usize, ((1.0 - v) * height as f64) as usize);
+            texels[r * width + c] = [radiance, radiance * 0.9, radiance * 0.8];
+            texels[r * width + (c + 1) % width] = [radiance * 0.5, radiance * 0.45, radiance * 0.4];
+        }
+        EnvironmentMap { file: "sky.exr".into(), width, height, texels }
+    }
+
+    fn power(map: &EnvironmentMap) -> [f64; 3] {
+        let mut p = [0.0; 3];
+        for (i, t) in map.texels.iter().enumerate() {
+            for k in 0..3 {
+                p[k] += f64::from(t[k]) * map.texel_solid_angle(i / map.width);
+            }
+        }
+        p
+    }
+
+    /// A two-texel sun comes out where it is, with the map's power split exactly between
+    /// it and the residual, and the residual no brighter than the sky around it.
+    #[test]
+    fn a_sun_is_extracted_and_power_is_kept() {
+        let d: [f64; 3] = [0.5, -0.4, 0.6];
+        let l = d.iter().map(|c| c * c).sum::<f64>().sqrt();
+        let d = d.map(|c| c / l);
+        let map = sky(512, Some((d, 5e4)));
+        let split = extract_suns(&map, 2.0);
+        assert_eq!(split.suns.len(), 1, "{:?}", split.suns);
+        let sun = split.suns[0];
+        let angle = (sun.direction[0] * d[0] + sun.direction[1] * d[1] + sun.direction[2] * d[2]).acos();
+        assert!(angle < 0.01, "sun {:?} is {angle} rad from {d:?}", sun.direction);
+        assert!(sun.half_angle < 0.02, "half-angle {}", sun.half_angle);
+        assert!(split.shares[0] > 0.4, "share {}", split.shares[0]);
+        let (before, after) = (power(&map), power(&split.residual));
+        for k in 0..3 {
+            let sun_power = f64::from(sun.strength * sun.color[k]) / 2.0;
+            assert!((after[k] + sun_power - before[k]).abs() < 1e-6 * before[k], "channel {k}");
+        }
+        let brightest = split.residual.texels.iter().map(|t| t[0]).fold(0.0f32, f32::max);
+        assert!(brightest <= 0.81, "residual peak {brightest}");
+    }
+
+    /// A smooth sky, and a bright but wide region, stay in SH.
+    #[test]
+    fn smooth_skies_keep_their_light() {
+        assert!(extract_suns(&sky(256, None), 1.0).suns.is_empty());
+        let mut wide = sky(256, None);
+        for r in 20..50 {
+            for c in 40..90 {
+                wide.texels[r * 256 + c] = [200.0; 3];
+            }
+        }
+        assert!(extract_suns(&wide, 1.0).suns.is_empty(), "a 40-degree bright patch is not a sun");
+    }
+}
