@@ -13,7 +13,8 @@ use std::time::Instant;
 /// `logsh shade`.
 pub fn shade(args: &ShadeArgs) -> Result<()> {
     let settings = args.shading.settings()?;
-    let scene = Scene::load(&args.scene)?;
+    let mut scene = Scene::load(&args.scene)?;
+    scene.turn_light(args.shading.light_rotation)?;
     let frame_number = args.frame.unwrap_or_else(|| scene.default_frame());
     let frame = scene.frame(frame_number)?;
     print_sharp_lights(&frame.light, &settings);
@@ -217,7 +218,8 @@ pub fn example(args: &ExampleArgs) -> Result<()> {
 /// `logsh bench`.
 pub fn bench(args: &BenchArgs) -> Result<()> {
     let settings = args.shading.settings()?;
-    let scene = Scene::load(&args.scene)?;
+    let mut scene = Scene::load(&args.scene)?;
+    scene.turn_light(args.shading.light_rotation)?;
     let frame_number = args.frame.unwrap_or_else(|| scene.default_frame());
     let frame = scene.frame(frame_number)?;
     let executor = Executor::select(args.shading.device, &settings)?;
@@ -240,7 +242,8 @@ pub fn render(args: &crate::cli::RenderArgs) -> Result<()> {
     if args.threads == Some(0) {
         return Err(anyhow!("--threads 0: give at least 1, or leave it out for one thread per core"));
     }
-    let scene = Scene::load(&args.scene)?;
+    let mut scene = Scene::load(&args.scene)?;
+    scene.turn_light(args.shading.light_rotation)?;
     let frames: Vec<i64> = match &args.frames {
         Some(spec) => spec.frames.clone(),
         None => {

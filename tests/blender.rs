@@ -316,6 +316,74 @@ fn sun_lamp_exports_as_a_sun_light() {
     assert_ok(&output, "logsh shade");
 }
 
+/// A Mapping node in front of the World's Environment Texture becomes the light's
+/// `rotation` (a Texture-type mapping as its inverse), and one that would bend directions
+/// (a Location) stops the export.
+#[test]
+fn world_mapping_rotation_exports() {
+    let Some(python) = bpy_python() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let cases = [
+        ("POINT", "(0, 0, 0)", Some([0.0, 0.0, 70.0])),
+        ("TEXTURE", "(0, 0, 0)", Some([0.0, 0.0, -70.0])),
+        ("POINT", "(1, 0, 0)", None),
+    ];
+    for (i, (kind, location, expected)) in cases.into_iter().enumerate() {
+        let blend = dir.path().join(format!("mapped{i}.blend"));
+        let make = format!(
+            "import bpy, math; bpy.ops.wm.read_factory_settings(use_empty=True); \
+             bpy.ops.mesh.primitive_plane_add(size=8); \
+             bpy.ops.object.camera_add(location=(0, -9, 6), rotation=(math.radians(60), 0, 0)); \
+             bpy.context.scene.camera = bpy.context.object; \
+             w = bpy.data.worlds.new('World'); bpy.context.scene.world = w; w.use_nodes = True; n = w.node_tree.nodes; \
+             tex = n.new('ShaderNodeTexEnvironment'); tex.image = bpy.data.images.new('sky', 16, 8, float_buffer=True); \
+             coord = n.new('ShaderNodeTexCoord'); m = n.new('ShaderNodeMapping'); m.vector_type = '{kind}'; \
+             m.inputs['Location'].default_value = {location}; \
+             m.inputs['Rotation'].default_value = (0, 0, math.radians(70)); \
+             w.node_tree.links.new(coord.outputs['Generated'], m.inputs['Vector']); \
+             w.node_tree.links.new(m.outputs['Vector'], tex.inputs['Vector']); \
+             w.node_tree.links.new(tex.outputs['Color'], n['Background'].inputs['Color']); \
+             bpy.ops.wm.save_as_mainfile(filepath={:?})",
+            blend.to_str().unwrap()
+        );
+        assert_ok(&std::process::Command::new(&python).args(["-c", &make]).output().unwrap(), "making a .blend");
+        let out = dir.path().join(format!("scene{i}"));
+        let output = run_python(
+            &python,
+            "blender_scripts/export_scene.py",
+            &[
+                Path::new("--blend"),
+                &blend,
+                Path::new("--out"),
+                &out,
+                Path::new("--resolution"),
+                Path::new("32x18"),
+                Path::new("--frames"),
+                Path::new("1-1"),
+            ],
+        );
+        match expected {
+            Some(rotation) => {
+                assert_ok(&output, "exporting a mapped World");
+                let json: serde_json::Value =
+                    serde_json::from_str(&std::fs::read_to_string(out.join("scene.json")).unwrap()).unwrap();
+                let got: Vec<f64> =
+                    json["light"]["rotation"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
+                for k in 0..3 {
+                    assert!((got[k] - rotation[k]).abs() < 1e-4, "{kind}: rotation {got:?}, expected {rotation:?}");
+                }
+                Scene::load(&out).unwrap();
+            }
+            None => {
+                assert_eq!(output.status.code(), Some(1));
+                let stderr = String::from_utf8_lossy(&output.stderr);
+                assert!(stderr.contains("Mapping node has a Location"), "{stderr}");
+                assert!(!out.exists());
+            }
+        }
+    }
+}
+
 /// The `dunes` sample built and exported small: the height map lies where the G-buffer
 /// sees the terrain, and the sky map is oriented as the World's (the brightest texel is
 /// the sun the builder placed), which ties the exporter's conventions to the reader's.

@@ -211,3 +211,40 @@ fn a_map_sun_is_shaded_as_a_sharp_light() {
     assert!(sharp <= 0.02, "with the sun taken out: {sharp}");
     assert!(sharp * 2.0 <= whole, "taking the sun out must help: {sharp} against {whole}");
 }
+
+/// `rotation` in scene.json looks the map up along `R d` (Blender's Point-type Mapping
+/// node), and `--light-rotation` turns map and suns alike about Z.
+#[test]
+fn light_rotation_turns_the_map_and_the_suns() {
+    let dir = tempfile::tempdir().unwrap();
+    let spec = SphereOverPlane { width: 16, height: 9, ..Default::default() };
+    sphere_over_plane(dir.path(), &spec).unwrap();
+    // A map whose red channel is its azimuth's cosine and green the elevation's sine.
+    let (width, height) = (128, 64);
+    let rgba: Vec<[f32; 4]> = (0..width * height)
+        .map(|i| {
+            let (u, v) = ((i % width) as f64 + 0.5, 1.0 - ((i / width) as f64 + 0.5) / height as f64);
+            let d = logsh::scene::light::equirectangular_to_direction(u / width as f64, v);
+            [(1.0 + d[0]) as f32, (1.0 + d[2]) as f32, 1.0, 1.0]
+        })
+        .collect();
+    logsh::scene::output::write_exr_rgba(&dir.path().join("sky.exr"), width, height, &rgba).unwrap();
+    let file = dir.path().join("scene.json");
+    let mut json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&file).unwrap()).unwrap();
+    json["light"] = serde_json::json!({"environment": "sky.exr", "rotation": [0.0, 0.0, 90.0]});
+    json["lights"] = serde_json::json!([{"type": "sun", "direction": [1.0, 0.0, 1.0], "angle": 1.0, "strength": 1.0}]);
+    std::fs::write(&file, serde_json::to_string(&json).unwrap()).unwrap();
+
+    let radiance = |scene: &Scene, d: [f64; 3]| scene.frame(1).unwrap().light.radiance(d);
+    let mut scene = Scene::load(dir.path()).unwrap();
+    // Rz(90) maps -y to +x: looking along -y reads the map's +x (red 2).
+    let along = radiance(&scene, [0.0, -0.8, 0.6]);
+    assert!((along[0] - 1.8).abs() < 0.02 && (along[1] - 1.6).abs() < 0.02, "{along:?}");
+    scene.turn_light(90.0).unwrap();
+    // Turned by +90 more: what was along -y is now along +x.
+    let turned = radiance(&scene, [0.8, 0.0, 0.6]);
+    assert!((turned[0] - along[0]).abs() < 0.02 && (turned[1] - along[1]).abs() < 0.02, "{turned:?} vs {along:?}");
+    let sun = scene.frame(1).unwrap().suns[0];
+    let expected = [0.0, std::f64::consts::FRAC_1_SQRT_2, std::f64::consts::FRAC_1_SQRT_2];
+    assert!((0..3).all(|k| (sun.direction[k] - expected[k]).abs() < 1e-12), "{:?}", sun.direction);
+}

@@ -20,7 +20,8 @@ What is written into the output directory, per frame `####`:
   that frame (modifiers, armatures, shape keys, animation applied); see `blockers.py`.
 - `heightmap.exr`: the height field object sampled on a grid by vertical rays (frame
   `start`; the terrain is static).
-- `sky.exr` when the World uses an environment texture; `scene.json`, whose `lights`
+- `sky.exr` when the World uses an environment texture (a Mapping node in front of it
+  becomes the light's `rotation`); `scene.json`, whose `lights`
   holds every Sun lamp that renders (direction towards the sun, Angle, Strength, Color;
   not animated). Any other lamp (Point, Spot, Area) stops the export with its name.
 
@@ -804,9 +805,9 @@ def export_world(scene, out, options, log):
     if texture.type != "TEX_ENVIRONMENT":
         raise ExportError(f"the World's colour comes from a {texture.type} node; logsh reads an Environment Texture "
                           "(or bake this sky into an equirectangular image)")
+    rotation = None
     if texture.inputs["Vector"].is_linked:
-        raise ExportError("the World's Environment Texture has a mapped vector input; logsh reads the default "
-                          "mapping only (remove the Mapping / Texture Coordinate nodes)")
+        rotation = mapping_rotation(texture.inputs["Vector"].links[0].from_node)
     if texture.projection != "EQUIRECTANGULAR":
         raise ExportError(f"the World's Environment Texture uses {texture.projection} projection; logsh reads equirectangular")
     image = texture.image
@@ -825,7 +826,42 @@ def export_world(scene, out, options, log):
         rgb = rgb.reshape(h // factor, factor, w // factor, factor, 3).mean(axis=(1, 3))
         log(f"environment map {w}x{h} box-filtered to {w // factor}x{h // factor}")
     write_exr(new_file(out, "sky.exr"), {c: rgb[..., k] for k, c in enumerate("RGB")})
-    return {"environment": "sky.exr", "strength": strength}
+    light = {"environment": "sky.exr", "strength": strength}
+    if rotation is not None and any(abs(r) > 1e-9 for r in rotation):
+        light["rotation"] = rotation
+        log(f"environment map rotated by {[round(r, 3) for r in rotation]} deg (Euler XYZ, the Mapping node's)")
+    return light
+
+
+def mapping_rotation(node):
+    """The rotation a Mapping node applies to the World's Environment Texture, as Euler XYZ
+    degrees of a Point-type mapping (the map looked up along R d); a Texture-type mapping is
+    the inverse. Anything that changes directions otherwise (location, non-uniform scale,
+    drivers, another input than Texture Coordinate > Generated) stops the export."""
+    if node.type != "MAPPING":
+        raise ExportError(f"the World's Environment Texture Vector comes from a {node.bl_label} node; logsh reads "
+                          "a Mapping node (rotation only) fed by Texture Coordinate > Generated, or nothing")
+    source = node.inputs["Vector"]
+    if not source.is_linked or source.links[0].from_node.type != "TEX_COORD" or \
+            source.links[0].from_socket.name != "Generated":
+        raise ExportError("the World's Mapping node must take its Vector from Texture Coordinate > Generated")
+    kind = node.vector_type
+    for name in ("Location", "Rotation", "Scale"):
+        socket = node.inputs.get(name)
+        if socket is not None and socket.enabled and socket.is_linked:
+            raise ExportError(f"the World's Mapping node has its {name} linked; logsh reads constant values")
+    location = node.inputs.get("Location")
+    if kind in ("POINT", "TEXTURE") and location is not None and any(abs(v) > 1e-9 for v in location.default_value):
+        raise ExportError("the World's Mapping node has a Location; it would bend directions (logsh reads rotation only)")
+    scale = node.inputs.get("Scale")
+    if scale is not None:
+        s = list(scale.default_value)
+        if not (s[0] > 0 and abs(s[0] - s[1]) < 1e-6 and abs(s[0] - s[2]) < 1e-6):
+            raise ExportError(f"the World's Mapping node has a non-uniform or negative Scale {s}; logsh reads rotation only")
+    euler = mathutils.Euler(node.inputs["Rotation"].default_value, "XYZ")
+    if kind == "TEXTURE":
+        euler = euler.to_matrix().inverted().to_euler("XYZ")
+    return [math.degrees(a) for a in euler]
 
 
 def write_blockers(path, frame, spheres):

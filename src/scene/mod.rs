@@ -18,8 +18,10 @@
 //!   background). Types and their keys: `heightfield` {`albedo`}, `water` {`tint`},
 //!   `diffuse` {`albedo`}, `phong` {`albedo`, `specular`, `exponent`}; every key of the
 //!   type is required, colours are three finite numbers `>= 0`, `exponent > 0`.
-//! - Light: exactly one of `{"environment": path, "strength": s}` (`strength` optional,
-//!   default 1, finite and `>= 0`), `{"constant": [r, g, b]}` or `{"sh": [[r, g, b], ...]}`
+//! - Light: exactly one of `{"environment": path, "strength": s, "rotation": [x, y, z]}`
+//!   (`strength` optional, default 1, finite and `>= 0`; `rotation` optional, Euler XYZ in
+//!   degrees as Blender's Mapping node of type Point: the radiance along `d` is the map's
+//!   along `R d`, the map resampled once on reading), `{"constant": [r, g, b]}` or `{"sh": [[r, g, b], ...]}`
 //!   with a perfect-square count of triples. See [`light`] for the map orientation.
 //! - Sharp lights: an optional list `"lights"` beside `light`, of
 //!   `{"type": "sun", "direction": [x, y, z], "angle": degrees, "strength": s, "color":
@@ -185,7 +187,13 @@ pub struct HeightfieldSpec {
 /// The `light` object of `scene.json`, before any file is read.
 #[derive(Clone, Debug, PartialEq)]
 pub enum LightSpec {
-    Environment { path: PathTemplate, strength: f32 },
+    /// `rotation`: Euler XYZ in degrees, as Blender's Mapping node (type Point) in front of
+    /// the Environment Texture: the radiance along `d` is the map's along `R d`.
+    Environment {
+        path: PathTemplate,
+        strength: f32,
+        rotation: [f64; 3],
+    },
     Constant([f32; 3]),
     Sh(Vec<[f64; 3]>),
 }
@@ -223,6 +231,8 @@ pub struct Scene {
     pub light_spec: LightSpec,
     /// Sharp lights beside `light` (empty without `lights`).
     pub suns: Vec<SunLight>,
+    /// Degrees the whole light is turned about Z on top of scene.json (`--light-rotation`).
+    pub light_turn: f64,
     pub channels: ChannelNames,
     static_light: Option<Arc<Light>>,
     static_height_map: Option<Arc<HeightMap>>,
@@ -288,6 +298,7 @@ struct MaterialFile {
 struct LightFile {
     environment: Option<String>,
     strength: Option<f64>,
+    rotation: Option<[f64; 3]>,
     constant: Option<[f64; 3]>,
     sh: Option<Vec<[f64; 3]>>,
 }
@@ -440,6 +451,13 @@ fn parse_light(file: &Path, l: &LightFile) -> Result<LightSpec, SceneError> {
     if l.strength.is_some() && l.environment.is_none() {
         return Err(SceneError::invalid(file, "light: \"strength\" goes only with \"environment\""));
     }
+    if l.rotation.is_some() && l.environment.is_none() {
+        return Err(SceneError::invalid(file, "light: \"rotation\" goes only with \"environment\""));
+    }
+    let rotation = l.rotation.unwrap_or([0.0; 3]);
+    if rotation.iter().any(|v| !v.is_finite()) {
+        return Err(SceneError::NonFinite { file: file.to_path_buf(), what: "light rotation".into() });
+    }
     if let Some(path) = &l.environment {
         let strength = l.strength.unwrap_or(1.0);
         if !strength.is_finite() {
@@ -448,7 +466,7 @@ fn parse_light(file: &Path, l: &LightFile) -> Result<LightSpec, SceneError> {
         if strength < 0.0 {
             return Err(SceneError::invalid(file, format!("light strength {strength} must be >= 0")));
         }
-        return Ok(LightSpec::Environment { path: PathTemplate(path.clone()), strength: strength as f32 });
+        return Ok(LightSpec::Environment { path: PathTemplate(path.clone()), strength: strength as f32, rotation });
     }
     if let Some(c) = l.constant {
         return Ok(LightSpec::Constant(colour(file, "light constant", c)?));
@@ -542,6 +560,7 @@ impl Scene {
             materials,
             light_spec,
             suns,
+            light_turn: 0.0,
             channels,
             static_light: None,
             static_height_map: None,
@@ -585,6 +604,33 @@ impl Scene {
         Ok(())
     }
 
+    /// Turns the scene's light (the environment and the suns) by `degrees` about Z, on
+    /// top of scene.json's (`--light-rotation`): a sun at azimuth `a` moves to `a +
+    /// degrees`. An `sh` light cannot be turned this way and is refused.
+    pub fn turn_light(&mut self, degrees: f64) -> Result<(), SceneError> {
+        if !degrees.is_finite() {
+            return Err(SceneError::invalid(&self.scene_file(), format!("--light-rotation {degrees} is not a number")));
+        }
+        if degrees == 0.0 {
+            return Ok(());
+        }
+        if matches!(self.light_spec, LightSpec::Sh(_)) {
+            return Err(SceneError::invalid(
+                &self.scene_file(),
+                "--light-rotation turns environment maps and suns; this scene's light is an \"sh\" vector",
+            ));
+        }
+        self.light_turn += degrees;
+        let turn = light::euler_xyz([0.0, 0.0, degrees.to_radians()]);
+        for sun in &mut self.suns {
+            sun.direction = light::rotate(&turn, sun.direction);
+        }
+        if self.static_light.is_some() {
+            self.static_light = Some(Arc::new(self.read_light(self.default_frame())?));
+        }
+        Ok(())
+    }
+
     /// The light of `frame` (shared when its path has no `#`).
     pub fn light(&self, frame: i64) -> Result<Arc<Light>, SceneError> {
         match &self.static_light {
@@ -610,8 +656,16 @@ impl Scene {
 
     fn read_light(&self, frame: i64) -> Result<Light, SceneError> {
         match &self.light_spec {
-            LightSpec::Environment { path, strength } => {
-                let map = EnvironmentMap::read(&path.resolve(&self.dir, frame))?;
+            LightSpec::Environment { path, strength, rotation } => {
+                let mut map = EnvironmentMap::read(&path.resolve(&self.dir, frame))?;
+                // The Mapping rotation, then the turn about Z (the light turned by +turn:
+                // the radiance along d is what was along Rz(-turn) d).
+                let mapping = light::euler_xyz(rotation.map(f64::to_radians));
+                let turn = light::euler_xyz([0.0, 0.0, -self.light_turn.to_radians()]);
+                let m = [0, 1, 2].map(|i| [0, 1, 2].map(|j| (0..3).map(|k| mapping[i][k] * turn[k][j]).sum::<f64>()));
+                if *rotation != [0.0; 3] || self.light_turn != 0.0 {
+                    map = map.rotated(&m);
+                }
                 Ok(Light::Environment { map, strength: *strength })
             }
             LightSpec::Constant(c) => Ok(Light::Constant(*c)),
