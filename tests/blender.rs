@@ -384,6 +384,62 @@ fn world_mapping_rotation_exports() {
     }
 }
 
+/// A Sky Texture World is baked by Cycles into the scene's map, and its sun comes back
+/// out of the map as a sharp light at the Sky Texture's elevation.
+#[test]
+fn sky_texture_bakes_and_its_sun_is_taken_out() {
+    let Some(python) = bpy_python() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let blend = dir.path().join("sky.blend");
+    let make = format!(
+        "import bpy, math; bpy.ops.wm.read_factory_settings(use_empty=True); \
+         bpy.ops.mesh.primitive_plane_add(size=8); bpy.ops.mesh.primitive_cube_add(location=(0, 0, 1)); \
+         bpy.ops.object.camera_add(location=(0, -9, 6), rotation=(math.radians(60), 0, 0)); \
+         bpy.context.scene.camera = bpy.context.object; \
+         w = bpy.data.worlds.new('World'); bpy.context.scene.world = w; w.use_nodes = True; n = w.node_tree.nodes; \
+         sky = n.new('ShaderNodeTexSky'); sky.sun_elevation = math.radians(30); \
+         w.node_tree.links.new(sky.outputs['Color'], n['Background'].inputs['Color']); \
+         bpy.ops.wm.save_as_mainfile(filepath={:?})",
+        blend.to_str().unwrap()
+    );
+    assert_ok(&std::process::Command::new(&python).args(["-c", &make]).output().unwrap(), "making a .blend");
+    let out = dir.path().join("scene");
+    let output = run_python(
+        &python,
+        "blender_scripts/export_scene.py",
+        &[
+            Path::new("--blend"),
+            &blend,
+            Path::new("--out"),
+            &out,
+            Path::new("--resolution"),
+            Path::new("32x18"),
+            Path::new("--frames"),
+            Path::new("1-1"),
+        ],
+    );
+    assert_ok(&output, "exporting a Sky Texture World");
+    assert!(String::from_utf8_lossy(&output.stdout).contains("World (Sky Texture) baked by Cycles"));
+    let scene = Scene::load(&out).unwrap();
+    let output = Command::cargo_bin("logsh")
+        .unwrap()
+        .args(["shade", "--device", "cpu", "--out"])
+        .arg(dir.path().join("shaded"))
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert_ok(&output, "logsh shade");
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    let elevation: f64 = stderr
+        .split("elevation ")
+        .nth(1)
+        .and_then(|rest| rest.split(' ').next())
+        .and_then(|e| e.parse().ok())
+        .unwrap_or_else(|| panic!("no sun taken out: {stderr}"));
+    assert!((elevation - 30.0).abs() < 1.0, "sun at elevation {elevation}: {stderr}");
+    assert!(matches!(scene.frame(1).unwrap().light.as_ref(), logsh::scene::Light::Environment { .. }));
+}
+
 /// The `dunes` sample built and exported small: the height map lies where the G-buffer
 /// sees the terrain, and the sky map is oriented as the World's (the brightest texel is
 /// the sun the builder placed), which ties the exporter's conventions to the reader's.

@@ -21,7 +21,8 @@ What is written into the output directory, per frame `####`:
 - `heightmap.exr`: the height field object sampled on a grid by vertical rays (frame
   `start`; the terrain is static).
 - `sky.exr` when the World uses an environment texture (a Mapping node in front of it
-  becomes the light's `rotation`); `scene.json`, whose `lights`
+  becomes the light's `rotation`), or a bake of the World by Cycles when it uses anything
+  else (a Sky Texture, a gradient, a linked strength); `scene.json`, whose `lights`
   holds every Sun lamp that renders (direction towards the sun, Angle, Strength, Color;
   not animated). Any other lamp (Point, Spot, Area) stops the export with its name.
 
@@ -795,16 +796,15 @@ def export_world(scene, out, options, log):
     if background.type != "BACKGROUND":
         raise ExportError(f"the World's surface is a {background.type} node; logsh reads a Background node "
                           "with a constant colour or an Environment Texture")
-    if background.inputs["Strength"].is_linked:
-        raise ExportError("the World's Background strength is linked; logsh reads a constant strength")
-    strength = float(background.inputs["Strength"].default_value)
     colour = background.inputs["Color"]
-    if not colour.is_linked:
+    texture = colour.links[0].from_node if colour.is_linked else None
+    if background.inputs["Strength"].is_linked or (texture is not None and texture.type != "TEX_ENVIRONMENT"):
+        # A Sky Texture, a gradient, a linked strength: what Cycles renders of the World.
+        what = texture.bl_label if texture is not None else "linked Strength"
+        return bake_world(scene, world, out, options, what, log)
+    strength = float(background.inputs["Strength"].default_value)
+    if texture is None:
         return {"constant": [float(c) * strength for c in list(colour.default_value)[:3]]}
-    texture = colour.links[0].from_node
-    if texture.type != "TEX_ENVIRONMENT":
-        raise ExportError(f"the World's colour comes from a {texture.type} node; logsh reads an Environment Texture "
-                          "(or bake this sky into an equirectangular image)")
     rotation = None
     if texture.inputs["Vector"].is_linked:
         rotation = mapping_rotation(texture.inputs["Vector"].links[0].from_node)
@@ -831,6 +831,49 @@ def export_world(scene, out, options, log):
         light["rotation"] = rotation
         log(f"environment map rotated by {[round(r, 3) for r in rotation]} deg (Euler XYZ, the Mapping node's)")
     return light
+
+
+BAKE_SAMPLES = 64
+
+
+def bake_world(scene, world, out, options, what, log):
+    """Renders `world` alone into an equirectangular map (`sky.exr`, options.sky_max_width
+    wide) with Cycles and a panoramic camera looking along +X with +Z up, which is the
+    Environment Texture's orientation; the map carries the World's strength. A Sky
+    Texture's sun disc lands in the map as a few very bright texels, which logsh's
+    `--sharp-lights auto` takes out again as a sun."""
+    width = min(options.sky_max_width, 2048)
+    bake = bpy.data.scenes.new("logsh world bake")
+    camera_data = bpy.data.cameras.new("logsh world bake")
+    camera = bpy.data.objects.new("logsh world bake", camera_data)
+    try:
+        bake.world = world
+        bake.collection.objects.link(camera)
+        bake.camera = camera
+        camera_data.type = "PANO"
+        camera_data.panorama_type = "EQUIRECTANGULAR"
+        camera_data.latitude_min, camera_data.latitude_max = -math.pi / 2, math.pi / 2
+        camera_data.longitude_min, camera_data.longitude_max = -math.pi, math.pi
+        camera.rotation_euler = (math.pi / 2, 0.0, -math.pi / 2)
+        bake.render.engine = "CYCLES"
+        bake.cycles.samples = BAKE_SAMPLES
+        bake.cycles.use_denoising = False
+        bake.render.resolution_x, bake.render.resolution_y = width, width // 2
+        bake.render.resolution_percentage = 100
+        bake.render.film_transparent = False
+        bake.render.image_settings.file_format = "OPEN_EXR"
+        bake.render.image_settings.color_depth = "32"
+        bake.render.image_settings.exr_codec = "ZIP"
+        bake.render.filepath = new_file(out, "sky.exr")
+        began = time.time()
+        bpy.ops.render.render(write_still=True, scene=bake.name)
+    finally:
+        bpy.data.objects.remove(camera)
+        bpy.data.cameras.remove(camera_data)
+        bpy.data.scenes.remove(bake)
+    log(f"World ({what}) baked by Cycles into a {width}x{width // 2} map, {BAKE_SAMPLES} samples, "
+        f"{time.time() - began:.1f} s")
+    return {"environment": "sky.exr", "strength": 1.0}
 
 
 def mapping_rotation(node):
