@@ -8,7 +8,8 @@ per-frame sphere blockers and camera, height map, materials and the World's ligh
 
     --blend FILE            the .blend to open (required unless Blender already opened one)
     --out DIR               output directory; must not already hold a scene.json
-    --frames A-B | N        frame range (default: the scene's)
+    --frames SPEC           frames to export, as logsh render reads them: 7, 1-24, 1..24,
+                            1-240x2, 1,5,10-20 (default: the scene's range)
     --resolution WxH        output size in pixels (default: the scene's, with its percentage)
     --spheres N             most blocker spheres per object without a logsh_spheres property (16)
     --fit-error E           relative volume error at which an object's fit stops adding spheres (0.1)
@@ -24,18 +25,36 @@ import argparse
 import os
 import sys
 
-import bpy
+try:
+    import bpy
+except ImportError:
+    sys.exit(f"error: {sys.executable} has no bpy (Blender as a Python module). Run `bash .ci/bpy-setup` and use "
+             ".venv-bpy/bin/python (pip's bpy), or run this script inside Blender: "
+             "blender -b scene.blend -P blender_scripts/export_scene.py -- --out DIR")
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from logsh_exporter.exporter import ExportError, Options, export  # noqa: E402
 
 
 def frame_range(text):
-    start, _, end = text.partition("-")
-    try:
-        return int(start), int(end or start)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"\"{text}\" is not a frame range like 1-24 or 7")
+    """The frames of a spec as `logsh render --frames` reads it: `7`, `1-24`, `1..24`,
+    `1-240x2` (every second frame), and comma-separated lists of those; returns the sorted
+    distinct frames."""
+    frames = set()
+    for part in text.split(","):
+        part = part.strip()
+        body, _, step = part.partition("x")
+        start, sep, end = body.partition("..") if ".." in body else body.partition("-")
+        try:
+            first = int(start)
+            last = int(end) if sep else first
+            step = int(step) if step else 1
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"\"{part}\" is not a frame spec like 7, 1-24, 1..24, 1-240x2 or 1,5,10-20")
+        if last < first or step < 1:
+            raise argparse.ArgumentTypeError(f"\"{part}\": the range is empty or the step is below 1")
+        frames.update(range(first, last + 1, step))
+    return sorted(frames)
 
 
 def size(text):

@@ -10,7 +10,8 @@ What is written into the output directory, per frame `####`:
   edges (a pixel half ball, half floor would get a position between them and a material
   index of 1.5), so each pixel gets exactly one sample at its centre: 1 sample, a box
   pixel filter of the smallest width Cycles accepts (0.01 px), no denoising, no motion
-  blur, no depth of field. The Combined pass is switched off: nothing reads it.
+  blur, no depth of field. The file also holds Blender's Combined pass, which nothing
+  reads.
 - `reflection.####.exr` when a material is water: for each water pixel, the world
   position, normal and material index of the surface seen in the mirror direction, found
   by ray casting the evaluated scene (`Scene.ray_cast`); Blender 4's single-part layout
@@ -89,8 +90,9 @@ class ExportError(Exception):
 @dataclass
 class Options:
     out: str
-    # Inclusive frame range; None takes the scene's.
-    frames: tuple = None
+    # The frames: an inclusive (start, end) tuple or a list of frame numbers; None takes
+    # the scene's range.
+    frames: object = None
     # (width, height) in pixels; None takes the scene's output size.
     resolution: tuple = None
     # Most blocker spheres per object without `logsh_spheres` (the fit stops earlier when
@@ -150,9 +152,15 @@ def export(scene, options, log=print):
         raise ExportError(f"{out} already holds a scene (scene.json); choose an empty directory")
     if scene.camera is None:
         raise ExportError("the scene has no camera; set Scene > Camera")
-    start, end = options.frames or (scene.frame_start, scene.frame_end)
-    if start > end:
-        raise ExportError(f"frame range {start}-{end} is empty")
+    if options.frames is None:
+        frames = list(range(scene.frame_start, scene.frame_end + 1))
+    elif isinstance(options.frames, tuple):
+        frames = list(range(options.frames[0], options.frames[1] + 1))
+    else:
+        frames = sorted(set(options.frames))
+    if not frames:
+        raise ExportError(f"the frames {options.frames or (scene.frame_start, scene.frame_end)} are empty")
+    start, end = frames[0], frames[-1]
     created = not os.path.exists(out)
     os.makedirs(out, exist_ok=True)
 
@@ -189,7 +197,10 @@ def export(scene, options, log=print):
             description["heightfield"] = export_heightmap(terrain, bpy.context.evaluated_depsgraph_get(), out, options, log)
 
         fits = {}
-        for frame in range(start, end + 1):
+        if len(frames) < end - start + 1:
+            log(f"note: scene.json says frames {start}-{end}; only {len(frames)} of them are exported, so render "
+                "those with logsh render --frames")
+        for frame in frames:
             began = time.time()
             scene.frame_set(frame)
             depsgraph = bpy.context.evaluated_depsgraph_get()
@@ -430,7 +441,7 @@ def convert_material(material, on_terrain):
         base, metallic = _value(node, "Color", base), 1.0
         roughness = _value(node, "Roughness", 0.5)
     elif node is not None:
-        print(f"note: material \"{material.name}\": surface node {node.type} is not read; its viewport colour is exported")
+        print(f"note: material \"{material.name}\": surface node {node.bl_label} is not read; its viewport colour is exported")
 
     kind = material.get("logsh_type")
     if on_terrain:
@@ -794,7 +805,7 @@ def export_world(scene, out, options, log):
         return {"constant": [0.0, 0.0, 0.0]}
     background = outputs[0].inputs["Surface"].links[0].from_node
     if background.type != "BACKGROUND":
-        raise ExportError(f"the World's surface is a {background.type} node; logsh reads a Background node "
+        raise ExportError(f"the World's surface is a {background.bl_label} node; logsh reads a Background node "
                           "with a constant colour or an Environment Texture")
     colour = background.inputs["Color"]
     texture = colour.links[0].from_node if colour.is_linked else None
@@ -809,7 +820,8 @@ def export_world(scene, out, options, log):
     if texture.inputs["Vector"].is_linked:
         rotation = mapping_rotation(texture.inputs["Vector"].links[0].from_node)
     if texture.projection != "EQUIRECTANGULAR":
-        raise ExportError(f"the World's Environment Texture uses {texture.projection} projection; logsh reads equirectangular")
+        projection = texture.bl_rna.properties["projection"].enum_items[texture.projection].name
+        raise ExportError(f"the World's Environment Texture uses {projection} projection; logsh reads Equirectangular")
     image = texture.image
     if image is None or image.size[0] == 0:
         raise ExportError("the World's Environment Texture has no (loadable) image")
