@@ -129,6 +129,7 @@ fn visibility(p: vec3<f32>, n: vec3<f32>, object: u32, caps: ptr<function, array
     if TANGENT_OCCLUSION && !fold_tangent {
         add_tangent(n, &acc);
     }
+    add_ground(p, &acc);
 //#if HEIGHTFIELD
     if enabled(FEATURE_HEIGHTFIELD) {
         add_heightfield(p, n, fold_tangent, params.log_epsilon, &acc);
@@ -141,6 +142,14 @@ fn visibility(p: vec3<f32>, n: vec3<f32>, object: u32, caps: ptr<function, array
     }
 //#endif
     return acc;
+}
+
+// The ground plane (kernel.rs, add_visibility): the hemisphere below the horizontal for a
+// receiver above it (kernel.rs, above_ground).
+fn add_ground(p: vec3<f32>, acc: ptr<function, array<f32, COUNT_CAP>>) {
+    if GROUND && p.z > GROUND_HEIGHT + 1e-4 * (1.0 + abs(GROUND_HEIGHT)) {
+        add_tangent(vec3<f32>(0.0, 0.0, 1.0), acc);
+    }
 }
 
 // The hemisphere behind the tangent plane (kernel.rs, the unfolded tangent term).
@@ -201,6 +210,7 @@ fn shade(@builtin(global_invocation_id) id: vec3<u32>) {
             if TANGENT_OCCLUSION {
                 add_tangent(n, &unoccluded);
             }
+            add_ground(a.xyz, &unoccluded);
             let lit_unoccluded = lit(&unoccluded, T_DIFFUSE, n);
             let combined = luminance_ratio(lit_diffuse, lit_unoccluded);
             var has_heightfield = false;

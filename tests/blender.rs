@@ -295,6 +295,8 @@ fn sun_lamp_exports_as_a_sun_light() {
     );
     assert_ok(&output, "exporting a scene with a Sun lamp");
     let scene = Scene::load(&out).unwrap();
+    // The plane under the cube is the ground.
+    assert!(scene.ground.is_some_and(|z| z.abs() < 1e-6), "ground {:?}", scene.ground);
     assert_eq!(scene.suns.len(), 1);
     let sun = scene.suns[0];
     let (a, b) = (40f64.to_radians(), 30f64.to_radians());

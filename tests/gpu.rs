@@ -447,3 +447,27 @@ fn shade_on_the_gpu_matches_the_cpu_through_the_command_line() {
         );
     }
 }
+
+/// A ground plane (`ground` in scene.json) under the spheres sample: the hemisphere below
+/// the horizontal for receivers above it, in the beauty and in the passes' unoccluded
+/// term, on both executors.
+#[test]
+fn ground_plane_matches() {
+    let Some(gpu) = gpu() else { return };
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("gbuffers/spheres");
+    let scene = Scene::load(&dir).unwrap();
+    let mut frame = scene.frame(scene.default_frame()).unwrap();
+    let lowest = frame.gbuffer.position.iter().zip(&frame.gbuffer.material).filter(|(_, &m)| m != 0);
+    let ground = lowest.map(|(p, _)| f64::from(p[2])).fold(f64::INFINITY, f64::min);
+    frame.ground = Some(ground);
+    let settings = ShadingSettings::default();
+    let without = logsh::shade::shade_frame(&scene, &Frame { ground: None, ..frame.clone() }, &settings).unwrap();
+    let with = logsh::shade::shade_frame(&scene, &frame, &settings).unwrap();
+    let changed = with.rgba.iter().zip(&without.rgba).filter(|(a, b)| (a[0] - b[0]).abs() > 1e-3).count();
+    assert!(changed > 100, "the ground changes the spheres' pixels ({changed} changed)");
+    check_parity(gpu, &scene, &frame, &settings, "spheres over a ground plane").expect("fits lavapipe's budget");
+    let cpu = logsh::shade::shade_frame_passes(&scene, &frame, &settings).unwrap();
+    let on_gpu = gpu.shade_frame_passes(&scene, &frame, &settings).unwrap();
+    assert_close!(on_gpu.visibility, cpu.visibility, TOLERANCE, "ground plane: visibility");
+    assert_close!(on_gpu.visibility_blockers, cpu.visibility_blockers, TOLERANCE, "ground plane: visibility_blockers");
+}

@@ -116,7 +116,7 @@ fn diffuse_fraction(field: &HeightField, spheres: &[Sphere], p: [f64; 3], n: [f6
     let light = Light::Constant([1.0; 3]);
     let model = LightModel::new(&light, &ReferenceLight::EnvironmentMap).unwrap();
     let term = LobeTerm { lobe: Lobe::Diffuse, axis: n, scale: [1.0; 3] };
-    let occ = ReferenceOccluders { spheres, field: Some(field), receiver_object: 0 };
+    let occ = ReferenceOccluders { spheres, field: Some(field), receiver_object: 0, ground: None };
     let e = integrate_point(occ, &model, p, n, &[term], 1e-4, 10);
     assert!(e.converged, "did not converge: {e:?}");
     (e.rgb[0], e.error)
@@ -185,7 +185,8 @@ fn receivers_on_and_inside_spheres() {
     let light = Light::Constant([1.0; 3]);
     let model = LightModel::new(&light, &ReferenceLight::EnvironmentMap).unwrap();
     let sphere = Sphere::new([0.0, 0.0, 2.0], 1.0);
-    let occ = ReferenceOccluders { spheres: std::slice::from_ref(&sphere), field: None, receiver_object: 0 };
+    let occ =
+        ReferenceOccluders { spheres: std::slice::from_ref(&sphere), field: None, receiver_object: 0, ground: None };
     let term = |n: [f64; 3]| [LobeTerm { lobe: Lobe::Diffuse, axis: n, scale: [1.0; 3] }];
     // The top of the sphere, its own normal, rounded slightly inside: unshadowed.
     let top = [0.0, 0.0, 3.0 - 1e-7];
@@ -333,7 +334,7 @@ fn sampled_matches_meridians_under_a_map() {
         LobeTerm { lobe: Lobe::Phong { exponent: 40.0 }, axis: view_reflected, scale: [0.3, 0.3, 0.3] },
     ];
     for (what, field) in [("spheres", None), ("spheres and terrain", Some(&field))] {
-        let occ = ReferenceOccluders { spheres: &spheres, field, receiver_object: 0 };
+        let occ = ReferenceOccluders { spheres: &spheres, field, receiver_object: 0, ground: None };
         let lifted = [p[0], p[1], field.map_or(0.0, |f| f.height_at(0.0, 0.0)) + 1e-9];
         let start = Instant::now();
         let exact = integrate_point(occ, &model, lifted, n, &terms, 1e-4, 8);
@@ -387,4 +388,23 @@ fn sampled_sphere_over_plane_matches_the_closed_form() {
     assert!(abs / n as f64 <= 1.5e-3, "mean abs {}", abs / n as f64);
     // Two standard errors cover about 95 % of pixels; allow for the estimate's own noise.
     assert!(outside * 10 <= n, "{outside} of {n} pixels beyond twice their estimate");
+}
+
+/// A ground plane hides the lower hemisphere from a receiver above it: facing sideways
+/// under a constant white light, a diffuse receiver gets exactly half its open value; a
+/// point on the ground itself is left to its tangent plane.
+#[test]
+fn ground_plane_hides_the_lower_hemisphere() {
+    let light = Light::Constant([1.0; 3]);
+    let model = LightModel::new(&light, &ReferenceLight::EnvironmentMap).unwrap();
+    let occ = ReferenceOccluders { spheres: &[], field: None, receiver_object: 0, ground: Some(0.0) };
+    let side = [1.0, 0.0, 0.0];
+    let term = [LobeTerm { lobe: Lobe::Diffuse, axis: side, scale: [1.0; 3] }];
+    let by_meridians = integrate_point(occ, &model, [0.0, 0.0, 1.0], side, &term, 1e-5, 8);
+    assert!((by_meridians.rgb[0] - 0.5).abs() < 1e-4, "{by_meridians:?}");
+    let sampled = sample_point(occ, &model, None, [0.0, 0.0, 1.0], side, &term, 1e-3, 8, 3);
+    assert!((sampled.rgb[0] - 0.5).abs() < 3e-3, "{sampled:?}");
+    let up = [LobeTerm { lobe: Lobe::Diffuse, axis: [0.0, 0.0, 1.0], scale: [1.0; 3] }];
+    let on_ground = integrate_point(occ, &model, [0.0, 0.0, 0.0], [0.0, 0.0, 1.0], &up, 1e-5, 8);
+    assert!((on_ground.rgb[0] - 1.0).abs() < 1e-4, "{on_ground:?}");
 }

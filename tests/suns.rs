@@ -248,3 +248,27 @@ fn light_rotation_turns_the_map_and_the_suns() {
     let expected = [0.0, std::f64::consts::FRAC_1_SQRT_2, std::f64::consts::FRAC_1_SQRT_2];
     assert!((0..3).all(|k| (sun.direction[k] - expected[k]).abs() < 1e-12), "{:?}", sun.direction);
 }
+
+/// `ground` is read into every frame, and refused beside a height field.
+#[test]
+fn ground_is_read_and_checked() {
+    let dir = tempfile::tempdir().unwrap();
+    let spec = SphereOverPlane { width: 16, height: 9, ..Default::default() };
+    sphere_over_plane(dir.path(), &spec).unwrap();
+    let file = dir.path().join("scene.json");
+    let mut json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&file).unwrap()).unwrap();
+    json["ground"] = serde_json::json!({"height": -0.5});
+    std::fs::write(&file, serde_json::to_string(&json).unwrap()).unwrap();
+    let scene = Scene::load(dir.path()).unwrap();
+    assert_eq!(scene.frame(1).unwrap().ground, Some(-0.5));
+
+    let dunes = tempfile::tempdir().unwrap();
+    let options = logsh::synth::ExampleOptions { width: 16, height: 9, ..Default::default() };
+    logsh::synth::example_scene("dunes", dunes.path(), options).unwrap();
+    let file = dunes.path().join("scene.json");
+    let mut json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&file).unwrap()).unwrap();
+    json["ground"] = serde_json::json!({"height": 0.0});
+    std::fs::write(&file, serde_json::to_string(&json).unwrap()).unwrap();
+    let error = Scene::load(dunes.path()).unwrap_err().to_string();
+    assert!(error.contains("\"ground\" and \"heightfield\"") && error.contains("scene.json"), "{error}");
+}

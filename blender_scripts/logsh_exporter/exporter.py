@@ -31,6 +31,8 @@ Scene markup, all optional (custom properties, set in the Object or Material tab
 
 - object `logsh_heightfield` (true): this mesh is the terrain (at most one);
 - object `logsh_spheres` (int): blocker spheres for this object, 0 for none;
+- object `logsh_ground` (false): this flat mesh is not the ground plane (by default the
+  lowest flat horizontal mesh under every other object is, when there is no height field);
 - material `logsh_type`: `diffuse`, `phong`, `water` or `heightfield`. Default: `phong`
   for a Principled BSDF with metallic >= 0.5 or roughness < 0.4, else `diffuse`; every
   material on the height field object is `heightfield`.
@@ -193,6 +195,9 @@ def export(scene, options, log=print):
             description["reflection_gbuffer"] = "reflection.####.exr"
 
         scene.frame_set(start)
+        ground = find_ground(objects, terrain, log)
+        if ground is not None:
+            description["ground"] = {"height": float(ground)}
         if terrain is not None:
             description["heightfield"] = export_heightmap(terrain, bpy.context.evaluated_depsgraph_get(), out, options, log)
 
@@ -498,6 +503,48 @@ def is_flat(triangles):
     centred = points - points.mean(axis=0)
     extents = np.sort(np.ptp(centred @ np.linalg.svd(centred, full_matrices=False)[2].T, axis=0))
     return extents[-1] <= 0 or extents[0] < FLAT_THICKNESS * extents[-1]
+
+
+def find_ground(objects, terrain, log):
+    """The height of the scene's floor, when there is no height field: the lowest flat,
+    horizontal mesh whose extent covers every other object's in x and y (an object may set
+    the custom property `logsh_ground` to false to be left out). logsh then treats it as
+    an infinite plane hiding the lower hemisphere from everything above it, as Cycles'
+    floor hides it; without this a constant or bright-bottomed World would light the
+    undersides of objects from below the floor."""
+    if terrain is not None:
+        return None
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    bounds = {}
+    for obj in objects:
+        if obj.type not in GEOMETRY_TYPES or obj.is_instancer:
+            continue
+        evaluated = obj.evaluated_get(depsgraph)
+        triangles = world_triangles(evaluated, evaluated.matrix_world)
+        if triangles is not None:
+            points = triangles.reshape(-1, 3)
+            bounds[obj.name] = (points.min(axis=0), points.max(axis=0), obj)
+    best = None
+    for name, (lo, hi, obj) in bounds.items():
+        if not obj.get("logsh_ground", True):
+            continue
+        size = max(hi[0] - lo[0], hi[1] - lo[1])
+        if size <= 0 or hi[2] - lo[2] > 1e-4 * size:
+            continue
+        others = [b for other, b in bounds.items() if other != name]
+        if not others:
+            continue
+        z = 0.5 * (lo[2] + hi[2])
+        covers = all(o_lo[0] >= lo[0] and o_lo[1] >= lo[1] and o_hi[0] <= hi[0] and o_hi[1] <= hi[1]
+                     for o_lo, o_hi, _ in others)
+        above = all(o_lo[2] >= z - 1e-3 * size for o_lo, _, _ in others)
+        if covers and above and (best is None or z < best[0]):
+            best = (z, name)
+    if best is not None:
+        log(f"ground: \"{best[1]}\" at z = {best[0]:.4g} hides the lower hemisphere from the objects above it "
+            "(set its logsh_ground property to false to leave it out)")
+        return best[0]
+    return None
 
 
 def object_indices(objects, changes):

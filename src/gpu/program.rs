@@ -362,6 +362,8 @@ fn prelude(kernel: &ShadingKernel<f32>, features: Features, march: Option<MarchS
         ("TANGENT_OCCLUSION", Bool(kernel.tangent_occlusion)),
         ("RATIO_ATTENUATION", Bool(kernel.ratio_attenuation)),
         ("OVERLAP_FLOOR", Bool(kernel.overlap_floor)),
+        ("GROUND", Bool(kernel.ground.is_some())),
+        ("GROUND_HEIGHT", F32(kernel.ground.unwrap_or(0.0))),
         ("OWN_SPHERE_REACH", F32(crate::logsh::OWN_SPHERE_REACH)),
         ("NEGLIGIBLE_RATIO", F32(crate::shade::blocker_tree::NEGLIGIBLE_RATIO)),
         ("Y0", F32(Y0)),

@@ -160,6 +160,9 @@ pub struct ReferenceOccluders<'a> {
     /// self-shadowing rule: those that hold it ([`own_sphere_holds`]) or whose centre lies
     /// on or behind its tangent plane cast nothing on it; every other sphere is exact.
     pub receiver_object: u32,
+    /// The scene's ground plane height: a receiver above it sees nothing below the
+    /// horizontal (a ray going down meets the plane).
+    pub ground: Option<f64>,
 }
 
 /// One BRDF term of the integrand: `scale * lobe(axis . w)`.
@@ -322,6 +325,7 @@ struct PointIntegrand<'a> {
     field: Option<&'a HeightField>,
     p: [f64; 3],
     n: [f64; 3],
+    above_ground: bool,
     /// Cap axes and `cos(alpha)` of the spheres that block something.
     caps: Vec<([f64; 3], f64)>,
     terms: Vec<LobeTerm>,
@@ -404,6 +408,9 @@ impl PointIntegrand<'_> {
             visible = intersect(&visible, &vec![(0.0, FRAC_PI_2 - horizon)]);
         }
         visible = intersect(&visible, &arc(self.n, 0.0, d, self.e3));
+        if self.above_ground {
+            visible = intersect(&visible, &arc([0.0, 0.0, 1.0], 0.0, d, self.e3));
+        }
         for &(axis, k) in &self.caps {
             if visible.is_empty() {
                 break;
@@ -517,6 +524,8 @@ pub(super) struct PreparedPoint<'a> {
     pub caps: Vec<([f64; 3], f64)>,
     pub terms: Vec<LobeTerm>,
     pub field: Option<&'a HeightField>,
+    /// Above the ground plane: directions below the horizontal are blocked.
+    pub above_ground: bool,
 }
 
 impl<'a> PreparedPoint<'a> {
@@ -561,19 +570,22 @@ impl<'a> PreparedPoint<'a> {
             let k = if dist <= s.radius { 0.0 } else { (1.0 - (s.radius / dist).powi(2)).max(0.0).sqrt() };
             caps.push((d.map(|c| c / dist), k));
         }
-        Ok(PreparedPoint { p, n, caps, terms, field: occluders.field })
+        let above_ground = occluders.ground.is_some_and(|z| crate::shade::kernel::above_ground(p, z));
+        Ok(PreparedPoint { p, n, caps, terms, field: occluders.field, above_ground })
     }
 
     /// Whether unit direction `w` clears the tangent plane and every cap (the height
     /// field is tested apart: it needs a horizon).
     pub fn sees(&self, w: [f64; 3]) -> bool {
-        dot(self.n, w) > 0.0 && self.caps.iter().all(|&(axis, k)| dot(axis, w) <= k)
+        dot(self.n, w) > 0.0
+            && !(self.above_ground && w[2] <= 0.0)
+            && self.caps.iter().all(|&(axis, k)| dot(axis, w) <= k)
     }
 }
 
 /// [`integrate_point`] by meridians, at a prepared point.
 fn integrate_prepared(point: PreparedPoint, light: &LightModel, tolerance: f64, max_level: u32) -> PointEstimate {
-    let PreparedPoint { p, n, caps, terms, field } = point;
+    let PreparedPoint { p, n, caps, terms, field, above_ground } = point;
     // The pole: world +Z with a height field (one horizon per meridian), else the axis of
     // the sharpest lobe (its falloff is then along the meridians, resolved by the
     // adaptive rule, and the meridian spacing only sees the rotationally symmetric part).
@@ -619,6 +631,7 @@ fn integrate_prepared(point: PreparedPoint, light: &LightModel, tolerance: f64, 
         field,
         p,
         n,
+        above_ground,
         caps,
         terms,
         e1,

@@ -261,7 +261,12 @@ pub fn render_reference(
         environment: environment.as_ref(),
         scene,
         frame,
-        occluders: ReferenceOccluders { spheres: &frame.blockers, field: field.as_ref(), receiver_object: 0 },
+        occluders: ReferenceOccluders {
+            spheres: &frame.blockers,
+            field: field.as_ref(),
+            receiver_object: 0,
+            ground: frame.ground,
+        },
         light: &light,
         options,
     };

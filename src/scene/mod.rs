@@ -29,6 +29,9 @@
 //!   0), `angle` is the disk's angular diameter (Blender's Sun "Angle", in `(0, 180]`),
 //!   `strength` the irradiance on a surface facing it (Blender's Sun "Strength", W/m^2,
 //!   finite and `>= 0`), `color` optional (default white). At most [`MAX_SUNS`].
+//! - Ground: an optional `{"height": z}`, an infinite horizontal plane at world Z `z` that
+//!   hides everything below the horizontal from receivers above it (a flat floor the
+//!   exporter found); not together with `heightfield`.
 //! - G-buffers: see [`gbuffer`] for channel names, layouts and per-pixel checks.
 //!
 //! # Channel-name overrides
@@ -213,6 +216,8 @@ pub struct Frame {
     pub light: Arc<Light>,
     /// The scene's sharp lights (`lights` in scene.json).
     pub suns: Vec<SunLight>,
+    /// The scene's ground plane height (`ground` in scene.json).
+    pub ground: Option<f64>,
 }
 
 /// A loaded and validated `scene.json`.
@@ -226,6 +231,9 @@ pub struct Scene {
     pub camera: Option<PathTemplate>,
     pub blockers: Option<PathTemplate>,
     pub heightfield: Option<HeightfieldSpec>,
+    /// World Z of an infinite horizontal ground plane that occludes (`ground` in
+    /// scene.json): everything below the horizontal, for a receiver above it.
+    pub ground: Option<f64>,
     /// Material table by index (all `>= 1`).
     pub materials: BTreeMap<u32, Material>,
     pub light_spec: LightSpec,
@@ -256,10 +264,17 @@ struct SceneFile {
     camera: Option<String>,
     blockers: Option<String>,
     heightfield: Option<HeightfieldFile>,
+    ground: Option<GroundFile>,
     materials: BTreeMap<String, MaterialFile>,
     light: LightFile,
     lights: Option<Vec<SharpLightFile>>,
     channels: Option<gbuffer::ChannelOverrides>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct GroundFile {
+    height: f64,
 }
 
 #[derive(Deserialize)]
@@ -541,6 +556,19 @@ impl Scene {
                 Some(HeightfieldSpec { heights: PathTemplate(h.heights), min: h.min, max: h.max, channel: h.channel })
             }
         };
+        let ground = match raw.ground {
+            None => None,
+            Some(g) if !g.height.is_finite() => {
+                return Err(SceneError::NonFinite { file: file.clone(), what: "ground height".into() })
+            }
+            Some(_) if heightfield.is_some() => {
+                return Err(SceneError::invalid(
+                    &file,
+                    "\"ground\" and \"heightfield\" both say what is below the scene; keep one",
+                ))
+            }
+            Some(g) => Some(g.height),
+        };
         let light_spec = parse_light(&file, &raw.light)?;
         let lights = raw.lights.unwrap_or_default();
         if lights.len() > MAX_SUNS {
@@ -557,6 +585,7 @@ impl Scene {
             camera: raw.camera.map(PathTemplate),
             blockers: raw.blockers.map(PathTemplate),
             heightfield,
+            ground,
             materials,
             light_spec,
             suns,
@@ -748,6 +777,7 @@ impl Scene {
             height_map: self.height_map(frame)?,
             light: self.light(frame)?,
             suns: self.suns.clone(),
+            ground: self.ground,
         })
     }
 

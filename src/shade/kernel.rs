@@ -195,17 +195,28 @@ pub struct ShadingKernel<T> {
     pub(crate) light: [Vec<T>; 3],
     /// The sharp lights, shaded outside SH ([`super::sun`]).
     pub(crate) suns: Vec<SunDisk>,
+    /// Height of the scene's ground plane, which hides the lower hemisphere from
+    /// receivers above it.
+    pub(crate) ground: Option<f64>,
+}
+
+/// How far above the ground plane a receiver must be for the plane to occlude it: the
+/// ground's own pixels (on it to f32 rounding) are left to their tangent plane.
+pub fn above_ground(p: [f64; 3], ground: f64) -> bool {
+    p[2] > ground + 1e-4 * (1.0 + ground.abs())
 }
 
 impl<T: Real> ShadingKernel<T> {
     /// Builds the tables. `light` holds `order^2` RGB coefficients; `has_heightfield`
-    /// decides whether the wedge operator is built at all; `suns` are the sharp lights.
+    /// decides whether the wedge operator is built at all; `suns` are the sharp lights;
+    /// `ground` the height of the scene's ground plane.
     pub fn new(
         settings: &ShadingSettings,
         materials: &BTreeMap<u32, Material>,
         light: &[[f64; 3]],
         has_heightfield: bool,
         suns: &[SunLight],
+        ground: Option<f64>,
     ) -> Self {
         let order = settings.order;
         let epsilon = settings.epsilon;
@@ -247,6 +258,7 @@ impl<T: Real> ShadingKernel<T> {
             materials,
             light: [channel(0), channel(1), channel(2)],
             suns: suns.iter().map(SunDisk::new).collect(),
+            ground,
         }
     }
 
@@ -277,6 +289,11 @@ impl<T: Real> ShadingKernel<T> {
         let fold_tangent = self.tangent_occlusion && marched.is_some() && n[2] > 0.0;
         if self.tangent_occlusion && !fold_tangent {
             add_rotated_zonal(order, &self.tangent, T::one(), nt.map(|c| -c), acc);
+        }
+        // The ground plane: the hemisphere below the horizontal, the tangent term's table
+        // about -Z (where both overlap, the overlap floor clamps them once).
+        if self.ground.is_some_and(|z| above_ground(p, z)) {
+            add_rotated_zonal(order, &self.tangent, T::one(), [T::zero(), T::zero(), -T::one()], acc);
         }
         if let Some((pyramid, wedge)) = marched {
             let directions = wedge.directions;
@@ -366,7 +383,8 @@ impl<T: Real> ShadingKernel<T> {
         };
         let n = point.normal;
         for sun in &self.suns {
-            let v = sun.visibility(occluders.blockers, occluders.horizons, point.position, n, point.object);
+            let v =
+                sun.visibility(occluders.blockers, occluders.horizons, self.ground, point.position, n, point.object);
             let d = sun.reflected(&v, Lobe::Diffuse, n);
             for i in 0..3 {
                 diffuse[i] += d[i] * f64::from(albedo[i]);

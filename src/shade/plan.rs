@@ -98,12 +98,22 @@ impl<'a> FramePlan<'a> {
             other => other.sh_coefficients(settings.order),
         };
         let kernel = match settings.precision {
-            Precision::F32 => {
-                PlannedKernel::F32(ShadingKernel::new(settings, &scene.materials, &light, contents.heightfield, &suns))
-            }
-            Precision::F64 => {
-                PlannedKernel::F64(ShadingKernel::new(settings, &scene.materials, &light, contents.heightfield, &suns))
-            }
+            Precision::F32 => PlannedKernel::F32(ShadingKernel::new(
+                settings,
+                &scene.materials,
+                &light,
+                contents.heightfield,
+                &suns,
+                frame.ground,
+            )),
+            Precision::F64 => PlannedKernel::F64(ShadingKernel::new(
+                settings,
+                &scene.materials,
+                &light,
+                contents.heightfield,
+                &suns,
+                frame.ground,
+            )),
         };
         let blockers = BlockerTree::new(&frame.blockers, settings.cluster_ratio);
         let mut timings = StageTimings::default();

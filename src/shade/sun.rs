@@ -21,6 +21,7 @@
 //!   `asin(r / d)` about the sphere's direction; a receiver inside a sphere sees it as the
 //!   half-space towards its centre (as the reference's surface band does); the receiver's
 //!   own spheres behind its tangent plane cast nothing (the self-shadowing rule);
+//! - the ground plane, for a receiver above it: the horizontal;
 //! - the height field: its horizon marched once along the sun's azimuth
 //!   ([`HorizonPyramid::horizon_along`], SN08's single-azimuth swath), against each
 //!   direction's elevation.
@@ -90,11 +91,12 @@ impl SunDisk {
     }
 
     /// Visibility of each disk direction, in `[0, 1]`, at `p` with unit normal `n` on
-    /// object `object` (module doc).
+    /// object `object` (module doc); `ground` is the scene's ground plane height.
     pub fn visibility(
         &self,
         blockers: Option<&BlockerTree>,
         horizons: Option<&HorizonPyramid>,
+        ground: Option<f64>,
         p: [f64; 3],
         n: [f64; 3],
         object: u32,
@@ -103,6 +105,11 @@ impl SunDisk {
         let covered = |boundary_minus_angle: f64| (0.5 + boundary_minus_angle / two_patches).clamp(0.0, 1.0);
         // Blocked share per direction, the largest over the occluders.
         let mut blocked = self.directions.map(|w| covered(-dot(n, w).clamp(-1.0, 1.0).asin()));
+        if ground.is_some_and(|z| super::kernel::above_ground(p, z)) {
+            for (b, w) in blocked.iter_mut().zip(&self.directions) {
+                *b = b.max(covered(-w[2].clamp(-1.0, 1.0).asin()));
+            }
+        }
         if let (Some(pyramid), Some(azimuth)) = (horizons, self.azimuth) {
             let horizon = pyramid.horizon_along(p, azimuth);
             for (b, w) in blocked.iter_mut().zip(&self.directions) {
@@ -211,7 +218,7 @@ mod tests {
         let distance = 10.0;
         for (offset, radius) in [(0.0, 0.3), (0.5, 0.6), (0.7, 0.4), (0.9, 0.2), (0.3, 1.5)] {
             let tree = BlockerTree::new(&[Sphere::new([offset, 0.0, distance], radius)], 0.0);
-            let v = disk.visibility(Some(&tree), None, [0.0; 3], [0.0, 0.0, 1.0], 0);
+            let v = disk.visibility(Some(&tree), None, None, [0.0; 3], [0.0, 0.0, 1.0], 0);
             let visible = v.iter().sum::<f64>() / DISK_DIRECTIONS as f64;
             let cap = (radius / distance.hypot(offset)).asin();
             let gamma = (offset / distance).atan();
