@@ -253,7 +253,7 @@ pub(super) fn sample_point(
     // fresh randomisations: stopping on an estimate's own spread biases it (measured: +4e-4
     // on sphere-over-plane, where agreeing replicates are the brighter ones).
     let needed = if pilot.error > tolerance { (pilot.error / tolerance).powi(2).log2().ceil() as u32 } else { 0 };
-    let level = (pilot_level + needed).min(max_level);
+    let level = pilot_level.saturating_add(needed).min(max_level);
     let mut out = estimator.run(level, split_mix(&mut (seed ^ 0x5a5a_5a5a_5a5a_5a5a)));
     out.evaluations += pilot.evaluations;
     out.converged = out.error <= tolerance;
@@ -306,7 +306,8 @@ pub(super) fn sample_suns(
     let pilot_level = PILOT_LEVEL.min(max_level);
     let pilot = run(pilot_level, seed);
     let needed = if pilot.error > tolerance { (pilot.error / tolerance).powi(2).log2().ceil() as u32 } else { 0 };
-    let mut out = run((pilot_level + needed).min(max_level), split_mix(&mut (seed ^ 0xa5a5_a5a5_a5a5_a5a5)));
+    let mut out =
+        run(pilot_level.saturating_add(needed).min(max_level), split_mix(&mut (seed ^ 0xa5a5_a5a5_a5a5_a5a5)));
     out.evaluations += pilot.evaluations;
     out.converged = out.error <= tolerance;
     out
