@@ -4,6 +4,7 @@
 
 use crate::heightfield::{brute_force_horizon, HeightField};
 use crate::logsh::{own_sphere_holds, Lobe};
+use crate::scene::camera::{dot, frame_around};
 use crate::scene::{Light, Sphere};
 use crate::sh::quadrature::gauss_legendre;
 use std::f64::consts::{FRAC_PI_2, PI, TAU};
@@ -213,24 +214,9 @@ fn rules() -> &'static Rules {
     })
 }
 
-pub(super) fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
 fn unit(v: [f64; 3]) -> Option<[f64; 3]> {
     let l = dot(v, v).sqrt();
     (l > 1e-300 && l.is_finite()).then(|| v.map(|c| c / l))
-}
-
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
-}
-
-/// Two unit vectors completing `e3` to a right-handed orthonormal frame.
-pub(super) fn frame_around(e3: [f64; 3]) -> ([f64; 3], [f64; 3]) {
-    let helper = if e3[2].abs() < 0.9 { [0.0, 0.0, 1.0] } else { [1.0, 0.0, 0.0] };
-    let e1 = unit(cross(helper, e3)).expect("helper is not parallel to e3");
-    (e1, cross(e3, e1))
 }
 
 /// Sorted, disjoint intervals of the polar angle `theta` on one meridian, in `[0, pi]`.
@@ -319,6 +305,20 @@ fn subtract(a: &Intervals, b: &Intervals) -> Intervals {
     out
 }
 
+/// `sum over the terms of scale lobe(axis . w)`, RGB: the BRDF part of the integrand.
+pub(super) fn lobe_sum(terms: &[LobeTerm], w: [f64; 3]) -> [f64; 3] {
+    let mut brdf = [0.0; 3];
+    for t in terms {
+        let v = t.lobe.value(dot(t.axis, w));
+        if v > 0.0 {
+            for k in 0..3 {
+                brdf[k] += t.scale[k] * v;
+            }
+        }
+    }
+    brdf
+}
+
 /// Everything fixed for one point's integral.
 struct PointIntegrand<'a> {
     light: &'a LightModel<'a>,
@@ -349,15 +349,7 @@ impl PointIntegrand<'_> {
     fn integrand(&self, d: [f64; 3], theta: f64) -> [f64; 3] {
         let (s, c) = theta.sin_cos();
         let w = [s * d[0] + c * self.e3[0], s * d[1] + c * self.e3[1], s * d[2] + c * self.e3[2]];
-        let mut brdf = [0.0; 3];
-        for t in &self.terms {
-            let v = t.lobe.value(dot(t.axis, w));
-            if v > 0.0 {
-                for k in 0..3 {
-                    brdf[k] += t.scale[k] * v;
-                }
-            }
-        }
+        let brdf = lobe_sum(&self.terms, w);
         if brdf == [0.0; 3] {
             return brdf;
         }
@@ -466,10 +458,8 @@ pub fn integrate_point(
     tolerance: f64,
     max_level: u32,
 ) -> PointEstimate {
-    match PreparedPoint::new(occluders, p, n, terms) {
-        Ok(point) => integrate_prepared(point, light, tolerance, max_level),
-        Err(exact) => exact,
-    }
+    PreparedPoint::new(occluders, p, n, terms)
+        .map_or_else(|exact| exact, |point| integrate_prepared(point, light, tolerance, max_level))
 }
 
 /// The same integral as [`integrate_point`] by importance sampling (`super::sampled`):
@@ -487,10 +477,10 @@ pub fn sample_point(
     max_level: u32,
     seed: u64,
 ) -> PointEstimate {
-    match PreparedPoint::new(occluders, p, n, terms) {
-        Ok(point) => super::sampled::sample_point(&point, light, environment, tolerance, max_level, seed),
-        Err(exact) => exact,
-    }
+    PreparedPoint::new(occluders, p, n, terms).map_or_else(
+        |exact| exact,
+        |point| super::sampled::sample_point(&point, light, environment, tolerance, max_level, seed),
+    )
 }
 
 /// The sharp lights' part of the integral (each sun's disk, exact visibility), by
@@ -509,10 +499,8 @@ pub fn sample_suns(
     if suns.is_empty() {
         return PointEstimate::exact([0.0; 3]);
     }
-    match PreparedPoint::new(occluders, p, n, terms) {
-        Ok(point) => super::sampled::sample_suns(&point, suns, tolerance, max_level, seed),
-        Err(exact) => exact,
-    }
+    PreparedPoint::new(occluders, p, n, terms)
+        .map_or_else(|exact| exact, |point| super::sampled::sample_suns(&point, suns, tolerance, max_level, seed))
 }
 
 /// A receiver ready to integrate: unit normal and lobe axes, the point lifted onto the

@@ -30,9 +30,10 @@
 //! one texel's extent reads those neighbours) times its solid angle, then a direction
 //! uniformly over the texel's extent on the sphere: density `P(texel) / Omega(texel)`.
 
-use super::integrate::{dot, frame_around, LightModel, LobeTerm, PointEstimate, PreparedPoint};
+use super::integrate::{lobe_sum, LightModel, LobeTerm, PointEstimate, PreparedPoint};
 use crate::heightfield::horizon_reaches;
 use crate::logsh::Lobe;
+use crate::scene::camera::{dot, frame_around};
 use crate::scene::light::direction_to_equirectangular;
 use crate::scene::{EnvironmentMap, Light, SunLight};
 use std::f64::consts::{PI, TAU};
@@ -246,15 +247,26 @@ pub(super) fn sample_point(
     let mut strategies: Vec<Strategy> = environment.map(Strategy::Environment).into_iter().collect();
     strategies.extend(point.terms.iter().map(Strategy::lobe));
     let estimator = Estimator { point, light, strategies };
+    pilot_then_fresh(tolerance, max_level, seed, 0x5a5a_5a5a_5a5a_5a5a, |level, seed| estimator.run(level, seed))
+}
+
+/// A pilot estimate at [`PILOT_LEVEL`], then a fresh one at the level it predicts for
+/// `tolerance` (at most `max_level`), randomised from `seed ^ salt`. Error falls like
+/// `N^-1/2` (or faster where the integrand is smooth), so the level that reaches the
+/// tolerance is predicted from the pilot's; the final estimate uses fresh randomisations
+/// because stopping on an estimate's own spread biases it (measured: +4e-4 on
+/// sphere-over-plane, where agreeing replicates are the brighter ones).
+fn pilot_then_fresh(
+    tolerance: f64,
+    max_level: u32,
+    seed: u64,
+    salt: u64,
+    run: impl Fn(u32, u64) -> PointEstimate,
+) -> PointEstimate {
     let pilot_level = PILOT_LEVEL.min(max_level);
-    let pilot = estimator.run(pilot_level, seed);
-    // Error falls like N^-1/2 (or faster where the integrand is smooth), so the level
-    // that reaches the tolerance is predicted from the pilot's. The final estimate uses
-    // fresh randomisations: stopping on an estimate's own spread biases it (measured: +4e-4
-    // on sphere-over-plane, where agreeing replicates are the brighter ones).
+    let pilot = run(pilot_level, seed);
     let needed = if pilot.error > tolerance { (pilot.error / tolerance).powi(2).log2().ceil() as u32 } else { 0 };
-    let level = pilot_level.saturating_add(needed).min(max_level);
-    let mut out = estimator.run(level, split_mix(&mut (seed ^ 0x5a5a_5a5a_5a5a_5a5a)));
+    let mut out = run(pilot_level.saturating_add(needed).min(max_level), split_mix(&mut (seed ^ salt)));
     out.evaluations += pilot.evaluations;
     out.converged = out.error <= tolerance;
     out
@@ -303,14 +315,7 @@ pub(super) fn sample_suns(
         }
         summarise(&means, level, points * suns.len() * REPLICATES)
     };
-    let pilot_level = PILOT_LEVEL.min(max_level);
-    let pilot = run(pilot_level, seed);
-    let needed = if pilot.error > tolerance { (pilot.error / tolerance).powi(2).log2().ceil() as u32 } else { 0 };
-    let mut out =
-        run(pilot_level.saturating_add(needed).min(max_level), split_mix(&mut (seed ^ 0xa5a5_a5a5_a5a5_a5a5)));
-    out.evaluations += pilot.evaluations;
-    out.converged = out.error <= tolerance;
-    out
+    pilot_then_fresh(tolerance, max_level, seed, 0xa5a5_a5a5_a5a5_a5a5, run)
 }
 
 /// The mean of the replicates and twice its standard error (largest channel).
@@ -340,15 +345,7 @@ impl Estimator<'_> {
     /// `light x visibility x BRDF` along unit `w`, or `None` where it is 0.
     fn integrand(&self, w: [f64; 3]) -> Option<[f64; 3]> {
         let point = self.point;
-        let mut brdf = [0.0; 3];
-        for t in &point.terms {
-            let v = t.lobe.value(dot(t.axis, w));
-            if v > 0.0 {
-                for k in 0..3 {
-                    brdf[k] += t.scale[k] * v;
-                }
-            }
-        }
+        let brdf = lobe_sum(&point.terms, w);
         if brdf == [0.0; 3] || !point.sees(w) {
             return None;
         }

@@ -220,3 +220,9 @@ pub(crate) fn normalize(a: [f64; 3]) -> [f64; 3] {
     let l = dot(a, a).sqrt();
     [a[0] / l, a[1] / l, a[2] / l]
 }
+/// Two unit vectors completing unit `e3` to a right-handed orthonormal frame.
+pub(crate) fn frame_around(e3: [f64; 3]) -> ([f64; 3], [f64; 3]) {
+    let helper = if e3[2].abs() < 0.9 { [0.0, 0.0, 1.0] } else { [1.0, 0.0, 0.0] };
+    let e1 = normalize(cross(helper, e3));
+    (e1, cross(e3, e1))
+}

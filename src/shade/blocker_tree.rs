@@ -79,42 +79,26 @@ impl BlockerTree {
     /// Calls `see` with every sphere (or cluster's equivalent sphere) that a receiver of
     /// object `object` at `p` with unit normal `n` sees (module doc). The receiver's own
     /// spheres that hold it are not seen ([`own_sphere_holds`]).
-    pub fn visit(&self, p: [f64; 3], n: [f64; 3], object: u32, mut see: impl FnMut(&Sphere)) {
-        let mut i = 0;
-        while i < self.nodes.len() {
-            let node = &self.nodes[i];
-            let next = node.skip as usize;
-            let c = node.bounds.center;
-            let r = node.bounds.radius;
-            let d = [c[0] - p[0], c[1] - p[1], c[2] - p[2]];
-            if d[0] * n[0] + d[1] * n[1] + d[2] * n[2] < -r {
-                i = next;
-                continue;
-            }
+    pub fn visit(&self, p: [f64; 3], n: [f64; 3], object: u32, see: impl FnMut(&Sphere)) {
+        self.walk(p, n, object, see, |node, d| {
             if node.leaf {
-                let s = &node.equivalent;
-                if !(object != 0 && s.object == object && own_sphere_holds(p, s.center, s.radius)) {
-                    see(s);
-                }
-                i = next;
-                continue;
+                return Step::Enter;
             }
+            let r = node.bounds.radius;
             let distance = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
-            if distance > r && r <= self.cluster_ratio * distance {
-                let e = &node.equivalent;
-                let q = [e.center[0] - p[0], e.center[1] - p[1], e.center[2] - p[2]];
-                if e.radius >= NEGLIGIBLE_RATIO * (q[0] * q[0] + q[1] * q[1] + q[2] * q[2]).sqrt() {
-                    see(e);
-                }
-                i = next;
-                continue;
+            if !(distance > r && r <= self.cluster_ratio * distance) {
+                return Step::Enter;
             }
-            i += 1;
-        }
+            let e = &node.equivalent;
+            let q = [e.center[0] - p[0], e.center[1] - p[1], e.center[2] - p[2]];
+            if e.radius >= NEGLIGIBLE_RATIO * (q[0] * q[0] + q[1] * q[1] + q[2] * q[2]).sqrt() {
+                Step::Cluster
+            } else {
+                Step::Skip
+            }
+        });
     }
-}
 
-impl BlockerTree {
     /// Calls `see` with every sphere that may block some direction of the cone of unit
     /// axis `axis` and half-angle `half_angle` from `p` (a sun's disk), never a cluster:
     /// sharp lights need the spheres themselves. A subtree is skipped when its bounds lie
@@ -127,38 +111,73 @@ impl BlockerTree {
         object: u32,
         axis: [f64; 3],
         half_angle: f64,
-        mut see: impl FnMut(&Sphere),
+        see: impl FnMut(&Sphere),
     ) {
-        let mut i = 0;
-        while i < self.nodes.len() {
-            let node = &self.nodes[i];
-            let next = node.skip as usize;
-            let c = node.bounds.center;
+        self.walk(p, n, object, see, |node, d| {
             let r = node.bounds.radius;
-            let d = [c[0] - p[0], c[1] - p[1], c[2] - p[2]];
             let distance = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
-            let behind = d[0] * n[0] + d[1] * n[1] + d[2] * n[2] < -r;
             // Outside the cone: the angle to the bounds' centre exceeds the cone's
             // half-angle plus the bounds' own angular radius.
             let outside = distance > r && {
                 let cos = ((d[0] * axis[0] + d[1] * axis[1] + d[2] * axis[2]) / distance).clamp(-1.0, 1.0);
                 cos.acos() > half_angle + (r / distance).asin()
             };
-            if behind || outside {
+            if outside {
+                Step::Skip
+            } else {
+                Step::Enter
+            }
+        });
+    }
+
+    /// The stackless walk both visits share: subtrees wholly behind the tangent plane of
+    /// `n` are skipped; `step` decides for every other node, given `d = centre - p` of its
+    /// bounds; a leaf entered is seen unless it is the receiver's own sphere holding it.
+    fn walk(
+        &self,
+        p: [f64; 3],
+        n: [f64; 3],
+        object: u32,
+        mut see: impl FnMut(&Sphere),
+        mut step: impl FnMut(&BlockerNode, [f64; 3]) -> Step,
+    ) {
+        let mut i = 0;
+        while i < self.nodes.len() {
+            let node = &self.nodes[i];
+            let next = node.skip as usize;
+            let c = node.bounds.center;
+            let d = [c[0] - p[0], c[1] - p[1], c[2] - p[2]];
+            if d[0] * n[0] + d[1] * n[1] + d[2] * n[2] < -node.bounds.radius {
                 i = next;
                 continue;
             }
-            if node.leaf {
-                let s = &node.equivalent;
-                if !(object != 0 && s.object == object && own_sphere_holds(p, s.center, s.radius)) {
-                    see(s);
+            match step(node, d) {
+                Step::Skip => i = next,
+                Step::Cluster => {
+                    see(&node.equivalent);
+                    i = next;
                 }
-                i = next;
-                continue;
+                Step::Enter if node.leaf => {
+                    let s = &node.equivalent;
+                    if !(object != 0 && s.object == object && own_sphere_holds(p, s.center, s.radius)) {
+                        see(s);
+                    }
+                    i = next;
+                }
+                Step::Enter => i += 1,
             }
-            i += 1;
         }
     }
+}
+
+/// What a walk does at a node in front of the tangent plane.
+enum Step {
+    /// Skip its subtree.
+    Skip,
+    /// See the subtree as its equivalent sphere.
+    Cluster,
+    /// A leaf: see its sphere; an inner node: go down into it.
+    Enter,
 }
 
 /// Appends the subtree of `items` in depth-first order; returns its root's index.

@@ -33,6 +33,7 @@
 use super::blocker_tree::BlockerTree;
 use crate::heightfield::HorizonPyramid;
 use crate::logsh::Lobe;
+use crate::scene::camera::{dot, frame_around};
 use crate::scene::SunLight;
 use std::f64::consts::PI;
 
@@ -69,9 +70,7 @@ pub struct SunDisk {
 impl SunDisk {
     pub fn new(light: &SunLight) -> Self {
         let axis = light.direction;
-        let helper = if axis[2].abs() < 0.9 { [0.0, 0.0, 1.0] } else { [1.0, 0.0, 0.0] };
-        let e1 = normalised(cross(helper, axis));
-        let e2 = cross(axis, e1);
+        let (e1, e2) = frame_around(axis);
         let one_minus_cos = 1.0 - light.half_angle.cos();
         let directions = disk_pattern().map(|[x, y]| {
             let r2 = x * x + y * y;
@@ -140,19 +139,6 @@ impl SunDisk {
             / DISK_DIRECTIONS as f64;
         self.disk_integral.map(|c| c * mean)
     }
-}
-
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
-}
-
-fn normalised(v: [f64; 3]) -> [f64; 3] {
-    let l = dot(v, v).sqrt();
-    v.map(|c| c / l)
 }
 
 /// Solid angle of the intersection of two spherical caps of half-angles `a` and `b`
