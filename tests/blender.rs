@@ -48,6 +48,24 @@ fn run_python(python: &Path, script: &str, args: &[&Path]) -> Output {
     command.output().unwrap()
 }
 
+/// Saves `path`: an empty factory scene (with `bpy` and `math` imported) after the bpy
+/// statements `scene`.
+fn make_blend(python: &Path, path: &Path, scene: &str) {
+    let script = format!(
+        "import bpy, math; bpy.ops.wm.read_factory_settings(use_empty=True); {scene}; \
+         bpy.ops.wm.save_as_mainfile(filepath={:?})",
+        path.to_str().unwrap()
+    );
+    assert_ok(&std::process::Command::new(python).args(["-c", &script]).output().unwrap(), "making a .blend");
+}
+
+/// Exports frame 1 of `blend` into `out` at `resolution` ("WxH").
+fn export_frame_1(python: &Path, blend: &Path, out: &Path, resolution: &str) -> Output {
+    let (resolution, frames) = (Path::new(resolution), Path::new("1-1"));
+    let args = [Path::new("--blend"), blend, Path::new("--out"), out, Path::new("--resolution"), resolution];
+    run_python(python, "blender_scripts/export_scene.py", &[&args[..], &[Path::new("--frames"), frames]].concat())
+}
+
 fn assert_ok(output: &Output, what: &str) {
     assert!(
         output.status.success(),
@@ -215,12 +233,7 @@ fn export_fails_clearly() {
     let dir = tempfile::tempdir().unwrap();
     // No camera: nothing to export.
     let blend = dir.path().join("no_camera.blend");
-    let make = format!(
-        "import bpy; bpy.ops.wm.read_factory_settings(use_empty=True); bpy.ops.mesh.primitive_cube_add(); \
-         bpy.ops.wm.save_as_mainfile(filepath={:?})",
-        blend.to_str().unwrap()
-    );
-    assert_ok(&std::process::Command::new(&python).args(["-c", &make]).output().unwrap(), "making a .blend");
+    make_blend(&python, &blend, "bpy.ops.mesh.primitive_cube_add()");
     let out = dir.path().join("out");
     let output = run_python(
         &python,
@@ -234,14 +247,13 @@ fn export_fails_clearly() {
     // A Point lamp: logsh would leave it out, so the export stops and names it, leaving no
     // output directory behind.
     let blend = dir.path().join("point.blend");
-    let make = format!(
-        "import bpy; bpy.ops.wm.read_factory_settings(use_empty=True); bpy.ops.mesh.primitive_cube_add(); \
+    make_blend(
+        &python,
+        &blend,
+        "bpy.ops.mesh.primitive_cube_add(); \
          bpy.ops.object.camera_add(location=(6, -6, 4)); bpy.context.scene.camera = bpy.context.object; \
-         bpy.ops.object.light_add(type='POINT'); bpy.context.object.name = 'Bulb'; \
-         bpy.ops.wm.save_as_mainfile(filepath={:?})",
-        blend.to_str().unwrap()
+         bpy.ops.object.light_add(type='POINT'); bpy.context.object.name = 'Bulb'",
     );
-    assert_ok(&std::process::Command::new(&python).args(["-c", &make]).output().unwrap(), "making a .blend");
     let output = run_python(
         &python,
         "blender_scripts/export_scene.py",
@@ -265,34 +277,19 @@ fn sun_lamp_exports_as_a_sun_light() {
     let Some(python) = bpy_python() else { return };
     let dir = tempfile::tempdir().unwrap();
     let blend = dir.path().join("sun.blend");
-    let make = format!(
-        "import bpy, math; bpy.ops.wm.read_factory_settings(use_empty=True); \
-         bpy.ops.mesh.primitive_plane_add(size=8); bpy.ops.mesh.primitive_cube_add(location=(0, 0, 1)); \
+    make_blend(
+        &python,
+        &blend,
+        "bpy.ops.mesh.primitive_plane_add(size=8); bpy.ops.mesh.primitive_cube_add(location=(0, 0, 1)); \
          bpy.ops.object.camera_add(location=(7, -7, 5), rotation=(math.radians(63), 0, math.radians(45))); \
          bpy.context.scene.camera = bpy.context.object; \
          bpy.ops.object.light_add(type='SUN', rotation=(math.radians(40), 0, math.radians(30))); \
          sun = bpy.context.object.data; sun.energy = 3.5; sun.angle = math.radians(2); sun.color = (1, 0.9, 0.8); \
          w = bpy.data.worlds.new('World'); bpy.context.scene.world = w; w.use_nodes = True; \
-         w.node_tree.nodes['Background'].inputs['Color'].default_value = (0.2, 0.2, 0.2, 1); \
-         bpy.ops.wm.save_as_mainfile(filepath={:?})",
-        blend.to_str().unwrap()
+         w.node_tree.nodes['Background'].inputs['Color'].default_value = (0.2, 0.2, 0.2, 1)",
     );
-    assert_ok(&std::process::Command::new(&python).args(["-c", &make]).output().unwrap(), "making a .blend");
     let out = dir.path().join("scene");
-    let output = run_python(
-        &python,
-        "blender_scripts/export_scene.py",
-        &[
-            Path::new("--blend"),
-            &blend,
-            Path::new("--out"),
-            &out,
-            Path::new("--resolution"),
-            Path::new("48x27"),
-            Path::new("--frames"),
-            Path::new("1-1"),
-        ],
-    );
+    let output = export_frame_1(&python, &blend, &out, "48x27");
     assert_ok(&output, "exporting a scene with a Sun lamp");
     let scene = Scene::load(&out).unwrap();
     // The plane under the cube is the ground.
@@ -332,9 +329,10 @@ fn world_mapping_rotation_exports() {
     ];
     for (i, (kind, location, expected)) in cases.into_iter().enumerate() {
         let blend = dir.path().join(format!("mapped{i}.blend"));
-        let make = format!(
-            "import bpy, math; bpy.ops.wm.read_factory_settings(use_empty=True); \
-             bpy.ops.mesh.primitive_plane_add(size=8); \
+        make_blend(
+            &python,
+            &blend,
+            &format!("bpy.ops.mesh.primitive_plane_add(size=8); \
              bpy.ops.object.camera_add(location=(0, -9, 6), rotation=(math.radians(60), 0, 0)); \
              bpy.context.scene.camera = bpy.context.object; \
              w = bpy.data.worlds.new('World'); bpy.context.scene.world = w; w.use_nodes = True; n = w.node_tree.nodes; \
@@ -344,26 +342,10 @@ fn world_mapping_rotation_exports() {
              m.inputs['Rotation'].default_value = (0, 0, math.radians(70)); \
              w.node_tree.links.new(coord.outputs['Generated'], m.inputs['Vector']); \
              w.node_tree.links.new(m.outputs['Vector'], tex.inputs['Vector']); \
-             w.node_tree.links.new(tex.outputs['Color'], n['Background'].inputs['Color']); \
-             bpy.ops.wm.save_as_mainfile(filepath={:?})",
-            blend.to_str().unwrap()
+             w.node_tree.links.new(tex.outputs['Color'], n['Background'].inputs['Color'])"),
         );
-        assert_ok(&std::process::Command::new(&python).args(["-c", &make]).output().unwrap(), "making a .blend");
         let out = dir.path().join(format!("scene{i}"));
-        let output = run_python(
-            &python,
-            "blender_scripts/export_scene.py",
-            &[
-                Path::new("--blend"),
-                &blend,
-                Path::new("--out"),
-                &out,
-                Path::new("--resolution"),
-                Path::new("32x18"),
-                Path::new("--frames"),
-                Path::new("1-1"),
-            ],
-        );
+        let output = export_frame_1(&python, &blend, &out, "32x18");
         match expected {
             Some(rotation) => {
                 assert_ok(&output, "exporting a mapped World");
@@ -393,33 +375,18 @@ fn sky_texture_bakes_and_its_sun_is_taken_out() {
     let Some(python) = bpy_python() else { return };
     let dir = tempfile::tempdir().unwrap();
     let blend = dir.path().join("sky.blend");
-    let make = format!(
-        "import bpy, math; bpy.ops.wm.read_factory_settings(use_empty=True); \
-         bpy.ops.mesh.primitive_plane_add(size=8); bpy.ops.mesh.primitive_cube_add(location=(0, 0, 1)); \
+    make_blend(
+        &python,
+        &blend,
+        "bpy.ops.mesh.primitive_plane_add(size=8); bpy.ops.mesh.primitive_cube_add(location=(0, 0, 1)); \
          bpy.ops.object.camera_add(location=(0, -9, 6), rotation=(math.radians(60), 0, 0)); \
          bpy.context.scene.camera = bpy.context.object; \
          w = bpy.data.worlds.new('World'); bpy.context.scene.world = w; w.use_nodes = True; n = w.node_tree.nodes; \
          sky = n.new('ShaderNodeTexSky'); sky.sun_elevation = math.radians(30); \
-         w.node_tree.links.new(sky.outputs['Color'], n['Background'].inputs['Color']); \
-         bpy.ops.wm.save_as_mainfile(filepath={:?})",
-        blend.to_str().unwrap()
+         w.node_tree.links.new(sky.outputs['Color'], n['Background'].inputs['Color'])",
     );
-    assert_ok(&std::process::Command::new(&python).args(["-c", &make]).output().unwrap(), "making a .blend");
     let out = dir.path().join("scene");
-    let output = run_python(
-        &python,
-        "blender_scripts/export_scene.py",
-        &[
-            Path::new("--blend"),
-            &blend,
-            Path::new("--out"),
-            &out,
-            Path::new("--resolution"),
-            Path::new("32x18"),
-            Path::new("--frames"),
-            Path::new("1-1"),
-        ],
-    );
+    let output = export_frame_1(&python, &blend, &out, "32x18");
     assert_ok(&output, "exporting a Sky Texture World");
     assert!(String::from_utf8_lossy(&output.stdout).contains("World (Sky Texture) baked by Cycles"));
     let scene = Scene::load(&out).unwrap();
