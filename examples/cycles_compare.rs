@@ -26,10 +26,10 @@
 
 use exr::prelude::read_first_rgba_layer_from_file;
 use logsh::reference::{render_reference, ReferenceOptions};
-use logsh::scene::{Light, Scene};
+use logsh::scene::{Light, Material, Scene};
 use logsh::shade::shade_frame;
 use logsh::shade::sharp_lights::extract_suns;
-use logsh::shade::{Quality, ShadingSettings};
+use logsh::shade::{GlossyMethod, Quality, ShadingSettings};
 use std::path::{Path, PathBuf};
 
 fn unoccluded_value(light: &Light) -> [f64; 3] {
@@ -84,15 +84,16 @@ fn main() {
         args.drain(i..i + 2);
         tolerance
     });
+    let quick = args.iter().position(|a| a == "--quick").map(|i| args.remove(i)).is_some();
     let dirs: Vec<PathBuf> = args.into_iter().map(PathBuf::from).collect();
     if dirs.is_empty() {
-        eprintln!("usage: cycles_compare [--noise DIR] [--reference TOLERANCE] SCENE_DIR...");
+        eprintln!("usage: cycles_compare [--quick] [--noise DIR] [--reference TOLERANCE] SCENE_DIR...");
         std::process::exit(2);
     }
-    println!("| scene | settings | pixels | mean abs error | p95 | mean signed |");
-    println!("| --- | --- | --- | --- | --- | --- |");
+    println!("| scene | settings | pixels | mean abs error | p95 | mean signed | glossy pixels (exponent >= 50) |");
+    println!("| --- | --- | --- | --- | --- | --- | --- |");
     let default = Quality::Default.settings();
-    let runs = [
+    let all_runs = [
         ("default", default),
         ("high", Quality::High.settings()),
         ("ultra", Quality::Ultra.settings()),
@@ -100,6 +101,7 @@ fn main() {
         ("default, overlap floor off", ShadingSettings { overlap_floor: false, ..default }),
         ("default, no clusters", ShadingSettings { cluster_ratio: 0.0, ..default }),
     ];
+    let runs = if quick { &all_runs[..1] } else { &all_runs[..] };
     for dir in dirs {
         let scene = Scene::load(&dir).unwrap_or_else(|e| panic!("{e}"));
         let number = scene.default_frame();
@@ -127,8 +129,17 @@ fn main() {
             ("default, sharp lights off", ShadingSettings { sharp_lights: false, ..default }),
             ("high, sharp lights off", ShadingSettings { sharp_lights: false, ..Quality::High.settings() }),
         ];
-        let runs: Vec<&(&str, ShadingSettings)> =
-            runs.iter().chain(if has_map_suns { &whole_map[..] } else { &[] }).collect();
+        // Where a material is glossy, also the other two ways of shading its lobe.
+        let has_phong = scene.materials.values().any(|m| matches!(m, Material::Phong { .. }));
+        let other_glossy = [
+            ("default, --glossy phong", ShadingSettings { glossy: GlossyMethod::Phong, ..default }),
+            ("default, --glossy sh", ShadingSettings { glossy: GlossyMethod::Sh, ..default }),
+        ];
+        let runs: Vec<&(&str, ShadingSettings)> = runs
+            .iter()
+            .chain(if has_map_suns && !quick { &whole_map[..] } else { &[] })
+            .chain(if has_phong { &other_glossy[..] } else { &[] })
+            .collect();
         for (name, settings) in runs {
             let shaded = shade_frame(&scene, &frame, settings).unwrap_or_else(|e| panic!("{e}"));
             assert_eq!(
@@ -174,9 +185,26 @@ fn main() {
             }
             let count = errors.len();
             let mean = errors.iter().sum::<f64>() / count as f64;
+            let glossy: Vec<f64> = frame
+                .gbuffer
+                .material
+                .iter()
+                .filter(|&&m| m != 0)
+                .zip(&errors)
+                .filter(|(m, _)| matches!(scene.materials.get(m), Some(Material::Phong { exponent, .. }) if *exponent >= 50.0))
+                .map(|(_, e)| *e)
+                .collect();
+            let glossy = if glossy.is_empty() {
+                "-".to_string()
+            } else {
+                format!("{:.3} ({} px)", glossy.iter().sum::<f64>() / glossy.len() as f64, glossy.len())
+            };
             errors.sort_by(|a, b| a.total_cmp(b));
             let p95 = errors[(0.95 * (count - 1) as f64).round() as usize];
-            println!("| {scene_name} | {name} | {count} | {mean:.3} | {p95:.3} | {:+.3} |", signed / count as f64);
+            println!(
+                "| {scene_name} | {name} | {count} | {mean:.3} | {p95:.3} | {:+.3} | {glossy} |",
+                signed / count as f64
+            );
             if std::env::var_os("LOGSH_COMPARE_BY_MATERIAL").is_some() {
                 let mut by_material: std::collections::BTreeMap<u32, (f64, f64, usize)> = Default::default();
                 for (i, &m) in frame.gbuffer.material.iter().enumerate() {

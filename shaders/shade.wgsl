@@ -177,6 +177,60 @@ fn lit(visibility: ptr<function, array<f32, COUNT_CAP>>, lobe: u32, axis: vec3<f
     return exp_dot_light(&f, visibility, tables[lobe + ORDER]);
 }
 
+//#if PREFILTERED
+// The glossy term read from a prefiltered environment (src/shade/glossy.rs; kernel.rs,
+// prefiltered_glossy): A(n . v) P(R) O, with n . v = n . R.
+fn prefiltered_glossy(occlusion: ptr<function, array<f32, COUNT_CAP>>, material: GpuMaterial, n: vec3<f32>, r: vec3<f32>) -> vec3<f32> {
+    // O = lum(exp*(V + lobe) . L) / lum(exp*(lobe) . L), V without the tangent and ground planes.
+    let shadowed = lit(occlusion, material.phong_lobe, r);
+    var open: array<f32, COUNT_CAP>;
+    var zonal = load_zonal(material.sharp_tables + ALBEDO_ENTRIES);
+    add_rotated_zonal(&zonal, 1.0, r, &open);
+    let unshadowed = max(dot_light(&open), vec3<f32>(0.0));
+    var occluded = 1.0;
+    let below = dot(LUMINANCE, unshadowed);
+    if below > 1e-12 {
+        occluded = clamp(dot(LUMINANCE, shadowed) / below, 0.0, 1.0);
+    }
+    let weight = albedo_lookup(material.sharp_tables, dot(n, r)) * occluded;
+    return prefiltered_lookup(material.sharp_map, r) * weight;
+}
+
+// The lobe's albedo at n . v = mu, linearly (glossy.rs, albedo_lookup).
+fn albedo_lookup(offset: u32, mu: f32) -> f32 {
+    let x = clamp(mu, 0.0, 1.0) * f32(ALBEDO_ENTRIES - 1u);
+    let i = min(u32(floor(x)), ALBEDO_ENTRIES - 2u);
+    return mix(tables[offset + i], tables[offset + i + 1u], x - f32(i));
+}
+
+// Bilinear read of the prefiltered map at `map` along d (src/scene/light.rs,
+// EnvironmentMap::lookup): columns wrap, rows clamp.
+fn prefiltered_lookup(map: u32, d: vec3<f32>) -> vec3<f32> {
+    let width = table_u32(map);
+    let height = table_u32(map + 1u);
+    let pi = 3.141592653589793;
+    let u = (atan2(d.y, d.x) - pi) / (-2.0 * pi);
+    let v = (acos(clamp(d.z / length(d), -1.0, 1.0)) - pi) / (-pi);
+    let x = u * f32(width) - 0.5;
+    let y = clamp((1.0 - v) * f32(height) - 0.5, 0.0, f32(height - 1u));
+    let x0 = floor(x);
+    let y0 = floor(y);
+    let w = i32(width);
+    let c0 = u32((i32(x0) % w + w) % w);
+    let c1 = u32((i32(x0) + 1 + w) % w);
+    let r0 = u32(y0);
+    let r1 = min(r0 + 1u, height - 1u);
+    let top = mix(map_texel(map, width, c0, r0), map_texel(map, width, c1, r0), x - x0);
+    let bottom = mix(map_texel(map, width, c0, r1), map_texel(map, width, c1, r1), x - x0);
+    return mix(top, bottom, y - y0);
+}
+
+fn map_texel(map: u32, width: u32, column: u32, row: u32) -> vec3<f32> {
+    let i = map + 2u + 3u * (row * width + column);
+    return vec3<f32>(tables[i], tables[i + 1u], tables[i + 2u]);
+}
+//#endif
+
 @compute @workgroup_size(WORKGROUP_SIZE)
 fn shade(@builtin(global_invocation_id) id: vec3<u32>) {
     let point = id.x;
@@ -200,7 +254,23 @@ fn shade(@builtin(global_invocation_id) id: vec3<u32>) {
 //#if PHONG
             if material.kind == MATERIAL_PHONG && enabled(FEATURE_PHONG) {
                 let reflected = record.reflected.xyz;
-                specular = lit(&v, material.phong_lobe, reflected) * material.specular.xyz;
+                var prefiltered = false;
+//#if PREFILTERED
+                if material.sharp_map != NO_MAP {
+                    // The specular occlusion's visibility: the caps and the unfolded horizons.
+                    var occlusion = caps;
+//#if HEIGHTFIELD
+                    if enabled(FEATURE_HEIGHTFIELD) {
+                        add_heightfield(a.xyz, n, false, params.log_epsilon, &occlusion);
+                    }
+//#endif
+                    specular = prefiltered_glossy(&occlusion, material, n, reflected) * material.specular.xyz;
+                    prefiltered = true;
+                }
+//#endif
+                if !prefiltered {
+                    specular = lit(&v, material.phong_lobe, reflected) * material.specular.xyz;
+                }
             }
 //#endif
 //#if PASSES

@@ -6,7 +6,7 @@ pub use crate::gpu::Specialisation;
 pub use crate::reference::Integration;
 use crate::scene::output::SampleType;
 use crate::sh::ExpMethod;
-use crate::shade::{default_epsilon, Precision, Quality, SettingsError, ShadingSettings};
+use crate::shade::{default_epsilon, GlossyMethod, Precision, Quality, SettingsError, ShadingSettings};
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use std::path::PathBuf;
 
@@ -180,6 +180,9 @@ pub struct ShadingArgs {
     /// auto: take the suns out of an environment map and shade them as sharp lights (printed); off: keep the whole map in SH.
     #[arg(long, value_enum, default_value_t = SharpLights::Auto)]
     pub sharp_lights: SharpLights,
+    /// Glossy lobes: ggx reads the environment prefiltered with the GGX lobe (what Cycles' Glossy BSDF renders) and scales it by a log-SH specular occlusion; phong does the same with the Phong lobe; sh keeps the Phong lobe in log-SH, no sharper than the order allows.
+    #[arg(long, value_enum, default_value_t = GlossyMethod::Ggx)]
+    pub glossy: GlossyMethod,
     /// Precision of the per-pixel kernel (the GPU pass is f32 only).
     #[arg(long, value_enum, default_value_t = Precision::F32)]
     pub precision: Precision,
@@ -207,6 +210,7 @@ impl ShadingArgs {
         settings.tangent_occlusion = self.tangent_occlusion == Switch::On;
         settings.overlap_floor = self.overlap_floor == Switch::On;
         settings.sharp_lights = self.sharp_lights == SharpLights::Auto;
+        settings.glossy = self.glossy;
         if let Some(ratio) = self.cluster_ratio {
             settings.cluster_ratio = ratio;
         }

@@ -13,7 +13,7 @@ mod support;
 use logsh::gpu::{Gpu, GpuError, Specialisation};
 use logsh::scene::{Frame, GBuffer, Scene};
 use logsh::sh::ExpMethod;
-use logsh::shade::{shade_frame, ShadedFrame, ShadingSettings};
+use logsh::shade::{shade_frame, GlossyMethod, ShadedFrame, ShadingSettings};
 use logsh::sweep::unoccluded_value;
 use logsh::synth::{self, ExampleOptions, SphereOverPlane};
 use std::path::{Path, PathBuf};
@@ -181,6 +181,8 @@ fn every_knob_matches() {
         ("no tangent occlusion", ShadingSettings { tangent_occlusion: false, ..base }),
         ("eps 0.01", ShadingSettings { epsilon: 0.01, ..base }),
         ("phong eps 0.2", ShadingSettings { phong_epsilon: Some(0.2), ..base }),
+        ("prefiltered phong lobe", ShadingSettings { glossy: GlossyMethod::Phong, ..base }),
+        ("glossy in log-SH", ShadingSettings { glossy: GlossyMethod::Sh, ..base }),
         ("bilinear levels", bilinear),
         ("b-spline scale max", spline_max),
         ("W 48, k 2", wide),

@@ -137,8 +137,13 @@ gpu_struct! {
         /// Offset of the Phong lobe's log-ZH in the tables (`order` values, then the log
         /// of its peak).
         phong_lobe: u32,
-        pad0: u32,
-        pad1: u32,
+        /// Offset of the prefiltered map the glossy term reads (its width and height as
+        /// u32 bits, then RGB texels row by row; src/shade/glossy.rs), or [`NO_MAP`] for
+        /// the glossy term in log-SH.
+        sharp_map: u32,
+        /// Offset of the lobe's albedo table (`ALBEDO_ENTRIES` values), then of its open
+        /// `exp*(lobe)` as ZH (`order` values).
+        sharp_tables: u32,
     }
 }
 
@@ -202,6 +207,8 @@ pub const FEATURE_PHONG: u32 = 4;
 /// [`GpuMaterial::kind`] values.
 pub const MATERIAL_DIFFUSE: u32 = 0;
 pub const MATERIAL_PHONG: u32 = 1;
+/// [`GpuMaterial::sharp_map`] of a material without a prefiltered glossy term.
+pub const NO_MAP: u32 = u32::MAX;
 /// A point's material slot when nothing is shaded there (background, or a water pixel
 /// whose mirror ray leaves the scene): the pass writes zero.
 pub const SLOT_NONE: u32 = u32::MAX;
@@ -228,7 +235,7 @@ pub fn wgsl_declarations() -> String {
     out += &format!("const WORKGROUP_SIZE: u32 = {WORKGROUP_SIZE}u;\n");
     out += &format!(
         "const FEATURE_HEIGHTFIELD: u32 = {FEATURE_HEIGHTFIELD}u;\nconst FEATURE_BLOCKERS: u32 = {FEATURE_BLOCKERS}u;\n\
-         const FEATURE_PHONG: u32 = {FEATURE_PHONG}u;\n"
+         const FEATURE_PHONG: u32 = {FEATURE_PHONG}u;\nconst NO_MAP: u32 = {NO_MAP}u;\n"
     );
     out += &format!(
         "const MATERIAL_DIFFUSE: u32 = {MATERIAL_DIFFUSE}u;\nconst MATERIAL_PHONG: u32 = {MATERIAL_PHONG}u;\n\
@@ -287,7 +294,7 @@ mod tests {
         check::<GpuPoint>(&offsets!(GpuPoint, position_slot, normal, reflected));
         check::<GpuShaded>(&offsets!(GpuShaded, diffuse, specular, visibility));
         check::<GpuBlockerNode>(&offsets!(GpuBlockerNode, bounds, equivalent, skip, leaf, object, pad));
-        check::<GpuMaterial>(&offsets!(GpuMaterial, albedo, specular, kind, phong_lobe, pad0, pad1));
+        check::<GpuMaterial>(&offsets!(GpuMaterial, albedo, specular, kind, phong_lobe, sharp_map, sharp_tables));
         check::<GpuLevel>(&offsets!(GpuLevel, offset, columns, rows, pad));
         check::<GpuStep>(&offsets!(GpuStep, distance, inv_distance, level, pad));
         check::<GpuDecimation>(&offsets!(

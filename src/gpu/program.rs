@@ -10,16 +10,18 @@
 //! and there is no per-pixel cost for choosing them at run time. Pipelines are cached by
 //! source text: a sequence compiles once.
 
-use super::layout::{wgsl_declarations, GpuMaterial, MATERIAL_DIFFUSE, MATERIAL_PHONG};
+use super::layout::{wgsl_declarations, GpuMaterial, MATERIAL_DIFFUSE, MATERIAL_PHONG, NO_MAP};
 use crate::heightfield::{HorizonSettings, LevelReconstruction, PyramidPlan, ScaleMax};
 use crate::logsh::cap_scale;
 use crate::scene::Material;
 use crate::sh::basis::{coefficient_count, double_factorial_odd, funk_hecke_factor, nlp_scale, real_normalisation};
 use crate::sh::exp::{ol_node_count, HYB_MAX_SQUARINGS, OL_COARSE_STEP, OL_FINE_NODES, ONE_DC, SERIES_MAX_TERMS, Y0};
 use crate::sh::ExpMethod;
+use crate::shade::glossy::{Prefiltered, ALBEDO_ENTRIES};
 use crate::shade::kernel::{sh_space_max_magnitude, LUMINANCE, SH_SPACE_BLEND};
 use crate::shade::{FrameContents, ShadingKernel};
 use std::collections::BTreeMap;
+use std::sync::Arc;
 
 const SH_WGSL: &str = include_str!("../../shaders/sh.wgsl");
 const LOGSH_WGSL: &str = include_str!("../../shaders/logsh.wgsl");
@@ -45,8 +47,8 @@ pub struct Features {
 }
 
 /// The feature names the `//#if` blocks of `shaders/` test.
-const FLAG_NAMES: [&str; 8] =
-    ["HEIGHTFIELD", "BLOCKERS", "PHONG", "EXP_QUAD", "EXP_OL", "EXP_HYB", "EXP_SERIES", "PASSES"];
+const FLAG_NAMES: [&str; 9] =
+    ["HEIGHTFIELD", "BLOCKERS", "PHONG", "PREFILTERED", "EXP_QUAD", "EXP_OL", "EXP_HYB", "EXP_SERIES", "PASSES"];
 
 impl Features {
     fn flags(&self, exp: ExpMethod) -> Vec<(&'static str, bool)> {
@@ -55,6 +57,7 @@ impl Features {
             self.contents.heightfield || all,
             self.contents.blockers || all,
             self.contents.phong || all,
+            self.contents.prefiltered || all,
             matches!(exp, ExpMethod::Quad | ExpMethod::Exact),
             exp == ExpMethod::Ol,
             exp == ExpMethod::Hyb,
@@ -210,6 +213,8 @@ impl ProgramTables {
 fn material_slots(kernel: &ShadingKernel<f32>, t: &mut TableBuilder) -> (Vec<GpuMaterial>, BTreeMap<u32, u32>) {
     let mut materials = Vec::new();
     let mut slots = BTreeMap::new();
+    // Prefiltered maps already in the tables (materials of one lobe share theirs).
+    let mut maps: Vec<(*const Prefiltered, u32)> = Vec::new();
     for (&index, lobes) in &kernel.materials {
         let (albedo, specular, kind, phong_lobe) = match (&lobes.material, &lobes.phong) {
             (Material::Phong { albedo, specular, .. }, Some(lobe)) => {
@@ -221,13 +226,32 @@ fn material_slots(kernel: &ShadingKernel<f32>, t: &mut TableBuilder) -> (Vec<Gpu
             }
             _ => continue,
         };
+        let (sharp_map, sharp_tables) = match &lobes.sharp {
+            Some(sharp) => {
+                let key = Arc::as_ptr(&sharp.prefiltered);
+                let map = match maps.iter().find(|(k, _)| *k == key) {
+                    Some(&(_, offset)) => offset,
+                    None => {
+                        let m = &sharp.prefiltered.map;
+                        let header = [f32::from_bits(m.width as u32), f32::from_bits(m.height as u32)];
+                        let offset = t.push_unnamed(header.into_iter().chain(m.texels.iter().flatten().copied()));
+                        maps.push((key, offset as u32));
+                        offset as u32
+                    }
+                };
+                let tables = t.push_unnamed(sharp.albedo.iter().chain(&sharp.open).copied());
+                (map, tables as u32)
+            }
+            None => (NO_MAP, 0),
+        };
         slots.insert(index, materials.len() as u32);
         materials.push(GpuMaterial {
             albedo: [albedo[0], albedo[1], albedo[2], 0.0],
             specular: [specular[0], specular[1], specular[2], 0.0],
             kind,
             phong_lobe,
-            ..Default::default()
+            sharp_map,
+            sharp_tables,
         });
     }
     if materials.is_empty() {
@@ -377,6 +401,7 @@ fn prelude(kernel: &ShadingKernel<f32>, features: Features, march: Option<MarchS
         ("SH_SPACE_MAX_MAGNITUDE", F32(sh_space_max_magnitude(kernel.exp.method))),
         ("SH_SPACE_BLEND", F32(SH_SPACE_BLEND)),
         ("LUMINANCE", Vec3(LUMINANCE)),
+        ("ALBEDO_ENTRIES", U32(ALBEDO_ENTRIES)),
     ];
     constants.iter().map(|(name, value)| value.declare(name)).collect()
 }
@@ -455,7 +480,9 @@ impl ShadeProgram {
             m.levels as u64 * (1 + sample) + m.directions as u64 * (1 + horizon + 2 * n + wedge) + wedge
         });
         let passes = if self.features.passes { 2 * tangent + 3 * lit + n } else { 0 };
-        1 + tangent + heightfield + spheres as u64 * sphere + 2 * lit + passes
+        // The specular occlusion: its own height-field march and the open lobe's rotation.
+        let prefiltered = if self.features.contents.prefiltered { heightfield + add_rotated + c } else { 0 };
+        1 + tangent + heightfield + spheres as u64 * sphere + 2 * lit + passes + prefiltered
     }
 }
 

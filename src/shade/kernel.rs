@@ -3,17 +3,20 @@
 //! holds are the ones a GPU executor uploads.
 
 use super::blocker_tree::BlockerTree;
-use super::settings::{ShadingSettings, MAX_DIRECTIONS};
+use super::glossy::{albedo_lookup, albedo_table, ggx_alpha, MapLevels, Prefiltered, SharpLobe};
+use super::settings::{GlossyMethod, ShadingSettings, MAX_DIRECTIONS};
 use super::sun::SunDisk;
 use crate::heightfield::HorizonPyramid;
 use crate::logsh::{
     cap_log_zh, lobe_log_zh_as, nlp_slice, optimal_lobe_epsilon, view_blocker, BlockerView, Lobe, WedgeOperator,
 };
-use crate::scene::{Material, SunLight};
+use crate::scene::camera::dot;
+use crate::scene::{EnvironmentMap, Light, Material, SunLight};
 use crate::sh::exp::{exp_hyb_with, exp_series, ExactExp, OlTable};
 use crate::sh::{add_rotated_zonal, coefficient_count, ExpMethod, Real, TriplingTensor, MAX_COEFFICIENTS};
 use std::collections::BTreeMap;
 use std::f64::consts::FRAC_PI_2;
+use std::sync::Arc;
 
 /// Largest non-DC magnitude `|f^|` given to the SH-space methods; a pixel beyond it is
 /// exponentiated by `quad` instead, which the lobe's peak bounds. Pixels at the default
@@ -150,8 +153,43 @@ impl<T: Real> LobeTable<T> {
 #[derive(Clone, Debug)]
 pub(crate) struct MaterialLobes<T> {
     pub(crate) material: Material,
-    /// Phong lobe (Eq. 27) for `phong` materials.
+    /// Phong lobe (Eq. 27) for `phong` materials: the glossy term itself with
+    /// `--glossy sh`, else the lobe of the specular occlusion.
     pub(crate) phong: Option<LobeTable<T>>,
+    /// The prefiltered glossy term ([`super::glossy`]) of `phong` materials, unless
+    /// `--glossy sh` or the light has no map.
+    pub(crate) sharp: Option<SharpGlossy<T>>,
+}
+
+/// The tables of one material's prefiltered glossy term ([`super::glossy`]).
+#[derive(Clone, Debug)]
+pub(crate) struct SharpGlossy<T> {
+    pub(crate) lobe: SharpLobe,
+    /// The light prefiltered with `lobe` (shared by materials of the same lobe).
+    pub(crate) prefiltered: Arc<Prefiltered>,
+    /// The lobe's albedo over `n . v` ([`super::glossy::albedo_table`]).
+    pub(crate) albedo: Vec<f32>,
+    /// `exp*(Phong lobe)` about +Z as ZH: the unoccluded denominator of the specular
+    /// occlusion.
+    pub(crate) open: Vec<T>,
+}
+
+/// The sharpest Phong lobe given to SH as the specular occlusion's lobe: the log-ZH
+/// tables are exact up to it ([`crate::logsh::lobe_log_zh`]), and no order up to 8
+/// tells a sharper lobe from it.
+pub const OCCLUSION_MAX_EXPONENT: f64 = 1024.0;
+
+/// The map the glossy term reflects: the light's own map (its suns taken out, which the
+/// sun term reflects), a constant light as a small constant map; `None` for a light
+/// given only as SH coefficients.
+fn glossy_map(light: &Light) -> Option<(EnvironmentMap, f32)> {
+    match light {
+        Light::Environment { map, strength } => Some((map.clone(), *strength)),
+        Light::Constant(c) => {
+            Some((EnvironmentMap { file: "constant light".into(), width: 16, height: 8, texels: vec![*c; 128] }, 1.0))
+        }
+        Light::Sh(_) => None,
+    }
 }
 
 /// What occludes a frame: its sphere blockers and its height-field pyramid.
@@ -207,13 +245,16 @@ pub fn above_ground(p: [f64; 3], ground: f64) -> bool {
 }
 
 impl<T: Real> ShadingKernel<T> {
-    /// Builds the tables. `light` holds `order^2` RGB coefficients; `has_heightfield`
-    /// decides whether the wedge operator is built at all; `suns` are the sharp lights;
-    /// `ground` the height of the scene's ground plane.
+    /// Builds the tables. `light` holds `order^2` RGB coefficients of `residual` (the
+    /// scene's light with its suns taken out), whose map the glossy term reflects;
+    /// `has_heightfield` decides whether the wedge operator is built at all; `suns` are
+    /// the sharp lights; `ground` the height of the scene's ground plane.
+    #[allow(clippy::too_many_arguments)]
     pub fn new(
         settings: &ShadingSettings,
         materials: &BTreeMap<u32, Material>,
         light: &[[f64; 3]],
+        residual: &Light,
         has_heightfield: bool,
         suns: &[SunLight],
         ground: Option<f64>,
@@ -222,14 +263,30 @@ impl<T: Real> ShadingKernel<T> {
         let epsilon = settings.epsilon;
         let mut tangent = vec![T::zero(); order];
         cap_log_zh(order, T::of(epsilon.ln()), T::of(FRAC_PI_2), &mut tangent);
-        let lobe_exp =
-            materials.values().any(|m| matches!(m, Material::Phong { .. })).then(|| crate::sh::ExactExp::new(order));
+        let any_phong = materials.values().any(|m| matches!(m, Material::Phong { .. }));
+        let lobe_exp = any_phong.then(|| crate::sh::ExactExp::new(order));
+        let exp = Exponentiator::new(order, settings.exp, settings.hyb_threshold);
+        let glossy = match glossy_map(residual) {
+            Some(_) if settings.glossy != GlossyMethod::Sh => settings.glossy,
+            _ => GlossyMethod::Sh,
+        };
+        let levels = (any_phong && glossy != GlossyMethod::Sh)
+            .then(|| glossy_map(residual).map(|(map, strength)| MapLevels::new(&map, strength, ground.is_some())))
+            .flatten();
+        let mut prefiltered: Vec<(SharpLobe, Arc<Prefiltered>)> = Vec::new();
         let materials = materials
             .iter()
             .map(|(&index, material)| {
-                let phong = match material {
+                let (phong, sharp) = match material {
                     Material::Phong { exponent, .. } => {
-                        let lobe = Lobe::Phong { exponent: *exponent as f64 };
+                        let exponent = f64::from(*exponent);
+                        let lobe = Lobe::Phong {
+                            exponent: if glossy == GlossyMethod::Sh {
+                                exponent
+                            } else {
+                                exponent.min(OCCLUSION_MAX_EXPONENT)
+                            },
+                        };
                         let eps = settings.phong_epsilon.unwrap_or_else(|| {
                             optimal_lobe_epsilon(
                                 order,
@@ -237,11 +294,32 @@ impl<T: Real> ShadingKernel<T> {
                                 lobe_exp.as_ref().expect("built when a phong material exists"),
                             )
                         });
-                        Some(LobeTable::new(order, lobe, eps))
+                        let table = LobeTable::new(order, lobe, eps);
+                        let sharp = levels.as_ref().map(|levels| {
+                            let sharp_lobe = match glossy {
+                                GlossyMethod::Phong => SharpLobe::Phong { exponent },
+                                _ => SharpLobe::Ggx { alpha: ggx_alpha(exponent) },
+                            };
+                            let map = match prefiltered.iter().find(|(l, _)| *l == sharp_lobe) {
+                                Some((_, map)) => map.clone(),
+                                None => {
+                                    let map = Arc::new(levels.prefilter(sharp_lobe));
+                                    prefiltered.push((sharp_lobe, map.clone()));
+                                    map
+                                }
+                            };
+                            SharpGlossy {
+                                lobe: sharp_lobe,
+                                prefiltered: map,
+                                albedo: albedo_table(sharp_lobe),
+                                open: open_lobe(order, &exp, &table),
+                            }
+                        });
+                        (Some(table), sharp)
                     }
-                    _ => None,
+                    _ => (None, None),
                 };
-                (index, MaterialLobes { material: material.clone(), phong })
+                (index, MaterialLobes { material: material.clone(), phong, sharp })
             })
             .collect();
         let channel = |c: usize| light.iter().map(|rgb| T::of(rgb[c])).collect::<Vec<T>>();
@@ -251,7 +329,7 @@ impl<T: Real> ShadingKernel<T> {
             ratio_attenuation: settings.ratio_attenuation,
             tangent_occlusion: settings.tangent_occlusion,
             overlap_floor: settings.overlap_floor,
-            exp: Exponentiator::new(order, settings.exp, settings.hyb_threshold),
+            exp,
             wedge: has_heightfield.then(|| WedgeOperator::new(order, settings.horizon.directions)),
             diffuse: LobeTable::new(order, Lobe::Diffuse, epsilon),
             tangent,
@@ -264,6 +342,11 @@ impl<T: Real> ShadingKernel<T> {
 
     pub fn order(&self) -> usize {
         self.order
+    }
+
+    /// Whether a material's glossy term reads a prefiltered environment.
+    pub fn has_prefiltered_glossy(&self) -> bool {
+        self.materials.values().any(|lobes| lobes.sharp.is_some())
     }
 
     /// Log visibility at `p` with unit normal `n` (Eq. 9 before exponentiation): the
@@ -280,6 +363,21 @@ impl<T: Real> ShadingKernel<T> {
     /// would clamp the overlap twice (`eps^2`), which paper 000 Section 4.2 warns about and
     /// which measurably brightens unoccluded terrain (1.06 instead of 1.03 at order 4).
     pub fn add_visibility(&self, occluders: Occluders, p: [f64; 3], n: [f64; 3], object: u32, acc: &mut [T]) {
+        self.add_visibility_parts(occluders, p, n, object, acc, None);
+    }
+
+    /// [`add_visibility`](Self::add_visibility), and into `occlusion` when given, the part
+    /// the specular occlusion reads ([`super::glossy`]): the height field (unfolded) and
+    /// the blockers, without the tangent plane and the ground plane.
+    pub(crate) fn add_visibility_parts(
+        &self,
+        occluders: Occluders,
+        p: [f64; 3],
+        n: [f64; 3],
+        object: u32,
+        acc: &mut [T],
+        mut occlusion: Option<&mut [T]>,
+    ) {
         let order = self.order;
         let nt = n.map(T::of);
         let marched = match (occluders.horizons, &self.wedge) {
@@ -300,6 +398,12 @@ impl<T: Real> ShadingKernel<T> {
             let mut sigmas = [0.0f64; MAX_DIRECTIONS];
             pyramid.horizon_elevations(p, &mut sigmas[..directions]);
             let mut slices = [T::zero(); MAX_DIRECTIONS * crate::sh::MAX_ORDER];
+            if let Some(occlusion) = occlusion.as_deref_mut() {
+                for (k, sigma) in sigmas[..directions].iter().enumerate() {
+                    nlp_slice(order, self.log_epsilon, T::of(*sigma), &mut slices[k * order..(k + 1) * order]);
+                }
+                wedge.accumulate(&slices[..directions * order], occlusion);
+            }
             for (k, sigma) in sigmas[..directions].iter_mut().enumerate() {
                 if fold_tangent {
                     let (sin, cos) = (wedge.wedge_width() * k as f64).sin_cos();
@@ -320,6 +424,9 @@ impl<T: Real> ShadingKernel<T> {
             if let BlockerView::Cap { direction, alpha, weight } = view {
                 cap_log_zh(order, self.log_epsilon, alpha, &mut zonal[..order]);
                 add_rotated_zonal(order, &zonal[..order], weight, direction, acc);
+                if let Some(occlusion) = occlusion.as_deref_mut() {
+                    add_rotated_zonal(order, &zonal[..order], weight, direction, occlusion);
+                }
             }
         });
     }
@@ -343,28 +450,99 @@ impl<T: Real> ShadingKernel<T> {
     /// Outgoing radiance of a surface point (docs/design.md, material types). Water is not a
     /// surface material here: the caller shades the reflected point instead.
     pub fn shade(&self, occluders: Occluders, point: &SurfacePoint) -> [f32; 3] {
-        let count = coefficient_count(self.order);
-        let mut visibility = [T::zero(); MAX_COEFFICIENTS];
-        self.add_visibility(occluders, point.position, point.normal, point.object, &mut visibility[..count]);
-        let Some(lobes) = self.materials.get(&point.material) else {
+        let Some((visibility, occlusion)) = self.surface_visibility(occluders, point) else {
             return [0.0; 3];
         };
-        let n = point.normal;
-        let scale = |c: [T; 3], k: [f32; 3]| [0, 1, 2].map(|i| c[i].to_f32().unwrap_or(0.0) * k[i]);
-        let (diffuse, glossy) = match &lobes.material {
-            Material::Diffuse { albedo } | Material::Heightfield { albedo } => {
-                (scale(self.lit(&visibility, &self.diffuse, n), *albedo), [0.0; 3])
-            }
-            Material::Phong { albedo, specular, .. } => {
-                let diffuse = scale(self.lit(&visibility, &self.diffuse, n), *albedo);
-                let phong = lobes.phong.as_ref().expect("phong materials carry their lobe");
-                let reflected = reflect_view(point.view_origin, point.position, n);
-                (diffuse, scale(self.lit(&visibility, phong, reflected), *specular))
-            }
-            Material::Water { .. } => return [0.0; 3],
-        };
+        let lobes = &self.materials[&point.material];
+        let (_, diffuse, glossy) = self.environment_lit(&visibility, &occlusion, lobes, point);
         let (sun_diffuse, sun_glossy) = self.sunlit(occluders, point, &lobes.material);
         [0, 1, 2].map(|i| (diffuse[i] + sun_diffuse[i]) + (glossy[i] + sun_glossy[i]))
+    }
+
+    /// The log visibility of a surface point, and that of its specular occlusion where
+    /// its material has a prefiltered glossy term; `None` for an unknown material.
+    pub(crate) fn surface_visibility(
+        &self,
+        occluders: Occluders,
+        point: &SurfacePoint,
+    ) -> Option<([T; MAX_COEFFICIENTS], [T; MAX_COEFFICIENTS])> {
+        let count = coefficient_count(self.order);
+        let mut visibility = [T::zero(); MAX_COEFFICIENTS];
+        let mut occlusion = [T::zero(); MAX_COEFFICIENTS];
+        let lobes = self.materials.get(&point.material);
+        let sharp = lobes.is_some_and(|l| l.sharp.is_some());
+        self.add_visibility_parts(
+            occluders,
+            point.position,
+            point.normal,
+            point.object,
+            &mut visibility[..count],
+            sharp.then_some(&mut occlusion[..count]),
+        );
+        lobes.map(|_| (visibility, occlusion))
+    }
+
+    /// The environment's light through the diffuse lobe, and the diffuse and glossy
+    /// radiance at `point`, each times the material's albedo or specular colour.
+    pub(crate) fn environment_lit(
+        &self,
+        visibility: &[T],
+        occlusion: &[T],
+        lobes: &MaterialLobes<T>,
+        point: &SurfacePoint,
+    ) -> ([T; 3], [f32; 3], [f32; 3]) {
+        let n = point.normal;
+        let scale = |c: [T; 3], k: [f32; 3]| [0, 1, 2].map(|i| c[i].to_f32().unwrap_or(0.0) * k[i]);
+        let lit_diffuse = self.lit(visibility, &self.diffuse, n);
+        match &lobes.material {
+            Material::Diffuse { albedo } | Material::Heightfield { albedo } => {
+                (lit_diffuse, scale(lit_diffuse, *albedo), [0.0; 3])
+            }
+            Material::Phong { albedo, specular, .. } => {
+                let diffuse = scale(lit_diffuse, *albedo);
+                let phong = lobes.phong.as_ref().expect("phong materials carry their lobe");
+                let reflected = reflect_view(point.view_origin, point.position, n);
+                let glossy = match &lobes.sharp {
+                    Some(sharp) => {
+                        let g = self.prefiltered_glossy(occlusion, phong, sharp, point, reflected);
+                        [0, 1, 2].map(|i| (g[i] * f64::from(specular[i])) as f32)
+                    }
+                    None => scale(self.lit(visibility, phong, reflected), *specular),
+                };
+                (lit_diffuse, diffuse, glossy)
+            }
+            Material::Water { .. } => ([T::zero(); 3], [0.0; 3], [0.0; 3]),
+        }
+    }
+
+    /// `A(n . v) P(R) O` ([`super::glossy`]): the prefiltered light along the mirror
+    /// direction, times the lobe's albedo, times the specular occlusion
+    /// `lum(exp*(V + lobe) . L) / lum(exp*(lobe) . L)` in `[0, 1]` (1 where the open lobe
+    /// gets no light).
+    fn prefiltered_glossy(
+        &self,
+        occlusion: &[T],
+        phong: &LobeTable<T>,
+        sharp: &SharpGlossy<T>,
+        point: &SurfacePoint,
+        reflected: [f64; 3],
+    ) -> [f64; 3] {
+        let count = coefficient_count(self.order);
+        let shadowed = self.lit(occlusion, phong, reflected);
+        let mut open = [T::zero(); MAX_COEFFICIENTS];
+        add_rotated_zonal(self.order, &sharp.open, T::one(), reflected.map(T::of), &mut open[..count]);
+        let open = self
+            .light
+            .each_ref()
+            .map(|light| light.iter().zip(&open[..count]).fold(T::zero(), |acc, (&l, &v)| acc + l * v).max(T::zero()));
+        let lum = |c: [T; 3]| (0..3).map(|i| LUMINANCE[i] * c[i].to_f64().unwrap_or(0.0)).sum::<f64>();
+        let occluded = match lum(open) {
+            below if below > 1e-12 => (lum(shadowed) / below).clamp(0.0, 1.0),
+            _ => 1.0,
+        };
+        // n . v = n . R, R the view mirrored about n.
+        let weight = albedo_lookup(&sharp.albedo, dot(reflected, point.normal)) * occluded;
+        sharp.prefiltered.lookup(reflected).map(|c| f64::from(c) * weight)
     }
 
     /// The sharp lights' diffuse and specular radiance at `point` ([`super::sun`]), each
@@ -382,16 +560,23 @@ impl<T: Real> ShadingKernel<T> {
             Material::Water { .. } => return ([0.0; 3], [0.0; 3]),
         };
         let n = point.normal;
+        // The glossy lobe as the environment's glossy term has it: the prefiltered one's
+        // shape and albedo, or Eq. 27's Phong lobe with `--glossy sh`.
+        let sharp = self.materials.get(&point.material).and_then(|lobes| lobes.sharp.as_ref());
+        let axis = reflect_view(point.view_origin, point.position, n);
+        let sharp_albedo = sharp.map(|sharp| albedo_lookup(&sharp.albedo, dot(axis, n)));
         for sun in &self.suns {
             let v =
                 sun.visibility(occluders.blockers, occluders.horizons, self.ground, point.position, n, point.object);
-            let d = sun.reflected(&v, Lobe::Diffuse, n);
+            let d = sun.reflected(&v, |z| Lobe::Diffuse.value(z), n);
             for i in 0..3 {
                 diffuse[i] += d[i] * f64::from(albedo[i]);
             }
             if let Some((specular, exponent)) = phong {
-                let axis = reflect_view(point.view_origin, point.position, n);
-                let g = sun.reflected(&v, Lobe::Phong { exponent: f64::from(exponent) }, axis);
+                let g = match (sharp, sharp_albedo) {
+                    (Some(sharp), Some(a)) => sun.reflected(&v, |z| a * sharp.lobe.value(z), axis),
+                    _ => sun.reflected(&v, |z| Lobe::Phong { exponent: f64::from(exponent) }.value(z), axis),
+                };
                 for i in 0..3 {
                     glossy[i] += g[i] * f64::from(specular[i]);
                 }
@@ -399,6 +584,17 @@ impl<T: Real> ShadingKernel<T> {
         }
         (diffuse.map(|c| c as f32), glossy.map(|c| c as f32))
     }
+}
+
+/// `exp*(lobe)` about +Z as ZH coefficients, exponentiated as the pixels' log vectors
+/// are: a zonal function stays zonal, its coefficients the `m = 0` ones.
+fn open_lobe<T: Real>(order: usize, exp: &Exponentiator, lobe: &LobeTable<T>) -> Vec<T> {
+    let count = coefficient_count(order);
+    let mut f = vec![T::zero(); count];
+    add_rotated_zonal(order, &lobe.zonal, T::one(), [T::zero(), T::zero(), T::one()], &mut f);
+    let mut e = vec![T::zero(); count];
+    exp.exp(&f, None, lobe.log_peak, &mut e);
+    (0..order).map(|l| e[l * l + l]).collect()
 }
 
 /// The view direction mirrored about `n`: `R = 2 (n . V) n - V`, `V` from `p` towards

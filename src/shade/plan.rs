@@ -39,6 +39,9 @@ pub struct FrameContents {
     pub blockers: bool,
     /// A Phong material is declared (a second exponentiation per glossy point).
     pub phong: bool,
+    /// A Phong material's glossy term reads a prefiltered environment
+    /// ([`super::glossy`]).
+    pub prefiltered: bool,
 }
 
 /// The kernel at the precision the settings ask for.
@@ -85,23 +88,28 @@ impl<'a> FramePlan<'a> {
             heightfield: terrain.is_some(),
             blockers: !frame.blockers.is_empty(),
             phong: scene.materials.values().any(|m| matches!(m, Material::Phong { .. })),
+            prefiltered: false,
         };
         let mut suns = frame.suns.clone();
         let mut extracted_shares = Vec::new();
-        let light = match frame.light.as_ref() {
+        let extracted;
+        let residual = match frame.light.as_ref() {
             Light::Environment { map, strength } if settings.sharp_lights => {
                 let split = super::sharp_lights::extract_suns(map, *strength);
                 suns.extend(&split.suns);
                 extracted_shares = split.shares;
-                Light::Environment { map: split.residual, strength: *strength }.sh_coefficients(settings.order)
+                extracted = Light::Environment { map: split.residual, strength: *strength };
+                &extracted
             }
-            other => other.sh_coefficients(settings.order),
+            other => other,
         };
+        let light = residual.sh_coefficients(settings.order);
         let kernel = match settings.precision {
             Precision::F32 => PlannedKernel::F32(ShadingKernel::new(
                 settings,
                 &scene.materials,
                 &light,
+                residual,
                 contents.heightfield,
                 &suns,
                 frame.ground,
@@ -110,10 +118,18 @@ impl<'a> FramePlan<'a> {
                 settings,
                 &scene.materials,
                 &light,
+                residual,
                 contents.heightfield,
                 &suns,
                 frame.ground,
             )),
+        };
+        let contents = FrameContents {
+            prefiltered: match &kernel {
+                PlannedKernel::F32(kernel) => kernel.has_prefiltered_glossy(),
+                PlannedKernel::F64(kernel) => kernel.has_prefiltered_glossy(),
+            },
+            ..contents
         };
         let blockers = BlockerTree::new(&frame.blockers, settings.cluster_ratio);
         let mut timings = StageTimings::default();

@@ -47,10 +47,27 @@ pub struct ShadingSettings {
     /// Take the suns out of an environment map and shade them as sharp lights
     /// ([`super::sharp_lights`]); off keeps the whole map in SH.
     pub sharp_lights: bool,
+    /// How glossy lobes are shaded ([`GlossyMethod`]).
+    pub glossy: GlossyMethod,
     /// Height-field march: W, k, o.
     pub horizon: HorizonSettings,
     /// The precision of the per-pixel kernel.
     pub precision: Precision,
+}
+
+/// How the glossy lobe of a `phong` material is shaded (`--glossy`). The first two read
+/// a prefiltered environment scaled by a log-SH specular occlusion ([`super::glossy`]);
+/// a light given as SH coefficients has no map to prefilter and is always shaded `sh`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, clap::ValueEnum)]
+pub enum GlossyMethod {
+    /// The GGX lobe of the material's width, with GGX's directional albedo: the Glossy
+    /// BSDF that `render_cycles.py` renders.
+    Ggx,
+    /// The Phong lobe of Eq. 27 (paper 000), cut by the tangent plane, prefiltered.
+    Phong,
+    /// The Phong lobe in log-SH (paper 000, Eq. 27): exact visibility weighting, but no
+    /// sharper than the order resolves.
+    Sh,
 }
 
 /// Precision of the per-pixel kernel (`--precision`).
@@ -124,6 +141,7 @@ impl ShadingSettings {
             overlap_floor: true,
             cluster_ratio: DEFAULT_CLUSTER_RATIO,
             sharp_lights: true,
+            glossy: GlossyMethod::Ggx,
             horizon: HorizonSettings::default(),
             precision: Precision::F32,
         }

@@ -32,7 +32,6 @@
 
 use super::blocker_tree::BlockerTree;
 use crate::heightfield::HorizonPyramid;
-use crate::logsh::Lobe;
 use crate::scene::camera::{dot, frame_around};
 use crate::scene::SunLight;
 use std::f64::consts::PI;
@@ -132,10 +131,15 @@ impl SunDisk {
         blocked.map(|b| 1.0 - b)
     }
 
-    /// `integral over the disk of L V lobe(axis . w) dw` for each lobe, given the disk's
+    /// `integral over the disk of L V lobe(axis . w) dw` for a lobe given by its value at `cos theta` from `axis`, given the disk's
     /// visibility: `disk_integral * mean(V lobe)`, RGB.
-    pub fn reflected(&self, visibility: &[f64; DISK_DIRECTIONS], lobe: Lobe, axis: [f64; 3]) -> [f64; 3] {
-        let mean = self.directions.iter().zip(visibility).map(|(w, v)| v * lobe.value(dot(axis, *w))).sum::<f64>()
+    pub fn reflected(
+        &self,
+        visibility: &[f64; DISK_DIRECTIONS],
+        lobe: impl Fn(f64) -> f64,
+        axis: [f64; 3],
+    ) -> [f64; 3] {
+        let mean = self.directions.iter().zip(visibility).map(|(w, v)| v * lobe(dot(axis, *w))).sum::<f64>()
             / DISK_DIRECTIONS as f64;
         self.disk_integral.map(|c| c * mean)
     }

@@ -70,22 +70,14 @@ impl<T: Real> ShadingKernel<T> {
     pub fn shade_passes(&self, occluders: Occluders, point: &SurfacePoint) -> PixelPasses {
         let count = coefficient_count(self.order);
         let (p, n) = (point.position, point.normal);
-        let mut full = [T::zero(); MAX_COEFFICIENTS];
-        self.add_visibility(occluders, p, n, point.object, &mut full[..count]);
-        let Some(lobes) = self.materials.get(&point.material) else {
+        let Some((full, occlusion)) = self.surface_visibility(occluders, point) else {
             return PixelPasses::UNSHADED;
         };
-        let scale = |c: [T; 3], k: [f32; 3]| [0, 1, 2].map(|i| c[i].to_f32().unwrap_or(0.0) * k[i]);
-        let lit_diffuse = self.lit(&full, &self.diffuse, n);
-        let (diffuse, specular) = match &lobes.material {
-            Material::Diffuse { albedo } | Material::Heightfield { albedo } => (scale(lit_diffuse, *albedo), [0.0; 3]),
-            Material::Phong { albedo, specular, .. } => {
-                let phong = lobes.phong.as_ref().expect("phong materials carry their lobe");
-                let reflected = super::reflect_view(point.view_origin, p, n);
-                (scale(lit_diffuse, *albedo), scale(self.lit(&full, phong, reflected), *specular))
-            }
-            Material::Water { .. } => return PixelPasses::UNSHADED,
-        };
+        let lobes = &self.materials[&point.material];
+        if matches!(lobes.material, Material::Water { .. }) {
+            return PixelPasses::UNSHADED;
+        }
+        let (lit_diffuse, diffuse, specular) = self.environment_lit(&full, &occlusion, lobes, point);
         let (sun_diffuse, sun_glossy) = self.sunlit(occluders, point, &lobes.material);
         let diffuse = [0, 1, 2].map(|i| diffuse[i] + sun_diffuse[i]);
         let specular = [0, 1, 2].map(|i| specular[i] + sun_glossy[i]);

@@ -1,0 +1,467 @@
+//! Sharp glossy lobes outside SH: the split sum of Karis 2013 ("Real Shading in Unreal
+//! Engine 4"), with log-SH visibility as the specular occlusion.
+//!
+//! Order-n SH holds a lobe no narrower than about `pi / n` (paper 000, Fig. 7): at order
+//! 4 a near-mirror comes out as a dull blob 0.3 away from Cycles. Here the glossy term of
+//! a `phong` material is
+//!
+//! ```text
+//! glossy = specular * A(n . v) * P(R) * O
+//! ```
+//!
+//! - `P(R)`: the environment prefiltered with the lobe about the mirror direction `R`,
+//!   `integral L(w) lobe(R . w) dw` with the lobe normalised over the sphere, read
+//!   bilinearly from a map whose resolution follows the lobe's width ([`Prefiltered`]).
+//! - `A(n . v)`: the lobe's albedo, what a white sky reflects: for the GGX lobe, GGX's
+//!   directional albedo with no Fresnel term (Cycles' Glossy BSDF: single scattering,
+//!   height-correlated Smith masking, so the cosine, the masking and the lower hemisphere
+//!   are all in it); for the Phong lobe, the part of it above the tangent plane.
+//! - `O`: the specular occlusion, `lum(exp*(V + lobe) . L) / lum(exp*(lobe) . L)` with
+//!   `V` the log visibility of the blockers and the height field, the log-SH Phong lobe
+//!   of the same width and `L` the light's SH vector, in `[0, 1]`. The tangent plane and
+//!   the ground plane are not in `V`: `A` holds the first exactly, and the second is
+//!   taken out of the map itself (the map is prefiltered with its lower hemisphere black
+//!   when the scene has a ground plane), where order 4 would blur either over tens of
+//!   degrees.
+//!
+//! The GGX lobe in reflected space is the split sum's `n = v = R` case: with the half
+//! vector `h` at half the angle `theta` from `R`, `lobe(theta) = D(cos(theta / 2)) / 4`,
+//! `D` the GGX normal distribution of width `alpha`, which integrates to 1 over the
+//! sphere. Its `alpha` is the one the exporter mapped to the Phong exponent,
+//! `r = 1 / (2 alpha^2) - 1/2` (`blender_scripts/logsh_exporter/exporter.py`), so that
+//! both lobes have the same peak, `(r + 1/2) / (2 pi)` against `(r + 1) / (2 pi)`.
+
+use crate::scene::camera::dot;
+use crate::scene::light::EnvironmentMap;
+use rayon::prelude::*;
+use std::f64::consts::PI;
+
+/// The shape of a sharp lobe about `R` (`--glossy`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum SharpLobe {
+    /// GGX of width `alpha` in reflected space, with GGX's directional albedo.
+    Ggx { alpha: f64 },
+    /// `(r + 1) / (2 pi) max(cos theta, 0)^r` (paper 000, Eq. 27), clipped by the
+    /// tangent plane.
+    Phong { exponent: f64 },
+}
+
+/// GGX width `alpha` of the Phong exponent the exporter writes for it (inverse of
+/// `r = 1 / (2 alpha^2) - 1/2`).
+pub fn ggx_alpha(exponent: f64) -> f64 {
+    (0.5 / (exponent + 0.5)).sqrt()
+}
+
+/// GGX normal distribution at `cos theta_h = mu`, normalised as `integral D cos = 1`.
+fn ggx_distribution(alpha: f64, mu: f64) -> f64 {
+    let a2 = alpha * alpha;
+    let d = mu * mu * (a2 - 1.0) + 1.0;
+    a2 / (PI * d * d)
+}
+
+/// Smith's `Lambda` for GGX at `cos theta = mu` (height-correlated masking,
+/// `G2 = 1 / (1 + Lambda(v) + Lambda(l))`).
+fn ggx_lambda(alpha: f64, mu: f64) -> f64 {
+    let mu2 = (mu * mu).max(1e-12);
+    0.5 * ((1.0 + alpha * alpha * (1.0 - mu2) / mu2).sqrt() - 1.0)
+}
+
+impl SharpLobe {
+    /// The lobe's value at `cos theta = z` from its axis, normalised over the sphere.
+    pub fn value(self, z: f64) -> f64 {
+        match self {
+            SharpLobe::Ggx { alpha } => ggx_distribution(alpha, ((1.0 + z.clamp(-1.0, 1.0)) * 0.5).sqrt()) / 4.0,
+            SharpLobe::Phong { exponent } => {
+                if z <= 0.0 {
+                    0.0
+                } else {
+                    (exponent + 1.0) / (2.0 * PI) * z.powf(exponent)
+                }
+            }
+        }
+    }
+
+    /// The angle from the axis at which the lobe falls to half its peak: the scale that
+    /// sets a prefiltered map's resolution.
+    pub fn half_width(self) -> f64 {
+        match self {
+            // D = D_max / 2 where cos^2 theta_h = (1 - sqrt(2) a^2) / (1 - a^2); the
+            // reflected angle is twice the half vector's.
+            SharpLobe::Ggx { alpha } => {
+                let a2 = alpha * alpha;
+                let mu2 = ((1.0 - std::f64::consts::SQRT_2 * a2) / (1.0 - a2)).clamp(0.0, 1.0);
+                2.0 * mu2.sqrt().acos()
+            }
+            SharpLobe::Phong { exponent } => 0.5f64.powf(1.0 / exponent).acos(),
+        }
+    }
+
+    /// The lobe's albedo at `n . v = mu` (module doc): what it reflects of a white sky
+    /// above the tangent plane, by a 64 x 64 midpoint rule over its sampling
+    /// distribution (GGX: half vectors drawn from `D cos`; Phong: directions about `R`).
+    pub fn albedo(self, mu: f64) -> f64 {
+        const STEPS: usize = 64;
+        let mu = mu.clamp(1e-4, 1.0);
+        let v = [(1.0 - mu * mu).sqrt(), 0.0, mu];
+        let mut sum = 0.0;
+        for i in 0..STEPS {
+            let xi = (i as f64 + 0.5) / STEPS as f64;
+            for j in 0..STEPS {
+                let phi = 2.0 * PI * (j as f64 + 0.5) / STEPS as f64;
+                sum += match self {
+                    SharpLobe::Ggx { alpha } => {
+                        // h with pdf D cos: tan theta_h = alpha sqrt(xi / (1 - xi)).
+                        let theta_h = (alpha * (xi / (1.0 - xi)).sqrt()).atan();
+                        let h = [theta_h.sin() * phi.cos(), theta_h.sin() * phi.sin(), theta_h.cos()];
+                        let vh = dot(v, h);
+                        let l_z = 2.0 * vh * h[2] - v[2];
+                        if vh <= 0.0 || l_z <= 0.0 {
+                            0.0
+                        } else {
+                            // f cos / pdf(l) = G2 (v . h) / ((n . v) (n . h)).
+                            let g2 = 1.0 / (1.0 + ggx_lambda(alpha, mu) + ggx_lambda(alpha, l_z));
+                            g2 * vh / (mu * h[2])
+                        }
+                    }
+                    SharpLobe::Phong { exponent } => {
+                        // w about R with pdf lobe: cos theta = xi^(1 / (r + 1)).
+                        let z = xi.powf(1.0 / (exponent + 1.0));
+                        let s = (1.0 - z * z).max(0.0).sqrt();
+                        let r = [-v[0], 0.0, v[2]];
+                        // R's frame: R, t = (R_z, 0, -R_x) in its plane, and Y.
+                        let w_z = z * r[2] + s * phi.cos() * (-r[0]);
+                        f64::from(u8::from(w_z > 0.0))
+                    }
+                };
+            }
+        }
+        sum / (STEPS * STEPS) as f64
+    }
+}
+
+/// Entries of a lobe's albedo table over `n . v` in `[0, 1]`.
+pub const ALBEDO_ENTRIES: usize = 33;
+
+/// `A(mu)` at `mu = i / (ALBEDO_ENTRIES - 1)`, read linearly ([`albedo_lookup`]).
+pub fn albedo_table(lobe: SharpLobe) -> Vec<f32> {
+    (0..ALBEDO_ENTRIES).map(|i| lobe.albedo(i as f64 / (ALBEDO_ENTRIES - 1) as f64) as f32).collect()
+}
+
+/// Linear interpolation of an [`albedo_table`] at `n . v = mu`.
+pub fn albedo_lookup(table: &[f32], mu: f64) -> f64 {
+    let x = mu.clamp(0.0, 1.0) * (table.len() - 1) as f64;
+    let i = (x.floor() as usize).min(table.len() - 2);
+    let t = x - i as f64;
+    f64::from(table[i]) * (1.0 - t) + f64::from(table[i + 1]) * t
+}
+
+/// Height of the coarsest level a map is reduced to.
+const MIN_HEIGHT: usize = 4;
+
+/// The prefiltered map has at least this many texels per lobe half-width, so that
+/// reading it bilinearly keeps the lobe's own detail; a lobe narrower than that at the
+/// map's own resolution reads the map itself.
+const OUTPUT_TEXELS_PER_HALF_WIDTH: f64 = 3.0;
+
+/// The map the lobe is integrated over has at least this many texels per half-width (its
+/// texels are box-filtered, so a coarser input only blurs the lobe by a fraction of a
+/// texel).
+const INPUT_TEXELS_PER_HALF_WIDTH: f64 = 2.0;
+
+/// The convolution window, in lobe half-widths: the GGX lobe keeps 97 % of its mass
+/// within it (its tail beyond falls as `theta^-4`; the window's weights are
+/// renormalised), the Phong lobe all of it.
+const WINDOW_HALF_WIDTHS: f64 = 12.0;
+
+/// An environment map prefiltered with one lobe: `P(R) = integral L(w) lobe(R . w) dw`,
+/// as an equirectangular map in the orientation of [`EnvironmentMap`].
+#[derive(Clone, Debug)]
+pub struct Prefiltered {
+    pub map: EnvironmentMap,
+}
+
+/// The box-filtered reductions of a map, each half the size of the one before, texels
+/// averaged by solid angle: the inputs of the prefiltering, each as fine as its lobe
+/// needs.
+pub struct MapLevels {
+    levels: Vec<EnvironmentMap>,
+}
+
+impl MapLevels {
+    /// `map` with its lower hemisphere black when `sky_only` (the ground plane hides it
+    /// from every receiver above the plane), and its reductions.
+    pub fn new(map: &EnvironmentMap, strength: f32, sky_only: bool) -> Self {
+        let mut base = map.clone();
+        for (i, t) in base.texels.iter_mut().enumerate() {
+            let row = i / map.width;
+            let below = (row as f64 + 0.5) / map.height as f64 > 0.5;
+            *t = if sky_only && below { [0.0; 3] } else { t.map(|c| c * strength) };
+        }
+        let mut levels = vec![base];
+        loop {
+            let last = levels.last().expect("one level at least");
+            if last.height / 2 < MIN_HEIGHT || last.width % 2 != 0 || last.height % 2 != 0 {
+                break;
+            }
+            let next = reduce(last);
+            levels.push(next);
+        }
+        Self { levels }
+    }
+
+    /// The map prefiltered with `lobe`.
+    pub fn prefilter(&self, lobe: SharpLobe) -> Prefiltered {
+        let s = lobe.half_width();
+        let texel = |m: &EnvironmentMap| PI / m.height as f64;
+        let coarsest_within =
+            |texels_per_half_width: f64| self.levels.iter().rev().find(|m| texel(m) * texels_per_half_width <= s);
+        let Some(output) = coarsest_within(OUTPUT_TEXELS_PER_HALF_WIDTH) else {
+            return Prefiltered { map: self.levels[0].clone() };
+        };
+        let input = coarsest_within(INPUT_TEXELS_PER_HALF_WIDTH).expect("coarser than the output's");
+        Prefiltered { map: convolve(input, output.width, output.height, lobe, (WINDOW_HALF_WIDTHS * s).min(PI)) }
+    }
+}
+
+/// One reduction: each texel the solid-angle-weighted mean of the 2 x 2 it covers.
+fn reduce(map: &EnvironmentMap) -> EnvironmentMap {
+    let (width, height) = (map.width / 2, map.height / 2);
+    let mut texels = vec![[0.0f32; 3]; width * height];
+    for row in 0..height {
+        let (w0, w1) = (map.texel_solid_angle(2 * row), map.texel_solid_angle(2 * row + 1));
+        for column in 0..width {
+            let mut sum = [0.0f64; 3];
+            for (r, w) in [(2 * row, w0), (2 * row + 1, w1)] {
+                for c in [2 * column, 2 * column + 1] {
+                    let t = map.texels[r * map.width + c];
+                    for k in 0..3 {
+                        sum[k] += w * f64::from(t[k]);
+                    }
+                }
+            }
+            texels[row * width + column] = sum.map(|v| (v / (2.0 * (w0 + w1))) as f32);
+        }
+    }
+    EnvironmentMap { file: map.file.clone(), width, height, texels }
+}
+
+/// `map` convolved with `lobe`, at the texel centres of a `width` x `height` map, over
+/// a window of `window` radians about each, the weights renormalised over the window.
+fn convolve(map: &EnvironmentMap, width: usize, height: usize, lobe: SharpLobe, window: f64) -> EnvironmentMap {
+    // Texel centres as (sin, cos) of their polar angle and of their azimuth
+    // (`equirectangular_to_direction`).
+    let polar = |row: usize, height: usize| PI * (row as f64 + 0.5) / height as f64;
+    let azimuths = |width: usize| -> Vec<(f64, f64)> {
+        (0..width).map(|c| (PI - 2.0 * PI * (c as f64 + 0.5) / width as f64).sin_cos()).collect()
+    };
+    let direction = |(sin_t, cos_t): (f64, f64), (sin_p, cos_p): (f64, f64)| [sin_t * cos_p, sin_t * sin_p, cos_t];
+    let in_rows: Vec<(f64, f64)> = (0..map.height).map(|r| polar(r, map.height).sin_cos()).collect();
+    let in_columns = azimuths(map.width);
+    let out_columns = azimuths(width);
+    let solid_angles: Vec<f64> = (0..map.height).map(|row| map.texel_solid_angle(row)).collect();
+    let cos_window = window.cos();
+    let margin = window + PI / map.height as f64;
+    let mut texels = vec![[0.0f32; 3]; width * height];
+    texels.par_chunks_mut(width).enumerate().for_each(|(row, out_row)| {
+        let theta = polar(row, height);
+        let window_rows: Vec<usize> =
+            (0..map.height).filter(|&r| (polar(r, map.height) - theta).abs() <= margin).collect();
+        for (column, out) in out_row.iter_mut().enumerate() {
+            let axis = direction(theta.sin_cos(), out_columns[column]);
+            // The input column nearest the axis's azimuth.
+            let centre = (column as f64 + 0.5) / width as f64 * map.width as f64;
+            let (mut sum, mut weights) = ([0.0f64; 3], 0.0f64);
+            for &r in &window_rows {
+                // The columns within the window at this row: all of them near a pole.
+                let reach = (margin / in_rows[r].0.max(1e-9) / (2.0 * PI) * map.width as f64).ceil() as usize + 1;
+                let (first, count) = if 2 * reach + 1 >= map.width {
+                    (0, map.width)
+                } else {
+                    (centre as usize + map.width - reach, 2 * reach + 1)
+                };
+                for c in (first..first + count).map(|c| c % map.width) {
+                    let z = dot(axis, direction(in_rows[r], in_columns[c]));
+                    if z < cos_window {
+                        continue;
+                    }
+                    let w = lobe.value(z) * solid_angles[r];
+                    let t = map.texels[r * map.width + c];
+                    for k in 0..3 {
+                        sum[k] += w * f64::from(t[k]);
+                    }
+                    weights += w;
+                }
+            }
+            *out = if weights > 0.0 { sum.map(|v| (v / weights) as f32) } else { map.lookup(axis) };
+        }
+    });
+    EnvironmentMap { file: map.file.clone(), width, height, texels }
+}
+
+impl Prefiltered {
+    /// `P(R)`, bilinearly.
+    pub fn lookup(&self, direction: [f64; 3]) -> [f32; 3] {
+        self.map.lookup(direction)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::light::direction_to_equirectangular;
+
+    /// A sky of the kind the glossy term must mirror: a gradient, coloured patches and a
+    /// window 20 times brighter, in a 512 x 256 map.
+    fn featured_sky() -> EnvironmentMap {
+        let (width, height) = (512, 256);
+        let texels = (0..width * height)
+            .map(|i| {
+                let (u, v) = ((i % width) as f64 / width as f64, 1.0 - (i / width) as f64 / height as f64);
+                let mut t = [0.3 + 0.4 * v, 0.4 + 0.3 * v, 0.6 + 0.3 * v];
+                if (0.1..0.2).contains(&u) && (0.55..0.65).contains(&v) {
+                    t = [2.0, 0.2, 0.1];
+                }
+                if (0.5..0.55).contains(&u) && (0.6..0.75).contains(&v) {
+                    t = [20.0, 20.0, 18.0];
+                }
+                t.map(|c| c as f32)
+            })
+            .collect();
+        EnvironmentMap { file: "featured sky".into(), width, height, texels }
+    }
+
+    /// `integral L lobe(R . w) dw` over every texel centre of `map`, normalised by the
+    /// lobe's own sum (the brute force the prefiltered maps are checked against).
+    fn brute_force(map: &EnvironmentMap, lobe: SharpLobe, axis: [f64; 3]) -> [f64; 3] {
+        let (mut sum, mut weights) = ([0.0f64; 3], 0.0);
+        for row in 0..map.height {
+            let omega = map.texel_solid_angle(row);
+            for column in 0..map.width {
+                let d = crate::scene::light::equirectangular_to_direction(
+                    (column as f64 + 0.5) / map.width as f64,
+                    1.0 - (row as f64 + 0.5) / map.height as f64,
+                );
+                let w = lobe.value(dot(axis, d)) * omega;
+                for k in 0..3 {
+                    sum[k] += w * f64::from(map.texels[row * map.width + column][k]);
+                }
+                weights += w;
+            }
+        }
+        sum.map(|s| s / weights)
+    }
+
+    fn directions(count: usize) -> Vec<[f64; 3]> {
+        let golden = PI * (3.0 - 5f64.sqrt());
+        (0..count)
+            .map(|i| {
+                let z = 1.0 - 2.0 * (i as f64 + 0.5) / count as f64;
+                let s = (1.0 - z * z).sqrt();
+                [s * (golden * i as f64).cos(), s * (golden * i as f64).sin(), z]
+            })
+            .collect()
+    }
+
+    #[test]
+    fn lobes_integrate_to_one() {
+        for lobe in [SharpLobe::Ggx { alpha: 0.3 }, SharpLobe::Ggx { alpha: 0.05 }, SharpLobe::Phong { exponent: 50.0 }]
+        {
+            // In cos theta, with nodes packed towards the axis where the lobe lives.
+            let steps = 200_000;
+            let integral: f64 = (0..steps)
+                .map(|i| {
+                    let t = (i as f64 + 0.5) / steps as f64;
+                    let z = 1.0 - 2.0 * t * t;
+                    lobe.value(z) * 2.0 * PI * 4.0 * t / steps as f64
+                })
+                .sum();
+            assert!((integral - 1.0).abs() < 2e-3, "{lobe:?}: {integral}");
+        }
+    }
+
+    /// The prefiltered maps against the brute-force integral of the lobe over the map,
+    /// along 200 directions, for lobes from rough to near-mirror. Measured worst errors,
+    /// relative to the map's mean radiance: GGX exponent 7.5 0.6 %, 60 1.6 %, 300 3 %
+    /// (the window's 3 % of GGX's tail goes to the core); Phong below 1 %.
+    #[test]
+    fn prefiltered_lookups_match_brute_force() {
+        let map = featured_sky();
+        let mean = map.texels.iter().map(|t| f64::from(t[1])).sum::<f64>() / map.texels.len() as f64;
+        let levels = MapLevels::new(&map, 1.0, false);
+        for (lobe, tolerance) in [
+            (SharpLobe::Ggx { alpha: ggx_alpha(7.5) }, 0.02),
+            (SharpLobe::Ggx { alpha: ggx_alpha(60.0) }, 0.04),
+            (SharpLobe::Ggx { alpha: ggx_alpha(300.0) }, 0.06),
+            (SharpLobe::Phong { exponent: 60.0 }, 0.02),
+            (SharpLobe::Phong { exponent: 300.0 }, 0.03),
+        ] {
+            let prefiltered = levels.prefilter(lobe);
+            let (mut worst, mut total) = (0.0f64, 0.0);
+            for axis in directions(200) {
+                let exact = brute_force(&map, lobe, axis);
+                let read = prefiltered.lookup(axis);
+                for k in 0..3 {
+                    let error = (f64::from(read[k]) - exact[k]).abs() / exact[k].max(mean);
+                    worst = worst.max(error);
+                    total += error;
+                }
+            }
+            eprintln!(
+                "{lobe:?}: {}x{}, worst {worst:.4}, mean {:.4}",
+                prefiltered.map.width,
+                prefiltered.map.height,
+                total / 600.0
+            );
+            assert!(worst < tolerance, "{lobe:?}: worst {worst}");
+        }
+    }
+
+    /// A lobe narrower than one and a half texels reads the map itself.
+    #[test]
+    fn a_mirror_reads_the_map() {
+        let map = featured_sky();
+        let levels = MapLevels::new(&map, 2.0, false);
+        let mirror = levels.prefilter(SharpLobe::Ggx { alpha: ggx_alpha(1e6) });
+        assert_eq!((mirror.map.width, mirror.map.height), (map.width, map.height));
+        let d = crate::scene::light::equirectangular_to_direction(0.525, 0.7);
+        assert_eq!(mirror.lookup(d), map.lookup(d).map(|c| 2.0 * c));
+        assert!(direction_to_equirectangular(d)[0] > 0.5);
+    }
+
+    /// GGX's directional albedo against an independent integral of `D G2 / (4 n.v)` over
+    /// the hemisphere of light directions; Phong's share above the tangent plane is 1
+    /// facing it and 1/2 at grazing.
+    #[test]
+    fn albedos_match_direct_integration() {
+        for alpha in [0.05, 0.25, 0.5] {
+            for mu in [1.0, 0.7, 0.3, 0.1] {
+                let v = [(1.0f64 - mu * mu).sqrt(), 0.0, mu];
+                let (rows, columns) = (2000, 400);
+                let mut direct = 0.0;
+                for i in 0..rows {
+                    // l by the angle from the mirror direction is too sharp for a plain grid
+                    // at small alpha; integrate over the half vector instead.
+                    let theta_h = (i as f64 + 0.5) / rows as f64 * PI / 2.0;
+                    for j in 0..columns {
+                        let phi = (j as f64 + 0.5) / columns as f64 * 2.0 * PI;
+                        let h = [theta_h.sin() * phi.cos(), theta_h.sin() * phi.sin(), theta_h.cos()];
+                        let vh = dot(v, h);
+                        let l_z = 2.0 * vh * h[2] - v[2];
+                        if vh <= 0.0 || l_z <= 0.0 {
+                            continue;
+                        }
+                        let d_omega_h = theta_h.sin() * (PI / 2.0 / rows as f64) * (2.0 * PI / columns as f64);
+                        // dw_l = 4 (v . h) dw_h.
+                        let g2 = 1.0 / (1.0 + ggx_lambda(alpha, mu) + ggx_lambda(alpha, l_z));
+                        direct += ggx_distribution(alpha, h[2]) * g2 / (4.0 * mu) * 4.0 * vh * d_omega_h;
+                    }
+                }
+                let tabulated = SharpLobe::Ggx { alpha }.albedo(mu);
+                assert!((tabulated - direct).abs() < 0.01, "alpha {alpha}, mu {mu}: {tabulated} vs {direct}");
+            }
+        }
+        let phong = SharpLobe::Phong { exponent: 200.0 };
+        assert!((phong.albedo(1.0) - 1.0).abs() < 1e-9);
+        assert!((phong.albedo(1e-4) - 0.5).abs() < 0.02, "{}", phong.albedo(1e-4));
+    }
+}
