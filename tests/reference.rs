@@ -296,14 +296,20 @@ fn errors_name_what_is_wrong() {
 /// A 64 x 32 sky with a dim gradient, a bright warm patch 20 degrees up and a small very
 /// bright spot (the kind of feature importance sampling must find).
 fn patchy_sky() -> Light {
-    let (width, height) = (64, 32);
+    patchy_sky_of(64, 32)
+}
+
+/// [`patchy_sky`] at another resolution (a multiple of 64 x 32): the same patch, the spot
+/// one texel.
+fn patchy_sky_of(width: usize, height: usize) -> Light {
+    let k = width / 64;
     let texels = (0..width * height)
         .map(|i| {
             let (c, r) = (i % width, i / width);
             let sky = 0.2 + 0.6 * (1.0 - r as f32 / height as f32);
-            if (10..14).contains(&r) && (20..28).contains(&c) {
+            if (10 * k..14 * k).contains(&r) && (20 * k..28 * k).contains(&c) {
                 [6.0, 4.0, 2.0]
-            } else if r == 6 && c == 45 {
+            } else if r == 6 * k && c == 45 * k {
                 [200.0, 200.0, 180.0]
             } else {
                 [sky * 0.8, sky * 0.9, sky]
@@ -407,4 +413,56 @@ fn ground_plane_hides_the_lower_hemisphere() {
     let up = [LobeTerm { lobe: Lobe::Diffuse, axis: [0.0, 0.0, 1.0], scale: [1.0; 3] }];
     let on_ground = integrate_point(occ, &model, [0.0, 0.0, 0.0], [0.0, 0.0, 1.0], &up, 1e-5, 8);
     assert!((on_ground.rgb[0] - 1.0).abs() < 1e-4, "{on_ground:?}");
+}
+
+/// The prefiltered glossy term and its log-SH specular occlusion (`--glossy phong`,
+/// src/shade/glossy.rs) against the reference's exact integral of the same Phong lobe,
+/// cut by the tangent plane, on a mirror-like plane (exponent 300) reflecting a sphere
+/// and a patchy sky. Measured, in units of the unoccluded white floor: 0.003 on average
+/// (the sphere's reflection black where the truth is, by the cone test of the lobe's
+/// core; log-SH's occlusion alone left it at 0.4 and the frame at 0.07), against 0.62 for
+/// the lobe in log-SH, which order 4 blurs into a dull blob.
+#[test]
+fn prefiltered_glossy_and_its_occlusion_match_the_reference() {
+    use logsh::shade::{shade_frame, GlossyMethod, ShadingSettings};
+    let dir = tempfile::tempdir().unwrap();
+    let spec = SphereOverPlane {
+        spheres: vec![Sphere::new([0.0, 1.0, 1.2], 1.0)],
+        width: 64,
+        height: 36,
+        camera_position: [0.0, -8.0, 4.0],
+        ..Default::default()
+    };
+    sphere_over_plane(dir.path(), &spec).unwrap();
+    let mut scene = Scene::load(dir.path()).unwrap();
+    scene.materials.insert(PLANE_MATERIAL, Material::Phong { albedo: [0.0; 3], specular: [1.0; 3], exponent: 300.0 });
+    let mut frame = scene.frame(1).unwrap();
+    frame.light = std::sync::Arc::new(patchy_sky_of(256, 128));
+    let truth = render(&scene, &frame, &options(2e-3, 7));
+    let unit = {
+        let Light::Environment { map, .. } = frame.light.as_ref() else { unreachable!() };
+        let mut sum = 0.0;
+        for row in 0..map.height / 2 {
+            let z = (std::f64::consts::PI * (row as f64 + 0.5) / map.height as f64).cos();
+            let omega = map.texel_solid_angle(row);
+            sum += (0..map.width).map(|c| f64::from(map.texels[row * map.width + c][1]) * z * omega).sum::<f64>();
+        }
+        sum / std::f64::consts::PI
+    };
+    let error = |glossy: GlossyMethod| {
+        let settings = ShadingSettings { glossy, ..ShadingSettings::default() };
+        let shaded = shade_frame(&scene, &frame, &settings).unwrap();
+        let (mut sum, mut n) = (0.0, 0usize);
+        for (i, &m) in frame.gbuffer.material.iter().enumerate() {
+            if m == PLANE_MATERIAL {
+                sum += (0..3).map(|k| (shaded.rgba[i][k] - truth.rgba[i][k]).abs() as f64).sum::<f64>() / 3.0;
+                n += 1;
+            }
+        }
+        sum / n as f64 / unit
+    };
+    let (prefiltered, in_sh) = (error(GlossyMethod::Phong), error(GlossyMethod::Sh));
+    println!("glossy plane against the reference: prefiltered {prefiltered:.4}, log-SH lobe {in_sh:.4}");
+    assert!(prefiltered < 0.01, "prefiltered glossy off by {prefiltered}");
+    assert!(in_sh > 0.3, "the log-SH lobe was expected to blur: {in_sh}");
 }

@@ -16,13 +16,18 @@
 //!   directional albedo with no Fresnel term (Cycles' Glossy BSDF: single scattering,
 //!   height-correlated Smith masking, so the cosine, the masking and the lower hemisphere
 //!   are all in it); for the Phong lobe, the part of it above the tangent plane.
-//! - `O`: the specular occlusion, `lum(exp*(V + lobe) . L) / lum(exp*(lobe) . L)` with
-//!   `V` the log visibility of the blockers and the height field, the log-SH Phong lobe
-//!   of the same width and `L` the light's SH vector, in `[0, 1]`. The tangent plane and
-//!   the ground plane are not in `V`: `A` holds the first exactly, and the second is
-//!   taken out of the map itself (the map is prefiltered with its lower hemisphere black
-//!   when the scene has a ground plane), where order 4 would blur either over tens of
-//!   degrees.
+//! - `O`: the specular occlusion by the blockers and the height field, in `[0, 1]`. For
+//!   a lobe order n resolves, log-SH's own, `lum(exp*(V + lobe) . L) / lum(exp*(lobe) .
+//!   L)` with `V` their log visibility, the log-SH Phong lobe of the same width and `L`
+//!   the light's SH vector. A sharper lobe's would be blurred over the order's `pi / n`
+//!   (a mirror reflecting a sphere came out 0.4 where the truth is 0), so its core (the
+//!   cone holding 80 % of it, [`SharpLobe::core_radius`]) is tested as a sun's disk is
+//!   (`super::sun`: 32 directions against the spheres themselves and the horizon along
+//!   its azimuth), each direction weighted by the lobe ([`cone_weights`]); between the
+//!   two, a blend ([`cone_share`]). The tangent plane and the ground plane are in
+//!   neither: `A` holds the first exactly, and the second is taken out of the map itself
+//!   (the map is prefiltered with its lower hemisphere black when the scene has a ground
+//!   plane), where order 4 would blur either over tens of degrees.
 //!
 //! The GGX lobe in reflected space is the split sum's `n = v = R` case: with the half
 //! vector `h` at half the angle `theta` from `R`, `lobe(theta) = D(cos(theta / 2)) / 4`,
@@ -31,10 +36,11 @@
 //! `r = 1 / (2 alpha^2) - 1/2` (`blender_scripts/logsh_exporter/exporter.py`), so that
 //! both lobes have the same peak, `(r + 1/2) / (2 pi)` against `(r + 1) / (2 pi)`.
 
+use super::sun::{disk_pattern, DISK_DIRECTIONS};
 use crate::scene::camera::dot;
 use crate::scene::light::EnvironmentMap;
 use rayon::prelude::*;
-use std::f64::consts::PI;
+use std::f64::consts::{FRAC_PI_2, PI};
 
 /// The shape of a sharp lobe about `R` (`--glossy`).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -96,6 +102,17 @@ impl SharpLobe {
         }
     }
 
+    /// The angle from the axis within which the lobe holds 80 % of its mass: the cone
+    /// whose directions the specular occlusion tests ([`cone_weights`]).
+    pub fn core_radius(self) -> f64 {
+        match self {
+            // GGX's mass within theta_h is tan^2 / (alpha^2 + tan^2): 4/5 at tan = 2 alpha.
+            SharpLobe::Ggx { alpha } => (2.0 * (2.0 * alpha).atan()).min(FRAC_PI_2),
+            // Phong's mass within theta is 1 - cos^(r + 1) theta.
+            SharpLobe::Phong { exponent } => 0.2f64.powf(1.0 / (exponent + 1.0)).acos().min(FRAC_PI_2),
+        }
+    }
+
     /// The lobe's albedo at `n . v = mu` (module doc): what it reflects of a white sky
     /// above the tangent plane, by a 64 x 64 midpoint rule over its sampling
     /// distribution (GGX: half vectors drawn from `D cos`; Phong: directions about `R`).
@@ -139,6 +156,24 @@ impl SharpLobe {
     }
 }
 
+/// The lobe's value at each direction of its core's [`super::sun::DiskDirections`] (the disk of
+/// [`SharpLobe::core_radius`] about the lobe's axis), normalised to sum to 1: the
+/// weights of the cone's visibility in the specular occlusion.
+pub fn cone_weights(lobe: SharpLobe) -> [f64; DISK_DIRECTIONS] {
+    let one_minus_cos = 1.0 - lobe.core_radius().cos();
+    let values = disk_pattern().map(|[x, y]| lobe.value(1.0 - one_minus_cos * (x * x + y * y)));
+    let sum: f64 = values.iter().sum();
+    values.map(|v| v / sum)
+}
+
+/// How much of the specular occlusion comes from the cone test rather than from log-SH
+/// at order `order`: 1 for a lobe whose core is at most half the angle order-n SH
+/// resolves (`pi / n`), 0 from that angle on, linear between.
+pub fn cone_share(lobe: SharpLobe, order: usize) -> f64 {
+    let resolved = PI / order as f64;
+    (2.0 - 2.0 * lobe.core_radius() / resolved).clamp(0.0, 1.0)
+}
+
 /// Entries of a lobe's albedo table over `n . v` in `[0, 1]`.
 pub const ALBEDO_ENTRIES: usize = 33;
 
@@ -158,10 +193,13 @@ pub fn albedo_lookup(table: &[f32], mu: f64) -> f64 {
 /// Height of the coarsest level a map is reduced to.
 const MIN_HEIGHT: usize = 4;
 
-/// The prefiltered map has at least this many texels per lobe half-width, so that
-/// reading it bilinearly keeps the lobe's own detail; a lobe narrower than that at the
-/// map's own resolution reads the map itself.
+/// The prefiltered map has at least this many texels per lobe half-width where the map
+/// is fine enough, so that reading it bilinearly keeps the lobe's own detail.
 const OUTPUT_TEXELS_PER_HALF_WIDTH: f64 = 3.0;
+
+/// A lobe whose half-width is below this many texels of the map reads the map itself:
+/// bilinear reading already spreads a texel that far.
+const MIRROR_TEXELS: f64 = 0.5;
 
 /// The map the lobe is integrated over has at least this many texels per half-width (its
 /// texels are box-filtered, so a coarser input only blurs the lobe by a fraction of a
@@ -215,10 +253,12 @@ impl MapLevels {
         let texel = |m: &EnvironmentMap| PI / m.height as f64;
         let coarsest_within =
             |texels_per_half_width: f64| self.levels.iter().rev().find(|m| texel(m) * texels_per_half_width <= s);
-        let Some(output) = coarsest_within(OUTPUT_TEXELS_PER_HALF_WIDTH) else {
-            return Prefiltered { map: self.levels[0].clone() };
-        };
-        let input = coarsest_within(INPUT_TEXELS_PER_HALF_WIDTH).expect("coarser than the output's");
+        let finest = &self.levels[0];
+        if texel(finest) * MIRROR_TEXELS > s {
+            return Prefiltered { map: finest.clone() };
+        }
+        let output = coarsest_within(OUTPUT_TEXELS_PER_HALF_WIDTH).unwrap_or(finest);
+        let input = coarsest_within(INPUT_TEXELS_PER_HALF_WIDTH).unwrap_or(finest);
         Prefiltered { map: convolve(input, output.width, output.height, lobe, (WINDOW_HALF_WIDTHS * s).min(PI)) }
     }
 }
@@ -416,7 +456,7 @@ mod tests {
         }
     }
 
-    /// A lobe narrower than one and a half texels reads the map itself.
+    /// A lobe narrower than half a texel reads the map itself.
     #[test]
     fn a_mirror_reads_the_map() {
         let map = featured_sky();

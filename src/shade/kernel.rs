@@ -3,9 +3,11 @@
 //! holds are the ones a GPU executor uploads.
 
 use super::blocker_tree::BlockerTree;
-use super::glossy::{albedo_lookup, albedo_table, ggx_alpha, MapLevels, Prefiltered, SharpLobe};
+use super::glossy::{
+    albedo_lookup, albedo_table, cone_share, cone_weights, ggx_alpha, MapLevels, Prefiltered, SharpLobe,
+};
 use super::settings::{GlossyMethod, ShadingSettings, MAX_DIRECTIONS};
-use super::sun::SunDisk;
+use super::sun::{DiskDirections, Planes, SunDisk, DISK_DIRECTIONS};
 use crate::heightfield::HorizonPyramid;
 use crate::logsh::{
     cap_log_zh, lobe_log_zh_as, nlp_slice, optimal_lobe_epsilon, view_blocker, BlockerView, Lobe, WedgeOperator,
@@ -172,6 +174,10 @@ pub(crate) struct SharpGlossy<T> {
     /// `exp*(Phong lobe)` about +Z as ZH: the unoccluded denominator of the specular
     /// occlusion.
     pub(crate) open: Vec<T>,
+    /// The share of the specular occlusion the cone test gives ([`super::glossy::cone_share`]).
+    pub(crate) cone_share: f64,
+    /// The cone's directions' weights ([`super::glossy::cone_weights`]).
+    pub(crate) cone_weights: [f64; DISK_DIRECTIONS],
 }
 
 /// The sharpest Phong lobe given to SH as the specular occlusion's lobe: the log-ZH
@@ -313,6 +319,8 @@ impl<T: Real> ShadingKernel<T> {
                                 prefiltered: map,
                                 albedo: albedo_table(sharp_lobe),
                                 open: open_lobe(order, &exp, &table),
+                                cone_share: cone_share(sharp_lobe, order),
+                                cone_weights: cone_weights(sharp_lobe),
                             }
                         });
                         (Some(table), sharp)
@@ -454,13 +462,14 @@ impl<T: Real> ShadingKernel<T> {
             return [0.0; 3];
         };
         let lobes = &self.materials[&point.material];
-        let (_, diffuse, glossy) = self.environment_lit(&visibility, &occlusion, lobes, point);
+        let (_, diffuse, glossy) = self.environment_lit(occluders, &visibility, &occlusion, lobes, point);
         let (sun_diffuse, sun_glossy) = self.sunlit(occluders, point, &lobes.material);
         [0, 1, 2].map(|i| (diffuse[i] + sun_diffuse[i]) + (glossy[i] + sun_glossy[i]))
     }
 
     /// The log visibility of a surface point, and that of its specular occlusion where
-    /// its material has a prefiltered glossy term; `None` for an unknown material.
+    /// its material has a prefiltered glossy term whose occlusion log-SH gives (in part);
+    /// `None` for an unknown material.
     pub(crate) fn surface_visibility(
         &self,
         occluders: Occluders,
@@ -470,7 +479,7 @@ impl<T: Real> ShadingKernel<T> {
         let mut visibility = [T::zero(); MAX_COEFFICIENTS];
         let mut occlusion = [T::zero(); MAX_COEFFICIENTS];
         let lobes = self.materials.get(&point.material);
-        let sharp = lobes.is_some_and(|l| l.sharp.is_some());
+        let sharp = lobes.is_some_and(|l| l.sharp.as_ref().is_some_and(|sharp| sharp.cone_share < 1.0));
         self.add_visibility_parts(
             occluders,
             point.position,
@@ -486,6 +495,7 @@ impl<T: Real> ShadingKernel<T> {
     /// radiance at `point`, each times the material's albedo or specular colour.
     pub(crate) fn environment_lit(
         &self,
+        occluders: Occluders,
         visibility: &[T],
         occlusion: &[T],
         lobes: &MaterialLobes<T>,
@@ -504,7 +514,7 @@ impl<T: Real> ShadingKernel<T> {
                 let reflected = reflect_view(point.view_origin, point.position, n);
                 let glossy = match &lobes.sharp {
                     Some(sharp) => {
-                        let g = self.prefiltered_glossy(occlusion, phong, sharp, point, reflected);
+                        let g = self.prefiltered_glossy(occluders, occlusion, phong, sharp, point, reflected);
                         [0, 1, 2].map(|i| (g[i] * f64::from(specular[i])) as f32)
                     }
                     None => scale(self.lit(visibility, phong, reflected), *specular),
@@ -516,30 +526,51 @@ impl<T: Real> ShadingKernel<T> {
     }
 
     /// `A(n . v) P(R) O` ([`super::glossy`]): the prefiltered light along the mirror
-    /// direction, times the lobe's albedo, times the specular occlusion
-    /// `lum(exp*(V + lobe) . L) / lum(exp*(lobe) . L)` in `[0, 1]` (1 where the open lobe
-    /// gets no light).
+    /// direction, times the lobe's albedo, times the specular occlusion: the cone test of
+    /// the lobe's core, log-SH's `lum(exp*(V + lobe) . L) / lum(exp*(lobe) . L)` (1 where
+    /// the open lobe gets no light), or a blend of the two, in `[0, 1]`.
     fn prefiltered_glossy(
         &self,
+        occluders: Occluders,
         occlusion: &[T],
         phong: &LobeTable<T>,
         sharp: &SharpGlossy<T>,
         point: &SurfacePoint,
         reflected: [f64; 3],
     ) -> [f64; 3] {
-        let count = coefficient_count(self.order);
-        let shadowed = self.lit(occlusion, phong, reflected);
-        let mut open = [T::zero(); MAX_COEFFICIENTS];
-        add_rotated_zonal(self.order, &sharp.open, T::one(), reflected.map(T::of), &mut open[..count]);
-        let open = self
-            .light
-            .each_ref()
-            .map(|light| light.iter().zip(&open[..count]).fold(T::zero(), |acc, (&l, &v)| acc + l * v).max(T::zero()));
-        let lum = |c: [T; 3]| (0..3).map(|i| LUMINANCE[i] * c[i].to_f64().unwrap_or(0.0)).sum::<f64>();
-        let occluded = match lum(open) {
-            below if below > 1e-12 => (lum(shadowed) / below).clamp(0.0, 1.0),
-            _ => 1.0,
+        let share = sharp.cone_share;
+        let by_cone = if share > 0.0 {
+            let core = DiskDirections::new(reflected, sharp.lobe.core_radius());
+            let planes = Planes { tangent: false, ground: None };
+            let visible = core.visibility(
+                occluders.blockers,
+                occluders.horizons,
+                planes,
+                point.position,
+                point.normal,
+                point.object,
+            );
+            visible.iter().zip(&sharp.cone_weights).map(|(v, w)| v * w).sum::<f64>()
+        } else {
+            0.0
         };
+        let by_sh = if share < 1.0 {
+            let count = coefficient_count(self.order);
+            let shadowed = self.lit(occlusion, phong, reflected);
+            let mut open = [T::zero(); MAX_COEFFICIENTS];
+            add_rotated_zonal(self.order, &sharp.open, T::one(), reflected.map(T::of), &mut open[..count]);
+            let open = self.light.each_ref().map(|light| {
+                light.iter().zip(&open[..count]).fold(T::zero(), |acc, (&l, &v)| acc + l * v).max(T::zero())
+            });
+            let lum = |c: [T; 3]| (0..3).map(|i| LUMINANCE[i] * c[i].to_f64().unwrap_or(0.0)).sum::<f64>();
+            match lum(open) {
+                below if below > 1e-12 => (lum(shadowed) / below).clamp(0.0, 1.0),
+                _ => 1.0,
+            }
+        } else {
+            0.0
+        };
+        let occluded = share * by_cone + (1.0 - share) * by_sh;
         // n . v = n . R, R the view mirrored about n.
         let weight = albedo_lookup(&sharp.albedo, dot(reflected, point.normal)) * occluded;
         sharp.prefiltered.lookup(reflected).map(|c| f64::from(c) * weight)

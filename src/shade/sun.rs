@@ -51,26 +51,37 @@ pub fn disk_pattern() -> [[f64; 2]; DISK_DIRECTIONS] {
     })
 }
 
-/// A sun prepared for shading: its disk's directions and what they integrate to.
+/// A cone of directions about an axis, spread uniformly by solid angle ([`disk_pattern`]),
+/// with the visibility test of the module doc: a sun's disk, or the core of a sharp
+/// glossy lobe ([`super::glossy`]).
 #[derive(Clone, Debug)]
-pub struct SunDisk {
-    pub light: SunLight,
+pub struct DiskDirections {
+    pub axis: [f64; 3],
+    pub half_angle: f64,
     /// Unit directions over the disk, uniform by solid angle.
     pub directions: [[f64; 3]; DISK_DIRECTIONS],
     /// Angular radius of the patch each direction stands for.
     pub patch: f64,
-    /// Unit xy of the sun's azimuth (for the horizon), `None` for a sun at the zenith or
-    /// nadir, where every azimuth's horizon is the same to the disk.
+    /// Unit xy of the axis's azimuth (for the horizon), `None` for an axis at the zenith
+    /// or nadir, where every azimuth's horizon is the same to the disk.
     pub azimuth: Option<[f64; 2]>,
-    /// [`SunLight::disk_integral`].
-    pub disk_integral: [f64; 3],
 }
 
-impl SunDisk {
-    pub fn new(light: &SunLight) -> Self {
-        let axis = light.direction;
+/// Which planes a disk's visibility test counts besides the blockers and the height
+/// field.
+#[derive(Clone, Copy, Debug)]
+pub struct Planes {
+    /// The receiver's tangent plane.
+    pub tangent: bool,
+    /// The scene's ground plane, at this height, for a receiver above it.
+    pub ground: Option<f64>,
+}
+
+impl DiskDirections {
+    /// The disk of half-angle `half_angle` (in `(0, pi/2]`) about unit `axis`.
+    pub fn new(axis: [f64; 3], half_angle: f64) -> Self {
         let (e1, e2) = frame_around(axis);
-        let one_minus_cos = 1.0 - light.half_angle.cos();
+        let one_minus_cos = 1.0 - half_angle.cos();
         let directions = disk_pattern().map(|[x, y]| {
             let r2 = x * x + y * y;
             let cos_theta = 1.0 - one_minus_cos * r2;
@@ -80,21 +91,21 @@ impl SunDisk {
         });
         let horizontal = axis[0].hypot(axis[1]);
         Self {
-            light: *light,
+            axis,
+            half_angle,
             directions,
-            patch: light.half_angle / (DISK_DIRECTIONS as f64).sqrt(),
+            patch: half_angle / (DISK_DIRECTIONS as f64).sqrt(),
             azimuth: (horizontal > 1e-9).then(|| [axis[0] / horizontal, axis[1] / horizontal]),
-            disk_integral: light.disk_integral(),
         }
     }
 
-    /// Visibility of each disk direction, in `[0, 1]`, at `p` with unit normal `n` on
-    /// object `object` (module doc); `ground` is the scene's ground plane height.
+    /// Visibility of each direction, in `[0, 1]`, at `p` with unit normal `n` on object
+    /// `object` (module doc), against the blockers, the height field and `planes`.
     pub fn visibility(
         &self,
         blockers: Option<&BlockerTree>,
         horizons: Option<&HorizonPyramid>,
-        ground: Option<f64>,
+        planes: Planes,
         p: [f64; 3],
         n: [f64; 3],
         object: u32,
@@ -102,8 +113,13 @@ impl SunDisk {
         let two_patches = 2.0 * self.patch;
         let covered = |boundary_minus_angle: f64| (0.5 + boundary_minus_angle / two_patches).clamp(0.0, 1.0);
         // Blocked share per direction, the largest over the occluders.
-        let mut blocked = self.directions.map(|w| covered(-dot(n, w).clamp(-1.0, 1.0).asin()));
-        if ground.is_some_and(|z| super::kernel::above_ground(p, z)) {
+        let mut blocked = [0.0f64; DISK_DIRECTIONS];
+        if planes.tangent {
+            for (b, w) in blocked.iter_mut().zip(&self.directions) {
+                *b = b.max(covered(-dot(n, *w).clamp(-1.0, 1.0).asin()));
+            }
+        }
+        if planes.ground.is_some_and(|z| super::kernel::above_ground(p, z)) {
             for (b, w) in blocked.iter_mut().zip(&self.directions) {
                 *b = b.max(covered(-w[2].clamp(-1.0, 1.0).asin()));
             }
@@ -115,7 +131,7 @@ impl SunDisk {
             }
         }
         if let Some(tree) = blockers {
-            tree.visit_cone(p, n, object, self.light.direction, self.light.half_angle + self.patch, |sphere| {
+            tree.visit_cone(p, n, object, self.axis, self.half_angle + self.patch, |sphere| {
                 let d = [0, 1, 2].map(|k| sphere.center[k] - p[k]);
                 let distance = dot(d, d).sqrt();
                 if !(distance > 0.0) || (object != 0 && sphere.object == object && dot(d, n) <= 0.0) {
@@ -130,6 +146,40 @@ impl SunDisk {
         }
         blocked.map(|b| 1.0 - b)
     }
+}
+
+/// A sun prepared for shading: its disk's directions and what they integrate to.
+#[derive(Clone, Debug)]
+pub struct SunDisk {
+    pub light: SunLight,
+    pub disk: DiskDirections,
+    /// [`SunLight::disk_integral`].
+    pub disk_integral: [f64; 3],
+}
+
+impl SunDisk {
+    pub fn new(light: &SunLight) -> Self {
+        Self {
+            light: *light,
+            disk: DiskDirections::new(light.direction, light.half_angle),
+            disk_integral: light.disk_integral(),
+        }
+    }
+
+    /// Visibility of each disk direction, in `[0, 1]`, at `p` with unit normal `n` on
+    /// object `object` (module doc): the tangent plane, the ground plane at `ground`, the
+    /// height field and the blockers.
+    pub fn visibility(
+        &self,
+        blockers: Option<&BlockerTree>,
+        horizons: Option<&HorizonPyramid>,
+        ground: Option<f64>,
+        p: [f64; 3],
+        n: [f64; 3],
+        object: u32,
+    ) -> [f64; DISK_DIRECTIONS] {
+        self.disk.visibility(blockers, horizons, Planes { tangent: true, ground }, p, n, object)
+    }
 
     /// `integral over the disk of L V lobe(axis . w) dw` for a lobe given by its value at `cos theta` from `axis`, given the disk's
     /// visibility: `disk_integral * mean(V lobe)`, RGB.
@@ -139,7 +189,7 @@ impl SunDisk {
         lobe: impl Fn(f64) -> f64,
         axis: [f64; 3],
     ) -> [f64; 3] {
-        let mean = self.directions.iter().zip(visibility).map(|(w, v)| v * lobe(dot(axis, *w))).sum::<f64>()
+        let mean = self.disk.directions.iter().zip(visibility).map(|(w, v)| v * lobe(dot(axis, *w))).sum::<f64>()
             / DISK_DIRECTIONS as f64;
         self.disk_integral.map(|c| c * mean)
     }

@@ -77,7 +77,7 @@ impl<T: Real> ShadingKernel<T> {
         if matches!(lobes.material, Material::Water { .. }) {
             return PixelPasses::UNSHADED;
         }
-        let (lit_diffuse, diffuse, specular) = self.environment_lit(&full, &occlusion, lobes, point);
+        let (lit_diffuse, diffuse, specular) = self.environment_lit(occluders, &full, &occlusion, lobes, point);
         let (sun_diffuse, sun_glossy) = self.sunlit(occluders, point, &lobes.material);
         let diffuse = [0, 1, 2].map(|i| diffuse[i] + sun_diffuse[i]);
         let specular = [0, 1, 2].map(|i| specular[i] + sun_glossy[i]);
