@@ -177,23 +177,27 @@ fn lit(visibility: ptr<function, array<f32, COUNT_CAP>>, lobe: u32, axis: vec3<f
     return exp_dot_light(&f, visibility, tables[lobe + ORDER]);
 }
 
-//#if PREFILTERED
-// The glossy term read from a prefiltered environment (src/shade/glossy.rs; kernel.rs,
-// prefiltered_glossy): A(n . v) P(R) O, with n . v = n . R.
-fn prefiltered_glossy(occlusion: ptr<function, array<f32, COUNT_CAP>>, material: GpuMaterial, n: vec3<f32>, r: vec3<f32>) -> vec3<f32> {
-    // O = lum(exp*(V + lobe) . L) / lum(exp*(lobe) . L), V without the tangent and ground planes.
-    let shadowed = lit(occlusion, material.phong_lobe, r);
-    var open: array<f32, COUNT_CAP>;
-    var zonal = load_zonal(material.sharp_tables + ALBEDO_ENTRIES);
-    add_rotated_zonal(&zonal, 1.0, r, &open);
-    let unshadowed = max(dot_light(&open), vec3<f32>(0.0));
-    var occluded = 1.0;
-    let below = dot(LUMINANCE, unshadowed);
-    if below > 1e-12 {
-        occluded = clamp(dot(LUMINANCE, shadowed) / below, 0.0, 1.0);
+// A Phong material's glossy lobe, at `material.sharp_tables` (program.rs,
+// material_slots): its shape (LOBE_GGX, LOBE_PHONG, or LOBE_SH for the lobe in log-SH)
+// and width (alpha or the exponent), its core's 1 - cos and patch radius, and the cone
+// test's share of the occlusion; then, for a prefiltered lobe, the cone's weights, the
+// albedo table and the open lobe's ZH.
+fn lobe_kind(material: GpuMaterial) -> u32 {
+    return table_u32(material.sharp_tables);
+}
+
+// The glossy lobe's value at cos theta = z from its axis (glossy.rs, SharpLobe::value;
+// logsh/lobe.rs for the log-SH lobe, the same Phong formula).
+fn lobe_value(material: GpuMaterial, z: vec4<f32>) -> vec4<f32> {
+    let width = tables[material.sharp_tables + 1u];
+    let pi = 3.141592653589793;
+    if lobe_kind(material) == LOBE_GGX {
+        let a2 = width * width;
+        let mu2 = (1.0 + clamp(z, vec4<f32>(-1.0), vec4<f32>(1.0))) * 0.5;
+        let d = mu2 * (a2 - 1.0) + 1.0;
+        return a2 / (pi * d * d) * 0.25;
     }
-    let weight = albedo_lookup(material.sharp_tables, dot(n, r)) * occluded;
-    return prefiltered_lookup(material.sharp_map, r) * weight;
+    return select(vec4<f32>(0.0), (width + 1.0) / (2.0 * pi) * pow(max(z, vec4<f32>(1e-30)), vec4<f32>(width)), z > vec4<f32>(0.0));
 }
 
 // The lobe's albedo at n . v = mu, linearly (glossy.rs, albedo_lookup).
@@ -201,6 +205,45 @@ fn albedo_lookup(offset: u32, mu: f32) -> f32 {
     let x = clamp(mu, 0.0, 1.0) * f32(ALBEDO_ENTRIES - 1u);
     let i = min(u32(floor(x)), ALBEDO_ENTRIES - 2u);
     return mix(tables[offset + i], tables[offset + i + 1u], x - f32(i));
+}
+
+//#if PREFILTERED
+// The glossy term read from a prefiltered environment (src/shade/glossy.rs; kernel.rs,
+// prefiltered_glossy): A(n . v) P(R) O, with n . v = n . R, O the cone test of the lobe's
+// core, the log-SH ratio (from `occlusion`), or a blend.
+fn prefiltered_glossy(occlusion: ptr<function, array<f32, COUNT_CAP>>, material: GpuMaterial, p: vec3<f32>, n: vec3<f32>, object: u32, r: vec3<f32>) -> vec3<f32> {
+    let core = tables[material.sharp_tables + 2u];
+    let core_patch = tables[material.sharp_tables + 3u];
+    let share = tables[material.sharp_tables + 4u];
+    let weights = material.sharp_tables + LOBE_HEAD;
+    let albedo = weights + DISK_DIRECTIONS;
+    let open_lobe = albedo + ALBEDO_ENTRIES;
+    var by_cone = 0.0;
+    if share > 0.0 {
+        var disk = disk_around(r, core);
+        let blocked = disk_blocked(&disk, p, n, object, r, core, core_patch, false, false);
+        for (var q = 0u; q < DISK_QUADS; q++) {
+            let w = vec4<f32>(tables[weights + 4u * q], tables[weights + 4u * q + 1u], tables[weights + 4u * q + 2u], tables[weights + 4u * q + 3u]);
+            by_cone += dot(w, 1.0 - blocked[q]);
+        }
+    }
+    var by_sh = 0.0;
+    if share < 1.0 {
+        // lum(exp*(V + lobe) . L) / lum(exp*(lobe) . L), V without the tangent and ground planes.
+        let shadowed = lit(occlusion, material.phong_lobe, r);
+        var open: array<f32, COUNT_CAP>;
+        var zonal = load_zonal(open_lobe);
+        add_rotated_zonal(&zonal, 1.0, r, &open);
+        let unshadowed = max(dot_light(&open), vec3<f32>(0.0));
+        by_sh = 1.0;
+        let below = dot(LUMINANCE, unshadowed);
+        if below > 1e-12 {
+            by_sh = clamp(dot(LUMINANCE, shadowed) / below, 0.0, 1.0);
+        }
+    }
+    let occluded = share * by_cone + (1.0 - share) * by_sh;
+    let weight = albedo_lookup(albedo, dot(n, r)) * occluded;
+    return prefiltered_lookup(material.sharp_map, r) * weight;
 }
 
 // Bilinear read of the prefiltered map at `map` along d (src/scene/light.rs,
@@ -231,6 +274,42 @@ fn map_texel(map: u32, width: u32, column: u32, row: u32) -> vec3<f32> {
 }
 //#endif
 
+//#if SUNS
+// The sharp lights' diffuse and glossy radiance at p (kernel.rs, sunlit; sun.rs): each
+// sun's disk integral times the mean over its directions of visibility times the cosine
+// lobe, and times the glossy lobe about r (with the lobe's albedo for a prefiltered one).
+fn sunlit(p: vec3<f32>, n: vec3<f32>, object: u32, r: vec3<f32>, material: GpuMaterial, diffuse: ptr<function, vec3<f32>>, specular: ptr<function, vec3<f32>>) {
+    let glossy = material.kind == MATERIAL_PHONG;
+    var albedo = 1.0;
+    if glossy && lobe_kind(material) != LOBE_SH {
+        albedo = albedo_lookup(material.sharp_tables + LOBE_HEAD + DISK_DIRECTIONS, dot(n, r));
+    }
+    for (var s = 0u; s < SUN_COUNT; s++) {
+        let base = T_SUNS + 8u * s;
+        let axis = vec3<f32>(tables[base], tables[base + 1u], tables[base + 2u]);
+        let one_minus_cos = tables[base + 3u];
+        let integral = vec3<f32>(tables[base + 4u], tables[base + 5u], tables[base + 6u]);
+        let patch_radius = tables[base + 7u];
+        var disk = disk_around(axis, one_minus_cos);
+        let blocked = disk_blocked(&disk, p, n, object, axis, one_minus_cos, patch_radius, true, true);
+        var cosine = 0.0;
+        var lobe = 0.0;
+        for (var q = 0u; q < DISK_QUADS; q++) {
+            let visible = 1.0 - blocked[q];
+            cosine += dot(visible, max(n.x * disk.x[q] + n.y * disk.y[q] + n.z * disk.z[q], vec4<f32>(0.0)));
+            if glossy {
+                lobe += dot(visible, lobe_value(material, r.x * disk.x[q] + r.y * disk.y[q] + r.z * disk.z[q]));
+            }
+        }
+        let mean = 1.0 / f32(DISK_DIRECTIONS);
+        *diffuse += integral * (cosine * mean / 3.141592653589793) * material.albedo.xyz;
+        if glossy {
+            *specular += integral * (lobe * mean * albedo) * material.specular.xyz;
+        }
+    }
+}
+//#endif
+
 @compute @workgroup_size(WORKGROUP_SIZE)
 fn shade(@builtin(global_invocation_id) id: vec3<u32>) {
     let point = id.x;
@@ -257,14 +336,15 @@ fn shade(@builtin(global_invocation_id) id: vec3<u32>) {
                 var prefiltered = false;
 //#if PREFILTERED
                 if material.sharp_map != NO_MAP {
-                    // The specular occlusion's visibility: the caps and the unfolded horizons.
+                    // The log-SH occlusion's visibility: the caps and the unfolded horizons.
                     var occlusion = caps;
 //#if HEIGHTFIELD
-                    if enabled(FEATURE_HEIGHTFIELD) {
+                    if enabled(FEATURE_HEIGHTFIELD) && tables[material.sharp_tables + 4u] < 1.0 {
                         add_heightfield(a.xyz, n, false, params.log_epsilon, &occlusion);
                     }
 //#endif
-                    specular = prefiltered_glossy(&occlusion, material, n, reflected) * material.specular.xyz;
+                    let object = bitcast<u32>(record.normal.w);
+                    specular = prefiltered_glossy(&occlusion, material, a.xyz, n, object, reflected) * material.specular.xyz;
                     prefiltered = true;
                 }
 //#endif
@@ -304,6 +384,9 @@ fn shade(@builtin(global_invocation_id) id: vec3<u32>) {
                 terms.y = luminance_ratio(lit(&heightfield, T_DIFFUSE, n), lit_unoccluded);
                 terms.z = luminance_ratio(lit(&blockers, T_DIFFUSE, n), lit_unoccluded);
             }
+//#endif
+//#if SUNS
+            sunlit(a.xyz, n, bitcast<u32>(record.normal.w), record.reflected.xyz, material, &diffuse, &specular);
 //#endif
         }
     }

@@ -144,7 +144,7 @@ impl Executor {
         match &self.device {
             Device::Cpu => Ok(on_cpu()?),
             Device::Gpu { gpu, fallback } => match on_gpu(gpu) {
-                Err(e @ (GpuError::LoopBudget { .. } | GpuError::SharpLights { .. })) if *fallback => {
+                Err(e @ GpuError::LoopBudget { .. }) if *fallback => {
                     self.notify(format!("--device auto: shading frame {} on the CPU: {e}", frame.number));
                     Ok(on_cpu()?)
                 }

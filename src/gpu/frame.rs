@@ -164,9 +164,6 @@ impl Gpu {
         passes: bool,
     ) -> Result<PreparedFrame<'a>, GpuError> {
         let mut plan = FramePlan::new(scene, frame, settings)?;
-        if !plan.suns.is_empty() {
-            return Err(GpuError::SharpLights { adapter: self.info.name.clone(), count: plan.suns.len() });
-        }
         let started = Instant::now();
         let PlannedKernel::F32(kernel) = &plan.kernel else {
             return Err(GpuError::double_precision());

@@ -57,12 +57,6 @@ pub enum GpuError {
          or lower --order, --directions or the blocker count, or use a hardware GPU"
     )]
     LoopBudget { adapter: String, needed: u64, limit: u64, what: String },
-    #[error(
-        "the frame has {count} sun light(s) (\"lights\" in scene.json, or taken out of its environment map by \
-         --sharp-lights auto), which the GPU pass does not shade yet: shade with --device cpu (--device auto does \
-         so by itself), or keep the whole map in SH with --sharp-lights off"
-    )]
-    SharpLights { adapter: String, count: usize },
     #[error("GPU error on {adapter} during {during}: {message}")]
     Wgpu { adapter: String, during: String, message: String },
     #[error(transparent)]

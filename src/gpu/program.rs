@@ -17,8 +17,9 @@ use crate::scene::Material;
 use crate::sh::basis::{coefficient_count, double_factorial_odd, funk_hecke_factor, nlp_scale, real_normalisation};
 use crate::sh::exp::{ol_node_count, HYB_MAX_SQUARINGS, OL_COARSE_STEP, OL_FINE_NODES, ONE_DC, SERIES_MAX_TERMS, Y0};
 use crate::sh::ExpMethod;
-use crate::shade::glossy::{Prefiltered, ALBEDO_ENTRIES};
+use crate::shade::glossy::{Prefiltered, SharpLobe, ALBEDO_ENTRIES};
 use crate::shade::kernel::{sh_space_max_magnitude, LUMINANCE, SH_SPACE_BLEND};
+use crate::shade::sun::{disk_pattern, DISK_DIRECTIONS};
 use crate::shade::{FrameContents, ShadingKernel};
 use std::collections::BTreeMap;
 use std::sync::Arc;
@@ -29,6 +30,7 @@ const HEIGHTFIELD_WGSL: &str = include_str!("../../shaders/heightfield.wgsl");
 const EXP_QUAD_WGSL: &str = include_str!("../../shaders/exp_quad.wgsl");
 const EXP_OL_WGSL: &str = include_str!("../../shaders/exp_ol.wgsl");
 const EXP_PRODUCT_WGSL: &str = include_str!("../../shaders/exp_product.wgsl");
+const DISK_WGSL: &str = include_str!("../../shaders/disk.wgsl");
 const SHADE_WGSL: &str = include_str!("../../shaders/shade.wgsl");
 /// The pyramid pre-pass (fixed source: it depends on no setting).
 pub const PYRAMID_WGSL: &str = include_str!("../../shaders/pyramid.wgsl");
@@ -47,8 +49,18 @@ pub struct Features {
 }
 
 /// The feature names the `//#if` blocks of `shaders/` test.
-const FLAG_NAMES: [&str; 9] =
-    ["HEIGHTFIELD", "BLOCKERS", "PHONG", "PREFILTERED", "EXP_QUAD", "EXP_OL", "EXP_HYB", "EXP_SERIES", "PASSES"];
+const FLAG_NAMES: [&str; 10] = [
+    "HEIGHTFIELD",
+    "BLOCKERS",
+    "PHONG",
+    "PREFILTERED",
+    "SUNS",
+    "EXP_QUAD",
+    "EXP_OL",
+    "EXP_HYB",
+    "EXP_SERIES",
+    "PASSES",
+];
 
 impl Features {
     fn flags(&self, exp: ExpMethod) -> Vec<(&'static str, bool)> {
@@ -58,6 +70,7 @@ impl Features {
             self.contents.blockers || all,
             self.contents.phong || all,
             self.contents.prefiltered || all,
+            self.contents.suns || all,
             matches!(exp, ExpMethod::Quad | ExpMethod::Exact),
             exp == ExpMethod::Ol,
             exp == ExpMethod::Hyb,
@@ -144,6 +157,7 @@ pub struct ShadeProgram {
     march: Option<MarchShape>,
     tensor_entries: usize,
     overlap_floor: bool,
+    suns: usize,
 }
 
 impl ShadeProgram {
@@ -164,6 +178,7 @@ impl ShadeProgram {
             exp: kernel.exp.method,
             march,
             tensor_entries: kernel.exp.tensor.as_ref().map_or(0, |t| t.entry_count()),
+            suns: kernel.suns.len(),
         }
     }
 }
@@ -196,6 +211,18 @@ impl ProgramTables {
         t.push("T_TANGENT", kernel.tangent.iter().copied());
         t.push("T_DIFFUSE", kernel.diffuse.zonal.iter().copied().chain([kernel.diffuse.log_peak as f32]));
         let (materials, slots) = material_slots(kernel, &mut t);
+        // The disk pattern (x, then y) and the suns (src/shade/sun.rs): direction,
+        // 1 - cos of the half-angle, disk integral, patch radius.
+        let pattern = disk_pattern();
+        t.push("T_DISK", pattern.iter().map(|p| p[0] as f32).chain(pattern.iter().map(|p| p[1] as f32)));
+        t.push(
+            "T_SUNS",
+            kernel.suns.iter().flat_map(|sun| {
+                let (d, i) = (sun.light.direction, sun.disk_integral);
+                let one_minus_cos = 1.0 - sun.light.half_angle.cos();
+                [d[0], d[1], d[2], one_minus_cos, i[0], i[1], i[2], sun.disk.patch].map(|v| v as f32)
+            }),
+        );
 
         // The light, channel-major, and the exponentiation's tables (src/sh/exp.rs).
         let nodes = push_exponentiation(kernel, &mut t);
@@ -226,8 +253,11 @@ fn material_slots(kernel: &ShadingKernel<f32>, t: &mut TableBuilder) -> (Vec<Gpu
             }
             _ => continue,
         };
-        let (sharp_map, sharp_tables) = match &lobes.sharp {
-            Some(sharp) => {
+        // The glossy lobe (shaders/shade.wgsl, lobe_kind): its shape, width, core radius
+        // and cone share; for a prefiltered one also the cone's weights, the albedo table
+        // and the open lobe's ZH, and its map.
+        let (sharp_map, sharp_tables) = match (&lobes.material, &lobes.sharp) {
+            (_, Some(sharp)) => {
                 let key = Arc::as_ptr(&sharp.prefiltered);
                 let map = match maps.iter().find(|(k, _)| *k == key) {
                     Some(&(_, offset)) => offset,
@@ -239,10 +269,31 @@ fn material_slots(kernel: &ShadingKernel<f32>, t: &mut TableBuilder) -> (Vec<Gpu
                         offset as u32
                     }
                 };
-                let tables = t.push_unnamed(sharp.albedo.iter().chain(&sharp.open).copied());
+                let (kind, width) = match sharp.lobe {
+                    SharpLobe::Ggx { alpha } => (LOBE_GGX, alpha),
+                    SharpLobe::Phong { exponent } => (LOBE_PHONG, exponent),
+                };
+                let core = crate::shade::sun::DiskDirections::new([0.0, 0.0, 1.0], sharp.lobe.core_radius());
+                let head = [
+                    f32::from_bits(kind),
+                    width as f32,
+                    (1.0 - core.half_angle.cos()) as f32,
+                    core.patch as f32,
+                    sharp.cone_share as f32,
+                ];
+                let weights = sharp.cone_weights.map(|w| w as f32);
+                let tables = t.push_unnamed(
+                    head.into_iter()
+                        .chain(weights)
+                        .chain(sharp.albedo.iter().copied())
+                        .chain(sharp.open.iter().copied()),
+                );
                 (map, tables as u32)
             }
-            None => (NO_MAP, 0),
+            (Material::Phong { exponent, .. }, None) => {
+                (NO_MAP, t.push_unnamed([f32::from_bits(LOBE_SH), *exponent, 0.0, 0.0, 0.0]) as u32)
+            }
+            _ => (NO_MAP, 0),
         };
         slots.insert(index, materials.len() as u32);
         materials.push(GpuMaterial {
@@ -259,6 +310,13 @@ fn material_slots(kernel: &ShadingKernel<f32>, t: &mut TableBuilder) -> (Vec<Gpu
     }
     (materials, slots)
 }
+
+/// The glossy lobe shapes of the material tables (`lobe_kind` in shaders/shade.wgsl).
+const LOBE_GGX: u32 = 0;
+const LOBE_PHONG: u32 = 1;
+const LOBE_SH: u32 = 2;
+/// Values before a lobe's cone weights: shape, width, core 1 - cos, patch, cone share.
+const LOBE_HEAD: usize = 5;
 
 /// The light and the tables of the kernel's exponentiation; returns the quadrature's node
 /// count.
@@ -402,6 +460,13 @@ fn prelude(kernel: &ShadingKernel<f32>, features: Features, march: Option<MarchS
         ("SH_SPACE_BLEND", F32(SH_SPACE_BLEND)),
         ("LUMINANCE", Vec3(LUMINANCE)),
         ("ALBEDO_ENTRIES", U32(ALBEDO_ENTRIES)),
+        ("DISK_DIRECTIONS", U32(DISK_DIRECTIONS)),
+        ("DISK_QUADS", U32(DISK_DIRECTIONS / 4)),
+        ("SUN_COUNT", U32(kernel.suns.len())),
+        ("LOBE_GGX", U32(LOBE_GGX as usize)),
+        ("LOBE_PHONG", U32(LOBE_PHONG as usize)),
+        ("LOBE_SH", U32(LOBE_SH as usize)),
+        ("LOBE_HEAD", U32(LOBE_HEAD)),
     ];
     constants.iter().map(|(name, value)| value.declare(name)).collect()
 }
@@ -432,6 +497,9 @@ fn compose_source(
     }
     if flag(&flags, "HEIGHTFIELD") {
         modules.push(HEIGHTFIELD_WGSL);
+    }
+    if flag(&flags, "PREFILTERED") || flag(&flags, "SUNS") {
+        modules.push(DISK_WGSL);
     }
     modules.push(SHADE_WGSL);
     let runtime_order = features.specialisation == Specialisation::None;
@@ -480,9 +548,19 @@ impl ShadeProgram {
             m.levels as u64 * (1 + sample) + m.directions as u64 * (1 + horizon + 2 * n + wedge) + wedge
         });
         let passes = if self.features.passes { 2 * tangent + 3 * lit + n } else { 0 };
-        // The specular occlusion: its own height-field march and the open lobe's rotation.
-        let prefiltered = if self.features.contents.prefiltered { heightfield + add_rotated + c } else { 0 };
-        1 + tangent + heightfield + spheres as u64 * sphere + 2 * lit + passes + prefiltered
+        // A disk of directions (shaders/disk.wgsl): its setup and planes, one azimuth's
+        // march, and every node of the tree updating the directions four at a time.
+        let quads = (DISK_DIRECTIONS / 4) as u64;
+        let march_one = self.march.map_or(0, |m| {
+            let sample = if m.bspline_levels { 21 } else { 1 };
+            m.levels as u64 * (1 + sample) + m.steps as u64 * (2 + sample)
+        });
+        let disk = 4 * quads + march_one + 2 * spheres as u64 * (1 + quads);
+        // The specular occlusion: its cone, its own height-field march, the open lobe.
+        let prefiltered =
+            if self.features.contents.prefiltered { disk + quads + heightfield + add_rotated + c } else { 0 };
+        let suns = self.suns as u64 * (disk + quads);
+        1 + tangent + heightfield + spheres as u64 * sphere + 2 * lit + passes + prefiltered + suns
     }
 }
 
@@ -602,6 +680,7 @@ mod tests {
             ("exp_quad.wgsl", EXP_QUAD_WGSL),
             ("exp_ol.wgsl", EXP_OL_WGSL),
             ("exp_product.wgsl", EXP_PRODUCT_WGSL),
+            ("disk.wgsl", DISK_WGSL),
             ("shade.wgsl", SHADE_WGSL),
             ("pyramid.wgsl", PYRAMID_WGSL),
         ] {

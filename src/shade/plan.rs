@@ -42,6 +42,8 @@ pub struct FrameContents {
     /// A Phong material's glossy term reads a prefiltered environment
     /// ([`super::glossy`]).
     pub prefiltered: bool,
+    /// Sharp lights ([`super::sun`]) light the frame.
+    pub suns: bool,
 }
 
 /// The kernel at the precision the settings ask for.
@@ -89,6 +91,7 @@ impl<'a> FramePlan<'a> {
             blockers: !frame.blockers.is_empty(),
             phong: scene.materials.values().any(|m| matches!(m, Material::Phong { .. })),
             prefiltered: false,
+            suns: false,
         };
         let mut suns = frame.suns.clone();
         let mut extracted_shares = Vec::new();
@@ -129,6 +132,7 @@ impl<'a> FramePlan<'a> {
                 PlannedKernel::F32(kernel) => kernel.has_prefiltered_glossy(),
                 PlannedKernel::F64(kernel) => kernel.has_prefiltered_glossy(),
             },
+            suns: !suns.is_empty(),
             ..contents
         };
         let blockers = BlockerTree::new(&frame.blockers, settings.cluster_ratio);

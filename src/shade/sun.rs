@@ -10,9 +10,10 @@
 //! uniformly by solid angle over the disk (a golden-angle spiral; see [`disk_pattern`]).
 //! Each direction stands for a patch of the disk of angular radius `rho = a /
 //! sqrt(DISK_DIRECTIONS)`, and its visibility is that patch's uncovered fraction,
-//! approximated from the signed angle to the nearest occluder boundary, `clamp(1/2 +
-//! (boundary - angle) / (2 rho))` per occluder, the largest one taken (so overlapping
-//! occluders are not counted twice). Penumbrae are therefore continuous and as wide as
+//! approximated from the signed angle `x` to the nearest occluder boundary, `clamp(1/2 +
+//! sin(x) / (2 rho))` per occluder (the sine is the angle where the clamp is not reached,
+//! and needs no inverse trigonometry), the largest one taken (so overlapping occluders
+//! are not counted twice). Penumbrae are therefore continuous and as wide as
 //! the disk, whatever the SH order. The occluders:
 //!
 //! - the tangent plane: the boundary is elevation 0 above it;
@@ -32,7 +33,7 @@
 
 use super::blocker_tree::BlockerTree;
 use crate::heightfield::HorizonPyramid;
-use crate::scene::camera::{dot, frame_around};
+use crate::scene::camera::{cross, dot, frame_around};
 use crate::scene::SunLight;
 use std::f64::consts::PI;
 
@@ -111,23 +112,30 @@ impl DiskDirections {
         object: u32,
     ) -> [f64; DISK_DIRECTIONS] {
         let two_patches = 2.0 * self.patch;
-        let covered = |boundary_minus_angle: f64| (0.5 + boundary_minus_angle / two_patches).clamp(0.0, 1.0);
+        // The blocked share from the sine of the signed angle `x` from the occluder's
+        // boundary (positive inside it): within the patch, where the share is not clamped,
+        // `sin x` is `x` to `x^3 / 6`, and it needs no inverse trigonometry, which GPUs
+        // only guarantee to 4096 ulp (shaders/disk.wgsl computes the same).
+        let covered = |sin_x: f64| (0.5 + sin_x / two_patches).clamp(0.0, 1.0);
         // Blocked share per direction, the largest over the occluders.
         let mut blocked = [0.0f64; DISK_DIRECTIONS];
         if planes.tangent {
             for (b, w) in blocked.iter_mut().zip(&self.directions) {
-                *b = b.max(covered(-dot(n, *w).clamp(-1.0, 1.0).asin()));
+                *b = b.max(covered(-dot(n, *w)));
             }
         }
         if planes.ground.is_some_and(|z| super::kernel::above_ground(p, z)) {
             for (b, w) in blocked.iter_mut().zip(&self.directions) {
-                *b = b.max(covered(-w[2].clamp(-1.0, 1.0).asin()));
+                *b = b.max(covered(-w[2]));
             }
         }
         if let (Some(pyramid), Some(azimuth)) = (horizons, self.azimuth) {
-            let horizon = pyramid.horizon_along(p, azimuth);
+            let (sin_h, cos_h) = pyramid.horizon_along(p, azimuth).sin_cos();
             for (b, w) in blocked.iter_mut().zip(&self.directions) {
-                *b = b.max(covered(horizon - w[2].clamp(-1.0, 1.0).asin()));
+                // x = horizon - elevation, in [-pi/2, pi]: past pi/2 it is deep inside.
+                let (sin_e, cos_e) = (w[2], (1.0 - w[2] * w[2]).max(0.0).sqrt());
+                let cos_x = cos_h * cos_e + sin_h * sin_e;
+                *b = b.max(if cos_x < 0.0 { 1.0 } else { covered(sin_h * cos_e - cos_h * sin_e) });
             }
         }
         if let Some(tree) = blockers {
@@ -138,14 +146,23 @@ impl DiskDirections {
                     return;
                 }
                 let axis = d.map(|c| c / distance);
-                let cap = if distance > sphere.radius { (sphere.radius / distance).asin() } else { PI / 2.0 };
+                // The cap's half-angle: asin(r / d), a hemisphere from inside.
+                let sin_cap = (sphere.radius / distance).min(1.0);
+                let cos_cap = (1.0 - sin_cap * sin_cap).sqrt();
                 for (b, w) in blocked.iter_mut().zip(&self.directions) {
-                    *b = b.max(covered(cap - dot(axis, *w).clamp(-1.0, 1.0).acos()));
+                    // x = cap - angle, in [-pi, pi/2]: below -pi/2 it is far outside.
+                    let (cos_a, sin_a) = (dot(axis, *w), norm(cross(axis, *w)));
+                    let cos_x = cos_cap * cos_a + sin_cap * sin_a;
+                    *b = b.max(if cos_x < 0.0 { 0.0 } else { covered(sin_cap * cos_a - cos_cap * sin_a) });
                 }
             });
         }
         blocked.map(|b| 1.0 - b)
     }
+}
+
+fn norm(a: [f64; 3]) -> f64 {
+    dot(a, a).sqrt()
 }
 
 /// A sun prepared for shading: its disk's directions and what they integrate to.

@@ -1,0 +1,155 @@
+// Directions over a disk and their visibility (src/shade/sun.rs, DiskDirections): a sun's
+// disk, or the core of a sharp glossy lobe (src/shade/glossy.rs). DISK_DIRECTIONS
+// directions uniform by solid angle (T_DISK holds the unit-disk pattern, x then y), held
+// four to a vec4 so that each occluder updates them in DISK_QUADS steps. Each direction's
+// blocked share is that of its patch, from the sine of the signed angle to the nearest
+// occluder boundary, the largest over the occluders (sun.rs, module doc). No inverse
+// trigonometry decides a share: Vulkan bounds asin and atan only to 4096 ulp, which on
+// lavapipe moved a penumbra by a tenth of a patch. The disk's 1 - cos and its patch
+// radius come from the host, computed in f64.
+
+struct Disk {
+    x: array<vec4<f32>, DISK_QUADS>,
+    y: array<vec4<f32>, DISK_QUADS>,
+    z: array<vec4<f32>, DISK_QUADS>,
+}
+
+// The disk whose half-angle has cosine 1 - `one_minus_cos` about unit `axis`
+// (DiskDirections::new, with frame_around's helper axis); the sines are taken from
+// 1 - cos, so that a mirror's core, a few thousandths of a radian, keeps its shape in f32.
+fn disk_around(axis: vec3<f32>, one_minus_cos: f32) -> Disk {
+    var helper = vec3<f32>(1.0, 0.0, 0.0);
+    if abs(axis.z) < 0.9 {
+        helper = vec3<f32>(0.0, 0.0, 1.0);
+    }
+    let e1 = normalize(cross(helper, axis));
+    let e2 = cross(axis, e1);
+    var disk: Disk;
+    for (var q = 0u; q < DISK_QUADS; q++) {
+        let i = T_DISK + 4u * q;
+        let j = i + DISK_DIRECTIONS;
+        let px = vec4<f32>(tables[i], tables[i + 1u], tables[i + 2u], tables[i + 3u]);
+        let py = vec4<f32>(tables[j], tables[j + 1u], tables[j + 2u], tables[j + 3u]);
+        let r2 = px * px + py * py;
+        let drop = one_minus_cos * r2;
+        let cos_t = 1.0 - drop;
+        let sin_t = sqrt(max(drop * (2.0 - drop), vec4<f32>(0.0)));
+        // Every point of the pattern is off the centre (radius sqrt((i + 1/2) / K)).
+        let r = sqrt(r2);
+        let c = px / r;
+        let s = py / r;
+        disk.x[q] = cos_t * axis.x + sin_t * (c * e1.x + s * e2.x);
+        disk.y[q] = cos_t * axis.y + sin_t * (c * e1.y + s * e2.y);
+        disk.z[q] = cos_t * axis.z + sin_t * (c * e1.z + s * e2.z);
+    }
+    return disk;
+}
+
+fn covered(sin_x: vec4<f32>, two_patches: f32) -> vec4<f32> {
+    return clamp(0.5 + sin_x / two_patches, vec4<f32>(0.0), vec4<f32>(1.0));
+}
+
+// Blocked share of each direction of `disk` (about `axis`, with 1 - cos of its half-angle
+// `one_minus_cos` and patch radius `patch_radius`) at p with normal n on object `object`:
+// the tangent plane and the ground plane when asked, the horizon along the axis's
+// azimuth, and every sphere of the blocker tree that reaches the cone, never a cluster
+// (DiskDirections::visibility, BlockerTree::visit_cone).
+fn disk_blocked(disk: ptr<function, Disk>, p: vec3<f32>, n: vec3<f32>, object: u32, axis: vec3<f32>, one_minus_cos: f32, patch_radius: f32, tangent: bool, ground: bool) -> array<vec4<f32>, DISK_QUADS> {
+    let two_patches = 2.0 * patch_radius;
+    var blocked: array<vec4<f32>, DISK_QUADS>;
+    if tangent {
+        for (var q = 0u; q < DISK_QUADS; q++) {
+            blocked[q] = covered(-(n.x * (*disk).x[q] + n.y * (*disk).y[q] + n.z * (*disk).z[q]), two_patches);
+        }
+    }
+    if ground && GROUND && p.z > GROUND_HEIGHT + 1e-4 * (1.0 + abs(GROUND_HEIGHT)) {
+        for (var q = 0u; q < DISK_QUADS; q++) {
+            blocked[q] = max(blocked[q], covered(-(*disk).z[q], two_patches));
+        }
+    }
+//#if HEIGHTFIELD
+    let horizontal = length(axis.xy);
+    if enabled(FEATURE_HEIGHTFIELD) && horizontal > 1e-9 {
+        let horizon = horizon_along(p, axis.xy / horizontal);
+        let sin_h = sin(horizon);
+        let cos_h = cos(horizon);
+        for (var q = 0u; q < DISK_QUADS; q++) {
+            // x = horizon - elevation, in [-pi/2, pi]: past pi/2 it is deep inside.
+            let sin_e = (*disk).z[q];
+            let cos_e = sqrt(max(1.0 - sin_e * sin_e, vec4<f32>(0.0)));
+            let cos_x = cos_h * cos_e + sin_h * sin_e;
+            let share = select(covered(sin_h * cos_e - cos_h * sin_e, two_patches), vec4<f32>(1.0), cos_x < vec4<f32>(0.0));
+            blocked[q] = max(blocked[q], share);
+        }
+    }
+//#endif
+//#if BLOCKERS
+    // The cone's reach for culling, with a margin for acos, atan2 and asin's 4096 ulp:
+    // a sphere kept that does not reach the disk blocks nothing.
+    let reach = acos(1.0 - one_minus_cos) + patch_radius + 0.01;
+    var i = 0u;
+    while i < params.node_count {
+        let node = blocker_tree[i];
+        let d = node.bounds.xyz - p;
+        let r = node.bounds.w;
+        if dot(d, n) < -r {
+            i = node.skip;
+            continue;
+        }
+        let distance = length(d);
+        // Outside the cone: the angle to the bounds' centre beyond the cone's half-angle
+        // plus the bounds' own angular radius.
+        if distance > r && atan2(length(cross(axis, d)), dot(axis, d)) > reach + asin(r / distance) {
+            i = node.skip;
+            continue;
+        }
+        if node.leaf != 0u {
+            let sphere = node.equivalent;
+            let to_sphere = sphere.xyz - p;
+            let sphere_distance = length(to_sphere);
+            let own = object != 0u && node.object == object;
+            if sphere_distance > 0.0 && !(own && (own_sphere_holds(p, sphere) || dot(to_sphere, n) <= 0.0)) {
+                let a = to_sphere / sphere_distance;
+                // The cap's half-angle: asin(r / d), a hemisphere from inside.
+                let sin_cap = min(sphere.w / sphere_distance, 1.0);
+                let cos_cap = sqrt(max(1.0 - sin_cap * sin_cap, 0.0));
+                for (var q = 0u; q < DISK_QUADS; q++) {
+                    // x = cap - angle, in [-pi, pi/2]: below -pi/2 it is far outside.
+                    let x = (*disk).x[q];
+                    let y = (*disk).y[q];
+                    let z = (*disk).z[q];
+                    let cx = a.y * z - a.z * y;
+                    let cy = a.z * x - a.x * z;
+                    let cz = a.x * y - a.y * x;
+                    let cos_a = a.x * x + a.y * y + a.z * z;
+                    let sin_a = sqrt(cx * cx + cy * cy + cz * cz);
+                    let cos_x = cos_cap * cos_a + sin_cap * sin_a;
+                    let share = select(covered(sin_cap * cos_a - cos_cap * sin_a, two_patches), vec4<f32>(0.0), cos_x < vec4<f32>(0.0));
+                    blocked[q] = max(blocked[q], share);
+                }
+            }
+            i = node.skip;
+            continue;
+        }
+        i++;
+    }
+//#endif
+    return blocked;
+}
+
+//#if HEIGHTFIELD
+// The horizon elevation from p along unit `dir` in the xy plane (pyramid.rs,
+// horizon_along): add_heightfield's march for one azimuth.
+fn horizon_along(p: vec3<f32>, dir: vec2<f32>) -> f32 {
+    let finite = all(abs(p) < vec3<f32>(3.0e38));
+    if STEPS == 0u || !finite {
+        return 0.0;
+    }
+    var receiver: array<f32, LEVELS>;
+    let above = max(p.z - sample_bilinear(level_table[0], p.x, p.y), 0.0);
+    for (var level = 0u; level < LEVELS; level++) {
+        receiver[level] = sample_level(level, p.x, p.y);
+    }
+    return horizon(p.x, p.y, above, dir, &receiver);
+}
+//#endif
