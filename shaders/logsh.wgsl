@@ -54,7 +54,7 @@ fn visit_blockers(p: vec3<f32>, n: vec3<f32>, object: u32, log_epsilon: f32, acc
         let node = blocker_tree[i];
         let d = node.bounds.xyz - p;
         let r = node.bounds.w;
-        if dot(d, n) < -r {
+        if dot(d, n) < -r * (1.0 - BEHIND_TOLERANCE) {
             i = node.skip;
             continue;
         }

@@ -272,3 +272,45 @@ fn ground_is_read_and_checked() {
     let error = Scene::load(dunes.path()).unwrap_err().to_string();
     assert!(error.contains("\"ground\" and \"heightfield\"") && error.contains("scene.json"), "{error}");
 }
+
+/// Water mirrors a Sun lamp: a water pixel whose mirror ray leaves the scene shows
+/// the sky there plus the sun's radiance, `strength color / (pi sin^2 a)`, when that
+/// direction falls inside the sun's disk, and only the sky when the sun is elsewhere.
+#[test]
+fn water_mirrors_a_sun_lamp() {
+    use logsh::shade::kernel::reflect_view;
+    use logsh::shade::{pixel_work, PixelWork};
+    use logsh::synth::{example_scene, ExampleOptions};
+    let dir = tempfile::tempdir().unwrap();
+    example_scene("dunes", dir.path(), ExampleOptions { width: 64, height: 36, ..Default::default() }).unwrap();
+    let scene = Scene::load(dir.path()).unwrap();
+    let mut frame = scene.frame(scene.default_frame()).unwrap();
+    let g = &frame.gbuffer;
+    let water = (0..g.width * g.height)
+        .find(|&i| matches!(scene.materials.get(&g.material[i]), Some(logsh::scene::Material::Water { .. })))
+        .expect("the dunes have water");
+    // Its mirror ray leaves the scene (the reflection G-buffer's background).
+    frame.reflection.as_mut().expect("the dunes have water").material[water] = 0;
+    let g = &frame.gbuffer;
+    let (x, y) = (water % g.width, water / g.width);
+    let PixelWork::Fixed(sky) = pixel_work(&scene.materials, &frame, x, y) else { panic!("water mirroring the sky") };
+    let point = logsh::shade::frame::surface_at(g, water, None, &frame);
+    let mirror = reflect_view(point.view_origin, point.position, point.normal);
+    let length = (mirror[0] * mirror[0] + mirror[1] * mirror[1] + mirror[2] * mirror[2]).sqrt();
+    let half_angle = 1f64.to_radians();
+    let sun = SunLight { direction: mirror.map(|c| c / length), half_angle, strength: 2.0, color: [1.0, 0.5, 0.25] };
+    let radiance = 2.0 / (PI * half_angle.sin().powi(2));
+    let tint = match scene.materials[&g.material[water]] {
+        logsh::scene::Material::Water { tint } => tint,
+        _ => unreachable!(),
+    };
+    frame.suns = vec![sun];
+    let PixelWork::Fixed(lit) = pixel_work(&scene.materials, &frame, x, y) else { panic!("still the sky") };
+    for k in 0..3 {
+        let expected = sky[k] as f64 + f64::from(tint[k]) * radiance * f64::from(sun.color[k]);
+        assert!((lit[k] as f64 - expected).abs() <= 1e-4 * expected, "channel {k}: {} vs {expected}", lit[k]);
+    }
+    frame.suns = vec![SunLight { direction: [0.0, 0.0, -1.0], ..sun }];
+    let PixelWork::Fixed(elsewhere) = pixel_work(&scene.materials, &frame, x, y) else { panic!("still the sky") };
+    assert_eq!(elsewhere, sky);
+}

@@ -50,7 +50,10 @@ direction, `docs/design.md`):
   (Walter et al. 2007, "Microfacet Models for Refraction", Section 5.2), and a Phong lobe
   about the mirror direction is about four times wider than a Blinn-Phong lobe about the
   half vector, so exponent = `(2 / alpha^2 - 2) / 4 = 1 / (2 alpha^2) - 1/2`, clamped to
-  1..1024 (roughness 0.5 gives 7.5, 0.3 gives 61, 0.2 gives 312).
+  1..10^6 (roughness 0.5 gives 7.5, 0.3 gives 61, 0.2 gives 312, 0.05 gives 80000; the
+  clamp is roughness 0.027, a mirror to any environment map's resolution). logsh reads
+  such lobes from a prefiltered environment (`--glossy ggx`, the default) as the GGX
+  lobe of this alpha, which is what Cycles renders.
 
 Without markup every visible mesh-like object (mesh, curve, surface, text, metaball, and
 their instances) is a blocker of `Options.spheres` spheres, except flat ones (thinner
@@ -81,7 +84,8 @@ MATERIAL_TYPES = ("diffuse", "phong", "water", "heightfield")
 # The smallest pixel filter Cycles accepts: one sample lands within 0.005 px of the centre.
 DATA_FILTER_WIDTH = 0.01
 FLAT_THICKNESS = 0.02
-MAX_EXPONENT = 1024.0
+# Roughness 0.027 (module doc): sharper than any environment map resolves.
+MAX_EXPONENT = 1.0e6
 VIEW_LAYER = "ViewLayer"
 
 

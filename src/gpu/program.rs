@@ -262,9 +262,12 @@ fn material_slots(kernel: &ShadingKernel<f32>, t: &mut TableBuilder) -> (Vec<Gpu
                 let map = match maps.iter().find(|(k, _)| *k == key) {
                     Some(&(_, offset)) => offset,
                     None => {
-                        let m = &sharp.prefiltered.map;
+                        // The texels the frame's plan computed (FramePlan::new); the shader
+                        // reads no other.
+                        let m = &sharp.prefiltered;
                         let header = [f32::from_bits(m.width as u32), f32::from_bits(m.height as u32)];
-                        let offset = t.push_unnamed(header.into_iter().chain(m.texels.iter().flatten().copied()));
+                        let texels = m.computed_texels();
+                        let offset = t.push_unnamed(header.into_iter().chain(texels.iter().flatten().copied()));
                         maps.push((key, offset as u32));
                         offset as u32
                     }
@@ -448,6 +451,7 @@ fn prelude(kernel: &ShadingKernel<f32>, features: Features, march: Option<MarchS
         ("GROUND_HEIGHT", F32(kernel.ground.unwrap_or(0.0))),
         ("OWN_SPHERE_REACH", F32(crate::logsh::OWN_SPHERE_REACH)),
         ("NEGLIGIBLE_RATIO", F32(crate::shade::blocker_tree::NEGLIGIBLE_RATIO)),
+        ("BEHIND_TOLERANCE", F32(crate::shade::blocker_tree::BEHIND_TOLERANCE)),
         ("Y0", F32(Y0)),
         ("ONE_DC", F32(ONE_DC)),
         ("OL_FINE_NODES", U32(OL_FINE_NODES)),

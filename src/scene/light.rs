@@ -158,22 +158,47 @@ impl EnvironmentMap {
 
     /// Bilinear lookup in direction `dir` (need not be unit).
     pub fn lookup(&self, dir: [f64; 3]) -> [f32; 3] {
+        BilinearTaps::new(self.width, self.height, dir).read(|column, row| self.texels[row * self.width + column])
+    }
+}
+
+/// The texels a bilinear read of a `width` x `height` equirectangular map blends: two
+/// columns (wrapping), two rows (clamped), and the weights of the second of each.
+#[derive(Clone, Copy, Debug)]
+pub struct BilinearTaps {
+    pub columns: [usize; 2],
+    pub rows: [usize; 2],
+    pub tx: f32,
+    pub ty: f32,
+}
+
+impl BilinearTaps {
+    /// The taps in direction `dir` (need not be unit).
+    pub fn new(width: usize, height: usize, dir: [f64; 3]) -> Self {
         let [u, v] = direction_to_equirectangular(dir);
-        let x = u * self.width as f64 - 0.5;
-        let y = ((1.0 - v) * self.height as f64 - 0.5).clamp(0.0, (self.height - 1) as f64);
+        let x = u * width as f64 - 0.5;
+        let y = ((1.0 - v) * height as f64 - 0.5).clamp(0.0, (height - 1) as f64);
         let (x0, y0) = (x.floor(), y.floor());
-        let (tx, ty) = ((x - x0) as f32, (y - y0) as f32);
-        let w = self.width as i64;
+        let w = width as i64;
         let col = |c: i64| c.rem_euclid(w) as usize;
-        let (c0, c1) = (col(x0 as i64), col(x0 as i64 + 1));
         let r0 = y0 as usize;
-        let r1 = (r0 + 1).min(self.height - 1);
-        let t = |c: usize, r: usize| self.texels[r * self.width + c];
+        Self {
+            columns: [col(x0 as i64), col(x0 as i64 + 1)],
+            rows: [r0, (r0 + 1).min(height - 1)],
+            tx: (x - x0) as f32,
+            ty: (y - y0) as f32,
+        }
+    }
+
+    /// The blend of `texel(column, row)` over the taps.
+    pub fn read(&self, texel: impl Fn(usize, usize) -> [f32; 3]) -> [f32; 3] {
+        let ([c0, c1], [r0, r1], tx, ty) = (self.columns, self.rows, self.tx, self.ty);
+        let (a, b, c, d) = (texel(c0, r0), texel(c1, r0), texel(c0, r1), texel(c1, r1));
         let mut out = [0.0f32; 3];
         for (k, o) in out.iter_mut().enumerate() {
-            let a = t(c0, r0)[k] * (1.0 - tx) + t(c1, r0)[k] * tx;
-            let b = t(c0, r1)[k] * (1.0 - tx) + t(c1, r1)[k] * tx;
-            *o = a * (1.0 - ty) + b * ty;
+            let top = a[k] * (1.0 - tx) + b[k] * tx;
+            let bottom = c[k] * (1.0 - tx) + d[k] * tx;
+            *o = top * (1.0 - ty) + bottom * ty;
         }
         out
     }

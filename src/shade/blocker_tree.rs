@@ -13,8 +13,10 @@
 //! What a receiver at `p` with normal `n` does at a node of bounding sphere `(c, R)`,
 //! `d = |c - p|`:
 //!
-//! - `n . (c - p) < -R`: every centre below lies behind the tangent plane, where each
-//!   sphere is culled anyway (paper 000, end of Section 4.2): skipped, exactly.
+//! - `n . (c - p) < -R (1 - BEHIND_TOLERANCE)`: every centre below lies behind the
+//!   tangent plane, where each sphere is culled anyway (paper 000, end of Section 4.2):
+//!   skipped ([`BEHIND_TOLERANCE`] keeps a sphere touching the plane from behind out on
+//!   both executors).
 //! - a leaf: its sphere is seen as it is.
 //! - `d > R` and `R <= cluster_ratio d` (the node spans at most about `2 cluster_ratio`
 //!   radians): one cap, of the node's equivalent sphere: centred at the children's
@@ -34,6 +36,14 @@ use crate::scene::Sphere;
 /// `pi 0.004^2 = 5e-5` sr) is dropped when it is a cluster's: it would change an open
 /// receiver's diffuse light by less than 2e-5 at the default epsilon.
 pub const NEGLIGIBLE_RATIO: f64 = 0.004;
+
+/// A subtree is behind the receiver's tangent plane when its bounds rise above the plane
+/// by less than this fraction of their radius. A receiver on a sphere's surface, the
+/// sphere's centre straight behind it along the normal, sits on that boundary exactly:
+/// f64 and f32 rounding then decided differently whether the sphere was seen, and a
+/// disk test (a sun's, a sharp lobe's core) took it for the hemisphere behind the plane.
+/// What rises less than this above the plane blocks only a sliver along the horizon.
+pub const BEHIND_TOLERANCE: f64 = 1e-4;
 
 /// Most blocker spheres a frame may hold: the tree of a million spheres takes about
 /// 100 MB, the most one GPU storage binding is guaranteed to hold (WebGPU's default
@@ -147,7 +157,7 @@ impl BlockerTree {
             let next = node.skip as usize;
             let c = node.bounds.center;
             let d = [c[0] - p[0], c[1] - p[1], c[2] - p[2]];
-            if d[0] * n[0] + d[1] * n[1] + d[2] * n[2] < -node.bounds.radius {
+            if d[0] * n[0] + d[1] * n[1] + d[2] * n[2] < -node.bounds.radius * (1.0 - BEHIND_TOLERANCE) {
                 i = next;
                 continue;
             }

@@ -135,8 +135,8 @@ pub enum PixelWork {
 
 /// The frame walk shared by the CPU and GPU executors: background from the light along
 /// the camera ray, water through the reflection G-buffer (the reflected point shaded as
-/// seen from the water surface, or the sky in the mirror direction), every other pixel
-/// its own surface point.
+/// seen from the water surface, or the sky and the Sun lamps in the mirror direction),
+/// every other pixel its own surface point.
 pub fn pixel_work(materials: &BTreeMap<u32, Material>, frame: &Frame, x: usize, y: usize) -> PixelWork {
     let g = &frame.gbuffer;
     let i = g.index(x, y);
@@ -154,7 +154,18 @@ pub fn pixel_work(materials: &BTreeMap<u32, Material>, frame: &Frame, x: usize, 
                 let water = surface_at(g, i, None, frame);
                 if reflection.material[i] == 0 {
                     let mirror = super::kernel::reflect_view(water.view_origin, water.position, water.normal);
-                    let sky = frame.light.radiance(mirror);
+                    let mut sky = frame.light.radiance(mirror);
+                    // The scene's Sun lamps, which the map does not hold, are mirrored too:
+                    // their disk's radiance where the mirror direction falls inside it.
+                    for sun in &frame.suns {
+                        let cos = crate::scene::camera::dot(crate::scene::camera::normalize(mirror), sun.direction);
+                        if cos >= sun.half_angle.cos() {
+                            let radiance = sun.strength / (std::f64::consts::PI * sun.half_angle.sin().powi(2)) as f32;
+                            for (s, c) in sky.iter_mut().zip(sun.color) {
+                                *s += radiance * c;
+                            }
+                        }
+                    }
                     PixelWork::Fixed([tint[0] * sky[0], tint[1] * sky[1], tint[2] * sky[2], 1.0])
                 } else {
                     PixelWork::Shade { point: surface_at(reflection, i, Some(water.position), frame), tint: *tint }

@@ -38,9 +38,10 @@
 
 use super::sun::{disk_pattern, DISK_DIRECTIONS};
 use crate::scene::camera::dot;
-use crate::scene::light::EnvironmentMap;
+use crate::scene::light::{BilinearTaps, EnvironmentMap};
 use rayon::prelude::*;
 use std::f64::consts::{FRAC_PI_2, PI};
+use std::sync::{Arc, OnceLock};
 
 /// The shape of a sharp lobe about `R` (`--glossy`).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -99,6 +100,23 @@ impl SharpLobe {
                 2.0 * mu2.sqrt().acos()
             }
             SharpLobe::Phong { exponent } => 0.5f64.powf(1.0 / exponent).acos(),
+        }
+    }
+
+    /// The lobe convolved with a patch of angular radius `patch`, to first order: GGX's
+    /// reflected half-width is about twice its `alpha`, so `alpha' = sqrt(alpha^2 +
+    /// (patch / 2)^2`, and a Phong lobe takes the exponent of that `alpha`. A sun's disk
+    /// reflects through this lobe: 32 directions over a 0.5 degree disk stand for patches
+    /// of 0.09 degrees, and a mirror's lobe (0.06 degrees) between them would turn its
+    /// highlight into sparkles.
+    pub fn widened(self, patch: f64) -> SharpLobe {
+        let widen = |alpha: f64| (alpha * alpha + 0.25 * patch * patch).sqrt();
+        match self {
+            SharpLobe::Ggx { alpha } => SharpLobe::Ggx { alpha: widen(alpha) },
+            SharpLobe::Phong { exponent } => {
+                let alpha = widen(ggx_alpha(exponent));
+                SharpLobe::Phong { exponent: (0.5 / (alpha * alpha) - 0.5).clamp(f64::MIN_POSITIVE, exponent) }
+            }
         }
     }
 
@@ -195,34 +213,35 @@ const MIN_HEIGHT: usize = 4;
 
 /// The prefiltered map has at least this many texels per lobe half-width where the map
 /// is fine enough, so that reading it bilinearly keeps the lobe's own detail.
-const OUTPUT_TEXELS_PER_HALF_WIDTH: f64 = 3.0;
+const OUTPUT_TEXELS_PER_HALF_WIDTH: f64 = 2.0;
 
 /// A lobe whose half-width is below this many texels of the map reads the map itself:
 /// bilinear reading already spreads a texel that far.
 const MIRROR_TEXELS: f64 = 0.5;
 
-/// The map the lobe is integrated over has at least this many texels per half-width (its
-/// texels are box-filtered, so a coarser input only blurs the lobe by a fraction of a
-/// texel).
+/// The lobe's core, out to [`CORE_HALF_WIDTHS`], is integrated over a map with at least
+/// this many texels per half-width (its texels are box-filtered, so a coarser input only
+/// blurs the lobe by a fraction of a texel).
 const INPUT_TEXELS_PER_HALF_WIDTH: f64 = 2.0;
+
+/// The core's reach, in lobe half-widths; between 2/3 of it and all of it, the core
+/// hands over to the tail smoothly.
+const CORE_HALF_WIDTHS: f64 = 3.0;
+
+/// The tail, from 2/3 of the core's reach to the window's edge, is integrated over a map
+/// with at least this many texels per half-width, where it is as smooth.
+const TAIL_TEXELS_PER_HALF_WIDTH: f64 = 1.0;
 
 /// The convolution window, in lobe half-widths: the GGX lobe keeps 97 % of its mass
 /// within it (its tail beyond falls as `theta^-4`; the window's weights are
 /// renormalised), the Phong lobe all of it.
 const WINDOW_HALF_WIDTHS: f64 = 12.0;
 
-/// An environment map prefiltered with one lobe: `P(R) = integral L(w) lobe(R . w) dw`,
-/// as an equirectangular map in the orientation of [`EnvironmentMap`].
-#[derive(Clone, Debug)]
-pub struct Prefiltered {
-    pub map: EnvironmentMap,
-}
-
 /// The box-filtered reductions of a map, each half the size of the one before, texels
 /// averaged by solid angle: the inputs of the prefiltering, each as fine as its lobe
 /// needs.
 pub struct MapLevels {
-    levels: Vec<EnvironmentMap>,
+    levels: Vec<Arc<EnvironmentMap>>,
 }
 
 impl MapLevels {
@@ -235,31 +254,38 @@ impl MapLevels {
             let below = (row as f64 + 0.5) / map.height as f64 > 0.5;
             *t = if sky_only && below { [0.0; 3] } else { t.map(|c| c * strength) };
         }
-        let mut levels = vec![base];
+        let mut levels = vec![Arc::new(base)];
         loop {
             let last = levels.last().expect("one level at least");
             if last.height / 2 < MIN_HEIGHT || last.width % 2 != 0 || last.height % 2 != 0 {
                 break;
             }
             let next = reduce(last);
-            levels.push(next);
+            levels.push(Arc::new(next));
         }
         Self { levels }
     }
 
-    /// The map prefiltered with `lobe`.
+    /// The map prefiltered with `lobe`, its texels computed when first read
+    /// ([`Prefiltered::prepare`]).
     pub fn prefilter(&self, lobe: SharpLobe) -> Prefiltered {
         let s = lobe.half_width();
         let texel = |m: &EnvironmentMap| PI / m.height as f64;
-        let coarsest_within =
-            |texels_per_half_width: f64| self.levels.iter().rev().find(|m| texel(m) * texels_per_half_width <= s);
+        let coarsest_within = |texels_per_half_width: f64| {
+            self.levels.iter().rev().find(|m| texel(m) * texels_per_half_width <= s).unwrap_or(&self.levels[0])
+        };
         let finest = &self.levels[0];
         if texel(finest) * MIRROR_TEXELS > s {
-            return Prefiltered { map: finest.clone() };
+            return Prefiltered::new(finest.width, finest.height, Source::Map(finest.clone()));
         }
-        let output = coarsest_within(OUTPUT_TEXELS_PER_HALF_WIDTH).unwrap_or(finest);
-        let input = coarsest_within(INPUT_TEXELS_PER_HALF_WIDTH).unwrap_or(finest);
-        Prefiltered { map: convolve(input, output.width, output.height, lobe, (WINDOW_HALF_WIDTHS * s).min(PI)) }
+        let output = coarsest_within(OUTPUT_TEXELS_PER_HALF_WIDTH);
+        let parts = [
+            (coarsest_within(INPUT_TEXELS_PER_HALF_WIDTH), CORE_HALF_WIDTHS * s, Fade::Out),
+            (coarsest_within(TAIL_TEXELS_PER_HALF_WIDTH), WINDOW_HALF_WIDTHS * s, Fade::In),
+        ]
+        .map(|(map, reach, fade)| Part::new(map.clone(), reach.min(PI), fade));
+        let handover = [2.0 / 3.0 * CORE_HALF_WIDTHS * s, CORE_HALF_WIDTHS * s].map(|a| a.min(PI).cos());
+        Prefiltered::new(output.width, output.height, Source::Convolution { parts, handover, lobe })
     }
 }
 
@@ -285,63 +311,202 @@ fn reduce(map: &EnvironmentMap) -> EnvironmentMap {
     EnvironmentMap { file: map.file.clone(), width, height, texels }
 }
 
-/// `map` convolved with `lobe`, at the texel centres of a `width` x `height` map, over
-/// a window of `window` radians about each, the weights renormalised over the window.
-fn convolve(map: &EnvironmentMap, width: usize, height: usize, lobe: SharpLobe, window: f64) -> EnvironmentMap {
-    // Texel centres as (sin, cos) of their polar angle and of their azimuth
-    // (`equirectangular_to_direction`).
-    let polar = |row: usize, height: usize| PI * (row as f64 + 0.5) / height as f64;
-    let azimuths = |width: usize| -> Vec<(f64, f64)> {
-        (0..width).map(|c| (PI - 2.0 * PI * (c as f64 + 0.5) / width as f64).sin_cos()).collect()
-    };
-    let direction = |(sin_t, cos_t): (f64, f64), (sin_p, cos_p): (f64, f64)| [sin_t * cos_p, sin_t * sin_p, cos_t];
-    let in_rows: Vec<(f64, f64)> = (0..map.height).map(|r| polar(r, map.height).sin_cos()).collect();
-    let in_columns = azimuths(map.width);
-    let out_columns = azimuths(width);
-    let solid_angles: Vec<f64> = (0..map.height).map(|row| map.texel_solid_angle(row)).collect();
-    let cos_window = window.cos();
-    let margin = window + PI / map.height as f64;
-    let mut texels = vec![[0.0f32; 3]; width * height];
-    texels.par_chunks_mut(width).enumerate().for_each(|(row, out_row)| {
-        let theta = polar(row, height);
-        let window_rows: Vec<usize> =
-            (0..map.height).filter(|&r| (polar(r, map.height) - theta).abs() <= margin).collect();
-        for (column, out) in out_row.iter_mut().enumerate() {
-            let axis = direction(theta.sin_cos(), out_columns[column]);
-            // The input column nearest the axis's azimuth.
-            let centre = (column as f64 + 0.5) / width as f64 * map.width as f64;
-            let (mut sum, mut weights) = ([0.0f64; 3], 0.0f64);
-            for &r in &window_rows {
-                // The columns within the window at this row: all of them near a pole.
-                let reach = (margin / in_rows[r].0.max(1e-9) / (2.0 * PI) * map.width as f64).ceil() as usize + 1;
-                let (first, count) = if 2 * reach + 1 >= map.width {
-                    (0, map.width)
-                } else {
-                    (centre as usize + map.width - reach, 2 * reach + 1)
-                };
-                for c in (first..first + count).map(|c| c % map.width) {
-                    let z = dot(axis, direction(in_rows[r], in_columns[c]));
-                    if z < cos_window {
-                        continue;
-                    }
-                    let w = lobe.value(z) * solid_angles[r];
-                    let t = map.texels[r * map.width + c];
-                    for k in 0..3 {
-                        sum[k] += w * f64::from(t[k]);
-                    }
-                    weights += w;
-                }
-            }
-            *out = if weights > 0.0 { sum.map(|v| (v / weights) as f32) } else { map.lookup(axis) };
+/// One part of a convolution: the map it reads, with its texel centres' (sin, cos) of
+/// polar angle and azimuth (`equirectangular_to_direction`) and solid angles, how far
+/// from the axis it reaches, and whether it fades out or in across the hand-over.
+struct Part {
+    map: Arc<EnvironmentMap>,
+    rows: Vec<(f64, f64)>,
+    columns: Vec<(f64, f64)>,
+    solid_angles: Vec<f64>,
+    reach: f64,
+    fade: Fade,
+}
+
+#[derive(Clone, Copy)]
+enum Fade {
+    Out,
+    In,
+}
+
+fn polar(row: usize, height: usize) -> f64 {
+    PI * (row as f64 + 0.5) / height as f64
+}
+
+fn azimuth(column: usize, width: usize) -> f64 {
+    PI - 2.0 * PI * (column as f64 + 0.5) / width as f64
+}
+
+fn direction((sin_t, cos_t): (f64, f64), (sin_p, cos_p): (f64, f64)) -> [f64; 3] {
+    [sin_t * cos_p, sin_t * sin_p, cos_t]
+}
+
+impl Part {
+    fn new(map: Arc<EnvironmentMap>, reach: f64, fade: Fade) -> Self {
+        Self {
+            rows: (0..map.height).map(|r| polar(r, map.height).sin_cos()).collect(),
+            columns: (0..map.width).map(|c| azimuth(c, map.width).sin_cos()).collect(),
+            solid_angles: (0..map.height).map(|r| map.texel_solid_angle(r)).collect(),
+            map,
+            reach,
+            fade,
         }
-    });
-    EnvironmentMap { file: map.file.clone(), width, height, texels }
+    }
+}
+
+/// What a prefiltered map's texels are.
+enum Source {
+    /// The map itself, for a lobe narrower than half its texel.
+    Map(Arc<EnvironmentMap>),
+    /// The lobe's convolution of the core part and the tail part, each over its reach
+    /// about the texel's centre, the weights renormalised. The core fades out and the
+    /// tail in between the cosines `handover` (a smoothstep in `cos theta`), so each
+    /// direction's weights sum to the lobe's.
+    Convolution { parts: [Part; 2], handover: [f64; 2], lobe: SharpLobe },
+}
+
+/// An environment map prefiltered with one lobe: `P(R) = integral L(w) lobe(R . w) dw`,
+/// an equirectangular map in the orientation of [`EnvironmentMap`]. A texel is computed
+/// the first time it is read, or for the directions a frame reads ([`Self::prepare`]):
+/// a frame reads a few thousand of a map's texels, and computing every texel of four
+/// lobes' maps of a 1024 x 512 sky took 2.9 s.
+pub struct Prefiltered {
+    pub width: usize,
+    pub height: usize,
+    source: Source,
+    texels: Vec<OnceLock<[f32; 3]>>,
+}
+
+impl std::fmt::Debug for Prefiltered {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "Prefiltered({}x{})", self.width, self.height)
+    }
 }
 
 impl Prefiltered {
+    fn new(width: usize, height: usize, source: Source) -> Self {
+        let texels = match source {
+            Source::Map(_) => Vec::new(),
+            Source::Convolution { .. } => (0..width * height).map(|_| OnceLock::new()).collect(),
+        };
+        Self { width, height, source, texels }
+    }
+
+    /// Texel (column, row).
+    pub fn texel(&self, column: usize, row: usize) -> [f32; 3] {
+        match &self.source {
+            Source::Map(map) => map.texels[row * map.width + column],
+            Source::Convolution { parts, handover, lobe } => *self.texels[row * self.width + column]
+                .get_or_init(|| convolved_texel(parts, *handover, *lobe, self.width, self.height, column, row)),
+        }
+    }
+
     /// `P(R)`, bilinearly.
     pub fn lookup(&self, direction: [f64; 3]) -> [f32; 3] {
-        self.map.lookup(direction)
+        BilinearTaps::new(self.width, self.height, direction).read(|column, row| self.texel(column, row))
+    }
+
+    /// Computes the texels that bilinear reads along `directions` blend, and, where a
+    /// read falls within a thousandth of a texel of the next one, that one too (an
+    /// executor whose rounding differs may pick it).
+    pub fn prepare(&self, directions: impl ParallelIterator<Item = [f64; 3]>) {
+        const MARGIN: f32 = 1e-3;
+        if self.texels.is_empty() {
+            return;
+        }
+        directions.for_each(|d| {
+            let taps = BilinearTaps::new(self.width, self.height, d);
+            let [c0, c1] = taps.columns;
+            let [r0, r1] = taps.rows;
+            let mut columns = vec![c0, c1];
+            if taps.tx < MARGIN {
+                columns.push((c0 + self.width - 1) % self.width);
+            }
+            if taps.tx > 1.0 - MARGIN {
+                columns.push((c1 + 1) % self.width);
+            }
+            let mut rows = vec![r0, r1];
+            if taps.ty < MARGIN && r0 > 0 {
+                rows.push(r0 - 1);
+            }
+            if taps.ty > 1.0 - MARGIN && r1 + 1 < self.height {
+                rows.push(r1 + 1);
+            }
+            for &row in &rows {
+                for &column in &columns {
+                    self.texel(column, row);
+                }
+            }
+        });
+    }
+
+    /// Every texel computed so far, row by row, zero where none was: what a GPU program
+    /// uploads after [`Self::prepare`].
+    pub fn computed_texels(&self) -> Vec<[f32; 3]> {
+        match &self.source {
+            Source::Map(map) => map.texels.clone(),
+            Source::Convolution { .. } => self.texels.iter().map(|t| t.get().copied().unwrap_or([0.0; 3])).collect(),
+        }
+    }
+}
+
+/// Texel (column, row) of a `width` x `height` map of `lobe`'s convolution of `parts`
+/// ([`Source::Convolution`]).
+fn convolved_texel(
+    parts: &[Part; 2],
+    handover: [f64; 2],
+    lobe: SharpLobe,
+    width: usize,
+    height: usize,
+    column: usize,
+    row: usize,
+) -> [f32; 3] {
+    let [fade_start, fade_end] = handover;
+    let fade_out = |z: f64| {
+        let t = ((fade_start - z) / (fade_start - fade_end)).clamp(0.0, 1.0);
+        1.0 - t * t * (3.0 - 2.0 * t)
+    };
+    let theta = polar(row, height);
+    let axis = direction(theta.sin_cos(), azimuth(column, width).sin_cos());
+    let (mut sum, mut weights) = ([0.0f64; 3], 0.0f64);
+    for part in parts {
+        let map = &part.map;
+        let margin = part.reach + PI / map.height as f64;
+        let cos_reach = part.reach.cos();
+        let centre = (column as f64 + 0.5) / width as f64 * map.width as f64;
+        for r in (0..map.height).filter(|&r| (polar(r, map.height) - theta).abs() <= margin) {
+            // The columns within reach at this row: all of them near a pole.
+            let reach = (margin / part.rows[r].0.max(1e-9) / (2.0 * PI) * map.width as f64).ceil() as usize + 1;
+            let (first, count) = if 2 * reach + 1 >= map.width {
+                (0, map.width)
+            } else {
+                (centre as usize + map.width - reach, 2 * reach + 1)
+            };
+            for c in (first..first + count).map(|c| c % map.width) {
+                let z = dot(axis, direction(part.rows[r], part.columns[c]));
+                if z < cos_reach {
+                    continue;
+                }
+                let share = match part.fade {
+                    Fade::Out => fade_out(z),
+                    Fade::In => 1.0 - fade_out(z),
+                };
+                if share <= 0.0 {
+                    continue;
+                }
+                let w = share * lobe.value(z) * part.solid_angles[r];
+                let t = map.texels[r * map.width + c];
+                for k in 0..3 {
+                    sum[k] += w * f64::from(t[k]);
+                }
+                weights += w;
+            }
+        }
+    }
+    if weights > 0.0 {
+        sum.map(|v| (v / weights) as f32)
+    } else {
+        parts[0].map.lookup(axis)
     }
 }
 
@@ -420,20 +585,22 @@ mod tests {
     }
 
     /// The prefiltered maps against the brute-force integral of the lobe over the map,
-    /// along 200 directions, for lobes from rough to near-mirror. Measured worst errors,
-    /// relative to the map's mean radiance: GGX exponent 7.5 0.6 %, 60 1.6 %, 300 3 %
-    /// (the window's 3 % of GGX's tail goes to the core); Phong below 1 %.
+    /// along 200 directions, for lobes from rough to near-mirror. Measured errors,
+    /// relative to the larger of the exact value and the map's mean radiance (a window
+    /// 20 times brighter than the sky is in the map): worst 1.7 % to 3.8 %, mean 0.1 % to
+    /// 0.5 %. The worst are where a window's edge crosses the lobe's core, read from a
+    /// map with two texels per half-width.
     #[test]
     fn prefiltered_lookups_match_brute_force() {
         let map = featured_sky();
         let mean = map.texels.iter().map(|t| f64::from(t[1])).sum::<f64>() / map.texels.len() as f64;
         let levels = MapLevels::new(&map, 1.0, false);
         for (lobe, tolerance) in [
-            (SharpLobe::Ggx { alpha: ggx_alpha(7.5) }, 0.02),
+            (SharpLobe::Ggx { alpha: ggx_alpha(7.5) }, 0.03),
             (SharpLobe::Ggx { alpha: ggx_alpha(60.0) }, 0.04),
-            (SharpLobe::Ggx { alpha: ggx_alpha(300.0) }, 0.06),
-            (SharpLobe::Phong { exponent: 60.0 }, 0.02),
-            (SharpLobe::Phong { exponent: 300.0 }, 0.03),
+            (SharpLobe::Ggx { alpha: ggx_alpha(300.0) }, 0.04),
+            (SharpLobe::Phong { exponent: 60.0 }, 0.05),
+            (SharpLobe::Phong { exponent: 300.0 }, 0.04),
         ] {
             let prefiltered = levels.prefilter(lobe);
             let (mut worst, mut total) = (0.0f64, 0.0);
@@ -448,8 +615,8 @@ mod tests {
             }
             eprintln!(
                 "{lobe:?}: {}x{}, worst {worst:.4}, mean {:.4}",
-                prefiltered.map.width,
-                prefiltered.map.height,
+                prefiltered.width,
+                prefiltered.height,
                 total / 600.0
             );
             assert!(worst < tolerance, "{lobe:?}: worst {worst}");
@@ -462,7 +629,7 @@ mod tests {
         let map = featured_sky();
         let levels = MapLevels::new(&map, 2.0, false);
         let mirror = levels.prefilter(SharpLobe::Ggx { alpha: ggx_alpha(1e6) });
-        assert_eq!((mirror.map.width, mirror.map.height), (map.width, map.height));
+        assert_eq!((mirror.width, mirror.height), (map.width, map.height));
         let d = crate::scene::light::equirectangular_to_direction(0.525, 0.7);
         assert_eq!(mirror.lookup(d), map.lookup(d).map(|c| 2.0 * c));
         assert!(direction_to_equirectangular(d)[0] > 0.5);

@@ -3,6 +3,7 @@
 //! holds are the ones a GPU executor uploads.
 
 use super::blocker_tree::BlockerTree;
+use super::frame::PixelWork;
 use super::glossy::{
     albedo_lookup, albedo_table, cone_share, cone_weights, ggx_alpha, MapLevels, Prefiltered, SharpLobe,
 };
@@ -16,6 +17,7 @@ use crate::scene::camera::dot;
 use crate::scene::{EnvironmentMap, Light, Material, SunLight};
 use crate::sh::exp::{exp_hyb_with, exp_series, ExactExp, OlTable};
 use crate::sh::{add_rotated_zonal, coefficient_count, ExpMethod, Real, TriplingTensor, MAX_COEFFICIENTS};
+use rayon::prelude::*;
 use std::collections::BTreeMap;
 use std::f64::consts::FRAC_PI_2;
 use std::sync::Arc;
@@ -154,6 +156,8 @@ impl<T: Real> LobeTable<T> {
 /// The BRDF lobes of one material.
 #[derive(Clone, Debug)]
 pub(crate) struct MaterialLobes<T> {
+    /// The material's index in the scene's table.
+    pub(crate) index: u32,
     pub(crate) material: Material,
     /// Phong lobe (Eq. 27) for `phong` materials: the glossy term itself with
     /// `--glossy sh`, else the lobe of the specular occlusion.
@@ -180,10 +184,10 @@ pub(crate) struct SharpGlossy<T> {
     pub(crate) cone_weights: [f64; DISK_DIRECTIONS],
 }
 
-/// The sharpest Phong lobe given to SH as the specular occlusion's lobe: the log-ZH
-/// tables are exact up to it ([`crate::logsh::lobe_log_zh`]), and no order up to 8
-/// tells a sharper lobe from it.
-pub const OCCLUSION_MAX_EXPONENT: f64 = 1024.0;
+/// The sharpest Phong lobe given to log-SH (the glossy term with `--glossy sh`, the
+/// specular occlusion's lobe otherwise): the log-ZH tables are exact up to it
+/// ([`crate::logsh::lobe_log_zh`]), and no order up to 8 tells a sharper lobe from it.
+pub const SH_MAX_EXPONENT: f64 = 1024.0;
 
 /// The map the glossy term reflects: the light's own map (its suns taken out, which the
 /// sun term reflects), a constant light as a small constant map; `None` for a light
@@ -286,13 +290,7 @@ impl<T: Real> ShadingKernel<T> {
                 let (phong, sharp) = match material {
                     Material::Phong { exponent, .. } => {
                         let exponent = f64::from(*exponent);
-                        let lobe = Lobe::Phong {
-                            exponent: if glossy == GlossyMethod::Sh {
-                                exponent
-                            } else {
-                                exponent.min(OCCLUSION_MAX_EXPONENT)
-                            },
-                        };
+                        let lobe = Lobe::Phong { exponent: exponent.min(SH_MAX_EXPONENT) };
                         let eps = settings.phong_epsilon.unwrap_or_else(|| {
                             optimal_lobe_epsilon(
                                 order,
@@ -327,7 +325,7 @@ impl<T: Real> ShadingKernel<T> {
                     }
                     _ => (None, None),
                 };
-                (index, MaterialLobes { material: material.clone(), phong, sharp })
+                (index, MaterialLobes { index, material: material.clone(), phong, sharp })
             })
             .collect();
         let channel = |c: usize| light.iter().map(|rgb| T::of(rgb[c])).collect::<Vec<T>>();
@@ -350,6 +348,25 @@ impl<T: Real> ShadingKernel<T> {
 
     pub fn order(&self) -> usize {
         self.order
+    }
+
+    /// Computes the prefiltered texels the glossy pixels of `frame` read (each once, in
+    /// parallel; [`Prefiltered::prepare`]), so that shading finds them ready and a GPU
+    /// program can upload them.
+    pub fn prepare_glossy(&self, materials: &BTreeMap<u32, Material>, frame: &crate::scene::Frame) {
+        for lobes in self.materials.values() {
+            let Some(sharp) = &lobes.sharp else { continue };
+            let g = &frame.gbuffer;
+            let directions = (0..g.width * g.height).into_par_iter().filter_map(|i| {
+                match super::frame::pixel_work(materials, frame, i % g.width, i / g.width) {
+                    PixelWork::Shade { point, .. } if point.material == lobes.index => {
+                        Some(reflect_view(point.view_origin, point.position, point.normal))
+                    }
+                    _ => None,
+                }
+            });
+            sharp.prefiltered.prepare(directions);
+        }
     }
 
     /// Whether a material's glossy term reads a prefiltered environment.
@@ -604,9 +621,16 @@ impl<T: Real> ShadingKernel<T> {
                 diffuse[i] += d[i] * f64::from(albedo[i]);
             }
             if let Some((specular, exponent)) = phong {
+                // The lobe widened by the disk's patch ([`SharpLobe::widened`]).
                 let g = match (sharp, sharp_albedo) {
-                    (Some(sharp), Some(a)) => sun.reflected(&v, |z| a * sharp.lobe.value(z), axis),
-                    _ => sun.reflected(&v, |z| Lobe::Phong { exponent: f64::from(exponent) }.value(z), axis),
+                    (Some(sharp), Some(a)) => {
+                        let lobe = sharp.lobe.widened(sun.disk.patch);
+                        sun.reflected(&v, |z| a * lobe.value(z), axis)
+                    }
+                    _ => {
+                        let lobe = SharpLobe::Phong { exponent: f64::from(exponent) }.widened(sun.disk.patch);
+                        sun.reflected(&v, |z| lobe.value(z), axis)
+                    }
                 };
                 for i in 0..3 {
                     glossy[i] += g[i] * f64::from(specular[i]);

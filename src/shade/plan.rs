@@ -127,6 +127,10 @@ impl<'a> FramePlan<'a> {
                 frame.ground,
             )),
         };
+        match &kernel {
+            PlannedKernel::F32(kernel) => kernel.prepare_glossy(&scene.materials, frame),
+            PlannedKernel::F64(kernel) => kernel.prepare_glossy(&scene.materials, frame),
+        }
         let contents = FrameContents {
             prefiltered: match &kernel {
                 PlannedKernel::F32(kernel) => kernel.has_prefiltered_glossy(),
