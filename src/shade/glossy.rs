@@ -285,7 +285,7 @@ impl MapLevels {
         ]
         .map(|(map, reach, fade)| Part::new(map.clone(), reach.min(PI), fade));
         let handover = [2.0 / 3.0 * CORE_HALF_WIDTHS * s, CORE_HALF_WIDTHS * s].map(|a| a.min(PI).cos());
-        Prefiltered::new(output.width, output.height, Source::Convolution { parts, handover, lobe })
+        Prefiltered::new(output.width, output.height, Source::Convolution { parts: Box::new(parts), handover, lobe })
     }
 }
 
@@ -362,7 +362,7 @@ enum Source {
     /// about the texel's centre, the weights renormalised. The core fades out and the
     /// tail in between the cosines `handover` (a smoothstep in `cos theta`), so each
     /// direction's weights sum to the lobe's.
-    Convolution { parts: [Part; 2], handover: [f64; 2], lobe: SharpLobe },
+    Convolution { parts: Box<[Part; 2]>, handover: [f64; 2], lobe: SharpLobe },
 }
 
 /// An environment map prefiltered with one lobe: `P(R) = integral L(w) lobe(R . w) dw`,
