@@ -92,7 +92,7 @@ fn disk_blocked(disk: ptr<function, Disk>, p: vec3<f32>, n: vec3<f32>, object: u
         let node = blocker_tree[i];
         let d = node.bounds.xyz - p;
         let r = node.bounds.w;
-        if dot(d, n) < -r * (1.0 - BEHIND_TOLERANCE) {
+        if behind_tangent_plane(d, r, n) {
             i = node.skip;
             continue;
         }

@@ -44,6 +44,12 @@ fn own_sphere_holds(p: vec3<f32>, sphere: vec4<f32>) -> bool {
     return dot(d, d) <= reach * reach;
 }
 
+// Whether a subtree whose bounds (radius r) lie at d from the receiver is behind its
+// tangent plane (blocker_tree.rs, BEHIND_TOLERANCE): the skip both tree walks share.
+fn behind_tangent_plane(d: vec3<f32>, r: f32, n: vec3<f32>) -> bool {
+    return dot(d, n) < -r * (1.0 - BEHIND_TOLERANCE);
+}
+
 // Walks the blocker tree without a stack and adds every sphere or cluster the receiver
 // sees (src/shade/blocker_tree.rs, BlockerTree::visit): subtrees wholly behind the
 // tangent plane skipped, leaves seen unless they are the receiver's own and hold it,
@@ -54,7 +60,7 @@ fn visit_blockers(p: vec3<f32>, n: vec3<f32>, object: u32, log_epsilon: f32, acc
         let node = blocker_tree[i];
         let d = node.bounds.xyz - p;
         let r = node.bounds.w;
-        if dot(d, n) < -r * (1.0 - BEHIND_TOLERANCE) {
+        if behind_tangent_plane(d, r, n) {
             i = node.skip;
             continue;
         }

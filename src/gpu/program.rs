@@ -19,7 +19,7 @@ use crate::sh::exp::{ol_node_count, HYB_MAX_SQUARINGS, OL_COARSE_STEP, OL_FINE_N
 use crate::sh::ExpMethod;
 use crate::shade::glossy::{Prefiltered, SharpLobe, ALBEDO_ENTRIES};
 use crate::shade::kernel::{sh_space_max_magnitude, LUMINANCE, SH_SPACE_BLEND};
-use crate::shade::sun::{disk_pattern, DISK_DIRECTIONS};
+use crate::shade::sun::{disk_pattern, patch_radius, DISK_DIRECTIONS};
 use crate::shade::{FrameContents, ShadingKernel};
 use std::collections::BTreeMap;
 use std::sync::Arc;
@@ -276,12 +276,12 @@ fn material_slots(kernel: &ShadingKernel<f32>, t: &mut TableBuilder) -> (Vec<Gpu
                     SharpLobe::Ggx { alpha } => (LOBE_GGX, alpha),
                     SharpLobe::Phong { exponent } => (LOBE_PHONG, exponent),
                 };
-                let core = crate::shade::sun::DiskDirections::new([0.0, 0.0, 1.0], sharp.lobe.core_radius());
+                let core = sharp.lobe.core_radius();
                 let head = [
                     f32::from_bits(kind),
                     width as f32,
-                    (1.0 - core.half_angle.cos()) as f32,
-                    core.patch as f32,
+                    (1.0 - core.cos()) as f32,
+                    patch_radius(core) as f32,
                     sharp.cone_share as f32,
                 ];
                 let weights = sharp.cone_weights.map(|w| w as f32);

@@ -18,6 +18,7 @@ use crate::scene::{EnvironmentMap, Light, Material, SunLight};
 use crate::sh::exp::{exp_hyb_with, exp_series, ExactExp, OlTable};
 use crate::sh::{add_rotated_zonal, coefficient_count, ExpMethod, Real, TriplingTensor, MAX_COEFFICIENTS};
 use rayon::prelude::*;
+use std::borrow::Cow;
 use std::collections::BTreeMap;
 use std::f64::consts::FRAC_PI_2;
 use std::sync::Arc;
@@ -192,12 +193,13 @@ pub const SH_MAX_EXPONENT: f64 = 1024.0;
 /// The map the glossy term reflects: the light's own map (its suns taken out, which the
 /// sun term reflects), a constant light as a small constant map; `None` for a light
 /// given only as SH coefficients.
-fn glossy_map(light: &Light) -> Option<(EnvironmentMap, f32)> {
+fn glossy_map(light: &Light) -> Option<(Cow<'_, EnvironmentMap>, f32)> {
     match light {
-        Light::Environment { map, strength } => Some((map.clone(), *strength)),
-        Light::Constant(c) => {
-            Some((EnvironmentMap { file: "constant light".into(), width: 16, height: 8, texels: vec![*c; 128] }, 1.0))
-        }
+        Light::Environment { map, strength } => Some((Cow::Borrowed(map), *strength)),
+        Light::Constant(c) => Some((
+            Cow::Owned(EnvironmentMap { file: "constant light".into(), width: 16, height: 8, texels: vec![*c; 128] }),
+            1.0,
+        )),
         Light::Sh(_) => None,
     }
 }
@@ -276,13 +278,12 @@ impl<T: Real> ShadingKernel<T> {
         let any_phong = materials.values().any(|m| matches!(m, Material::Phong { .. }));
         let lobe_exp = any_phong.then(|| crate::sh::ExactExp::new(order));
         let exp = Exponentiator::new(order, settings.exp, settings.hyb_threshold);
-        let glossy = match glossy_map(residual) {
-            Some(_) if settings.glossy != GlossyMethod::Sh => settings.glossy,
-            _ => GlossyMethod::Sh,
-        };
-        let levels = (any_phong && glossy != GlossyMethod::Sh)
-            .then(|| glossy_map(residual).map(|(map, strength)| MapLevels::new(&map, strength, ground.is_some())))
-            .flatten();
+        // The prefiltered glossy term's map levels, where a Phong material needs them and
+        // the light has a map; otherwise every lobe stays in log-SH.
+        let levels = (any_phong && settings.glossy != GlossyMethod::Sh)
+            .then(|| glossy_map(residual))
+            .flatten()
+            .map(|(map, strength)| MapLevels::new(&map, strength, ground.is_some()));
         let mut prefiltered: Vec<(SharpLobe, Arc<Prefiltered>)> = Vec::new();
         let materials = materials
             .iter()
@@ -300,7 +301,7 @@ impl<T: Real> ShadingKernel<T> {
                         });
                         let table = LobeTable::new(order, lobe, eps);
                         let sharp = levels.as_ref().map(|levels| {
-                            let sharp_lobe = match glossy {
+                            let sharp_lobe = match settings.glossy {
                                 GlossyMethod::Phong => SharpLobe::Phong { exponent },
                                 _ => SharpLobe::Ggx { alpha: ggx_alpha(exponent) },
                             };

@@ -14,6 +14,7 @@ use super::kernel::ShadingKernel;
 use super::settings::{Precision, ShadingSettings};
 use crate::heightfield::{HeightField, HorizonPyramid, PyramidPlan};
 use crate::scene::{Frame, Light, Material, Scene, SunLight};
+use crate::sh::Real;
 use crate::timing::StageTimings;
 use std::time::Instant;
 
@@ -107,30 +108,19 @@ impl<'a> FramePlan<'a> {
             other => other,
         };
         let light = residual.sh_coefficients(settings.order);
-        let kernel = match settings.precision {
-            Precision::F32 => PlannedKernel::F32(ShadingKernel::new(
-                settings,
-                &scene.materials,
-                &light,
-                residual,
-                contents.heightfield,
-                &suns,
-                frame.ground,
-            )),
-            Precision::F64 => PlannedKernel::F64(ShadingKernel::new(
-                settings,
-                &scene.materials,
-                &light,
-                residual,
-                contents.heightfield,
-                &suns,
-                frame.ground,
-            )),
+        let inputs = KernelInputs {
+            settings,
+            scene,
+            frame,
+            light: &light,
+            residual,
+            heightfield: contents.heightfield,
+            suns: &suns,
         };
-        match &kernel {
-            PlannedKernel::F32(kernel) => kernel.prepare_glossy(&scene.materials, frame),
-            PlannedKernel::F64(kernel) => kernel.prepare_glossy(&scene.materials, frame),
-        }
+        let kernel = match settings.precision {
+            Precision::F32 => PlannedKernel::F32(inputs.kernel()),
+            Precision::F64 => PlannedKernel::F64(inputs.kernel()),
+        };
         let contents = FrameContents {
             prefiltered: match &kernel {
                 PlannedKernel::F32(kernel) => kernel.has_prefiltered_glossy(),
@@ -154,5 +144,36 @@ impl<'a> FramePlan<'a> {
             extracted_shares,
             timings,
         })
+    }
+}
+
+/// What a frame's kernel is built from, at either precision.
+struct KernelInputs<'a> {
+    settings: &'a ShadingSettings,
+    scene: &'a Scene,
+    frame: &'a Frame,
+    /// The SH projection of `residual`.
+    light: &'a [[f64; 3]],
+    /// The light with its suns taken out.
+    residual: &'a Light,
+    heightfield: bool,
+    suns: &'a [SunLight],
+}
+
+impl KernelInputs<'_> {
+    /// The kernel's tables, with the prefiltered texels the frame's glossy pixels read
+    /// computed ([`ShadingKernel::prepare_glossy`]).
+    fn kernel<T: Real>(&self) -> ShadingKernel<T> {
+        let kernel = ShadingKernel::new(
+            self.settings,
+            &self.scene.materials,
+            self.light,
+            self.residual,
+            self.heightfield,
+            self.suns,
+            self.frame.ground,
+        );
+        kernel.prepare_glossy(&self.scene.materials, self.frame);
+        kernel
     }
 }

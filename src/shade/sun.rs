@@ -52,6 +52,12 @@ pub fn disk_pattern() -> [[f64; 2]; DISK_DIRECTIONS] {
     })
 }
 
+/// Angular radius of the patch of a disk of half-angle `half_angle` that each of its
+/// [`DISK_DIRECTIONS`] directions stands for.
+pub fn patch_radius(half_angle: f64) -> f64 {
+    half_angle / (DISK_DIRECTIONS as f64).sqrt()
+}
+
 /// A cone of directions about an axis, spread uniformly by solid angle ([`disk_pattern`]),
 /// with the visibility test of the module doc: a sun's disk, or the core of a sharp
 /// glossy lobe ([`super::glossy`]).
@@ -95,7 +101,7 @@ impl DiskDirections {
             axis,
             half_angle,
             directions,
-            patch: half_angle / (DISK_DIRECTIONS as f64).sqrt(),
+            patch: patch_radius(half_angle),
             azimuth: (horizontal > 1e-9).then(|| [axis[0] / horizontal, axis[1] / horizontal]),
         }
     }
