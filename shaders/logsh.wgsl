@@ -1,23 +1,34 @@
 // Log-SH visibility of blockers (src/logsh/cap.rs; paper 000, Eq. 24-26, Section 4.2).
 
-// ZH of log(eps) inside a cap of angular radius alpha around +Z (cap.rs, cap_log_zh):
-// V_l = log(eps) 2 pi K_l (P_{l-1}(cos a) - P_{l+1}(cos a)) / (2l + 1). Closed form.
-fn cap_log_zh(log_epsilon: f32, alpha: f32) -> array<f32, ORDER_CAP> {
+// ZH of a log depth (log(eps) in the paper) inside a cap of angular radius alpha around +Z
+// (cap.rs, cap_log_zh):
+// V_l = depth 2 pi K_l (P_{l-1}(cos a) - P_{l+1}(cos a)) / (2l + 1). Closed form.
+fn cap_log_zh(log_depth: f32, alpha: f32) -> array<f32, ORDER_CAP> {
     let x = cos(alpha);
     var p: array<f32, ORDER_PLUS_ONE>;
     legendre(x, &p);
     var out: array<f32, ORDER_CAP>;
-    out[0] = log_epsilon * tables[T_CAP_SCALE] * (1.0 - x);
+    out[0] = log_depth * tables[T_CAP_SCALE] * (1.0 - x);
     for (var l = 1u; l < ORDER; l++) {
-        out[l] = log_epsilon * tables[T_CAP_SCALE + l] * (p[l - 1u] - p[l + 1u]) / f32(2u * l + 1u);
+        out[l] = log_depth * tables[T_CAP_SCALE + l] * (p[l - 1u] - p[l + 1u]) / f32(2u * l + 1u);
     }
     return out;
+}
+
+// The log depth of a cap of angular radius alpha, interpolated linearly in the fitted
+// table (src/shade/cap_depth.rs, cap_depth_at).
+fn cap_depth(alpha: f32) -> f32 {
+    let x = clamp(alpha / 1.5707963, 0.0, 1.0) * f32(CAP_DEPTH_INTERVALS);
+    let k = min(u32(x), CAP_DEPTH_INTERVALS - 1u);
+    let t = x - f32(k);
+    let below = tables[T_CAP_DEPTH + k];
+    return below + t * (tables[T_CAP_DEPTH + k + 1u] - below);
 }
 
 // Adds one sphere's cap as seen from receiver p with normal n (cap.rs, view_blocker):
 // culled when its centre is on or behind the tangent plane (paper 000, end of Section
 // 4.2); a receiver inside the sphere sees the hemisphere towards its centre.
-fn add_sphere(p: vec3<f32>, n: vec3<f32>, sphere: vec4<f32>, log_epsilon: f32, acc: ptr<function, array<f32, COUNT_CAP>>) {
+fn add_sphere(p: vec3<f32>, n: vec3<f32>, sphere: vec4<f32>, acc: ptr<function, array<f32, COUNT_CAP>>) {
     let d = sphere.xyz - p;
     let distance = length(d);
     if !(distance > 0.0) {
@@ -28,7 +39,8 @@ fn add_sphere(p: vec3<f32>, n: vec3<f32>, sphere: vec4<f32>, log_epsilon: f32, a
         return;
     }
     let ratio = min(sphere.w / distance, 1.0);
-    var zonal = cap_log_zh(log_epsilon, asin(ratio));
+    let alpha = asin(ratio);
+    var zonal = cap_log_zh(cap_depth(alpha), alpha);
     var weight = 1.0;
     if RATIO_ATTENUATION {
         weight = ratio;
@@ -54,7 +66,7 @@ fn behind_tangent_plane(d: vec3<f32>, r: f32, n: vec3<f32>) -> bool {
 // sees (src/shade/blocker_tree.rs, BlockerTree::visit): subtrees wholly behind the
 // tangent plane skipped, leaves seen unless they are the receiver's own and hold it,
 // distant clusters seen as their equivalent sphere or dropped when negligible.
-fn visit_blockers(p: vec3<f32>, n: vec3<f32>, object: u32, log_epsilon: f32, acc: ptr<function, array<f32, COUNT_CAP>>) {
+fn visit_blockers(p: vec3<f32>, n: vec3<f32>, object: u32, acc: ptr<function, array<f32, COUNT_CAP>>) {
     var i = 0u;
     while i < params.node_count {
         let node = blocker_tree[i];
@@ -66,7 +78,7 @@ fn visit_blockers(p: vec3<f32>, n: vec3<f32>, object: u32, log_epsilon: f32, acc
         }
         if node.leaf != 0u {
             if !(object != 0u && node.object == object && own_sphere_holds(p, node.equivalent)) {
-                add_sphere(p, n, node.equivalent, log_epsilon, acc);
+                add_sphere(p, n, node.equivalent, acc);
             }
             i = node.skip;
             continue;
@@ -74,7 +86,7 @@ fn visit_blockers(p: vec3<f32>, n: vec3<f32>, object: u32, log_epsilon: f32, acc
         let distance = length(d);
         if distance > r && r <= params.cluster_ratio * distance {
             if node.equivalent.w >= NEGLIGIBLE_RATIO * length(node.equivalent.xyz - p) {
-                add_sphere(p, n, node.equivalent, log_epsilon, acc);
+                add_sphere(p, n, node.equivalent, acc);
             }
             i = node.skip;
             continue;

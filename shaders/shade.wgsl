@@ -136,7 +136,7 @@ fn visibility(p: vec3<f32>, n: vec3<f32>, object: u32, caps: ptr<function, array
     }
 //#endif
 //#if BLOCKERS
-    visit_blockers(p, n, object, params.log_epsilon, caps);
+    visit_blockers(p, n, object, caps);
     for (var i = 0u; i < COUNT; i++) {
         acc[i] += (*caps)[i];
     }

@@ -206,6 +206,8 @@ impl ProgramTables {
         t.push("T_FUNK_HECKE", (0..order).map(|l| funk_hecke_factor(l) as f32));
         t.push("T_NLP_SCALE", (0..order).map(|l| nlp_scale(l) as f32));
         t.push("T_CAP_SCALE", (0..order).map(|l| cap_scale(l) as f32));
+        // Each cap's log depth per angular radius (src/shade/cap_depth.rs).
+        t.push("T_CAP_DEPTH", kernel.cap_depths.iter().copied());
 
         // Lobes: order log-ZH values then the log of the peak.
         t.push("T_TANGENT", kernel.tangent.iter().copied());
@@ -446,6 +448,7 @@ fn prelude(kernel: &ShadingKernel<f32>, features: Features, march: Option<MarchS
         ("GENERIC", Bool(generic)),
         ("TANGENT_OCCLUSION", Bool(kernel.tangent_occlusion)),
         ("RATIO_ATTENUATION", Bool(kernel.ratio_attenuation)),
+        ("CAP_DEPTH_INTERVALS", U32(crate::shade::cap_depth::CAP_DEPTH_INTERVALS)),
         ("OVERLAP_FLOOR", Bool(kernel.overlap_floor)),
         ("GROUND", Bool(kernel.ground.is_some())),
         ("GROUND_HEIGHT", F32(kernel.ground.unwrap_or(0.0))),

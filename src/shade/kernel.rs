@@ -3,6 +3,7 @@
 //! holds are the ones a GPU executor uploads.
 
 use super::blocker_tree::BlockerTree;
+use super::cap_depth::{cap_depth_at, fitted_cap_depths, CapDepthKey, CAP_DEPTH_INTERVALS};
 use super::frame::PixelWork;
 use super::glossy::{
     albedo_lookup, albedo_table, cone_share, cone_weights, ggx_alpha, MapLevels, Prefiltered, SharpLobe,
@@ -230,6 +231,9 @@ pub struct SurfacePoint {
 pub struct ShadingKernel<T> {
     pub(crate) order: usize,
     pub(crate) log_epsilon: T,
+    /// Each cap's log depth per angular radius ([`super::cap_depth`]): fitted, or
+    /// `log(eps)` throughout.
+    pub(crate) cap_depths: Vec<T>,
     pub(crate) ratio_attenuation: bool,
     pub(crate) tangent_occlusion: bool,
     /// Floor the log visibility at `log(eps)` per quadrature node
@@ -329,10 +333,23 @@ impl<T: Real> ShadingKernel<T> {
                 (index, MaterialLobes { index, material: material.clone(), phong, sharp })
             })
             .collect();
+        let cap_depths = if settings.fitted_caps {
+            let key = CapDepthKey {
+                order,
+                epsilon_bits: epsilon.to_bits(),
+                tangent_occlusion: settings.tangent_occlusion,
+                exp: settings.exp,
+                hyb_threshold_bits: settings.hyb_threshold.to_bits(),
+            };
+            fitted_cap_depths(key, &exp).iter().map(|&d| T::of(d)).collect()
+        } else {
+            vec![T::of(epsilon.ln()); CAP_DEPTH_INTERVALS + 1]
+        };
         let channel = |c: usize| light.iter().map(|rgb| T::of(rgb[c])).collect::<Vec<T>>();
         Self {
             order,
             log_epsilon: T::of(epsilon.ln()),
+            cap_depths,
             ratio_attenuation: settings.ratio_attenuation,
             tangent_occlusion: settings.tangent_occlusion,
             overlap_floor: settings.overlap_floor,
@@ -448,7 +465,7 @@ impl<T: Real> ShadingKernel<T> {
         tree.visit(p, n, object, |sphere| {
             let view = view_blocker(pt, nt, sphere.center.map(T::of), T::of(sphere.radius), self.ratio_attenuation);
             if let BlockerView::Cap { direction, alpha, weight } = view {
-                cap_log_zh(order, self.log_epsilon, alpha, &mut zonal[..order]);
+                cap_log_zh(order, cap_depth_at(&self.cap_depths, alpha), alpha, &mut zonal[..order]);
                 add_rotated_zonal(order, &zonal[..order], weight, direction, acc);
                 if let Some(occlusion) = occlusion.as_deref_mut() {
                     add_rotated_zonal(order, &zonal[..order], weight, direction, occlusion);
