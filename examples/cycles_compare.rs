@@ -1,6 +1,6 @@
 //! logsh against Cycles on exported Blender scenes: shades a scene's first frame at the
-//! `default`, `high` and `ultra` presets, at `default` with every cap at `log(eps)`
-//! (`--fitted-caps off`), with ratio attenuation, without the
+//! `default`, `high` and `ultra` presets, at `default` with every cap and slice at `log(eps)`
+//! (`--fitted-depths off`), with ratio attenuation, without the
 //! overlap floor and without clusters (and, where `--sharp-lights` takes suns out of the
 //! map, `default` and `high` without that), and compares each with the direct-lighting Cycles render stored beside it
 //! (`cycles.NNNN.exr`, written by `blender_scripts/render_cycles.py` with the exported
@@ -98,7 +98,7 @@ fn main() {
         ("default", default),
         ("high", Quality::High.settings()),
         ("ultra", Quality::Ultra.settings()),
-        ("default, caps at log(eps) (--fitted-caps off)", ShadingSettings { fitted_caps: false, ..default }),
+        ("default, depths at log(eps) (--fitted-depths off)", ShadingSettings { fitted_depths: false, ..default }),
         ("default, ratio attenuation", ShadingSettings { ratio_attenuation: true, ..default }),
         ("default, overlap floor off", ShadingSettings { overlap_floor: false, ..default }),
         ("default, no clusters", ShadingSettings { cluster_ratio: 0.0, ..default }),

@@ -170,6 +170,21 @@ fn nlp_slice(log_epsilon: f32, sigma: f32) -> array<f32, ORDER_CAP> {
     return out;
 }
 
+// A slice with its horizon band at the fitted depth (fitted_depth.rs, banded_slice):
+// log(eps) up to `base`, the band from `base` to `sigma` at the depth for its width.
+fn banded_slice(log_epsilon: f32, base: f32, sigma: f32) -> array<f32, ORDER_CAP> {
+    if sigma <= base {
+        return nlp_slice(log_epsilon, sigma);
+    }
+    let below = nlp_slice(1.0, base);
+    var out = nlp_slice(1.0, sigma);
+    let depth = fitted_depth(T_BAND_DEPTH, sigma - base);
+    for (var l = 0u; l < ORDER; l++) {
+        out[l] = log_epsilon * below[l] + depth * (out[l] - below[l]);
+    }
+    return out;
+}
+
 // acc += wedge k between slices `first` and `second`, rotated about z by phi_k
 // (wedge.rs, accumulate; Eq. 20-23).
 fn add_wedge(k: u32, first: ptr<function, array<f32, ORDER_CAP>>, second: ptr<function, array<f32, ORDER_CAP>>, acc: ptr<function, array<f32, COUNT_CAP>>) {
@@ -222,10 +237,15 @@ fn add_heightfield(p: vec3<f32>, n: vec3<f32>, fold_tangent: bool, log_epsilon: 
         if STEPS > 0u && finite {
             sigma = horizon(p.x, p.y, above, dir, &receiver);
         }
+        // The band from the horizontal (or the tangent plane, where higher) up to the
+        // horizon takes its fitted depth.
+        var base = 0.0;
         if fold_tangent {
-            sigma = max(sigma, atan(-(n.x * dir.x + n.y * dir.y) / n.z));
+            let tangent_elevation = atan(-(n.x * dir.x + n.y * dir.y) / n.z);
+            sigma = max(sigma, tangent_elevation);
+            base = max(base, tangent_elevation);
         }
-        var slice = nlp_slice(log_epsilon, sigma);
+        var slice = banded_slice(log_epsilon, base, sigma);
         if k == 0u {
             first = slice;
         } else {

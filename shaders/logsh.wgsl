@@ -15,14 +15,14 @@ fn cap_log_zh(log_depth: f32, alpha: f32) -> array<f32, ORDER_CAP> {
     return out;
 }
 
-// The log depth of a cap of angular radius alpha, interpolated linearly in the fitted
-// table (src/shade/cap_depth.rs, cap_depth_at).
-fn cap_depth(alpha: f32) -> f32 {
-    let x = clamp(alpha / 1.5707963, 0.0, 1.0) * f32(CAP_DEPTH_INTERVALS);
-    let k = min(u32(x), CAP_DEPTH_INTERVALS - 1u);
+// The log depth for an angle (a cap's radius, a band's width), interpolated linearly in
+// the fitted table at `table` (src/shade/fitted_depth.rs, depth_at).
+fn fitted_depth(table: u32, angle: f32) -> f32 {
+    let x = clamp(angle / 1.5707963, 0.0, 1.0) * f32(DEPTH_INTERVALS);
+    let k = min(u32(x), DEPTH_INTERVALS - 1u);
     let t = x - f32(k);
-    let below = tables[T_CAP_DEPTH + k];
-    return below + t * (tables[T_CAP_DEPTH + k + 1u] - below);
+    let below = tables[table + k];
+    return below + t * (tables[table + k + 1u] - below);
 }
 
 // Adds one sphere's cap as seen from receiver p with normal n (cap.rs, view_blocker):
@@ -40,7 +40,7 @@ fn add_sphere(p: vec3<f32>, n: vec3<f32>, sphere: vec4<f32>, acc: ptr<function, 
     }
     let ratio = min(sphere.w / distance, 1.0);
     let alpha = asin(ratio);
-    var zonal = cap_log_zh(cap_depth(alpha), alpha);
+    var zonal = cap_log_zh(fitted_depth(T_CAP_DEPTH, alpha), alpha);
     var weight = 1.0;
     if RATIO_ATTENUATION {
         weight = ratio;

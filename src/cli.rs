@@ -165,9 +165,9 @@ pub struct ShadingArgs {
     /// Scale each sphere's log visibility by r/|c-p| (the paper's Section 4.2).
     #[arg(long, value_enum, default_value_t = Switch::Off)]
     pub ratio_attenuation: Switch,
-    /// Give each sphere's cap the log depth fitted for its angular radius (-1 for small caps, log(eps) for wide ones) instead of log(eps) for all.
+    /// Give each sphere's cap the log depth fitted for its angular radius, and each height-field slice's horizon band the one fitted for its width (about -1 when small, log(eps) when wide), instead of log(eps) for all.
     #[arg(long, value_enum, default_value_t = Switch::On)]
-    pub fitted_caps: Switch,
+    pub fitted_depths: Switch,
     /// Clamp the hemisphere behind each receiver's tangent plane in log space.
     #[arg(long, value_enum, default_value_t = Switch::On)]
     pub tangent_occlusion: Switch,
@@ -210,7 +210,7 @@ impl ShadingArgs {
             settings.exp = exp;
         }
         settings.ratio_attenuation = self.ratio_attenuation == Switch::On;
-        settings.fitted_caps = self.fitted_caps == Switch::On;
+        settings.fitted_depths = self.fitted_depths == Switch::On;
         settings.tangent_occlusion = self.tangent_occlusion == Switch::On;
         settings.overlap_floor = self.overlap_floor == Switch::On;
         settings.sharp_lights = self.sharp_lights == SharpLights::Auto;

@@ -19,7 +19,7 @@ use std::time::Instant;
 #[derive(Clone, Debug, Serialize)]
 pub struct SweepRow {
     /// What was varied: "preset", "order", "epsilon", "exp", "directions", "level_step",
-    /// "level_offset", "ratio_attenuation", "fitted_caps" or "tangent_occlusion"; every
+    /// "level_offset", "ratio_attenuation", "fitted_depths" or "tangent_occlusion"; every
     /// other knob is the base's (fitted caps on).
     pub knob: String,
     /// The value, as a user would type it.
@@ -79,7 +79,7 @@ pub fn configurations() -> Vec<(String, String, ShadingSettings)> {
         out.push(("level_offset".into(), level_offset.to_string(), s));
     }
     out.push(("ratio_attenuation".into(), "on".into(), ShadingSettings { ratio_attenuation: true, ..base }));
-    out.push(("fitted_caps".into(), "off".into(), ShadingSettings { fitted_caps: false, ..base }));
+    out.push(("fitted_depths".into(), "off".into(), ShadingSettings { fitted_depths: false, ..base }));
     out.push(("tangent_occlusion".into(), "off".into(), ShadingSettings { tangent_occlusion: false, ..base }));
     out
 }
@@ -276,7 +276,7 @@ mod tests {
             "level_step",
             "level_offset",
             "ratio_attenuation",
-            "fitted_caps",
+            "fitted_depths",
             "tangent_occlusion",
         ] {
             assert!(knobs.contains(k), "{k}");

@@ -181,7 +181,7 @@ fn every_knob_matches() {
     wide.horizon.level_step = 2.0;
     let cases = [
         ("ratio attenuation", ShadingSettings { ratio_attenuation: true, ..base }),
-        ("caps at log(eps)", ShadingSettings { fitted_caps: false, ..base }),
+        ("depths at log(eps)", ShadingSettings { fitted_depths: false, ..base }),
         ("no tangent occlusion", ShadingSettings { tangent_occlusion: false, ..base }),
         ("eps 0.01", ShadingSettings { epsilon: 0.01, ..base }),
         ("phong eps 0.2", ShadingSettings { phong_epsilon: Some(0.2), ..base }),

@@ -206,8 +206,10 @@ impl ProgramTables {
         t.push("T_FUNK_HECKE", (0..order).map(|l| funk_hecke_factor(l) as f32));
         t.push("T_NLP_SCALE", (0..order).map(|l| nlp_scale(l) as f32));
         t.push("T_CAP_SCALE", (0..order).map(|l| cap_scale(l) as f32));
-        // Each cap's log depth per angular radius (src/shade/cap_depth.rs).
+        // Each cap's log depth per angular radius and each horizon band's per width
+        // (src/shade/fitted_depth.rs).
         t.push("T_CAP_DEPTH", kernel.cap_depths.iter().copied());
+        t.push("T_BAND_DEPTH", kernel.band_depths.iter().copied());
 
         // Lobes: order log-ZH values then the log of the peak.
         t.push("T_TANGENT", kernel.tangent.iter().copied());
@@ -448,7 +450,7 @@ fn prelude(kernel: &ShadingKernel<f32>, features: Features, march: Option<MarchS
         ("GENERIC", Bool(generic)),
         ("TANGENT_OCCLUSION", Bool(kernel.tangent_occlusion)),
         ("RATIO_ATTENUATION", Bool(kernel.ratio_attenuation)),
-        ("CAP_DEPTH_INTERVALS", U32(crate::shade::cap_depth::CAP_DEPTH_INTERVALS)),
+        ("DEPTH_INTERVALS", U32(crate::shade::fitted_depth::DEPTH_INTERVALS)),
         ("OVERLAP_FLOOR", Bool(kernel.overlap_floor)),
         ("GROUND", Bool(kernel.ground.is_some())),
         ("GROUND_HEIGHT", F32(kernel.ground.unwrap_or(0.0))),
@@ -552,7 +554,10 @@ impl ShadeProgram {
             let steps = m.steps as u64;
             let horizon = steps * (1 + sample) + if m.bspline_scale_max { steps } else { 0 };
             let wedge = c * (1 + n) + n * (n + 1) / 2 + c;
-            m.levels as u64 * (1 + sample) + m.directions as u64 * (1 + horizon + 2 * n + wedge) + wedge
+            // A banded slice: two NLP slices (Legendre and coefficients, 2n each) and
+            // their combination (n).
+            let slice = 5 * n;
+            m.levels as u64 * (1 + sample) + m.directions as u64 * (1 + horizon + slice + wedge) + wedge
         });
         let passes = if self.features.passes { 2 * tangent + 3 * lit + n } else { 0 };
         // A disk of directions (shaders/disk.wgsl): its setup and planes, one azimuth's

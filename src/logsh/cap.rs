@@ -9,7 +9,7 @@ pub fn cap_scale(l: usize) -> f64 {
 
 /// Writes the `order` ZH coefficients of the log visibility of a cap of angular radius
 /// `alpha` around +Z: `log(eps)` inside the cap, 0 outside (Eq. 26; the kernel passes the
-/// depth fitted for `alpha` instead, [`crate::shade::cap_depth`]):
+/// depth fitted for `alpha` instead, [`crate::shade::fitted_depth`]):
 /// `V_l = log(eps) 2 pi K_l integral_{cos alpha}^{1} P_l(z) dz`, `K_l = sqrt((2l+1)/(4 pi))`,
 /// with `integral_x^1 P_l = (P_{l-1}(x) - P_{l+1}(x)) / (2l + 1)`. Closed form, exact up to
 /// rounding, any order.

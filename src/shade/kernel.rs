@@ -3,7 +3,7 @@
 //! holds are the ones a GPU executor uploads.
 
 use super::blocker_tree::BlockerTree;
-use super::cap_depth::{cap_depth_at, fitted_cap_depths, CapDepthKey, CAP_DEPTH_INTERVALS};
+use super::fitted_depth::{banded_slice, depth_at, fitted_depths, DepthKey, DEPTH_INTERVALS};
 use super::frame::PixelWork;
 use super::glossy::{
     albedo_lookup, albedo_table, cone_share, cone_weights, ggx_alpha, MapLevels, Prefiltered, SharpLobe,
@@ -11,9 +11,7 @@ use super::glossy::{
 use super::settings::{GlossyMethod, ShadingSettings, MAX_DIRECTIONS};
 use super::sun::{DiskDirections, Planes, SunDisk, DISK_DIRECTIONS};
 use crate::heightfield::HorizonPyramid;
-use crate::logsh::{
-    cap_log_zh, lobe_log_zh_as, nlp_slice, optimal_lobe_epsilon, view_blocker, BlockerView, Lobe, WedgeOperator,
-};
+use crate::logsh::{cap_log_zh, lobe_log_zh_as, optimal_lobe_epsilon, view_blocker, BlockerView, Lobe, WedgeOperator};
 use crate::scene::camera::dot;
 use crate::scene::{EnvironmentMap, Light, Material, SunLight};
 use crate::sh::exp::{exp_hyb_with, exp_series, ExactExp, OlTable};
@@ -231,9 +229,10 @@ pub struct SurfacePoint {
 pub struct ShadingKernel<T> {
     pub(crate) order: usize,
     pub(crate) log_epsilon: T,
-    /// Each cap's log depth per angular radius ([`super::cap_depth`]): fitted, or
-    /// `log(eps)` throughout.
+    /// Each cap's log depth per angular radius and each horizon band's per width
+    /// ([`super::fitted_depth`]): fitted, or `log(eps)` throughout.
     pub(crate) cap_depths: Vec<T>,
+    pub(crate) band_depths: Vec<T>,
     pub(crate) ratio_attenuation: bool,
     pub(crate) tangent_occlusion: bool,
     /// Floor the log visibility at `log(eps)` per quadrature node
@@ -333,23 +332,27 @@ impl<T: Real> ShadingKernel<T> {
                 (index, MaterialLobes { index, material: material.clone(), phong, sharp })
             })
             .collect();
-        let cap_depths = if settings.fitted_caps {
-            let key = CapDepthKey {
+        let (cap_depths, band_depths) = if settings.fitted_depths {
+            let key = DepthKey {
                 order,
                 epsilon_bits: epsilon.to_bits(),
                 tangent_occlusion: settings.tangent_occlusion,
                 exp: settings.exp,
                 hyb_threshold_bits: settings.hyb_threshold.to_bits(),
+                directions: if has_heightfield { settings.horizon.directions } else { 0 },
             };
-            fitted_cap_depths(key, &exp).iter().map(|&d| T::of(d)).collect()
+            let fitted = fitted_depths(key, &exp);
+            let of = |table: &[f64]| table.iter().map(|&d| T::of(d)).collect();
+            (of(&fitted.caps), of(&fitted.bands))
         } else {
-            vec![T::of(epsilon.ln()); CAP_DEPTH_INTERVALS + 1]
+            (vec![T::of(epsilon.ln()); DEPTH_INTERVALS + 1], vec![T::of(epsilon.ln()); DEPTH_INTERVALS + 1])
         };
         let channel = |c: usize| light.iter().map(|rgb| T::of(rgb[c])).collect::<Vec<T>>();
         Self {
             order,
             log_epsilon: T::of(epsilon.ln()),
             cap_depths,
+            band_depths,
             ratio_attenuation: settings.ratio_attenuation,
             tangent_occlusion: settings.tangent_occlusion,
             overlap_floor: settings.overlap_floor,
@@ -443,17 +446,23 @@ impl<T: Real> ShadingKernel<T> {
             let mut slices = [T::zero(); MAX_DIRECTIONS * crate::sh::MAX_ORDER];
             if let Some(occlusion) = occlusion.as_deref_mut() {
                 for (k, sigma) in sigmas[..directions].iter().enumerate() {
-                    nlp_slice(order, self.log_epsilon, T::of(*sigma), &mut slices[k * order..(k + 1) * order]);
+                    let slice = &mut slices[k * order..(k + 1) * order];
+                    banded_slice(order, self.log_epsilon, &self.band_depths, T::zero(), T::of(*sigma), slice);
                 }
                 wedge.accumulate(&slices[..directions * order], occlusion);
             }
             for (k, sigma) in sigmas[..directions].iter_mut().enumerate() {
+                // The band from the horizontal (or the tangent plane, where higher) up to
+                // the horizon takes its fitted depth; below it stays at log(eps).
+                let mut base = 0.0f64;
                 if fold_tangent {
                     let (sin, cos) = (wedge.wedge_width() * k as f64).sin_cos();
                     let tangent_elevation = (-(n[0] * cos + n[1] * sin) / n[2]).atan();
                     *sigma = sigma.max(tangent_elevation);
+                    base = base.max(tangent_elevation);
                 }
-                nlp_slice(order, self.log_epsilon, T::of(*sigma), &mut slices[k * order..(k + 1) * order]);
+                let slice = &mut slices[k * order..(k + 1) * order];
+                banded_slice(order, self.log_epsilon, &self.band_depths, T::of(base), T::of(*sigma), slice);
             }
             wedge.accumulate(&slices[..directions * order], acc);
         }
@@ -465,7 +474,7 @@ impl<T: Real> ShadingKernel<T> {
         tree.visit(p, n, object, |sphere| {
             let view = view_blocker(pt, nt, sphere.center.map(T::of), T::of(sphere.radius), self.ratio_attenuation);
             if let BlockerView::Cap { direction, alpha, weight } = view {
-                cap_log_zh(order, cap_depth_at(&self.cap_depths, alpha), alpha, &mut zonal[..order]);
+                cap_log_zh(order, depth_at(&self.cap_depths, alpha), alpha, &mut zonal[..order]);
                 add_rotated_zonal(order, &zonal[..order], weight, direction, acc);
                 if let Some(occlusion) = occlusion.as_deref_mut() {
                     add_rotated_zonal(order, &zonal[..order], weight, direction, occlusion);

@@ -1,13 +1,13 @@
 //! The per-pixel pipeline, in the order a frame meets it: [`plan`] prepares a frame once
 //! for either executor (settings, checks, height field, pyramid plan, light, kernel
-//! tables, the blockers' [`blocker_tree`], each cap's fitted [`cap_depth`]); [`frame`] says what each pixel is; [`kernel`] shades one surface point (the
+//! tables, the blockers' [`blocker_tree`], each cap's fitted [`fitted_depth`]); [`frame`] says what each pixel is; [`kernel`] shades one surface point (the
 //! math both executors share; [`sun`] its sharp lights, [`sharp_lights`] the suns taken
 //! out of an environment map); [`cpu`] is the CPU executor (the GPU one is in
 //! `src/gpu/`); [`compositing`] assembles the passes of `logsh render`.
 pub mod blocker_tree;
-pub mod cap_depth;
 pub mod compositing;
 pub mod cpu;
+pub mod fitted_depth;
 pub mod frame;
 pub mod glossy;
 pub mod kernel;

@@ -31,10 +31,11 @@ pub struct ShadingSettings {
     pub hyb_threshold: f64,
     /// Scale each sphere's log vector by `r / |c - p|` (paper 000, Section 4.2).
     pub ratio_attenuation: bool,
-    /// Give each sphere's cap the log depth fitted for its angular radius
-    /// ([`super::cap_depth`]) instead of `log(eps)`: small caps no longer take more light
-    /// than they block.
-    pub fitted_caps: bool,
+    /// Give each sphere's cap the log depth fitted for its angular radius, and each
+    /// height-field slice's horizon band the one fitted for its width
+    /// ([`super::fitted_depth`]), instead of `log(eps)`: small caps and low horizons no
+    /// longer take more light than they block.
+    pub fitted_depths: bool,
     /// Add the log visibility of the hemisphere behind each receiver's tangent plane:
     /// no light reaches an opaque surface from behind it, and leaving that hemisphere
     /// unclamped lets the band-limited lobe overshoot (an unoccluded plane comes out
@@ -116,7 +117,7 @@ pub const MAX_CLUSTER_RATIO: f64 = 0.5;
 /// Default eps per order: the value minimising the mean absolute error on the
 /// sphere-over-plane analytic scenes with the default exponentiation (`quad`, nodes clamped
 /// at the lobe's peak) and tangent occlusion, every cap at `log(eps)`. With fitted cap
-/// depths ([`super::cap_depth`]) they stay near the best on eleven Blender scenes against
+/// depths ([`super::fitted_depth`]) they stay near the best on eleven Blender scenes against
 /// Cycles (mean 0.024 at order 4 against 0.026 at eps 0.07 and 0.023 at 0.13; 0.018 at
 /// order 6 against 0.019 at 0.05 and 0.017 at 0.1), so they are kept. `cargo run --release --example
 /// sphere_accuracy` prints the whole table (orders 3-8, eps 0.01-0.2, every method;
@@ -144,7 +145,7 @@ impl ShadingSettings {
             exp: ExpMethod::Quad,
             hyb_threshold: crate::sh::exp::HYB_MAGNITUDE,
             ratio_attenuation: false,
-            fitted_caps: true,
+            fitted_depths: true,
             tangent_occlusion: true,
             overlap_floor: true,
             cluster_ratio: DEFAULT_CLUSTER_RATIO,
