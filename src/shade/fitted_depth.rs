@@ -40,15 +40,20 @@ use std::f64::consts::FRAC_PI_2;
 use std::sync::{Arc, Mutex, OnceLock};
 
 /// Intervals of each table over its angle (a cap's radius, a band's width) in
-/// `[0, pi/2]`, 1.4 degrees apart: a fitted depth changes by at most 0.06 between
-/// neighbours at orders 3 to 8.
+/// `[0, pi/2]`: 1.4 degrees apart.
 pub const DEPTH_INTERVALS: usize = 64;
 
 /// Cap elevations fitted per radius.
 const ELEVATIONS: usize = 8;
 
-/// The shallowest log depth searched: a cap always takes some light.
+/// The shallowest log depth searched: a cap or band always takes some light (an eps
+/// above `e^-0.05` searches nothing but `log(eps)`).
 const SHALLOWEST: f64 = -0.05;
+
+/// The depths searched at `epsilon`: from `log(eps)` to [`SHALLOWEST`].
+fn depth_range(epsilon: f64) -> (f64, f64) {
+    (epsilon.ln(), SHALLOWEST.max(epsilon.ln()))
+}
 
 /// What the fitted tables depend on: the order, eps, whether the tangent plane is
 /// clamped, `exp*` (method and HYB threshold, as bits so that it hashes) and the height
@@ -115,7 +120,7 @@ pub fn fit_cap_depths(order: usize, epsilon: f64, tangent_occlusion: bool, exp: 
                     .map(|&(beta, share)| (receiver.shade(Some(Cap { depth, alpha, beta })) / open - share).powi(2))
                     .sum::<f64>()
             };
-            minimise(squared_error, (epsilon.ln(), SHALLOWEST))
+            minimise(squared_error, depth_range(epsilon))
         })
         .collect()
 }
@@ -140,7 +145,7 @@ pub fn fit_band_depths(order: usize, epsilon: f64, exp: &Exponentiator, wedge: &
             // Width 0 takes the smallest nonzero one's depth, as a cap's radius does.
             let width = FRAC_PI_2 * k.max(1) as f64 / DEPTH_INTERVALS as f64;
             let unblocked = width.cos().powi(2);
-            minimise(|depth| (bowl(depth, width) / open - unblocked).powi(2), (log_epsilon, SHALLOWEST))
+            minimise(|depth| (bowl(depth, width) / open - unblocked).powi(2), depth_range(epsilon))
         })
         .collect()
 }
