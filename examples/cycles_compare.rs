@@ -2,7 +2,8 @@
 //! `default`, `high` and `ultra` presets, at `default` with every cap and slice at `log(eps)`
 //! (`--fitted-depths off`), with ratio attenuation, without the
 //! overlap floor and without clusters (and, where `--sharp-lights` takes suns out of the
-//! map, `default` and `high` without that), and compares each with the direct-lighting Cycles render stored beside it
+//! map, `default` and `high` without that; under a map, `default` with its projection
+//! windowed), and compares each with the direct-lighting Cycles render stored beside it
 //! (`cycles.NNNN.exr`, written by `blender_scripts/render_cycles.py` with the exported
 //! material table turned back into Cycles shaders, so that both sides use the same albedo,
 //! specular colour and lobe width).
@@ -30,7 +31,7 @@ use logsh::reference::{render_reference, ReferenceOptions};
 use logsh::scene::{Light, Material, Scene};
 use logsh::shade::shade_frame;
 use logsh::shade::sharp_lights::extract_suns;
-use logsh::shade::{GlossyMethod, Quality, ShadingSettings};
+use logsh::shade::{GlossyMethod, LightWindow, Quality, ShadingSettings};
 use std::path::{Path, PathBuf};
 
 fn unoccluded_value(light: &Light) -> [f64; 3] {
@@ -131,6 +132,12 @@ fn main() {
             ("default, sharp lights off", ShadingSettings { sharp_lights: false, ..default }),
             ("high, sharp lights off", ShadingSettings { sharp_lights: false, ..Quality::High.settings() }),
         ];
+        // Under a map, also its SH projection windowed.
+        let is_map = matches!(frame.light.as_ref(), Light::Environment { .. });
+        let windowed = [
+            ("default, --light-window lanczos", ShadingSettings { light_window: LightWindow::Lanczos, ..default }),
+            ("default, --light-window hann", ShadingSettings { light_window: LightWindow::Hann, ..default }),
+        ];
         // Where a material is glossy, also the other two ways of shading its lobe.
         let has_phong = scene.materials.values().any(|m| matches!(m, Material::Phong { .. }));
         let other_glossy = [
@@ -141,6 +148,7 @@ fn main() {
             .iter()
             .chain(if has_map_suns && !quick { &whole_map[..] } else { &[] })
             .chain(if has_phong { &other_glossy[..] } else { &[] })
+            .chain(if is_map && !quick { &windowed[..] } else { &[] })
             .collect();
         for (name, settings) in runs {
             let shaded = shade_frame(&scene, &frame, settings).unwrap_or_else(|e| panic!("{e}"));

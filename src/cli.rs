@@ -6,7 +6,7 @@ pub use crate::gpu::Specialisation;
 pub use crate::reference::Integration;
 use crate::scene::output::SampleType;
 use crate::sh::ExpMethod;
-use crate::shade::{default_epsilon, GlossyMethod, Precision, Quality, SettingsError, ShadingSettings};
+use crate::shade::{default_epsilon, GlossyMethod, LightWindow, Precision, Quality, SettingsError, ShadingSettings};
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use std::path::PathBuf;
 
@@ -183,6 +183,9 @@ pub struct ShadingArgs {
     /// auto: take the suns out of an environment map and shade them as sharp lights (printed); off: keep the whole map in SH.
     #[arg(long, value_enum, default_value_t = SharpLights::Auto)]
     pub sharp_lights: SharpLights,
+    /// Window the light's SH bands (Sloan 2008): lanczos or hann trade the ringing of a truncated projection around bright regions for blur.
+    #[arg(long, value_enum, default_value_t = LightWindow::None)]
+    pub light_window: LightWindow,
     /// Glossy lobes: ggx reads the environment prefiltered with the GGX lobe (what Cycles' Glossy BSDF renders) and scales it by a log-SH specular occlusion; phong does the same with the Phong lobe; sh keeps the Phong lobe in log-SH, no sharper than the order allows.
     #[arg(long, value_enum, default_value_t = GlossyMethod::Ggx)]
     pub glossy: GlossyMethod,
@@ -214,6 +217,7 @@ impl ShadingArgs {
         settings.tangent_occlusion = self.tangent_occlusion == Switch::On;
         settings.overlap_floor = self.overlap_floor == Switch::On;
         settings.sharp_lights = self.sharp_lights == SharpLights::Auto;
+        settings.light_window = self.light_window;
         settings.glossy = self.glossy;
         if let Some(ratio) = self.cluster_ratio {
             settings.cluster_ratio = ratio;

@@ -21,4 +21,4 @@ pub use cpu::{shade_frame, shade_frame_passes, shade_frame_timed};
 pub use frame::{pixel_work, PixelWork, ShadeError, ShadedFrame};
 pub use kernel::{Exponentiator, Occluders, PixelPasses, ShadingKernel, SurfacePoint};
 pub use plan::{FrameContents, FramePlan, PlannedKernel, Terrain};
-pub use settings::{default_epsilon, GlossyMethod, Precision, Quality, SettingsError, ShadingSettings};
+pub use settings::{default_epsilon, GlossyMethod, LightWindow, Precision, Quality, SettingsError, ShadingSettings};

@@ -107,7 +107,8 @@ impl<'a> FramePlan<'a> {
             }
             other => other,
         };
-        let light = residual.sh_coefficients(settings.order);
+        let mut light = residual.sh_coefficients(settings.order);
+        settings.light_window.apply(settings.order, &mut light);
         let inputs = KernelInputs {
             settings,
             scene,

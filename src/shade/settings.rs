@@ -52,6 +52,8 @@ pub struct ShadingSettings {
     /// Take the suns out of an environment map and shade them as sharp lights
     /// ([`super::sharp_lights`]); off keeps the whole map in SH.
     pub sharp_lights: bool,
+    /// The window on the light's SH bands ([`LightWindow`]).
+    pub light_window: LightWindow,
     /// How glossy lobes are shaded ([`GlossyMethod`]).
     pub glossy: GlossyMethod,
     /// Height-field march: W, k, o.
@@ -73,6 +75,43 @@ pub enum GlossyMethod {
     /// The Phong lobe in log-SH (paper 000, Eq. 27): exact visibility weighting, but no
     /// sharper than the order resolves.
     Sh,
+}
+
+/// A window on the light's SH projection (`--light-window`), band `l` of order `n`
+/// scaled by `w_l` (Sloan 2008, "Stupid Spherical Harmonics (SH) Tricks", Section 5): a
+/// truncated projection rings around a bright region, and the window trades that ringing
+/// for blur.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, clap::ValueEnum)]
+pub enum LightWindow {
+    /// The projection as it is.
+    None,
+    /// Lanczos' sigma factors, `w_l = sinc(pi l / n)`.
+    Lanczos,
+    /// Hann, `w_l = (1 + cos(pi l / n)) / 2`.
+    Hann,
+}
+
+impl LightWindow {
+    /// `w_l` for band `l` of an order-`order` projection.
+    pub fn weight(self, l: usize, order: usize) -> f64 {
+        let x = std::f64::consts::PI * l as f64 / order as f64;
+        match self {
+            LightWindow::None => 1.0,
+            LightWindow::Lanczos if l == 0 => 1.0,
+            LightWindow::Lanczos => x.sin() / x,
+            LightWindow::Hann => 0.5 * (1.0 + x.cos()),
+        }
+    }
+
+    /// Scales each band of `coefficients` (an order-`order` projection) by its weight.
+    pub fn apply(self, order: usize, coefficients: &mut [[f64; 3]]) {
+        for l in 0..order {
+            let w = self.weight(l, order);
+            for c in &mut coefficients[l * l..(l + 1) * (l + 1)] {
+                *c = c.map(|v| v * w);
+            }
+        }
+    }
 }
 
 /// Precision of the per-pixel kernel (`--precision`).
@@ -150,6 +189,7 @@ impl ShadingSettings {
             overlap_floor: true,
             cluster_ratio: DEFAULT_CLUSTER_RATIO,
             sharp_lights: true,
+            light_window: LightWindow::None,
             glossy: GlossyMethod::Ggx,
             horizon: HorizonSettings::default(),
             precision: Precision::F32,

@@ -254,4 +254,43 @@ mod tests {
         }
         assert!(extract_suns(&wide, 1.0).suns.is_empty(), "a 40-degree bright patch is not a sun");
     }
+
+    /// The residual's SH projection against the map it stands for: a bright region left
+    /// in SH rings, the truncated projection dipping below zero across the sphere, and a
+    /// window (`--light-window`) trades that ringing for blur while keeping the power.
+    #[test]
+    fn windowing_the_residual_limits_its_ringing() {
+        use crate::shade::LightWindow;
+        let order = 4;
+        let mut wide = sky(256, None);
+        for r in 20..50 {
+            for c in 40..90 {
+                wide.texels[r * 256 + c] = [200.0; 3];
+            }
+        }
+        let residual = extract_suns(&wide, 1.0).residual;
+        let projected = crate::scene::Light::Environment { map: residual, strength: 1.0 }.sh_coefficients(order);
+        let lowest = |window: LightWindow| {
+            let mut coefficients = projected.clone();
+            window.apply(order, &mut coefficients);
+            assert_eq!(coefficients[0], projected[0], "{window:?} keeps the power");
+            let mut y = [0.0; 16];
+            let mut lowest = f64::INFINITY;
+            for i in 0..64 {
+                for j in 0..128 {
+                    let (theta, phi) =
+                        (std::f64::consts::PI * (i as f64 + 0.5) / 64.0, std::f64::consts::TAU * j as f64 / 128.0);
+                    let dir = [theta.sin() * phi.cos(), theta.sin() * phi.sin(), theta.cos()];
+                    crate::sh::eval_basis(order, dir, &mut y);
+                    lowest = lowest.min((0..16).map(|k| y[k] * coefficients[k][0]).sum::<f64>());
+                }
+            }
+            lowest / (projected[0][0] * crate::sh::exp::Y0)
+        };
+        let (none, lanczos, hann) =
+            (lowest(LightWindow::None), lowest(LightWindow::Lanczos), lowest(LightWindow::Hann));
+        println!("lowest value over the mean: none {none:.3}, lanczos {lanczos:.3}, hann {hann:.3}");
+        assert!(none < -0.1, "the unwindowed projection rings: lowest {none} of the mean");
+        assert!(lanczos > 0.2 * none && hann > 0.2 * none, "none {none}, lanczos {lanczos}, hann {hann}");
+    }
 }
