@@ -140,33 +140,11 @@ pub const LOBE_EPSILON_RANGE: (f64, f64) = (1e-3, 0.9);
 pub fn optimal_lobe_epsilon(order: usize, lobe: Lobe, exact: &crate::sh::ExactExp) -> f64 {
     let (lo, hi) = (LOBE_EPSILON_RANGE.0.ln(), LOBE_EPSILON_RANGE.1.ln());
     let error = |log_eps: f64| lobe_exp_error(order, lobe, log_eps.exp(), exact);
-    let steps = 24;
-    let grid: Vec<f64> = (0..=steps).map(|k| lo + (hi - lo) * k as f64 / steps as f64).collect();
-    let errors: Vec<f64> = grid.iter().map(|&x| error(x)).collect();
-    let best = (0..grid.len()).min_by(|&a, &b| errors[a].total_cmp(&errors[b])).expect("non-empty grid");
-    let (mut a, mut b) = (grid[best.saturating_sub(1)], grid[(best + 1).min(steps)]);
-    let ratio = 0.5 * (5f64.sqrt() - 1.0);
-    let (mut c, mut d) = (b - ratio * (b - a), a + ratio * (b - a));
-    let (mut fc, mut fd) = (error(c), error(d));
-    for _ in 0..14 {
-        if fc < fd {
-            b = d;
-            d = c;
-            fd = fc;
-            c = b - ratio * (b - a);
-            fc = error(c);
-        } else {
-            a = c;
-            c = d;
-            fc = fd;
-            d = a + ratio * (b - a);
-            fd = error(d);
-        }
-    }
-    let refined = 0.5 * (a + b);
-    if error(refined) <= errors[best] {
+    let found = super::minimise::scan_then_golden(error, (lo, hi), 24, 14);
+    let (refined, (best, best_error)) = (found.refined, found.best_scanned);
+    if error(refined) <= best_error {
         refined.exp()
     } else {
-        grid[best].exp()
+        best.exp()
     }
 }

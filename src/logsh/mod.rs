@@ -3,6 +3,7 @@
 //! are summed per pixel and exponentiated once.
 pub mod cap;
 pub mod lobe;
+pub mod minimise;
 pub mod slice;
 pub mod training;
 pub mod wedge;

@@ -32,6 +32,7 @@
 //! Both executors read the same tables (`T_CAP_DEPTH` and `T_BAND_DEPTH` on the GPU).
 
 use super::kernel::Exponentiator;
+use crate::logsh::minimise::scan_then_golden;
 use crate::logsh::{cap_log_zh, lobe_log_zh, nlp_slice, Lobe, WedgeOperator};
 use crate::sh::{add_rotated_zonal, coefficient_count, ExpMethod, Real, MAX_COEFFICIENTS};
 use rayon::prelude::*;
@@ -272,27 +273,7 @@ impl<'a> DiffuseReceiver<'a> {
 /// The minimum of `error` over `range`: a scan of 12 steps, then golden-section search
 /// around the best to 1e-3 of the range.
 fn minimise(error: impl Fn(f64) -> f64, range: (f64, f64)) -> f64 {
-    let steps = 12;
-    let (lo, hi) = range;
-    let grid: Vec<f64> = (0..=steps).map(|k| lo + (hi - lo) * k as f64 / steps as f64).collect();
-    let errors: Vec<f64> = grid.iter().map(|&x| error(x)).collect();
-    let best = (0..=steps).min_by(|&a, &b| errors[a].total_cmp(&errors[b])).expect("non-empty grid");
-    let (mut a, mut b) = (grid[best.saturating_sub(1)], grid[(best + 1).min(steps)]);
-    let ratio = 0.5 * (5f64.sqrt() - 1.0);
-    let (mut c, mut d) = (b - ratio * (b - a), a + ratio * (b - a));
-    let (mut error_c, mut error_d) = (error(c), error(d));
-    for _ in 0..11 {
-        if error_c < error_d {
-            (b, d, error_d) = (d, c, error_c);
-            c = b - ratio * (b - a);
-            error_c = error(c);
-        } else {
-            (a, c, error_c) = (c, d, error_d);
-            d = a + ratio * (b - a);
-            error_d = error(d);
-        }
-    }
-    0.5 * (a + b)
+    scan_then_golden(error, range, 12, 11).refined
 }
 
 #[cfg(test)]
