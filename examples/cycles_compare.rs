@@ -18,61 +18,18 @@
 //! same scene with another seed, `DIR/<scene name>/cycles.NNNN.exr`
 //! (`render_cycles.py --seed 1`): the Cycles noise floor under these figures.
 //!
-//! Error: mean over non-background pixels and over R, G, B of |logsh - Cycles| divided by
-//! the unoccluded value, the radiance an open, upward-facing white diffuse floor receives
-//! from the scene's light and suns (`(1/pi) * integral of L max(w.z, 0)`), so that 0.01 reads as
-//! 1% of an unshadowed white floor whatever the light's brightness. Albedo is not divided
-//! out: both renders carry the same albedo, and dividing would blow up dark materials and
-//! mix the diffuse and specular parts of Phong pixels. Also printed: the 95th percentile
+//! Error: [`logsh::compare`]'s, the mean over non-background pixels and over R, G, B of
+//! |logsh - Cycles| divided by the radiance an open white floor receives from the scene's
+//! light (a point lamp's share averaged over the frame). Also printed: the 95th percentile
 //! and the mean signed difference (positive: logsh brighter).
 
-use exr::prelude::read_first_rgba_layer_from_file;
+use logsh::compare::{frame_error, read_rgb, unoccluded_value};
 use logsh::reference::{render_reference, ReferenceOptions};
 use logsh::scene::{Light, Material, Scene};
 use logsh::shade::shade_frame;
 use logsh::shade::sharp_lights::extract_suns;
 use logsh::shade::{GlossyMethod, LightWindow, Quality, ShadingSettings};
-use std::path::{Path, PathBuf};
-
-fn unoccluded_value(light: &Light) -> [f64; 3] {
-    match light {
-        Light::Constant(c) => c.map(|v| v as f64),
-        Light::Environment { map, strength } => {
-            let mut sum = [0.0; 3];
-            for row in 0..map.height {
-                let v = 1.0 - (row as f64 + 0.5) / map.height as f64;
-                let cos_theta = (std::f64::consts::PI * (1.0 - v)).cos();
-                if cos_theta <= 0.0 {
-                    continue;
-                }
-                let weight = cos_theta * map.texel_solid_angle(row) / std::f64::consts::PI * *strength as f64;
-                for column in 0..map.width {
-                    let t = map.texels[row * map.width + column];
-                    for k in 0..3 {
-                        sum[k] += weight * t[k] as f64;
-                    }
-                }
-            }
-            sum
-        }
-        Light::Sh(_) => {
-            panic!("an SH light has no map to integrate; compare scenes with an environment or constant light")
-        }
-    }
-}
-
-fn read_rgb(path: &Path) -> (usize, usize, Vec<[f32; 3]>) {
-    let image = read_first_rgba_layer_from_file(
-        path,
-        |size, _| (size.width(), vec![[0.0f32; 3]; size.width() * size.height()]),
-        |(width, pixels), position, (r, g, b, _a): (f32, f32, f32, f32)| {
-            pixels[position.y() * *width + position.x()] = [r, g, b];
-        },
-    )
-    .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-    let size = image.layer_data.size;
-    (size.width(), size.height(), image.layer_data.channel_data.pixels.1)
-}
+use std::path::PathBuf;
 
 fn main() {
     let mut args: Vec<String> = std::env::args().skip(1).collect();
@@ -109,16 +66,10 @@ fn main() {
         let scene = Scene::load(&dir).unwrap_or_else(|e| panic!("{e}"));
         let number = scene.default_frame();
         let frame = scene.frame(number).unwrap_or_else(|e| panic!("{e}"));
-        let (width, height, cycles) = read_rgb(&dir.join(format!("cycles.{number:04}.exr")));
-        let mut unoccluded = unoccluded_value(&frame.light);
-        for sun in &frame.suns {
-            // A sun's disk on an open, upward-facing white floor: its irradiance times the
-            // cosine at the disk's centre (exact to 2e-5 for a disk a degree wide), over pi.
-            let power = sun.disk_integral();
-            for k in 0..3 {
-                unoccluded[k] += power[k] * sun.direction[2].max(0.0) / std::f64::consts::PI;
-            }
-        }
+        let (width, height, cycles) =
+            read_rgb(&dir.join(format!("cycles.{number:04}.exr"))).unwrap_or_else(|e| panic!("{e}"));
+        let unoccluded = unoccluded_value(&frame)
+            .expect("an SH light has no map to integrate; compare scenes with an environment or constant light");
         eprintln!("{}: frame {number}, unoccluded value {unoccluded:.3?}", dir.display());
         let scene_name =
             dir.file_name().map_or_else(|| dir.display().to_string(), |n| n.to_string_lossy().into_owned());
@@ -175,26 +126,14 @@ fn main() {
             images.push((name, truth.rgba.iter().map(|p| [p[0], p[1], p[2]]).collect()));
         }
         if let Some(noise) = &noise {
-            let (_, _, second) = read_rgb(&noise.join(&scene_name).join(format!("cycles.{number:04}.exr")));
+            let (_, _, second) = read_rgb(&noise.join(&scene_name).join(format!("cycles.{number:04}.exr")))
+                .unwrap_or_else(|e| panic!("{e}"));
             images.push(("Cycles, another seed".to_string(), second));
         }
         for (name, image) in &images {
-            let mut errors = Vec::new();
-            let mut signed = 0.0;
-            for (i, &m) in frame.gbuffer.material.iter().enumerate() {
-                if m == 0 {
-                    continue;
-                }
-                let mut e = 0.0;
-                for k in 0..3 {
-                    let d = (image[i][k] as f64 - cycles[i][k] as f64) / unoccluded[k];
-                    e += d.abs() / 3.0;
-                    signed += d / 3.0;
-                }
-                errors.push(e);
-            }
-            let count = errors.len();
-            let mean = errors.iter().sum::<f64>() / count as f64;
+            let error = frame_error(&frame.gbuffer.material, image, &cycles, unoccluded);
+            let (count, mean, p95, signed) = (error.pixels, error.mean, error.p95, error.signed);
+            let errors = error.per_pixel;
             let glossy: Vec<f64> = frame
                 .gbuffer
                 .material
@@ -209,12 +148,7 @@ fn main() {
             } else {
                 format!("{:.3} ({} px)", glossy.iter().sum::<f64>() / glossy.len() as f64, glossy.len())
             };
-            errors.sort_by(|a, b| a.total_cmp(b));
-            let p95 = errors[(0.95 * (count - 1) as f64).round() as usize];
-            println!(
-                "| {scene_name} | {name} | {count} | {mean:.3} | {p95:.3} | {:+.3} | {glossy} |",
-                signed / count as f64
-            );
+            println!("| {scene_name} | {name} | {count} | {mean:.3} | {p95:.3} | {signed:+.3} | {glossy} |");
             if std::env::var_os("LOGSH_COMPARE_BY_MATERIAL").is_some() {
                 let mut by_material: std::collections::BTreeMap<u32, (f64, f64, usize)> = Default::default();
                 for (i, &m) in frame.gbuffer.material.iter().enumerate() {

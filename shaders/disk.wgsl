@@ -53,8 +53,9 @@ fn covered(sin_x: vec4<f32>, two_patches: f32) -> vec4<f32> {
 // `one_minus_cos` and patch radius `patch_radius`) at p with normal n on object `object`:
 // the tangent plane and the ground plane when asked, the horizon along the axis's
 // azimuth, and every sphere of the blocker tree that reaches the cone, never a cluster
-// (DiskDirections::visibility, BlockerTree::visit_cone).
-fn disk_blocked(disk: ptr<function, Disk>, p: vec3<f32>, n: vec3<f32>, object: u32, axis: vec3<f32>, one_minus_cos: f32, patch_radius: f32, tangent: bool, ground: bool) -> array<vec4<f32>, DISK_QUADS> {
+// (DiskDirections::visibility, BlockerTree::visit_cone); only what is nearer than `reach`
+// (a point lamp's distance; 3e38 for a sun or a lobe).
+fn disk_blocked(disk: ptr<function, Disk>, p: vec3<f32>, n: vec3<f32>, object: u32, axis: vec3<f32>, one_minus_cos: f32, patch_radius: f32, reach: f32, tangent: bool, ground: bool) -> array<vec4<f32>, DISK_QUADS> {
     let two_patches = 2.0 * patch_radius;
     var blocked: array<vec4<f32>, DISK_QUADS>;
     if tangent {
@@ -70,7 +71,7 @@ fn disk_blocked(disk: ptr<function, Disk>, p: vec3<f32>, n: vec3<f32>, object: u
 //#if HEIGHTFIELD
     let horizontal = length(axis.xy);
     if enabled(FEATURE_HEIGHTFIELD) && horizontal > 1e-9 {
-        let horizon = horizon_along(p, axis.xy / horizontal);
+        let horizon = horizon_along(p, axis.xy / horizontal, reach * horizontal);
         let sin_h = sin(horizon);
         let cos_h = cos(horizon);
         for (var q = 0u; q < DISK_QUADS; q++) {
@@ -86,7 +87,7 @@ fn disk_blocked(disk: ptr<function, Disk>, p: vec3<f32>, n: vec3<f32>, object: u
 //#if BLOCKERS
     // The cone's reach for culling, with a margin for acos, atan2 and asin's 4096 ulp:
     // a sphere kept that does not reach the disk blocks nothing.
-    let reach = acos(1.0 - one_minus_cos) + patch_radius + 0.01;
+    let cone_reach = acos(1.0 - one_minus_cos) + patch_radius + 0.01;
     var i = 0u;
     while i < params.node_count {
         let node = blocker_tree[i];
@@ -99,7 +100,7 @@ fn disk_blocked(disk: ptr<function, Disk>, p: vec3<f32>, n: vec3<f32>, object: u
         let distance = length(d);
         // Outside the cone: the angle to the bounds' centre beyond the cone's half-angle
         // plus the bounds' own angular radius.
-        if distance > r && atan2(length(cross(axis, d)), dot(axis, d)) > reach + asin(r / distance) {
+        if distance > r && atan2(length(cross(axis, d)), dot(axis, d)) > cone_reach + asin(r / distance) {
             i = node.skip;
             continue;
         }
@@ -108,7 +109,8 @@ fn disk_blocked(disk: ptr<function, Disk>, p: vec3<f32>, n: vec3<f32>, object: u
             let to_sphere = sphere.xyz - p;
             let sphere_distance = length(to_sphere);
             let own = object != 0u && node.object == object;
-            if sphere_distance > 0.0 && !(own && (own_sphere_holds(p, sphere) || dot(to_sphere, n) <= 0.0)) {
+            let beyond = sphere_distance - sphere.w >= reach;
+            if sphere_distance > 0.0 && !beyond && !(own && (own_sphere_holds(p, sphere) || dot(to_sphere, n) <= 0.0)) {
                 let a = to_sphere / sphere_distance;
                 // The cap's half-angle: asin(r / d), a hemisphere from inside.
                 let sin_cap = min(sphere.w / sphere_distance, 1.0);
@@ -138,9 +140,10 @@ fn disk_blocked(disk: ptr<function, Disk>, p: vec3<f32>, n: vec3<f32>, object: u
 }
 
 //#if HEIGHTFIELD
-// The horizon elevation from p along unit `dir` in the xy plane (pyramid.rs,
-// horizon_along): add_heightfield's march for one azimuth.
-fn horizon_along(p: vec3<f32>, dir: vec2<f32>) -> f32 {
+// The horizon elevation from p along unit `dir` in the xy plane, over the steps no
+// farther than `reach` (pyramid.rs, horizon_along): add_heightfield's march for one
+// azimuth.
+fn horizon_along(p: vec3<f32>, dir: vec2<f32>, reach: f32) -> f32 {
     let finite = all(abs(p) < vec3<f32>(3.0e38));
     if STEPS == 0u || !finite {
         return 0.0;
@@ -150,6 +153,6 @@ fn horizon_along(p: vec3<f32>, dir: vec2<f32>) -> f32 {
     for (var level = 0u; level < LEVELS; level++) {
         receiver[level] = sample_level(level, p.x, p.y);
     }
-    return horizon(p.x, p.y, above, dir, &receiver);
+    return horizon(p.x, p.y, above, dir, reach, &receiver);
 }
 //#endif

@@ -131,13 +131,16 @@ fn bspline_max(omega: ptr<function, array<f32, STEP_ARRAY>>, m: u32) -> f32 {
 
 // Horizon elevation along azimuth k from (x, y), `above` the level-0 surface, with the
 // receiver terms f_L(x) of SN08 Eq. 2 per level (pyramid.rs, horizon_elevations).
-fn horizon(x: f32, y: f32, above: f32, dir: vec2<f32>, receiver: ptr<function, array<f32, LEVELS>>) -> f32 {
+fn horizon(x: f32, y: f32, above: f32, dir: vec2<f32>, reach: f32, receiver: ptr<function, array<f32, LEVELS>>) -> f32 {
     let t_far = far_distance(x, y, dir);
     var max_tan = -3.0e38;
     var omega: array<f32, STEP_ARRAY>;
     var m = 0u;
     for (var s = 0u; s < STEPS; s++) {
         let step = steps[s];
+        if step.distance > reach {
+            break;
+        }
         let q = sample_level(step.level, x + step.distance * dir.x, y + step.distance * dir.y);
         let tangent = (q - (*receiver)[step.level] - above) * step.inv_distance;
         if BSPLINE_SCALE_MAX {
@@ -235,7 +238,7 @@ fn add_heightfield(p: vec3<f32>, n: vec3<f32>, fold_tangent: bool, log_epsilon: 
         let dir = vec2<f32>(tables[T_AZIMUTHS + 2u * k], tables[T_AZIMUTHS + 2u * k + 1u]);
         var sigma = 0.0;
         if STEPS > 0u && finite {
-            sigma = horizon(p.x, p.y, above, dir, &receiver);
+            sigma = horizon(p.x, p.y, above, dir, 3.0e38, &receiver);
         }
         // The band from the horizontal (or the tangent plane, where higher) up to the
         // horizon takes its fitted depth.

@@ -225,7 +225,7 @@ fn prefiltered_glossy(occlusion: ptr<function, array<f32, COUNT_CAP>>, material:
     var by_cone = 0.0;
     if share > 0.0 {
         var disk = disk_around(r, core);
-        let blocked = disk_blocked(&disk, p, n, object, r, core, core_patch, false, false);
+        let blocked = disk_blocked(&disk, p, n, object, r, core, core_patch, 3.0e38, false, false);
         for (var q = 0u; q < DISK_QUADS; q++) {
             let w = vec4<f32>(tables[weights + 4u * q], tables[weights + 4u * q + 1u], tables[weights + 4u * q + 2u], tables[weights + 4u * q + 3u]);
             by_cone += dot(w, 1.0 - blocked[q]);
@@ -320,36 +320,71 @@ fn map_texel(map: u32, width: u32, column: u32, row: u32) -> vec3<f32> {
 
 //#if SUNS
 // The sharp lights' diffuse and glossy radiance at p (kernel.rs, sunlit; sun.rs): each
-// sun's disk integral times the mean over its directions of visibility times the cosine
-// lobe, and times the glossy lobe about r (with the lobe's albedo for a prefiltered one).
+// sun's and point lamp's disk integral times the mean over its directions of visibility
+// times the cosine lobe, and times the glossy lobe about r (with the lobe's albedo for a
+// prefiltered one).
 fn sunlit(p: vec3<f32>, n: vec3<f32>, object: u32, r: vec3<f32>, material: GpuMaterial, diffuse: ptr<function, vec3<f32>>, specular: ptr<function, vec3<f32>>) {
-    let glossy = material.kind == MATERIAL_PHONG;
     var albedo = 1.0;
-    if glossy && lobe_kind(material) != LOBE_SH {
+    if material.kind == MATERIAL_PHONG && lobe_kind(material) != LOBE_SH {
         albedo = albedo_lookup(material.sharp_tables + LOBE_HEAD + DISK_DIRECTIONS, dot(n, r));
     }
     for (var s = 0u; s < SUN_COUNT; s++) {
         let base = T_SUNS + 8u * s;
         let axis = vec3<f32>(tables[base], tables[base + 1u], tables[base + 2u]);
-        let one_minus_cos = tables[base + 3u];
         let integral = vec3<f32>(tables[base + 4u], tables[base + 5u], tables[base + 6u]);
-        let patch_radius = tables[base + 7u];
-        var disk = disk_around(axis, one_minus_cos);
-        let blocked = disk_blocked(&disk, p, n, object, axis, one_minus_cos, patch_radius, true, true);
-        var cosine = 0.0;
-        var lobe = 0.0;
-        for (var q = 0u; q < DISK_QUADS; q++) {
-            let visible = 1.0 - blocked[q];
-            cosine += dot(visible, max(n.x * disk.x[q] + n.y * disk.y[q] + n.z * disk.z[q], vec4<f32>(0.0)));
-            if glossy {
-                lobe += dot(visible, widened_lobe_value(material, patch_radius, r.x * disk.x[q] + r.y * disk.y[q] + r.z * disk.z[q]));
-            }
+        add_disk_light(p, n, object, r, material, albedo, axis, tables[base + 3u], tables[base + 7u], 3.0e38, integral, diffuse, specular);
+    }
+    for (var s = 0u; s < POINT_COUNT; s++) {
+        // The lamp's disk seen from p (src/scene/light.rs, PointLight::seen_from).
+        let base = T_POINTS + 8u * s;
+        let d = vec3<f32>(tables[base], tables[base + 1u], tables[base + 2u]) - p;
+        let radius = tables[base + 3u];
+        let intensity = vec3<f32>(tables[base + 4u], tables[base + 5u], tables[base + 6u]);
+        let distance = length(d);
+        var axis = n;
+        if distance > 0.0 {
+            axis = d / distance;
         }
-        let mean = 1.0 / f32(DISK_DIRECTIONS);
-        *diffuse += integral * (cosine * mean / 3.141592653589793) * material.albedo.xyz;
+        let r2 = radius * radius;
+        let d2 = max(distance * distance, POINT_NEAREST * POINT_NEAREST);
+        var sin2 = min(r2 / d2, 1.0);
+        var spread = max(d2, r2);
+        if tables[base + 7u] > 0.5 {
+            sin2 = r2 / (d2 + r2);
+            spread = d2 + r2;
+        }
+        var half_angle = asin(sqrt(sin2));
+        var one_minus_cos = sin2 / (1.0 + sqrt(max(1.0 - sin2, 0.0)));
+        if half_angle < POINT_HALF_ANGLE_MIN {
+            half_angle = POINT_HALF_ANGLE_MIN;
+            one_minus_cos = 2.0 * pow(sin(0.5 * POINT_HALF_ANGLE_MIN), 2.0);
+        }
+        // SunLight::disk_integral of the lamp's irradiance, intensity / spread.
+        let integral = min(intensity / spread, vec3<f32>(3.0e38)) * (2.0 / (2.0 - one_minus_cos));
+        let patch_radius = half_angle / sqrt(f32(DISK_DIRECTIONS));
+        add_disk_light(p, n, object, r, material, albedo, axis, one_minus_cos, patch_radius, distance, integral, diffuse, specular);
+    }
+}
+
+// One disk light's share (kernel.rs, sunlit's loop body): `integral` is the disk's
+// radiance times its solid angle, `reach` its distance (3e38 for a sun).
+fn add_disk_light(p: vec3<f32>, n: vec3<f32>, object: u32, r: vec3<f32>, material: GpuMaterial, albedo: f32, axis: vec3<f32>, one_minus_cos: f32, patch_radius: f32, reach: f32, integral: vec3<f32>, diffuse: ptr<function, vec3<f32>>, specular: ptr<function, vec3<f32>>) {
+    let glossy = material.kind == MATERIAL_PHONG;
+    var disk = disk_around(axis, one_minus_cos);
+    let blocked = disk_blocked(&disk, p, n, object, axis, one_minus_cos, patch_radius, reach, true, true);
+    var cosine = 0.0;
+    var lobe = 0.0;
+    for (var q = 0u; q < DISK_QUADS; q++) {
+        let visible = 1.0 - blocked[q];
+        cosine += dot(visible, max(n.x * disk.x[q] + n.y * disk.y[q] + n.z * disk.z[q], vec4<f32>(0.0)));
         if glossy {
-            *specular += integral * (lobe * mean * albedo) * material.specular.xyz;
+            lobe += dot(visible, widened_lobe_value(material, patch_radius, r.x * disk.x[q] + r.y * disk.y[q] + r.z * disk.z[q]));
         }
+    }
+    let mean = 1.0 / f32(DISK_DIRECTIONS);
+    *diffuse += integral * (cosine * mean / 3.141592653589793) * material.albedo.xyz;
+    if glossy {
+        *specular += integral * (lobe * mean * albedo) * material.specular.xyz;
     }
 }
 //#endif

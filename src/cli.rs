@@ -177,7 +177,7 @@ pub struct ShadingArgs {
     /// Sphere clusters whose radius is at most this fraction of their distance are one cap; 0 sees every sphere.
     #[arg(long)]
     pub cluster_ratio: Option<f64>,
-    /// Turn the light (environment map and suns) by this many degrees about Z, on top of the scene's own rotation: a sun at azimuth a moves to a + DEG.
+    /// Turn the light (environment map and suns) by this many degrees about Z, on top of the scene's own rotation: a sun at azimuth a moves to a + DEG. Point lamps stay where they are.
     #[arg(long, value_name = "DEG", default_value_t = 0.0, allow_negative_numbers = true)]
     pub light_rotation: f64,
     /// auto: take the suns out of an environment map and shade them as sharp lights (printed); off: keep the whole map in SH.

@@ -8,10 +8,12 @@
 //! (the frame plan, the kernel and the CPU executor), [`gpu`] the same pipeline as one
 //! wgpu compute pass, [`executor`] the choice between the two, [`render`] the sequence
 //! driver of `logsh render`, [`bench`](mod@bench) `logsh bench`,
-//! [`reference`](mod@reference) the ground truth, [`synth`] procedural scenes, [`info`]
+//! [`reference`](mod@reference) the ground truth, [`compare`] the measure against Cycles,
+//! [`synth`] procedural scenes, [`info`]
 //! the EXR listing of `logsh info`, [`cli`] and [`run`] the command line.
 pub mod bench;
 pub mod cli;
+pub mod compare;
 pub mod executor;
 pub mod gpu;
 pub mod heightfield;

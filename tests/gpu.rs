@@ -478,6 +478,51 @@ fn ground_plane_matches() {
     assert_close!(on_gpu.visibility_blockers, cpu.visibility_blockers, TOLERANCE, "ground plane: visibility_blockers");
 }
 
+/// Point lamps on both executors, over the small dunes (height field, blockers, Phong,
+/// water) and the `cones` sample (ground plane, metal cone): a Soft Falloff lamp low over
+/// the terrain (its horizon cut at the lamp's distance), a sphere lamp high above, and one
+/// of radius 0 (the narrowest disk).
+#[test]
+fn point_lamps_match() {
+    let Some(gpu) = gpu() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let dunes = small_dunes(dir.path());
+    let cones = Scene::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("gbuffers/cones")).unwrap();
+    for (name, scene) in [("dunes 64x36", &dunes), ("cones", &cones)] {
+        let mut frame = scene.frame(scene.default_frame()).unwrap();
+        // Over the middle of what the frame sees, 0.3 and 3 of its extent up.
+        let points = frame.gbuffer.material.iter().zip(&frame.gbuffer.position).filter(|(&m, _)| m != 0);
+        let (mut low, mut high) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+        for (_, p) in points {
+            for k in 0..3 {
+                low[k] = low[k].min(f64::from(p[k]));
+                high[k] = high[k].max(f64::from(p[k]));
+            }
+        }
+        let middle = [0, 1, 2].map(|k| 0.5 * (low[k] + high[k]));
+        let extent = (high[0] - low[0]).max(high[1] - low[1]);
+        let lamp = |height: f64, radius: f64, power: f32, soft_falloff| logsh::scene::PointLight {
+            position: [middle[0] + 0.1 * extent, middle[1], high[2] + height * extent],
+            radius: radius * extent,
+            power: power * (extent * extent) as f32,
+            color: [1.0, 0.9, 0.8],
+            soft_falloff,
+        };
+        // Powers that light the ground about as much as the sky does.
+        frame.points = vec![lamp(0.3, 0.05, 1.0, true), lamp(3.0, 0.1, 100.0, false), lamp(1.0, 0.0, 10.0, true)];
+        // The lamps must light the frame for the comparison to test them.
+        let mean = |f: &logsh::scene::Frame| {
+            let shaded = shade_frame(scene, f, &ShadingSettings::default()).unwrap();
+            shaded.rgba.iter().map(|p| f64::from(p[0] + p[1] + p[2])).sum::<f64>() / shaded.rgba.len() as f64
+        };
+        let unlit = logsh::scene::Frame { points: Vec::new(), ..frame.clone() };
+        let (with, without) = (mean(&frame), mean(&unlit));
+        assert!(with > 1.3 * without, "{name}: the lamps add too little light to test: {with} against {without}");
+        check_parity(gpu, scene, &frame, &ShadingSettings::default(), &format!("{name} with point lamps"))
+            .unwrap_or_else(|| panic!("{name}: refused"));
+    }
+}
+
 /// Sharp lights and sharp glossy lobes on both executors: a sun a few degrees wide over
 /// the small dunes (height field, blockers, Phong, water) and over the `cones` sample
 /// (ground plane, metal cone), with the glossy lobe prefiltered as GGX or Phong (each with

@@ -141,7 +141,10 @@ fn scene_json_sun_lights_are_read_and_checked() {
     assert_eq!((sun.strength, sun.color), (4.0, [1.0, 0.9, 0.8]));
     assert_eq!(scene.frame(1).unwrap().suns, scene.suns);
     for (lights, says) in [
-        (serde_json::json!([{"type": "spot", "direction": [0, 0, 1], "angle": 1, "strength": 1}]), "is not \"sun\""),
+        (
+            serde_json::json!([{"type": "spot", "direction": [0, 0, 1], "angle": 1, "strength": 1}]),
+            "unknown type \"spot\"",
+        ),
         (serde_json::json!([{"type": "sun", "angle": 1, "strength": 1}]), "needs \"direction\""),
         (serde_json::json!([{"type": "sun", "direction": [0, 0, 0], "angle": 1, "strength": 1}]), "has no length"),
         (serde_json::json!([{"type": "sun", "direction": [0, 0, 1], "angle": 0, "strength": 1}]), "(0, 180]"),

@@ -24,8 +24,12 @@ What is written into the output directory, per frame `####`:
 - `sky.exr` when the World uses an environment texture (a Mapping node in front of it
   becomes the light's `rotation`), or a bake of the World by Cycles when it uses anything
   else (a Sky Texture, a gradient, a linked strength); `scene.json`, whose `lights`
-  holds every Sun lamp that renders (direction towards the sun, Angle, Strength, Color;
-  not animated). Any other lamp (Point, Spot, Area) stops the export with its name.
+  holds every Sun lamp that renders (direction towards the sun, Angle, Strength, Color)
+  and every Point lamp (world position, Radius, Power, Color, Soft Falloff), Exposure
+  folded into Strength or Power; none animated. Any other lamp (Spot, Area), or a lamp
+  setting logsh does not model (nodes, Temperature, Cast Shadow off, Diffuse or
+  Specular factors other than 1, Normalize off, hidden from Diffuse or Glossy rays),
+  stops the export with the lamp's name.
 
 Scene markup, all optional (custom properties, set in the Object or Material tab):
 
@@ -193,8 +197,13 @@ def export(scene, options, log=print):
         if lights:
             description["lights"] = lights
             for light in lights:
-                log(f"sun lamp: direction {[round(c, 4) for c in light['direction']]}, angle {light['angle']:.3g} deg, "
-                    f"strength {light['strength']:.4g}")
+                if light["type"] == "sun":
+                    log(f"sun lamp: direction {[round(c, 4) for c in light['direction']]}, "
+                        f"angle {light['angle']:.3g} deg, strength {light['strength']:.4g}")
+                else:
+                    log(f"point lamp: position {[round(c, 4) for c in light['position']]}, "
+                        f"radius {light['radius']:.4g}, power {light['power']:.4g} W, "
+                        f"soft falloff {'on' if light['soft_falloff'] else 'off'}")
         if water:
             description["reflection_gbuffer"] = "reflection.####.exr"
 
@@ -307,8 +316,10 @@ LAMP_NAMES = {"SUN": "Sun", "POINT": "Point", "SPOT": "Spot", "AREA": "Area"}
 
 def export_lamps(scene, view_layer, start, end):
     """The lamps that light the render, as scene.json's `lights`: each Sun lamp becomes a
-    `sun` (direction towards it, Blender's Angle, Strength and Color). Any other lamp stops
-    the export, naming it: a lamp left out would make every frame silently too dark."""
+    `sun` (direction towards it, Blender's Angle, Strength and Color), each Point lamp a
+    `point` (world position, Radius, Power, Color, Soft Falloff). Any other lamp, or a
+    setting logsh cannot represent, stops the export, naming the lamp: a lamp left out
+    would make every frame silently too dark."""
     names = {o.name for o in view_layer.objects}
     lights = []
     for obj in scene.objects:
@@ -316,30 +327,63 @@ def export_lamps(scene, view_layer, start, end):
             continue
         lamp = obj.data
         kind = LAMP_NAMES.get(lamp.type, lamp.type.title())
-        if lamp.type != "SUN":
-            raise ExportError(f"light \"{obj.name}\" is a {kind} lamp; logsh shades Sun lamps and the World only. "
-                              "Replace it with a Sun lamp, or disable it in renders (Object Properties > "
-                              "Visibility) or set its Power to 0")
-        if getattr(lamp, "use_nodes", False):
-            raise ExportError(f"Sun lamp \"{obj.name}\" uses nodes; logsh reads its Strength and Color only. "
-                              "Switch Use Nodes off")
-        directions = []
+        if lamp.type not in ("SUN", "POINT"):
+            article = "an" if kind[:1] in "AEIOU" else "a"
+            raise ExportError(f"light \"{obj.name}\" is {article} {kind} lamp; logsh shades Sun and Point lamps and the "
+                              "World only. Replace it with a Sun or Point lamp, or disable it in renders (Object "
+                              "Properties > Visibility) or set its Power to 0")
+        unsupported = [
+            (getattr(lamp, "use_nodes", False), "uses nodes; logsh reads its Strength or Power and Color only. "
+                                                "Switch Use Nodes off"),
+            (getattr(lamp, "use_temperature", False), "takes its colour from Temperature; logsh reads Color only. "
+                                                      "Switch Temperature off and set the Color"),
+            (not getattr(lamp, "use_shadow", True), "has Cast Shadow off; logsh shadows every lamp. Switch Cast "
+                                                    "Shadow on"),
+            (getattr(lamp, "diffuse_factor", 1.0) != 1.0 or getattr(lamp, "specular_factor", 1.0) != 1.0,
+             "has a Diffuse or Specular influence other than 1; logsh lights both fully. Set them to 1"),
+            (lamp.type == "POINT" and not getattr(lamp, "normalize", True),
+             "has Normalize off; logsh reads Power as Blender does with Normalize on. Switch Normalize on"),
+            (not getattr(obj, "visible_diffuse", True) or not getattr(obj, "visible_glossy", True),
+             "is hidden from Diffuse or Glossy rays (Object Properties > Visibility > Ray Visibility); logsh "
+             "lights both. Switch them on"),
+        ]
+        for refused, why in unsupported:
+            if refused:
+                raise ExportError(f"{kind} lamp \"{obj.name}\" {why}")
+        states = []
         for frame in range(start, end + 1):
             scene.frame_set(frame)
             axis = obj.matrix_world.to_3x3() @ mathutils.Vector((0.0, 0.0, 1.0))
-            directions.append((axis.normalized(), lamp.energy, tuple(lamp.color), lamp.angle))
-        if any((d[0] - directions[0][0]).length > 1e-6 or d[1:] != directions[0][1:] for d in directions):
-            raise ExportError(f"Sun lamp \"{obj.name}\" is animated (its direction, strength, colour or angle "
-                              f"changes within frames {start}-{end}); logsh's lights are the same for "
-                              "every frame. Export the frames in parts, or remove the animation")
-        axis, energy, color, angle = directions[0]
-        lights.append({
-            "type": "sun",
-            "direction": [float(axis.x), float(axis.y), float(axis.z)],
-            "angle": max(math.degrees(angle), 1e-3),
-            "strength": float(energy),
-            "color": [float(c) for c in color],
-        })
+            position = obj.matrix_world.translation
+            settings = (lamp.energy, getattr(lamp, "exposure", 0.0), tuple(lamp.color), getattr(lamp, "shadow_soft_size", 0.0),
+                        getattr(lamp, "use_soft_falloff", True), getattr(lamp, "angle", 0.0))
+            states.append((axis.normalized(), position.copy(), settings))
+        moved = any((a - states[0][0]).length > 1e-6 or (p - states[0][1]).length > 1e-6 or s != states[0][2]
+                    for a, p, s in states)
+        if moved:
+            raise ExportError(f"{kind} lamp \"{obj.name}\" is animated (its placement or settings change within "
+                              f"frames {start}-{end}); logsh's lights are the same for every frame. Export the "
+                              "frames in parts, or remove the animation")
+        axis, position, (energy, exposure, color, radius, soft_falloff, angle) = states[0]
+        # Blender's Exposure scales the lamp's Strength or Power by 2^Exposure.
+        energy = float(energy) * 2.0 ** float(exposure)
+        if lamp.type == "SUN":
+            lights.append({
+                "type": "sun",
+                "direction": [float(axis.x), float(axis.y), float(axis.z)],
+                "angle": max(math.degrees(angle), 1e-3),
+                "strength": energy,
+                "color": [float(c) for c in color],
+            })
+        else:
+            lights.append({
+                "type": "point",
+                "position": [float(c) for c in position],
+                "radius": float(radius),
+                "power": energy,
+                "color": [float(c) for c in color],
+                "soft_falloff": bool(soft_falloff),
+            })
     return lights
 
 

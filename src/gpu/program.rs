@@ -157,6 +157,7 @@ pub struct ShadeProgram {
     march: Option<MarchShape>,
     tensor_entries: usize,
     overlap_floor: bool,
+    /// Suns and point lamps: each a disk per pixel.
     suns: usize,
 }
 
@@ -178,7 +179,7 @@ impl ShadeProgram {
             exp: kernel.exp.method,
             march,
             tensor_entries: kernel.exp.tensor.as_ref().map_or(0, |t| t.entry_count()),
-            suns: kernel.suns.len(),
+            suns: kernel.suns.len() + kernel.points.len(),
         }
     }
 }
@@ -225,6 +226,17 @@ impl ProgramTables {
                 let (d, i) = (sun.light.direction, sun.disk_integral);
                 let one_minus_cos = 1.0 - sun.light.half_angle.cos();
                 [d[0], d[1], d[2], one_minus_cos, i[0], i[1], i[2], sun.disk.patch].map(|v| v as f32)
+            }),
+        );
+        // The point lamps (src/scene/light.rs, PointLight): position, radius, power times
+        // colour over 4 pi, and 1 for Soft Falloff.
+        t.push(
+            "T_POINTS",
+            kernel.points.iter().flat_map(|lamp| {
+                let [x, y, z] = lamp.position;
+                let i = lamp.color.map(|c| f64::from(lamp.power) * f64::from(c) / (4.0 * std::f64::consts::PI));
+                let soft = if lamp.soft_falloff { 1.0 } else { 0.0 };
+                [x, y, z, lamp.radius, i[0], i[1], i[2], soft].map(|v| v as f32)
             }),
         );
 
@@ -472,6 +484,9 @@ fn prelude(kernel: &ShadingKernel<f32>, features: Features, march: Option<MarchS
         ("DISK_DIRECTIONS", U32(DISK_DIRECTIONS)),
         ("DISK_QUADS", U32(DISK_DIRECTIONS / 4)),
         ("SUN_COUNT", U32(kernel.suns.len())),
+        ("POINT_COUNT", U32(kernel.points.len())),
+        ("POINT_HALF_ANGLE_MIN", F32(crate::scene::light::POINT_HALF_ANGLE_MIN)),
+        ("POINT_NEAREST", F32(crate::scene::light::POINT_NEAREST)),
         ("LOBE_GGX", U32(LOBE_GGX as usize)),
         ("LOBE_PHONG", U32(LOBE_PHONG as usize)),
         ("LOBE_SH", U32(LOBE_SH as usize)),

@@ -43,7 +43,7 @@ pub use pyramid::{
     decimation_taps, HorizonPyramid, HorizonSettings, LevelReconstruction, MarchStep, PyramidLevel, PyramidPlan,
     ScaleMax, MAX_LEVELS, MAX_STEPS,
 };
-pub use reference::{brute_force_horizon, horizon_reaches};
+pub use reference::{brute_force_horizon, horizon_reaches, horizon_reaches_within};
 
 /// What can be wrong with a height map or with horizon settings.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]

@@ -439,14 +439,16 @@ impl HorizonPyramid {
         }
 
         for (k, out_k) in out.iter_mut().enumerate() {
-            *out_k = self.march(x, y, above, &receiver, self.directions[k]);
+            *out_k = self.march(x, y, above, &receiver, self.directions[k], f64::INFINITY);
         }
     }
 
     /// The horizon elevation from `p` along one azimuth, unit `dir` in the xy plane: the
     /// same march as [`Self::horizon_elevations`] (SN08's swath, here a single azimuth, as
-    /// its Section 6 does for a key light). 0 for a non-finite `p` or an empty pyramid.
-    pub fn horizon_along(&self, p: [f64; 3], dir: [f64; 2]) -> f64 {
+    /// its Section 6 does for a key light), over the steps no farther than `reach` (the
+    /// horizontal distance to a local light, paper 002; infinite for a sun). 0 for a
+    /// non-finite `p` or an empty pyramid.
+    pub fn horizon_along(&self, p: [f64; 3], dir: [f64; 2], reach: f64) -> f64 {
         if self.steps.is_empty() || !p.iter().chain(&dir).all(|v| v.is_finite()) {
             return 0.0;
         }
@@ -457,17 +459,20 @@ impl HorizonPyramid {
         for (level, r) in receiver.iter_mut().enumerate().take(used_levels) {
             *r = self.sample_level(level, x, y);
         }
-        self.march(x, y, above, &receiver, dir)
+        self.march(x, y, above, &receiver, dir, reach)
     }
 
     /// One azimuth's march from `(x, y)`, `above` the surface, with the receiver term
-    /// per level already sampled.
-    fn march(&self, x: f64, y: f64, above: f64, receiver: &[f64; MAX_LEVELS], dir: [f64; 2]) -> f64 {
+    /// per level already sampled, over the steps no farther than `reach`.
+    fn march(&self, x: f64, y: f64, above: f64, receiver: &[f64; MAX_LEVELS], dir: [f64; 2], reach: f64) -> f64 {
         let mut omega = [0.0f64; MAX_STEPS];
         let t_far = self.far_distance(x, y, dir);
         let mut max_tan = f64::NEG_INFINITY;
         let mut m = 0;
         for step in &self.steps {
+            if step.distance > reach {
+                break;
+            }
             let q = self.sample_level(step.level, x + step.distance * dir[0], y + step.distance * dir[1]);
             let tangent = (q - receiver[step.level] - above) * step.inv_distance;
             match self.settings.scale_max {

@@ -29,7 +29,7 @@ use std::f64::consts::FRAC_PI_2;
 /// this azimuth is blocked). Cost: one quadratic fit per grid cell crossed, about
 /// `columns + rows` cells for a ray across the map; it allocates nothing.
 pub fn brute_force_horizon(field: &HeightField, p: [f64; 3], azimuth: f64) -> f64 {
-    horizon_up_to(field, p, azimuth, FRAC_PI_2)
+    horizon_up_to(field, p, azimuth, FRAC_PI_2, f64::INFINITY)
 }
 
 /// Whether the exact horizon of [`brute_force_horizon`] reaches `elevation` (radians):
@@ -38,12 +38,19 @@ pub fn brute_force_horizon(field: &HeightField, p: [f64; 3], azimuth: f64) -> f6
 /// ray at that elevation has climbed above the highest sample (nothing further can reach
 /// it). An upward direction from low terrain costs a few cells instead of the map.
 pub fn horizon_reaches(field: &HeightField, p: [f64; 3], azimuth: f64, elevation: f64) -> bool {
-    horizon_up_to(field, p, azimuth, elevation) >= elevation
+    horizon_up_to(field, p, azimuth, elevation, f64::INFINITY) >= elevation
 }
 
-/// The exact horizon while it is below `stop`; once it reaches `stop`, or once nothing
-/// further along the ray can, some value `>= stop` or the (exact) horizon so far.
-fn horizon_up_to(field: &HeightField, p: [f64; 3], azimuth: f64, stop: f64) -> f64 {
+/// [`horizon_reaches`] for a light `reach` away horizontally (a point lamp): only the
+/// surface nearer than that can block the direction.
+pub fn horizon_reaches_within(field: &HeightField, p: [f64; 3], azimuth: f64, elevation: f64, reach: f64) -> bool {
+    horizon_up_to(field, p, azimuth, elevation, reach) >= elevation
+}
+
+/// The exact horizon, of the surface no farther than `reach`, while it is below `stop`;
+/// once it reaches `stop`, or once nothing further along the ray can, some value `>=
+/// stop` or the (exact) horizon so far.
+fn horizon_up_to(field: &HeightField, p: [f64; 3], azimuth: f64, stop: f64, reach: f64) -> f64 {
     let z = p[2];
     // The slope of a ray at the elevation `stop`, when it climbs.
     let climb = (stop > 0.0 && stop < FRAC_PI_2).then(|| stop.tan());
@@ -70,6 +77,9 @@ fn horizon_up_to(field: &HeightField, p: [f64; 3], azimuth: f64, stop: f64) -> f
             t_far = t_far.max(axis_exit(p[a], dir[a], min[a], max[a]));
         }
     }
+    // The surface beyond `reach` counts for nothing: the walk ends there (the horizon
+    // stays at least 0, as the fast path's march takes it).
+    let t_far = t_far.min(reach);
 
     let mut crossings = [
         LineCrossings::new(p[0], dir[0], min[0], max[0], n[0], t_far),

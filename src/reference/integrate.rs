@@ -196,6 +196,19 @@ impl PointEstimate {
     fn exact(rgb: [f64; 3]) -> Self {
         PointEstimate { rgb, error: 0.0, level: 0, converged: true, meridians: 0, evaluations: 0 }
     }
+
+    /// The estimate of the sum of two parts of one integral (errors add; the level is
+    /// the deeper one's).
+    pub fn plus(&self, other: &PointEstimate) -> PointEstimate {
+        PointEstimate {
+            rgb: [0, 1, 2].map(|k| self.rgb[k] + other.rgb[k]),
+            error: self.error + other.error,
+            level: self.level.max(other.level),
+            converged: self.converged && other.converged,
+            meridians: self.meridians + other.meridians,
+            evaluations: self.evaluations + other.evaluations,
+        }
+    }
 }
 
 struct Rules {
@@ -503,6 +516,32 @@ pub fn sample_suns(
         .map_or_else(|exact| exact, |point| super::sampled::sample_suns(&point, suns, tolerance, max_level, seed))
 }
 
+/// The point lamps' part of the integral: each lamp's disk as seen from `p`
+/// ([`crate::scene::PointLight::seen_from`]), sampled as [`sample_suns`] samples a sun's,
+/// with only the occluders nearer than the lamp; `tolerance` is shared between them.
+#[allow(clippy::too_many_arguments)]
+pub fn sample_lamps(
+    occluders: ReferenceOccluders,
+    lamps: &[crate::scene::PointLight],
+    p: [f64; 3],
+    n: [f64; 3],
+    terms: &[LobeTerm],
+    tolerance: f64,
+    max_level: u32,
+    seed: u64,
+) -> PointEstimate {
+    let mut total = PointEstimate::exact([0.0; 3]);
+    let share = tolerance / lamps.len().max(1) as f64;
+    for (i, lamp) in lamps.iter().enumerate() {
+        let (disk, reach) = lamp.seen_from(p, unit(n).unwrap_or([0.0, 0.0, 1.0]));
+        let seed = seed ^ (i as u64 + 1).wrapping_mul(0x9e37_79b9_7f4a_7c15);
+        let one = PreparedPoint::within(occluders, p, n, terms, reach)
+            .map_or_else(|exact| exact, |point| super::sampled::sample_suns(&point, &[disk], share, max_level, seed));
+        total = total.plus(&one);
+    }
+    total
+}
+
 /// A receiver ready to integrate: unit normal and lobe axes, the point lifted onto the
 /// height field, and the caps of the spheres that can block it.
 pub(super) struct PreparedPoint<'a> {
@@ -514,6 +553,9 @@ pub(super) struct PreparedPoint<'a> {
     pub field: Option<&'a HeightField>,
     /// Above the ground plane: directions below the horizontal are blocked.
     pub above_ground: bool,
+    /// Distance to a point lamp being integrated: spheres wholly beyond it and terrain
+    /// beyond it block nothing. Infinite otherwise.
+    pub reach: f64,
 }
 
 impl<'a> PreparedPoint<'a> {
@@ -524,6 +566,17 @@ impl<'a> PreparedPoint<'a> {
         p: [f64; 3],
         n: [f64; 3],
         terms: &[LobeTerm],
+    ) -> Result<PreparedPoint<'a>, PointEstimate> {
+        Self::within(occluders, p, n, terms, f64::INFINITY)
+    }
+
+    /// [`Self::new`] for light from no farther than `reach` (a point lamp's distance).
+    fn within(
+        occluders: ReferenceOccluders<'a>,
+        p: [f64; 3],
+        n: [f64; 3],
+        terms: &[LobeTerm],
+        reach: f64,
     ) -> Result<PreparedPoint<'a>, PointEstimate> {
         let terms: Vec<LobeTerm> = terms
             .iter()
@@ -552,6 +605,9 @@ impl<'a> PreparedPoint<'a> {
                 continue;
             }
             let dist = dot(d, d).sqrt();
+            if dist - s.radius >= reach {
+                continue;
+            }
             if dist < s.radius * (1.0 - SURFACE_BAND) {
                 return Err(PointEstimate::exact([0.0; 3]));
             }
@@ -559,7 +615,7 @@ impl<'a> PreparedPoint<'a> {
             caps.push((d.map(|c| c / dist), k));
         }
         let above_ground = occluders.ground.is_some_and(|z| crate::shade::kernel::above_ground(p, z));
-        Ok(PreparedPoint { p, n, caps, terms, field: occluders.field, above_ground })
+        Ok(PreparedPoint { p, n, caps, terms, field: occluders.field, above_ground, reach })
     }
 
     /// Whether unit direction `w` clears the tangent plane and every cap (the height
@@ -573,7 +629,7 @@ impl<'a> PreparedPoint<'a> {
 
 /// [`integrate_point`] by meridians, at a prepared point.
 fn integrate_prepared(point: PreparedPoint, light: &LightModel, tolerance: f64, max_level: u32) -> PointEstimate {
-    let PreparedPoint { p, n, caps, terms, field, above_ground } = point;
+    let PreparedPoint { p, n, caps, terms, field, above_ground, .. } = point;
     // The pole: world +Z with a height field (one horizon per meridian), else the axis of
     // the sharpest lobe (its falloff is then along the meridians, resolved by the
     // adaptive rule, and the meridian spacing only sees the rotationally symmetric part).

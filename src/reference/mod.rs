@@ -22,6 +22,12 @@
 //! error (projection vs fast path). Background and water-mirror pixels use the same
 //! light model as the surfaces.
 //!
+//! The sharp lights are added by sampling each one's disk with the same exact visibility
+//! (`sampled::sample_suns`): the scene's suns, and each point lamp's disk as seen from the
+//! receiver, against only the spheres and terrain nearer than the lamp. Water mirroring
+//! the sky shows the Sun lamps' disks, and water whose mirror ray meets a point lamp first
+//! shows the lamp, as in the fast path ([`crate::shade::frame::mirrored_lamp`]).
+//!
 //! # Visibility (exact, f64)
 //!
 //! A direction `w` from the receiver `p` with normal `n` is visible when all of these
@@ -120,14 +126,14 @@ mod integrate;
 mod sampled;
 
 pub use integrate::{
-    integrate_point, sample_point, sample_suns, LightModel, LobeTerm, PointEstimate, ReferenceOccluders,
+    integrate_point, sample_lamps, sample_point, sample_suns, LightModel, LobeTerm, PointEstimate, ReferenceOccluders,
     MAX_REFERENCE_SH_ORDER, SURFACE_BAND,
 };
 pub use sampled::{TexelSampler, BASE_POINTS, REPLICATES};
 
 use crate::logsh::Lobe;
 use crate::scene::{Frame, GBuffer, Material, Scene};
-use crate::shade::frame::surface_at;
+use crate::shade::frame::{mirrored_lamp, mirrored_suns, surface_at};
 use crate::shade::kernel::reflect_view;
 use rayon::prelude::*;
 use std::sync::Mutex;
@@ -363,17 +369,18 @@ impl Context<'_> {
             }
             _ => integrate_point(occluders, self.light, p, n, &terms, tolerance, max_level),
         };
-        if self.frame.suns.is_empty() {
+        if self.frame.suns.is_empty() && self.frame.points.is_empty() {
             return environment;
         }
-        // The suns to half the tolerance (their part is sampled whatever the integration).
-        let suns = sample_suns(occluders, &self.frame.suns, p, n, &terms, 0.5 * tolerance, max_level, seed ^ 0x5u64);
+        // The sharp lights to half the tolerance (their part is sampled whatever the
+        // integration), split between the suns and the lamps.
+        let sharp = 0.5 * tolerance / (!self.frame.suns.is_empty() as u8 + !self.frame.points.is_empty() as u8) as f64;
+        let suns = sample_suns(occluders, &self.frame.suns, p, n, &terms, sharp, max_level, seed ^ 0x5u64);
+        let lamps = sample_lamps(occluders, &self.frame.points, p, n, &terms, sharp, max_level, seed ^ 0x6u64);
         PointEstimate {
-            rgb: [0, 1, 2].map(|k| environment.rgb[k] + suns.rgb[k]),
-            error: environment.error + suns.error,
-            converged: environment.converged && suns.converged,
-            evaluations: environment.evaluations + suns.evaluations,
-            ..environment
+            meridians: environment.meridians,
+            level: environment.level,
+            ..environment.plus(&suns).plus(&lamps)
         }
     }
 
@@ -397,9 +404,14 @@ impl Context<'_> {
                     let reflection = self.frame.reflection.as_ref().expect("checked before rendering");
                     let water = surface_at(g, i, None, self.frame);
                     let tint = tint.map(f64::from);
-                    let estimate = if reflection.material[i] == 0 {
-                        let sky = self.light_along(reflect_view(water.view_origin, water.position, water.normal));
-                        exact([0, 1, 2].map(|k| tint[k] * sky[k]))
+                    let mirror = reflect_view(water.view_origin, water.position, water.normal);
+                    let lamp = mirrored_lamp(self.frame, water.position, mirror, reflection, i);
+                    let estimate = if let Some(lamp) = lamp {
+                        exact([0, 1, 2].map(|k| tint[k] * f64::from(lamp[k])))
+                    } else if reflection.material[i] == 0 {
+                        let sky = self.light_along(mirror);
+                        let suns = mirrored_suns(self.frame, mirror);
+                        exact([0, 1, 2].map(|k| tint[k] * (sky[k] + f64::from(suns[k]))))
                     } else {
                         self.surface(reflection, i, Some(water.position), tint, seed)
                     };

@@ -31,7 +31,7 @@
 //! uniformly over the texel's extent on the sphere: density `P(texel) / Omega(texel)`.
 
 use super::integrate::{lobe_sum, LightModel, LobeTerm, PointEstimate, PreparedPoint};
-use crate::heightfield::horizon_reaches;
+use crate::heightfield::horizon_reaches_within;
 use crate::logsh::Lobe;
 use crate::scene::camera::{dot, frame_around};
 use crate::scene::light::direction_to_equirectangular;
@@ -350,7 +350,9 @@ impl Estimator<'_> {
             return None;
         }
         if let Some(field) = point.field {
-            if horizon_reaches(field, point.p, w[1].atan2(w[0]), w[2].clamp(-1.0, 1.0).asin()) {
+            // A point lamp's reach is along the direction; the walk's is horizontal.
+            let reach = point.reach * w[0].hypot(w[1]);
+            if horizon_reaches_within(field, point.p, w[1].atan2(w[0]), w[2].clamp(-1.0, 1.0).asin(), reach) {
                 return None;
             }
         }

@@ -28,7 +28,11 @@
 //!   [r, g, b]}` in Blender's units: `direction` points towards the sun (any length but
 //!   0), `angle` is the disk's angular diameter (Blender's Sun "Angle", in `(0, 180]`),
 //!   `strength` the irradiance on a surface facing it (Blender's Sun "Strength", W/m^2,
-//!   finite and `>= 0`), `color` optional (default white). At most [`MAX_SUNS`].
+//!   finite and `>= 0`), `color` optional (default white); and of `{"type": "point",
+//!   "position": [x, y, z], "radius": r, "power": p, "color": [r, g, b], "soft_falloff":
+//!   b}`, a Blender Point lamp: world position, Radius (metres, `>= 0`), Power (watts,
+//!   finite and `>= 0`), `color` optional (default white), Soft Falloff optional (default
+//!   true, Blender's default; see [`PointLight`]). At most [`MAX_SUNS`] entries.
 //! - Ground: an optional `{"height": z}`, an infinite horizontal plane at world Z `z` that
 //!   hides everything below the horizontal from receivers above it (a flat floor the
 //!   exporter found); not together with `heightfield`.
@@ -74,7 +78,7 @@ pub use camera::{Camera, Sphere};
 pub use error::{SceneError, MAX_IMAGE_PIXELS, MAX_IMAGE_SIDE};
 pub use gbuffer::{ChannelNames, GBuffer};
 pub use heightmap::HeightMap;
-pub use light::{EnvironmentMap, Light, SunLight, MAX_SUNS};
+pub use light::{EnvironmentMap, Light, PointLight, SunLight, MAX_SUNS};
 
 use serde::Deserialize;
 use std::collections::BTreeMap;
@@ -214,8 +218,10 @@ pub struct Frame {
     pub blockers: Vec<Sphere>,
     pub height_map: Option<Arc<HeightMap>>,
     pub light: Arc<Light>,
-    /// The scene's sharp lights (`lights` in scene.json).
+    /// The scene's suns (`lights` in scene.json).
     pub suns: Vec<SunLight>,
+    /// The scene's point lamps (`lights` in scene.json).
+    pub points: Vec<PointLight>,
     /// The scene's ground plane height (`ground` in scene.json).
     pub ground: Option<f64>,
 }
@@ -237,8 +243,10 @@ pub struct Scene {
     /// Material table by index (all `>= 1`).
     pub materials: BTreeMap<u32, Material>,
     pub light_spec: LightSpec,
-    /// Sharp lights beside `light` (empty without `lights`).
+    /// Suns beside `light` (from `lights`).
     pub suns: Vec<SunLight>,
+    /// Point lamps (from `lights`); `--light-rotation` leaves them where they are.
+    pub points: Vec<PointLight>,
     /// Degrees the whole light is turned about Z on top of scene.json (`--light-rotation`).
     pub light_turn: f64,
     pub channels: ChannelNames,
@@ -285,6 +293,10 @@ struct SharpLightFile {
     direction: Option<[f64; 3]>,
     angle: Option<f64>,
     strength: Option<f64>,
+    position: Option<[f64; 3]>,
+    radius: Option<f64>,
+    power: Option<f64>,
+    soft_falloff: Option<bool>,
     color: Option<[f64; 3]>,
 }
 
@@ -418,21 +430,68 @@ fn parse_material(file: &Path, key: &str, m: &MaterialFile) -> Result<(u32, Mate
     Ok((index, material))
 }
 
-fn parse_sun(file: &Path, i: usize, l: &SharpLightFile) -> Result<SunLight, SceneError> {
+/// One entry of `lights`.
+enum Lamp {
+    Sun(SunLight),
+    Point(PointLight),
+}
+
+fn parse_lamp(file: &Path, i: usize, l: &SharpLightFile) -> Result<Lamp, SceneError> {
     let name = format!("lights[{i}]");
-    if l.kind != "sun" {
-        return Err(SceneError::invalid(file, format!("{name}: type \"{}\" is not \"sun\"", l.kind)));
+    let keys = [
+        ("direction", l.direction.is_some()),
+        ("angle", l.angle.is_some()),
+        ("strength", l.strength.is_some()),
+        ("position", l.position.is_some()),
+        ("radius", l.radius.is_some()),
+        ("power", l.power.is_some()),
+        ("soft_falloff", l.soft_falloff.is_some()),
+    ];
+    let allowed: &[&str] = match l.kind.as_str() {
+        "sun" => &["direction", "angle", "strength"],
+        "point" => &["position", "radius", "power", "soft_falloff"],
+        other => {
+            return Err(SceneError::invalid(file, format!("{name}: unknown type \"{other}\" (expected sun or point)")))
+        }
+    };
+    if let Some((key, _)) = keys.iter().find(|(k, present)| *present && !allowed.contains(k)) {
+        return Err(SceneError::invalid(file, format!("{name}: key \"{key}\" does not belong to a {}", l.kind)));
     }
-    let missing = |key: &str| SceneError::invalid(file, format!("{name}: sun needs \"{key}\""));
+    let missing = |key: &str| SceneError::invalid(file, format!("{name}: {} needs \"{key}\"", l.kind));
+    let non_finite = |what: &str| SceneError::NonFinite { file: file.to_path_buf(), what: format!("{name} {what}") };
+    let color = match l.color {
+        Some(c) => colour(file, &format!("{name} color"), c)?,
+        None => [1.0; 3],
+    };
+    // Strength and power are f32 in shading: finite, >= 0, and within f32.
+    let amount = |key: &str, value: f64| {
+        if !value.is_finite() {
+            Err(non_finite(key))
+        } else if !(0.0..=f64::from(f32::MAX)).contains(&value) {
+            Err(SceneError::invalid(file, format!("{name}: {key} {value} must be >= 0 and at most {:e}", f32::MAX)))
+        } else {
+            Ok(value as f32)
+        }
+    };
+    if l.kind == "point" {
+        let position = l.position.ok_or_else(|| missing("position"))?;
+        let radius = l.radius.ok_or_else(|| missing("radius"))?;
+        if position.iter().chain([&radius]).any(|v| !v.is_finite()) {
+            return Err(non_finite("position or radius"));
+        }
+        if radius < 0.0 {
+            return Err(SceneError::invalid(file, format!("{name}: radius {radius} must be >= 0")));
+        }
+        let power = amount("power", l.power.ok_or_else(|| missing("power"))?)?;
+        let soft_falloff = l.soft_falloff.unwrap_or(true);
+        return Ok(Lamp::Point(PointLight { position, radius, power, color, soft_falloff }));
+    }
     let direction = l.direction.ok_or_else(|| missing("direction"))?;
     let angle = l.angle.ok_or_else(|| missing("angle"))?;
-    let strength = l.strength.ok_or_else(|| missing("strength"))?;
-    if direction.iter().chain([&angle, &strength]).any(|v| !v.is_finite()) {
-        return Err(SceneError::NonFinite {
-            file: file.to_path_buf(),
-            what: format!("{name} direction, angle or strength"),
-        });
+    if direction.iter().chain([&angle]).any(|v| !v.is_finite()) {
+        return Err(non_finite("direction or angle"));
     }
+    let strength = amount("strength", l.strength.ok_or_else(|| missing("strength"))?)?;
     let length = direction.iter().map(|v| v * v).sum::<f64>().sqrt();
     if !(length > 0.0) {
         return Err(SceneError::invalid(file, format!("{name}: direction {direction:?} has no length")));
@@ -440,19 +499,12 @@ fn parse_sun(file: &Path, i: usize, l: &SharpLightFile) -> Result<SunLight, Scen
     if !(angle > 0.0 && angle <= 180.0) {
         return Err(SceneError::invalid(file, format!("{name}: angle {angle} must be in (0, 180] degrees")));
     }
-    if strength < 0.0 {
-        return Err(SceneError::invalid(file, format!("{name}: strength {strength} must be >= 0")));
-    }
-    let color = match l.color {
-        Some(c) => colour(file, &format!("{name} color"), c)?,
-        None => [1.0; 3],
-    };
-    Ok(SunLight {
+    Ok(Lamp::Sun(SunLight {
         direction: direction.map(|v| v / length),
         half_angle: (0.5 * angle).to_radians(),
-        strength: strength as f32,
+        strength,
         color,
-    })
+    }))
 }
 
 fn parse_light(file: &Path, l: &LightFile) -> Result<LightSpec, SceneError> {
@@ -574,7 +626,13 @@ impl Scene {
         if lights.len() > MAX_SUNS {
             return Err(SceneError::invalid(&file, format!("{} lights; at most {MAX_SUNS}", lights.len())));
         }
-        let suns = lights.iter().enumerate().map(|(i, l)| parse_sun(&file, i, l)).collect::<Result<Vec<_>, _>>()?;
+        let (mut suns, mut points) = (Vec::new(), Vec::new());
+        for (i, l) in lights.iter().enumerate() {
+            match parse_lamp(&file, i, l)? {
+                Lamp::Sun(sun) => suns.push(sun),
+                Lamp::Point(point) => points.push(point),
+            }
+        }
         let channels = ChannelNames::from_overrides(raw.channels.as_ref());
 
         let mut scene = Scene {
@@ -589,6 +647,7 @@ impl Scene {
             materials,
             light_spec,
             suns,
+            points,
             light_turn: 0.0,
             channels,
             static_light: None,
@@ -777,6 +836,7 @@ impl Scene {
             height_map: self.height_map(frame)?,
             light: self.light(frame)?,
             suns: self.suns.clone(),
+            points: self.points.clone(),
             ground: self.ground,
         })
     }

@@ -123,6 +123,45 @@ pub fn surface_at(buffer: &GBuffer, i: usize, view_origin: Option<[f64; 3]>, fra
     }
 }
 
+/// The Sun lamps' radiance along `mirror`: each disk's radiance where the direction falls
+/// inside it.
+pub fn mirrored_suns(frame: &Frame, mirror: [f64; 3]) -> [f32; 3] {
+    let mut out = [0.0f32; 3];
+    let dir = crate::scene::camera::normalize(mirror);
+    for sun in &frame.suns {
+        if crate::scene::camera::dot(dir, sun.direction) >= sun.half_angle.cos() {
+            let radiance = sun.strength / (std::f64::consts::PI * sun.half_angle.sin().powi(2)) as f32;
+            for (o, c) in out.iter_mut().zip(sun.color) {
+                *o += radiance * c;
+            }
+        }
+    }
+    out
+}
+
+/// The radiance of the nearest point lamp that the mirror ray from `origin` along
+/// `mirror` meets before the surface of the reflection G-buffer's pixel `i`, if any.
+pub fn mirrored_lamp(
+    frame: &Frame,
+    origin: [f64; 3],
+    mirror: [f64; 3],
+    reflection: &GBuffer,
+    i: usize,
+) -> Option<[f32; 3]> {
+    let dir = crate::scene::camera::normalize(mirror);
+    let surface = (reflection.material[i] != 0).then(|| {
+        let p = reflection.position[i].map(f64::from);
+        (0..3).map(|k| (p[k] - origin[k]).powi(2)).sum::<f64>().sqrt()
+    });
+    frame
+        .points
+        .iter()
+        .filter_map(|lamp| lamp.hit_along(origin, dir).map(|t| (t, lamp)))
+        .filter(|(t, _)| surface.is_none_or(|s| *t < s))
+        .min_by(|a, b| a.0.total_cmp(&b.0))
+        .map(|(_, lamp)| lamp.radiance())
+}
+
 /// What one pixel needs from an executor.
 #[derive(Clone, Copy, Debug)]
 pub enum PixelWork {
@@ -135,7 +174,8 @@ pub enum PixelWork {
 
 /// The frame walk shared by the CPU and GPU executors: background from the light along
 /// the camera ray, water through the reflection G-buffer (the reflected point shaded as
-/// seen from the water surface, or the sky and the Sun lamps in the mirror direction),
+/// seen from the water surface, or the sky and the Sun lamps in the mirror direction, or
+/// a point lamp the mirror ray meets first),
 /// every other pixel its own surface point.
 pub fn pixel_work(materials: &BTreeMap<u32, Material>, frame: &Frame, x: usize, y: usize) -> PixelWork {
     let g = &frame.gbuffer;
@@ -152,19 +192,22 @@ pub fn pixel_work(materials: &BTreeMap<u32, Material>, frame: &Frame, x: usize, 
             Some(Material::Water { tint }) => {
                 let reflection = frame.reflection.as_ref().expect("checked before shading");
                 let water = surface_at(g, i, None, frame);
+                let mirror = super::kernel::reflect_view(water.view_origin, water.position, water.normal);
+                // A lamp the mirror ray meets before the reflected surface (Cycles shows
+                // lamps to glossy rays): the pixel is its radiance.
+                if let Some(radiance) = mirrored_lamp(frame, water.position, mirror, reflection, i) {
+                    return PixelWork::Fixed([
+                        tint[0] * radiance[0],
+                        tint[1] * radiance[1],
+                        tint[2] * radiance[2],
+                        1.0,
+                    ]);
+                }
                 if reflection.material[i] == 0 {
-                    let mirror = super::kernel::reflect_view(water.view_origin, water.position, water.normal);
                     let mut sky = frame.light.radiance(mirror);
-                    // The scene's Sun lamps, which the map does not hold, are mirrored too:
-                    // their disk's radiance where the mirror direction falls inside it.
-                    for sun in &frame.suns {
-                        let cos = crate::scene::camera::dot(crate::scene::camera::normalize(mirror), sun.direction);
-                        if cos >= sun.half_angle.cos() {
-                            let radiance = sun.strength / (std::f64::consts::PI * sun.half_angle.sin().powi(2)) as f32;
-                            for (s, c) in sky.iter_mut().zip(sun.color) {
-                                *s += radiance * c;
-                            }
-                        }
+                    // The scene's Sun lamps, which the map does not hold, are mirrored too.
+                    for (s, sun) in sky.iter_mut().zip(mirrored_suns(frame, mirror)) {
+                        *s += sun;
                     }
                     PixelWork::Fixed([tint[0] * sky[0], tint[1] * sky[1], tint[2] * sky[2], 1.0])
                 } else {

@@ -13,7 +13,7 @@ use super::sun::{DiskDirections, Planes, SunDisk, DISK_DIRECTIONS};
 use crate::heightfield::HorizonPyramid;
 use crate::logsh::{cap_log_zh, lobe_log_zh_as, optimal_lobe_epsilon, view_blocker, BlockerView, Lobe, WedgeOperator};
 use crate::scene::camera::dot;
-use crate::scene::{EnvironmentMap, Light, Material, SunLight};
+use crate::scene::{EnvironmentMap, Light, Material, PointLight, SunLight};
 use crate::sh::exp::{exp_hyb_with, exp_series, ExactExp, OlTable};
 use crate::sh::{add_rotated_zonal, coefficient_count, ExpMethod, Real, TriplingTensor, MAX_COEFFICIENTS};
 use rayon::prelude::*;
@@ -248,6 +248,8 @@ pub struct ShadingKernel<T> {
     pub(crate) light: [Vec<T>; 3],
     /// The sharp lights, shaded outside SH ([`super::sun`]).
     pub(crate) suns: Vec<SunDisk>,
+    /// The point lamps, each a disk built per receiver ([`SunDisk::of_lamp`]).
+    pub(crate) points: Vec<PointLight>,
     /// Height of the scene's ground plane, which hides the lower hemisphere from
     /// receivers above it.
     pub(crate) ground: Option<f64>,
@@ -262,8 +264,8 @@ pub fn above_ground(p: [f64; 3], ground: f64) -> bool {
 impl<T: Real> ShadingKernel<T> {
     /// Builds the tables. `light` holds `order^2` RGB coefficients of `residual` (the
     /// scene's light with its suns taken out), whose map the glossy term reflects;
-    /// `has_heightfield` decides whether the wedge operator is built at all; `suns` are
-    /// the sharp lights; `ground` the height of the scene's ground plane.
+    /// `has_heightfield` decides whether the wedge operator is built at all; `suns` and
+    /// `points` are the sharp lights; `ground` the height of the scene's ground plane.
     #[allow(clippy::too_many_arguments)]
     pub fn new(
         settings: &ShadingSettings,
@@ -272,6 +274,7 @@ impl<T: Real> ShadingKernel<T> {
         residual: &Light,
         has_heightfield: bool,
         suns: &[SunLight],
+        points: &[PointLight],
         ground: Option<f64>,
     ) -> Self {
         let order = settings.order;
@@ -363,6 +366,7 @@ impl<T: Real> ShadingKernel<T> {
             materials,
             light: [channel(0), channel(1), channel(2)],
             suns: suns.iter().map(SunDisk::new).collect(),
+            points: points.to_vec(),
             ground,
         }
     }
@@ -640,7 +644,8 @@ impl<T: Real> ShadingKernel<T> {
         let sharp = self.materials.get(&point.material).and_then(|lobes| lobes.sharp.as_ref());
         let axis = reflect_view(point.view_origin, point.position, n);
         let sharp_albedo = sharp.map(|sharp| albedo_lookup(&sharp.albedo, dot(axis, n)));
-        for sun in &self.suns {
+        let lamps = self.points.iter().map(|lamp| SunDisk::of_lamp(lamp, point.position, n));
+        for sun in self.suns.iter().map(Cow::Borrowed).chain(lamps.map(Cow::Owned)) {
             let v =
                 sun.visibility(occluders.blockers, occluders.horizons, self.ground, point.position, n, point.object);
             let d = sun.reflected(&v, |z| Lobe::Diffuse.value(z), n);

@@ -127,7 +127,7 @@ impl<'a> FramePlan<'a> {
                 PlannedKernel::F32(kernel) => kernel.has_prefiltered_glossy(),
                 PlannedKernel::F64(kernel) => kernel.has_prefiltered_glossy(),
             },
-            suns: !suns.is_empty(),
+            suns: !suns.is_empty() || !frame.points.is_empty(),
             ..contents
         };
         let blockers = BlockerTree::new(&frame.blockers, settings.cluster_ratio);
@@ -172,6 +172,7 @@ impl KernelInputs<'_> {
             self.residual,
             self.heightfield,
             self.suns,
+            &self.frame.points,
             self.frame.ground,
         );
         kernel.prepare_glossy(&self.scene.materials, self.frame);

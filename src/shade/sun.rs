@@ -27,6 +27,10 @@
 //!   ([`HorizonPyramid::horizon_along`], SN08's single-azimuth swath), against each
 //!   direction's elevation.
 //!
+//! A point lamp ([`PointLight`]) is a disk too, seen from each receiver
+//! ([`SunDisk::of_lamp`]): built per pixel, its occluders restricted to those nearer than
+//! the lamp (paper 002: the horizon only up to the light's distance).
+//!
 //! The BRDF is evaluated per direction (the cosine lobe, the Phong lobe), so a sun that
 //! grazes the surface or a highlight narrower than the disk is integrated, not sampled at
 //! the centre.
@@ -34,7 +38,7 @@
 use super::blocker_tree::BlockerTree;
 use crate::heightfield::HorizonPyramid;
 use crate::scene::camera::{cross, dot, frame_around};
-use crate::scene::SunLight;
+use crate::scene::{PointLight, SunLight};
 use std::f64::consts::PI;
 
 /// Directions per sun disk (per pixel, each tested against the disk's occluders).
@@ -72,6 +76,10 @@ pub struct DiskDirections {
     /// Unit xy of the axis's azimuth (for the horizon), `None` for an axis at the zenith
     /// or nadir, where every azimuth's horizon is the same to the disk.
     pub azimuth: Option<[f64; 2]>,
+    /// Distance to the light along the axis: a blocker wholly beyond it, or terrain
+    /// beyond it, casts nothing (paper 002's horizon restricted to a local light's
+    /// distance). Infinite for a sun or a lobe.
+    pub reach: f64,
 }
 
 /// Which planes a disk's visibility test counts besides the blockers and the height
@@ -103,6 +111,7 @@ impl DiskDirections {
             directions,
             patch: patch_radius(half_angle),
             azimuth: (horizontal > 1e-9).then(|| [axis[0] / horizontal, axis[1] / horizontal]),
+            reach: f64::INFINITY,
         }
     }
 
@@ -136,7 +145,8 @@ impl DiskDirections {
             }
         }
         if let (Some(pyramid), Some(azimuth)) = (horizons, self.azimuth) {
-            let (sin_h, cos_h) = pyramid.horizon_along(p, azimuth).sin_cos();
+            let horizontal_reach = self.reach * self.axis[0].hypot(self.axis[1]);
+            let (sin_h, cos_h) = pyramid.horizon_along(p, azimuth, horizontal_reach).sin_cos();
             for (b, w) in blocked.iter_mut().zip(&self.directions) {
                 // x = horizon - elevation, in [-pi/2, pi]: past pi/2 it is deep inside.
                 let (sin_e, cos_e) = (w[2], (1.0 - w[2] * w[2]).max(0.0).sqrt());
@@ -148,7 +158,10 @@ impl DiskDirections {
             tree.visit_cone(p, n, object, self.axis, self.half_angle + self.patch, |sphere| {
                 let d = [0, 1, 2].map(|k| sphere.center[k] - p[k]);
                 let distance = dot(d, d).sqrt();
-                if !(distance > 0.0) || (object != 0 && sphere.object == object && dot(d, n) <= 0.0) {
+                if !(distance > 0.0)
+                    || distance - sphere.radius >= self.reach
+                    || (object != 0 && sphere.object == object && dot(d, n) <= 0.0)
+                {
                     return;
                 }
                 let axis = d.map(|c| c / distance);
@@ -187,6 +200,15 @@ impl SunDisk {
             disk: DiskDirections::new(light.direction, light.half_angle),
             disk_integral: light.disk_integral(),
         }
+    }
+
+    /// A point lamp's disk at one receiver ([`PointLight::seen_from`]): nothing beyond the
+    /// lamp's centre shadows it.
+    pub fn of_lamp(lamp: &PointLight, p: [f64; 3], n: [f64; 3]) -> Self {
+        let (light, reach) = lamp.seen_from(p, n);
+        let mut disk = Self::new(&light);
+        disk.disk.reach = reach;
+        disk
     }
 
     /// Visibility of each disk direction, in `[0, 1]`, at `p` with unit normal `n` on

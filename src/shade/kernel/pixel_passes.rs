@@ -3,7 +3,7 @@
 //!
 //! The diffuse and specular terms are the very values [`ShadingKernel::shade`] sums (the
 //! sharp lights' included), so `diffuse + specular` is its result bit for bit. The
-//! visibility terms are the environment's: a sun's shadow is in the beauty and the
+//! visibility terms are the environment's: a sun's or lamp's shadow is in the beauty and the
 //! diffuse and specular passes, not in these ratios. The visibility terms are scalar
 //! ratios, one per occluder set `x`:
 //!
