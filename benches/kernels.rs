@@ -29,6 +29,46 @@ fn exponentiation(c: &mut Criterion) {
     }
 }
 
+/// A pixel's `exp*(f) . L` at the `quad` grid: exponentiated, projected back to SH and
+/// dotted with the light in f64 (`ExactExp::exp_floored`, the oracle), against the light
+/// folded into the quadrature in f32 (`FoldedQuadrature::lit`, the CPU executor's path).
+fn lighting(c: &mut Criterion) {
+    use logsh::sh::{ExactExp, FoldedQuadrature};
+    for order in [4, 8] {
+        let count = order * order;
+        let vectors = training_log_vectors(order, 16, 42);
+        let vectors32: Vec<Vec<f32>> = vectors.iter().map(|v| v.iter().map(|&c| c as f32).collect()).collect();
+        let light: [Vec<f64>; 3] = std::array::from_fn(|c| (0..count).map(|k| 1.0 / (1.0 + (k + c) as f64)).collect());
+        let quadrature = ExactExp::fast(order);
+        let folded = FoldedQuadrature::new(&quadrature, &light);
+        c.bench_function(&format!("lit/projected f64/order{order}"), |b| {
+            b.iter(|| {
+                let mut out = [0.0f64; MAX_COEFFICIENTS];
+                let mut sum = [0.0f64; 3];
+                for v in &vectors {
+                    quadrature.exp_floored(black_box(&v[..count]), Some((&v[..count], -2.3)), 1.0, &mut out[..count]);
+                    for (s, l) in sum.iter_mut().zip(&light) {
+                        *s += l.iter().zip(&out[..count]).map(|(a, b)| a * b).sum::<f64>();
+                    }
+                }
+                black_box(sum)
+            })
+        });
+        c.bench_function(&format!("lit/folded f32/order{order}"), |b| {
+            b.iter(|| {
+                let mut sum = [0.0f32; 3];
+                for v in &vectors32 {
+                    let lit = folded.lit(black_box(&v[..count]), Some((&v[..count], -2.3)), 1.0);
+                    for (s, l) in sum.iter_mut().zip(lit) {
+                        *s += l;
+                    }
+                }
+                black_box(sum)
+            })
+        });
+    }
+}
+
 fn blockers(c: &mut Criterion) {
     use logsh::logsh::{cap_log_zh, view_blocker, BlockerView};
     use logsh::sh::add_rotated_zonal;
@@ -56,6 +96,6 @@ fn blockers(c: &mut Criterion) {
 criterion_group! {
     name = benches;
     config = Criterion::default().sample_size(20).measurement_time(std::time::Duration::from_secs(1)).warm_up_time(std::time::Duration::from_millis(300));
-    targets = exponentiation, blockers
+    targets = exponentiation, lighting, blockers
 }
 criterion_main!(benches);

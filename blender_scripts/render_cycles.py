@@ -2,11 +2,17 @@
 logsh is compared against (`examples/cycles_compare.rs`).
 
     python blender_scripts/render_cycles.py --blend scene.blend --out DIR [--frame 1]
-        [--samples 256] [--resolution WxH] [--seed 0]
+        [--samples 256] [--resolution WxH] [--seed 0] [--ladder 1,2,4,...]
     blender -b scene.blend -P blender_scripts/render_cycles.py -- --out DIR ...
 
 Writes `DIR/cycles.NNNN.exr` (linear RGB, half float) and `DIR/cycles.NNNN.png` (sRGB,
 Standard view transform); refuses to write over either.
+
+With `--ladder`, times Cycles instead (`examples/cycles_timing.rs` reads the results):
+one render of 1 sample first, untimed, so that loading Cycles' kernels is not counted,
+then one render per sample count of the ladder, each timed from the render call to its
+return (scene sync included, as every frame of a sequence pays it), written as
+`DIR/cycles.NNNN.sN.exr`, and the times as `DIR/cycles.NNNN.timing.json`.
 
 So that the two renders differ only in how they compute light and visibility, every
 material is first converted as the exporter converts it (`logsh_exporter/exporter.py`)
@@ -27,15 +33,17 @@ at its centre (box filter of width 0.01 px), as for the G-buffer, so the two ima
 compare pixel for pixel; no denoising, no clamping.
 """
 import argparse
+import json
 import os
 import sys
+import time
 
 import bpy
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from export_scene import size  # noqa: E402
 from logsh_exporter.exporter import DATA_FILTER_WIDTH, Changes, material_table, find_heightfield, Options, \
-    renderable_objects  # noqa: E402
+    output_size, renderable_objects  # noqa: E402
 
 
 def roughness_of(exponent):
@@ -85,6 +93,7 @@ def main(argv):
     parser.add_argument("--samples", type=int, default=256)
     parser.add_argument("--resolution", type=size)
     parser.add_argument("--seed", type=int, default=0, help="Cycles' noise seed (two seeds measure the noise)")
+    parser.add_argument("--ladder", type=sample_ladder, help="time renders at these sample counts (1,2,4,...)")
     args = parser.parse_args(argv)
     if args.blend:
         bpy.ops.wm.open_mainfile(filepath=os.path.abspath(args.blend), load_ui=False)
@@ -93,7 +102,9 @@ def main(argv):
     scene = bpy.context.scene
     frame = args.frame if args.frame is not None else scene.frame_start
     stem = os.path.join(os.path.abspath(args.out), f"cycles.{frame:04d}")
-    for path in (stem + ".exr", stem + ".png"):
+    outputs = [f"{stem}.s{n}.exr" for n in args.ladder] + [stem + ".timing.json"] if args.ladder else \
+        [stem + ".exr", stem + ".png"]
+    for path in outputs:
         if os.path.exists(path):
             sys.exit(f"error: {path} exists; choose another directory")
     os.makedirs(args.out, exist_ok=True)
@@ -136,20 +147,57 @@ def main(argv):
 
     scene.frame_set(frame)
     render.use_file_extension = False
+    if args.ladder:
+        time_ladder(scene, stem, args.ladder)
+        return
     bpy.ops.render.render()
-    result = bpy.data.images["Render Result"]
+    save_exr(scene, stem + ".exr")
     settings = render.image_settings
+    settings.file_format = "PNG"
+    settings.color_depth = "8"
+    bpy.data.images["Render Result"].save_render(stem + ".png", scene=scene)
+    print(f"wrote {stem}.exr and .png ({args.samples} samples, max bounces {cycles.max_bounces})")
+
+
+def sample_ladder(text):
+    counts = [int(n) for n in text.split(",")]
+    if not counts or any(n < 1 for n in counts):
+        raise argparse.ArgumentTypeError(f"{text!r}: sample counts are integers >= 1, comma-separated")
+    return counts
+
+
+def time_ladder(scene, stem, ladder):
+    """Renders 1 sample untimed (Cycles loads its kernels), then each count of `ladder`
+    timed; writes each image and the times."""
+    scene.cycles.samples = 1
+    started = time.perf_counter()
+    bpy.ops.render.render()
+    warm_up = time.perf_counter() - started
+    seconds = []
+    for count in ladder:
+        scene.cycles.samples = count
+        started = time.perf_counter()
+        bpy.ops.render.render()
+        seconds.append(time.perf_counter() - started)
+        save_exr(scene, f"{stem}.s{count}.exr")
+        print(f"{count} samples: {seconds[-1]:.3f} s")
+    with open(stem + ".timing.json", "w") as f:
+        json.dump({"warm_up_seconds": warm_up, "samples": ladder, "seconds": seconds,
+                   "threads": scene.render.threads, "resolution": list(output_size(scene))}, f, indent=1)
+    print(f"wrote {stem}.timing.json (warm-up render {warm_up:.2f} s)")
+
+
+def save_exr(scene, path):
+    """The last render as linear RGB, half float."""
+    result = bpy.data.images["Render Result"]
+    settings = scene.render.image_settings
     if hasattr(settings, "media_type"):
         settings.media_type = "IMAGE"
     settings.file_format = "OPEN_EXR"
     settings.color_mode = "RGB"
     settings.color_depth = "16"
     settings.exr_codec = "ZIP"
-    result.save_render(stem + ".exr", scene=scene)
-    settings.file_format = "PNG"
-    settings.color_depth = "8"
-    result.save_render(stem + ".png", scene=scene)
-    print(f"wrote {stem}.exr and .png ({args.samples} samples, max bounces {cycles.max_bounces})")
+    result.save_render(path, scene=scene)
 
 
 if __name__ == "__main__":

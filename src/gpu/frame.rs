@@ -165,7 +165,7 @@ impl Gpu {
     ) -> Result<PreparedFrame<'a>, GpuError> {
         let mut plan = FramePlan::new(scene, frame, settings)?;
         let started = Instant::now();
-        let PlannedKernel::F32(kernel) = &plan.kernel else {
+        let PlannedKernel::F32(kernel) = plan.kernel.as_ref() else {
             return Err(GpuError::double_precision());
         };
         let march = plan.terrain.as_ref().map(|t| MarchShape::of(&t.pyramid, &settings.horizon));

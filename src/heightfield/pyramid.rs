@@ -523,6 +523,24 @@ impl HorizonPyramid {
             LevelReconstruction::BicubicBSpline => {
                 let u = grid_coordinate(x, self.min[0], self.max[0], l.columns);
                 let v = grid_coordinate(y, self.min[1], self.max[1], l.rows);
+                // Away from the edges no tap is clamped: four contiguous samples per row
+                // (the same sum as below, in the same order).
+                let (i, j) = (u as usize, v as usize);
+                if i >= 1 && j >= 1 && i + 2 < l.columns && j + 2 < l.rows {
+                    let wx = bspline_weights(u - i as f64);
+                    let wy = bspline_weights(v - j as f64);
+                    let mut sum = 0.0;
+                    for (r, w) in wy.iter().enumerate() {
+                        let start = (j - 1 + r) * l.columns + i - 1;
+                        let line: &[f32; 4] = l.heights[start..start + 4].try_into().expect("four taps");
+                        let mut s = 0.0;
+                        for (c, &h) in line.iter().enumerate() {
+                            s += wx[c] * f64::from(h);
+                        }
+                        sum += w * s;
+                    }
+                    return sum;
+                }
                 let (ix, wx) = bspline_taps(u, l.columns);
                 let (iy, wy) = bspline_taps(v, l.rows);
                 let mut sum = 0.0;
@@ -557,9 +575,10 @@ fn bspline_taps(u: f64, n: usize) -> ([usize; 4], [f64; 4]) {
     if n <= 1 {
         return ([0; 4], [0.25; 4]);
     }
-    let i = u.floor();
-    let w = bspline_weights(u - i);
-    let i = i as isize;
+    // `u` is clamped to `[0, n - 1]`: truncation (an integer conversion, not a libm
+    // call) is its floor.
+    let i = u as isize;
+    let w = bspline_weights(u - i as f64);
     let last = (n - 1) as isize;
     (std::array::from_fn(|t| (i - 1 + t as isize).clamp(0, last) as usize), w)
 }

@@ -83,7 +83,7 @@ fn shade_plan<P: PixelResult>(plan: &FramePlan) -> (Vec<P>, StageTimings) {
     let blockers = (!plan.blockers.is_empty()).then_some(&plan.blockers);
     let occluders = Occluders { blockers, horizons: pyramid.as_ref() };
     let started = Instant::now();
-    let pixels = match &plan.kernel {
+    let pixels = match plan.kernel.as_ref() {
         PlannedKernel::F32(kernel) => shade_pixels::<P, f32>(kernel, occluders, plan),
         PlannedKernel::F64(kernel) => shade_pixels::<P, f64>(kernel, occluders, plan),
     };

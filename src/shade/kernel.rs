@@ -15,7 +15,9 @@ use crate::logsh::{cap_log_zh, lobe_log_zh_as, optimal_lobe_epsilon, view_blocke
 use crate::scene::camera::dot;
 use crate::scene::{EnvironmentMap, Light, Material, PointLight, SunLight};
 use crate::sh::exp::{exp_hyb_with, exp_series, ExactExp, OlTable};
-use crate::sh::{add_rotated_zonal, coefficient_count, ExpMethod, Real, TriplingTensor, MAX_COEFFICIENTS};
+use crate::sh::{
+    add_rotated_zonal, coefficient_count, ExpMethod, FoldedQuadrature, Real, TriplingTensor, MAX_COEFFICIENTS,
+};
 use rayon::prelude::*;
 use std::borrow::Cow;
 use std::collections::BTreeMap;
@@ -246,6 +248,9 @@ pub struct ShadingKernel<T> {
     pub(crate) materials: BTreeMap<u32, MaterialLobes<T>>,
     /// Light SH coefficients per colour channel.
     pub(crate) light: [Vec<T>; 3],
+    /// The light folded into the quadrature, for [`Self::lit`] in f32 with `quad` or
+    /// `exact` ([`FoldedQuadrature`]).
+    pub(crate) folded: Option<FoldedQuadrature>,
     /// The sharp lights, shaded outside SH ([`super::sun`]).
     pub(crate) suns: Vec<SunDisk>,
     /// The point lamps, each a disk built per receiver ([`SunDisk::of_lamp`]).
@@ -351,6 +356,14 @@ impl<T: Real> ShadingKernel<T> {
             (vec![T::of(epsilon.ln()); DEPTH_INTERVALS + 1], vec![T::of(epsilon.ln()); DEPTH_INTERVALS + 1])
         };
         let channel = |c: usize| light.iter().map(|rgb| T::of(rgb[c])).collect::<Vec<T>>();
+        // The f32 path dots with the light inside the quadrature (`crate::sh::folded`).
+        let folded = (is_f32::<T>() && matches!(exp.method, ExpMethod::Quad | ExpMethod::Exact)).then(|| {
+            let channel64 = |c: usize| light.iter().map(|rgb| rgb[c]).collect::<Vec<f64>>();
+            FoldedQuadrature::new(
+                exp.exact.as_ref().expect("always built"),
+                &[channel64(0), channel64(1), channel64(2)],
+            )
+        });
         Self {
             order,
             log_epsilon: T::of(epsilon.ln()),
@@ -365,6 +378,7 @@ impl<T: Real> ShadingKernel<T> {
             tangent,
             materials,
             light: [channel(0), channel(1), channel(2)],
+            folded,
             suns: suns.iter().map(SunDisk::new).collect(),
             points: points.to_vec(),
             ground,
@@ -495,6 +509,15 @@ impl<T: Real> ShadingKernel<T> {
         let mut f = [T::zero(); MAX_COEFFICIENTS];
         f[..count].copy_from_slice(&visibility[..count]);
         add_rotated_zonal(self.order, &lobe.zonal, T::one(), axis.map(T::of), &mut f[..count]);
+        if let Some(folded) = &self.folded {
+            let as_f32 = |v: &[T]| -> [f32; MAX_COEFFICIENTS] {
+                std::array::from_fn(|k| v.get(k).and_then(|x| x.to_f32()).unwrap_or(0.0))
+            };
+            let (f32s, v32s) = (as_f32(&f[..count]), as_f32(&visibility[..count]));
+            let floored = self.overlap_floor.then(|| (&v32s[..count], self.log_epsilon.to_f32().unwrap_or(0.0)));
+            let ceiling = lobe.log_peak as f32;
+            return folded.lit(&f32s[..count], floored, ceiling).map(|c| T::of(f64::from(c)));
+        }
         let mut e = [T::zero(); MAX_COEFFICIENTS];
         let floored = self.overlap_floor.then(|| (&visibility[..count], self.log_epsilon.to_f64().unwrap_or(0.0)));
         self.exp.exp(&f[..count], floored, lobe.log_peak, &mut e[..count]);
@@ -682,6 +705,11 @@ fn open_lobe<T: Real>(order: usize, exp: &Exponentiator, lobe: &LobeTable<T>) ->
     let mut e = vec![T::zero(); count];
     exp.exp(&f, None, lobe.log_peak, &mut e);
     (0..order).map(|l| e[l * l + l]).collect()
+}
+
+/// Whether the kernel's scalar is f32 (the throughput path) rather than the f64 oracle.
+fn is_f32<T: Real>() -> bool {
+    std::any::TypeId::of::<T>() == std::any::TypeId::of::<f32>()
 }
 
 /// The view direction mirrored about `n`: `R = 2 (n . V) n - V`, `V` from `p` towards

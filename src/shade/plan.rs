@@ -13,9 +13,11 @@ use super::frame::{check_frame, height_field, ShadeError};
 use super::kernel::ShadingKernel;
 use super::settings::{Precision, ShadingSettings};
 use crate::heightfield::{HeightField, HorizonPyramid, PyramidPlan};
-use crate::scene::{Frame, Light, Material, Scene, SunLight};
+use crate::scene::{Frame, Light, Material, PointLight, Scene, SunLight};
 use crate::sh::Real;
 use crate::timing::StageTimings;
+use std::collections::BTreeMap;
+use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
 /// The height field of a frame and the plan of its pyramid (level sizes, march steps,
@@ -61,7 +63,8 @@ pub struct FramePlan<'a> {
     pub contents: FrameContents,
     /// `Some` when the scene has a height map.
     pub terrain: Option<Terrain>,
-    pub kernel: PlannedKernel,
+    /// Shared with the frames before it whose kernel is the same ([`lighting`]).
+    pub kernel: Arc<PlannedKernel>,
     /// The frame's sphere blockers as a hierarchy.
     pub blockers: BlockerTree,
     /// The sharp lights the kernel shades: the scene's, then those taken out of its map.
@@ -94,36 +97,15 @@ impl<'a> FramePlan<'a> {
             prefiltered: false,
             suns: false,
         };
-        let mut suns = frame.suns.clone();
-        let mut extracted_shares = Vec::new();
-        let extracted;
-        let residual = match frame.light.as_ref() {
-            Light::Environment { map, strength } if settings.sharp_lights => {
-                let split = super::sharp_lights::extract_suns(map, *strength);
-                suns.extend(&split.suns);
-                extracted_shares = split.shares;
-                extracted = Light::Environment { map: split.residual, strength: *strength };
-                &extracted
-            }
-            other => other,
-        };
-        let mut light = residual.sh_coefficients(settings.order);
-        settings.light_window.apply(settings.order, &mut light);
-        let inputs = KernelInputs {
-            settings,
-            scene,
-            frame,
-            light: &light,
-            residual,
-            heightfield: contents.heightfield,
-            suns: &suns,
-        };
-        let kernel = match settings.precision {
-            Precision::F32 => PlannedKernel::F32(inputs.kernel()),
-            Precision::F64 => PlannedKernel::F64(inputs.kernel()),
-        };
+        let lighting = lighting(settings, scene, frame, contents.heightfield);
+        match lighting.kernel.as_ref() {
+            PlannedKernel::F32(kernel) => kernel.prepare_glossy(&scene.materials, frame),
+            PlannedKernel::F64(kernel) => kernel.prepare_glossy(&scene.materials, frame),
+        }
+        let (kernel, suns, extracted_shares) =
+            (lighting.kernel.clone(), lighting.suns.clone(), lighting.extracted_shares.clone());
         let contents = FrameContents {
-            prefiltered: match &kernel {
+            prefiltered: match kernel.as_ref() {
                 PlannedKernel::F32(kernel) => kernel.has_prefiltered_glossy(),
                 PlannedKernel::F64(kernel) => kernel.has_prefiltered_glossy(),
             },
@@ -162,10 +144,9 @@ struct KernelInputs<'a> {
 }
 
 impl KernelInputs<'_> {
-    /// The kernel's tables, with the prefiltered texels the frame's glossy pixels read
-    /// computed ([`ShadingKernel::prepare_glossy`]).
+    /// The kernel's tables.
     fn kernel<T: Real>(&self) -> ShadingKernel<T> {
-        let kernel = ShadingKernel::new(
+        ShadingKernel::new(
             self.settings,
             &self.scene.materials,
             self.light,
@@ -174,8 +155,88 @@ impl KernelInputs<'_> {
             self.suns,
             &self.frame.points,
             self.frame.ground,
-        );
-        kernel.prepare_glossy(&self.scene.materials, self.frame);
-        kernel
+        )
     }
+}
+
+/// A frame's kernel and the sharp lights it shades, which the next frames of a sequence
+/// share while the settings, the light and everything else the kernel is built from stay
+/// the same: the tables (lobes, Phong eps, fitted depths, OL fit, wedge operator,
+/// quadrature, the folded light) and the prefiltered texels are then built once per
+/// sequence, not per frame.
+pub struct Lighting {
+    pub kernel: Arc<PlannedKernel>,
+    /// The scene's suns, then those taken out of its map.
+    pub suns: Vec<SunLight>,
+    /// The share of the map's power of each sun taken out of it.
+    pub extracted_shares: Vec<f64>,
+}
+
+/// What a kernel is built from, but the frame's pixels. The light is compared by
+/// identity: a scene's static light is one `Arc` for all its frames, and the cache holds
+/// it, so that its address cannot be reused by another.
+struct LightingKey {
+    settings: ShadingSettings,
+    light: Arc<Light>,
+    materials: BTreeMap<u32, Material>,
+    suns: Vec<SunLight>,
+    points: Vec<PointLight>,
+    ground: Option<f64>,
+    heightfield: bool,
+}
+
+impl LightingKey {
+    fn same(&self, other: &LightingKey) -> bool {
+        Arc::ptr_eq(&self.light, &other.light)
+            && self.settings == other.settings
+            && self.materials == other.materials
+            && self.suns == other.suns
+            && self.points == other.points
+            && self.ground == other.ground
+            && self.heightfield == other.heightfield
+    }
+}
+
+/// The last frame's lighting, per process.
+static LAST_LIGHTING: Mutex<Option<(LightingKey, Arc<Lighting>)>> = Mutex::new(None);
+
+/// The kernel of `frame` with `settings`: the last frame's when nothing it is built from
+/// changed, else built (suns taken out of the map, the residual projected) and kept.
+fn lighting(settings: &ShadingSettings, scene: &Scene, frame: &Frame, heightfield: bool) -> Arc<Lighting> {
+    let key = LightingKey {
+        settings: *settings,
+        light: frame.light.clone(),
+        materials: scene.materials.clone(),
+        suns: frame.suns.clone(),
+        points: frame.points.clone(),
+        ground: frame.ground,
+        heightfield,
+    };
+    let last = || LAST_LIGHTING.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
+    if let Some((_, lighting)) = last().as_ref().filter(|(previous, _)| previous.same(&key)) {
+        return lighting.clone();
+    }
+    let mut suns = frame.suns.clone();
+    let mut extracted_shares = Vec::new();
+    let extracted;
+    let residual = match frame.light.as_ref() {
+        Light::Environment { map, strength } if settings.sharp_lights => {
+            let split = super::sharp_lights::extract_suns(map, *strength);
+            suns.extend(&split.suns);
+            extracted_shares = split.shares;
+            extracted = Light::Environment { map: split.residual, strength: *strength };
+            &extracted
+        }
+        other => other,
+    };
+    let mut light = residual.sh_coefficients(settings.order);
+    settings.light_window.apply(settings.order, &mut light);
+    let inputs = KernelInputs { settings, scene, frame, light: &light, residual, heightfield, suns: &suns };
+    let kernel = match settings.precision {
+        Precision::F32 => PlannedKernel::F32(inputs.kernel()),
+        Precision::F64 => PlannedKernel::F64(inputs.kernel()),
+    };
+    let lighting = Arc::new(Lighting { kernel: Arc::new(kernel), suns, extracted_shares });
+    *last() = Some((key, lighting.clone()));
+    lighting
 }

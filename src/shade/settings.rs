@@ -12,7 +12,7 @@ pub const MAX_DIRECTIONS: usize = 64;
 pub const MIN_EPSILON: f64 = 1e-6;
 
 /// The knobs of one shading run.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ShadingSettings {
     /// SH order n: n^2 coefficients per log vector.
     pub order: usize,
