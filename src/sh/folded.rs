@@ -21,6 +21,10 @@ use super::exp::ExactExp;
 /// Nodes evaluated together.
 pub const LANES: usize = 8;
 
+#[cfg(target_arch = "x86_64")]
+static HAS_AVX2_FMA: std::sync::LazyLock<bool> =
+    std::sync::LazyLock::new(|| is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma"));
+
 /// `w_i L(x_i)` and the basis at the nodes of one [`ExactExp`] grid, in f32.
 #[derive(Clone, Debug)]
 pub struct FoldedQuadrature {
@@ -58,8 +62,25 @@ impl FoldedQuadrature {
 
     /// `exp*(f) . L` per channel, clamped at 0, with the nodes' values floored and capped
     /// as [`ExactExp::exp_floored`] does: `f - v + max(v, floor)` with `floored = Some((v,
-    /// floor))`, then at most `ceiling`.
+    /// floor))`, then at most `ceiling`. Where the processor has AVX2 and FMA (checked once
+    /// per process), the same code compiled for them: eight lanes per instruction.
     pub fn lit(&self, f: &[f32], floored: Option<(&[f32], f32)>, ceiling: f32) -> [f32; 3] {
+        #[cfg(target_arch = "x86_64")]
+        if *HAS_AVX2_FMA {
+            // SAFETY: the processor supports the features the function is compiled for.
+            return unsafe { self.lit_avx2(f, floored, ceiling) };
+        }
+        self.lit_lanes(f, floored, ceiling)
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    unsafe fn lit_avx2(&self, f: &[f32], floored: Option<(&[f32], f32)>, ceiling: f32) -> [f32; 3] {
+        self.lit_lanes(f, floored, ceiling)
+    }
+
+    #[inline(always)]
+    fn lit_lanes(&self, f: &[f32], floored: Option<(&[f32], f32)>, ceiling: f32) -> [f32; 3] {
         let count = self.count;
         let nodes = self.nodes;
         let mut acc = [[0.0f32; LANES]; 3];
