@@ -2,13 +2,15 @@
 //! disk facing the receiver, shaded as a disk of directions per pixel with only the
 //! occluders nearer than the lamp (src/shade/sun.rs, src/scene/light.rs `PointLight`).
 
-use logsh::reference::{render_reference, Integration, ReferenceLight, ReferenceOptions};
+mod support;
+
 use logsh::scene::{Light, PointLight, Scene, Sphere};
 use logsh::shade::sun::cap_overlap;
 use logsh::shade::{shade_frame, ShadingSettings};
 use logsh::synth::{sphere_over_plane, SphereOverPlane, PLANE_MATERIAL};
 use std::f64::consts::PI;
 use std::sync::Arc;
+use support::sharp::{assert_finite, load_with_lights, PlaneComparison};
 
 fn unit(v: [f64; 3]) -> ([f64; 3], f64) {
     let length = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
@@ -53,43 +55,10 @@ fn lamp_behind_a_sphere_matches_the_closed_form() {
     for soft_falloff in [false, true] {
         let lamp = PointLight { position: [1.0, 1.2, 4.5], radius: 0.3, power: 400.0, color: [1.0; 3], soft_falloff };
         frame.points = vec![lamp];
-        let shaded = shade_frame(&scene, &frame, &ShadingSettings::default()).unwrap();
-        let options = ReferenceOptions {
-            light: ReferenceLight::EnvironmentMap,
-            integration: Integration::Auto,
-            tolerance: 2e-3,
-            max_level: 6,
-        };
-        let truth = render_reference(&scene, &frame, &options, &|_| {}).unwrap();
-        let (mut fast, mut reference, mut n, mut penumbra) = (0.0, 0.0, 0usize, 0usize);
-        let (mut fast_worst, mut reference_worst) = (0.0f64, 0.0f64);
-        for (i, &m) in frame.gbuffer.material.iter().enumerate() {
-            if m != PLANE_MATERIAL {
-                continue;
-            }
-            let p = frame.gbuffer.position[i].map(f64::from);
-            let open = expected_plane(p, &lamp, &[]);
-            let expected = expected_plane(p, &lamp, &[sphere]);
-            let e_fast = (f64::from(shaded.rgba[i][0]) - expected).abs() / open;
-            let e_reference = (f64::from(truth.rgba[i][0]) - expected).abs() / open;
-            fast += e_fast;
-            reference += e_reference;
-            fast_worst = fast_worst.max(e_fast);
-            reference_worst = reference_worst.max(e_reference);
-            n += 1;
-            penumbra += usize::from(expected > 0.02 * open && expected < 0.98 * open);
-        }
-        let (fast, reference) = (fast / n as f64, reference / n as f64);
-        println!(
-            "lamp (soft falloff {soft_falloff}) over sphere and plane, {n} plane pixels ({penumbra} in the penumbra), \
-             relative to the open plane there: CPU mean {fast:.1e} max {fast_worst:.3}; reference mean \
-             {reference:.1e} max {reference_worst:.3}"
-        );
-        assert!(penumbra > 20, "the shadow must have a penumbra to test: {penumbra} pixels");
-        assert!(fast <= 3e-3, "CPU mean error {fast}");
-        assert!(fast_worst <= 0.06, "CPU worst pixel {fast_worst}");
-        assert!(reference <= 2e-3, "reference mean error {reference}");
-        assert!(reference_worst <= 0.02, "reference worst pixel {reference_worst}");
+        PlaneComparison::measure(&scene, &frame, |p| {
+            (expected_plane(p, &lamp, &[sphere]), expected_plane(p, &lamp, &[]))
+        })
+        .assert_close(&format!("lamp (soft falloff {soft_falloff}) over sphere and plane"));
     }
 }
 
@@ -152,14 +121,8 @@ fn extreme_point_lamps_stay_finite() {
     ] {
         frame.points = vec![PointLight { position, radius, power, color: [1.0; 3], soft_falloff }];
         let shaded = shade_frame(&scene, &frame, &ShadingSettings::default()).unwrap();
-        assert!(
-            shaded.rgba.iter().all(|p| p.iter().all(|v| v.is_finite() && *v >= 0.0)),
-            "lamp at {position:?}, radius {radius}, power {power}: non-finite or negative pixel"
-        );
-        if position[2] < -1.0 {
-            let lit = shaded.rgba.iter().zip(&frame.gbuffer.material).filter(|(_, &m)| m == PLANE_MATERIAL);
-            assert!(lit.clone().all(|(p, _)| p[0] < 1.5), "a lamp under the plane lights it");
-        }
+        let what = format!("lamp at {position:?}, radius {radius}, power {power}");
+        assert_finite(&shaded, &frame, position[2] < -1.0, &what);
     }
 }
 
@@ -168,14 +131,7 @@ fn scene_json_point_lamps_are_read_and_checked() {
     let dir = tempfile::tempdir().unwrap();
     let spec = SphereOverPlane { width: 16, height: 9, ..Default::default() };
     sphere_over_plane(dir.path(), &spec).unwrap();
-    let file = dir.path().join("scene.json");
-    let original: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&file).unwrap()).unwrap();
-    let with_lights = |lights: serde_json::Value| {
-        let mut v = original.clone();
-        v["lights"] = lights;
-        std::fs::write(&file, serde_json::to_string_pretty(&v).unwrap()).unwrap();
-        Scene::load(dir.path())
-    };
+    let with_lights = |lights: serde_json::Value| load_with_lights(dir.path(), lights);
     let mut scene = with_lights(serde_json::json!([
         {"type": "point", "position": [1.0, 2.0, 3.0], "radius": 0.25, "power": 500.0, "color": [1.0, 0.9, 0.8]},
         {"type": "point", "position": [0.0, 0.0, 2.0], "radius": 0.0, "power": 10.0, "soft_falloff": false},

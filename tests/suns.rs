@@ -4,13 +4,16 @@
 //!
 //! `cargo test --release --test suns -- --nocapture` prints the measured figures.
 
-use logsh::reference::{render_reference, Integration, ReferenceLight, ReferenceOptions};
+mod support;
+
+use logsh::reference::{render_reference, ReferenceOptions};
 use logsh::scene::{Light, Scene, Sphere, SunLight};
 use logsh::shade::sun::cap_overlap;
 use logsh::shade::{shade_frame, ShadingSettings};
 use logsh::synth::{sphere_over_plane, SphereOverPlane, PLANE_MATERIAL};
 use std::f64::consts::PI;
 use std::sync::Arc;
+use support::sharp::{assert_finite, load_with_lights, PlaneComparison};
 
 const SUN_HALF_ANGLE_DEGREES: f64 = 3.0;
 const SUN_STRENGTH: f32 = 3.0;
@@ -48,44 +51,9 @@ fn sun_behind_a_sphere_matches_the_closed_form() {
     frame.light = Arc::new(Light::Constant([0.0; 3]));
     frame.suns = vec![sun];
 
-    let shaded = shade_frame(&scene, &frame, &ShadingSettings::default()).unwrap();
-    let options = ReferenceOptions {
-        light: ReferenceLight::EnvironmentMap,
-        integration: Integration::Auto,
-        tolerance: 2e-3,
-        max_level: 6,
-    };
-    let truth = render_reference(&scene, &frame, &options, &|_| {}).unwrap();
     let open = f64::from(SUN_STRENGTH) * sun.direction[2] / PI;
-    let (mut fast, mut reference, mut n, mut penumbra) = (0.0, 0.0, 0usize, 0usize);
-    let (mut fast_worst, mut reference_worst) = (0.0f64, 0.0f64);
-    for (i, &m) in frame.gbuffer.material.iter().enumerate() {
-        if m != PLANE_MATERIAL {
-            continue;
-        }
-        let p = frame.gbuffer.position[i].map(f64::from);
-        let expected = expected_plane(p, &sun, &sphere);
-        let e_fast = (f64::from(shaded.rgba[i][0]) - expected).abs() / open;
-        let e_reference = (f64::from(truth.rgba[i][0]) - expected).abs() / open;
-        fast += e_fast;
-        reference += e_reference;
-        fast_worst = fast_worst.max(e_fast);
-        reference_worst = reference_worst.max(e_reference);
-        n += 1;
-        penumbra += usize::from(expected > 0.02 * open && expected < 0.98 * open);
-    }
-    let (fast, reference) = (fast / n as f64, reference / n as f64);
-    println!(
-        "sun over sphere and plane, {n} plane pixels ({penumbra} in the penumbra), relative to the open plane: \
-         CPU mean {fast:.1e} max {fast_worst:.3}; reference mean {reference:.1e} max {reference_worst:.3}"
-    );
-    assert!(penumbra > 20, "the shadow must have a penumbra to test: {penumbra} pixels");
-    // The disk is 32 directions, each a soft patch: penumbra pixels within a few percent.
-    assert!(fast <= 3e-3, "CPU mean error {fast}");
-    assert!(fast_worst <= 0.06, "CPU worst pixel {fast_worst}");
-    // The reference samples the disk to 1e-3 of the value, and the cosine varies over it.
-    assert!(reference <= 2e-3, "reference mean error {reference}");
-    assert!(reference_worst <= 0.02, "reference worst pixel {reference_worst}");
+    PlaneComparison::measure(&scene, &frame, |p| (expected_plane(p, &sun, &sphere), open))
+        .assert_close("sun over sphere and plane");
 }
 
 /// Extreme suns stay finite: radiance 1e6, 0.01 degrees wide, on the horizon and below.
@@ -107,14 +75,7 @@ fn extreme_suns_stay_finite() {
         frame.suns =
             vec![SunLight { direction, half_angle: (0.5 * angle_degrees).to_radians(), strength, color: [1.0; 3] }];
         let shaded = shade_frame(&scene, &frame, &ShadingSettings::default()).unwrap();
-        assert!(
-            shaded.rgba.iter().all(|p| p.iter().all(|v| v.is_finite() && *v >= 0.0)),
-            "sun {direction:?} {angle_degrees} deg: non-finite or negative pixel"
-        );
-        if direction[2] < -0.1 {
-            let lit = shaded.rgba.iter().zip(&frame.gbuffer.material).filter(|(_, &m)| m == PLANE_MATERIAL);
-            assert!(lit.clone().all(|(p, _)| p[0] < 1.5), "a sun below the horizon lights the plane");
-        }
+        assert_finite(&shaded, &frame, direction[2] < -0.1, &format!("sun {direction:?} {angle_degrees} deg"));
     }
 }
 
@@ -123,14 +84,7 @@ fn scene_json_sun_lights_are_read_and_checked() {
     let dir = tempfile::tempdir().unwrap();
     let spec = SphereOverPlane { width: 16, height: 9, ..Default::default() };
     sphere_over_plane(dir.path(), &spec).unwrap();
-    let file = dir.path().join("scene.json");
-    let original: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&file).unwrap()).unwrap();
-    let with_lights = |lights: serde_json::Value| {
-        let mut v = original.clone();
-        v["lights"] = lights;
-        std::fs::write(&file, serde_json::to_string_pretty(&v).unwrap()).unwrap();
-        Scene::load(dir.path())
-    };
+    let with_lights = |lights: serde_json::Value| load_with_lights(dir.path(), lights);
     let scene = with_lights(serde_json::json!([
         {"type": "sun", "direction": [0.0, 0.0, 2.0], "angle": 1.0, "strength": 4.0, "color": [1.0, 0.9, 0.8]}
     ]))

@@ -2,6 +2,8 @@
 //! actual difference.
 #![allow(dead_code)]
 
+pub mod sharp;
+
 /// Asserts `|actual - expected| <= tolerance` for scalars or slices, printing the worst
 /// entry and its difference.
 #[macro_export]
