@@ -37,6 +37,10 @@ pub enum Command {
     Render(RenderArgs),
     /// List the parts, layers, channels, sizes and sample types of an EXR file (headers only).
     Info(InfoArgs),
+    /// Recompute the beauty and every pass of frames rendered with --transfer under a turned, scaled or swapped environment, without shading again.
+    Relight(RelightArgs),
+    /// Serve a local web page (127.0.0.1 only) that shows the frames of a directory rendered with --transfer and relights them in the browser: environment rotation, strength, exposure, and a wipe against the Cycles render.
+    View(ViewArgs),
 }
 
 /// `--sharp-lights`.
@@ -286,8 +290,45 @@ pub struct RenderArgs {
     /// Storage of the colour passes and visibility terms (P and N are always float).
     #[arg(long, value_enum, default_value_t = SampleType::Half)]
     pub colour_type: SampleType,
+    /// Also write each pixel's transfer vectors (diffuse and specular, order^2 coefficients each), its colours and glossy lookup as EXR layers, for `logsh relight` and `logsh view`; shaded on the CPU.
+    #[arg(long)]
+    pub transfer: bool,
     #[command(flatten)]
     pub shading: ShadingArgs,
+}
+
+#[derive(Args, Debug)]
+pub struct RelightArgs {
+    /// Frames rendered with `logsh render --transfer`.
+    #[arg(required = true)]
+    pub frames: Vec<PathBuf>,
+    /// Relight with this environment map (EXR or HDR, oriented as a Blender World's Environment Texture) instead of the rendered light.
+    #[arg(long)]
+    pub light: Option<PathBuf>,
+    /// Turn the light by this many degrees about Z, on top of the rendered turn. The scene's Sun and point lamps stay as rendered.
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    pub light_rotation: f64,
+    /// Strength of the map [default: the rendered strength; 1 with --light]; scales a constant or SH light too.
+    #[arg(long, allow_negative_numbers = true)]
+    pub strength: Option<f32>,
+    /// Output directory; receives each frame's relit EXR (beauty and passes, same file name) and a PNG preview.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Storage of the colour passes and visibility terms (P and N are always float).
+    #[arg(long, value_enum, default_value_t = SampleType::Half)]
+    pub colour_type: SampleType,
+}
+
+#[derive(Args, Debug)]
+pub struct ViewArgs {
+    /// Directory of frames rendered with `logsh render --transfer`.
+    pub dir: PathBuf,
+    /// Port on 127.0.0.1 (0: any free port, printed on start).
+    #[arg(long, default_value_t = 8642)]
+    pub port: u16,
+    /// Do not open the page in a browser.
+    #[arg(long)]
+    pub no_open: bool,
 }
 
 #[derive(Args, Debug)]

@@ -29,3 +29,5 @@ pub mod shade;
 pub mod sweep;
 pub mod synth;
 pub mod timing;
+pub mod transfer;
+pub mod view;

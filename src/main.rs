@@ -12,6 +12,8 @@ fn main() {
         Command::Bench(args) => logsh::run::bench(&args),
         Command::Render(args) => logsh::run::render(&args),
         Command::Info(args) => logsh::run::info(&args),
+        Command::Relight(args) => logsh::run::relight(&args),
+        Command::View(args) => logsh::run::view(&args),
     };
     if let Err(error) = result {
         eprintln!("error: {error:#}");

@@ -284,6 +284,7 @@ pub fn render(args: &crate::cli::RenderArgs) -> Result<()> {
         name: args.name.clone(),
         skip_existing: args.skip_existing,
         colour: args.colour_type,
+        transfer: args.transfer,
         settings,
     };
     check_outputs(&scene, &options)?;
@@ -293,7 +294,14 @@ pub fn render(args: &crate::cli::RenderArgs) -> Result<()> {
     }
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create output directory {}", args.out.display()))?;
-    let executor = Executor::select(args.shading.device, &settings)?;
+    let executor = if args.transfer {
+        if args.shading.device == crate::executor::DeviceChoice::Gpu {
+            return Err(anyhow!("--transfer: the transfer layers are computed on the CPU; leave out --device gpu"));
+        }
+        Executor::cpu()
+    } else {
+        Executor::select(args.shading.device, &settings)?
+    };
     print_notices(&executor);
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(args.threads.unwrap_or(0))
@@ -341,4 +349,99 @@ pub fn info(args: &crate::cli::InfoArgs) -> Result<()> {
         println!("{}", serde_json::to_string_pretty(&all)?);
     }
     Ok(())
+}
+
+/// `logsh relight`.
+pub fn relight(args: &crate::cli::RelightArgs) -> Result<()> {
+    use crate::transfer::{relight, RelightLight, RelightOptions, TransferFrame};
+    if args.out.exists() && !args.out.is_dir() {
+        return Err(anyhow!("--out {}: exists and is not a directory", args.out.display()));
+    }
+    if !args.light_rotation.is_finite() {
+        return Err(anyhow!("--light-rotation {} is not a number", args.light_rotation));
+    }
+    if args.strength.is_some_and(|s| !(s.is_finite() && s >= 0.0)) {
+        return Err(anyhow!("--strength {}: give a finite value >= 0", args.strength.unwrap_or_default()));
+    }
+    let options = RelightOptions { light: args.light.clone(), rotation: args.light_rotation, strength: args.strength };
+    let mut outputs = Vec::new();
+    for file in &args.frames {
+        let name = file.file_name().ok_or_else(|| anyhow!("{}: not a file", file.display()))?;
+        let exr = args.out.join(name).with_extension("exr");
+        let png = exr.with_extension("png");
+        let canonical = |p: &Path| std::fs::canonicalize(p).ok();
+        for output in [&exr, &png] {
+            if let Some(existing) = canonical(output) {
+                if args.frames.iter().any(|f| canonical(f).as_ref() == Some(&existing))
+                    || args.light.as_deref().and_then(canonical).as_ref() == Some(&existing)
+                {
+                    return Err(anyhow!("{}: would be written over an input; choose another --out", output.display()));
+                }
+            }
+        }
+        if outputs.iter().any(|(e, _): &(std::path::PathBuf, _)| *e == exr) {
+            return Err(anyhow!("{}: two frames would be written to the same file", exr.display()));
+        }
+        outputs.push((exr, png));
+    }
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("cannot create output directory {}", args.out.display()))?;
+    let started = Instant::now();
+    let mut light: Option<RelightLight> = None;
+    let (mut reading, mut building, mut relighting) = (0.0, 0.0, 0.0);
+    for (file, (exr, png)) in args.frames.iter().zip(&outputs) {
+        let t = Instant::now();
+        let frame = TransferFrame::read(file)?;
+        reading += t.elapsed().as_secs_f64();
+        let t = Instant::now();
+        let source = options.source(&frame.header);
+        if !light.as_ref().is_some_and(|l| l.serves(&source, &frame.header)) {
+            light = Some(RelightLight::new(source, &frame.header, file)?);
+        }
+        building += t.elapsed().as_secs_f64();
+        let t = Instant::now();
+        let passes = relight(&frame, light.as_ref().expect("built above"));
+        relighting += t.elapsed().as_secs_f64();
+        crate::render::write_passes(exr, &passes, args.colour_type)?;
+        output::write_png_preview(png, passes.width, passes.height, &passes.beauty)?;
+    }
+    let count = args.frames.len();
+    eprintln!(
+        "relit {count} frame(s) in {:.3} s: reading {:.1} ms, light {:.1} ms, relighting {:.1} ms per frame: {}",
+        started.elapsed().as_secs_f64(),
+        1e3 * reading / count as f64,
+        1e3 * building / count as f64,
+        1e3 * relighting / count as f64,
+        args.out.display()
+    );
+    Ok(())
+}
+
+/// `logsh view`.
+pub fn view(args: &crate::cli::ViewArgs) -> Result<()> {
+    let viewer = crate::view::Viewer::new(&args.dir)?;
+    let open = !args.no_open;
+    viewer.serve(args.port, |address| {
+        println!("logsh view: {} at {address} (Ctrl-C stops)", args.dir.display());
+        let _ = std::io::Write::flush(&mut std::io::stdout());
+        if open {
+            if let Err(e) = open_in_browser(address) {
+                eprintln!("view: cannot open a browser ({e}); open {address} in one");
+            }
+        }
+    })
+}
+
+/// Opens `address` with the desktop's browser.
+fn open_in_browser(address: &str) -> std::io::Result<()> {
+    let mut command = if cfg!(target_os = "macos") {
+        std::process::Command::new("open")
+    } else if cfg!(windows) {
+        let mut c = std::process::Command::new("cmd");
+        c.args(["/C", "start", ""]);
+        c
+    } else {
+        std::process::Command::new("xdg-open")
+    };
+    command.arg(address).stdout(std::process::Stdio::null()).stderr(std::process::Stdio::null()).spawn().map(|_| ())
 }

@@ -48,6 +48,8 @@ pub struct SequenceOptions {
     pub skip_existing: bool,
     /// Storage of the colour passes.
     pub colour: SampleType,
+    /// Add the transfer layers ([`crate::transfer`]), shading on the CPU.
+    pub transfer: bool,
     pub settings: ShadingSettings,
 }
 
@@ -159,9 +161,16 @@ fn render_frame(
     outputs: &[PathBuf; 2],
 ) -> anyhow::Result<()> {
     let data = scene.frame(frame)?;
-    let passes = executor.shade_passes(scene, &data, &options.settings)?;
     let [exr, png] = outputs;
-    write_passes(exr, &passes, options.colour)?;
+    let passes = if options.transfer {
+        let (passes, transfer) = crate::transfer::shade_with_transfer(scene, &data, &options.settings)?;
+        write_passes_with_transfer(exr, &passes, &transfer, options.colour)?;
+        passes
+    } else {
+        let passes = executor.shade_passes(scene, &data, &options.settings)?;
+        write_passes(exr, &passes, options.colour)?;
+        passes
+    };
     output::write_png_preview(png, passes.width, passes.height, &passes.beauty)
         .with_context(|| format!("frame {frame}: cannot write the preview"))?;
     Ok(())
@@ -198,10 +207,34 @@ pub fn pass_channels(passes: &ShadedPasses, colour: SampleType) -> Vec<(String, 
 
 /// Writes the multi-layer EXR of one frame.
 pub fn write_passes(path: &Path, passes: &ShadedPasses, colour: SampleType) -> Result<(), output::OutputError> {
-    let channels = pass_channels(passes, colour);
+    write_channels(path, passes.width, passes.height, &pass_channels(passes, colour), &[])
+}
+
+/// Writes the multi-layer EXR of one frame with its transfer layers and their header
+/// ([`crate::transfer`]).
+pub fn write_passes_with_transfer(
+    path: &Path,
+    passes: &ShadedPasses,
+    transfer: &crate::transfer::TransferFrame,
+    colour: SampleType,
+) -> Result<(), output::OutputError> {
+    let mut channels = pass_channels(passes, colour);
+    channels.extend(transfer.channels(colour));
+    let attributes = [(crate::transfer::TRANSFER_ATTRIBUTE, transfer.header_text())];
+    write_channels(path, passes.width, passes.height, &channels, &attributes)
+}
+
+/// Writes named channels and text attributes as one multi-layer EXR.
+fn write_channels(
+    path: &Path,
+    width: usize,
+    height: usize,
+    channels: &[(String, SampleType, Vec<f32>)],
+    attributes: &[(&str, String)],
+) -> Result<(), output::OutputError> {
     let refs: Vec<OutputChannel> = channels
         .iter()
         .map(|(name, kind, values)| OutputChannel { name: name.clone(), sample_type: *kind, values })
         .collect();
-    write_exr_layers(path, passes.width, passes.height, &refs)
+    write_exr_layers(path, width, height, &refs, attributes)
 }

@@ -156,6 +156,19 @@ impl EnvironmentMap {
         EnvironmentMap { file: self.file.clone(), width, height, texels }
     }
 
+    /// This map behind a Blender Mapping node of rotation `rotation` (Euler XYZ, degrees),
+    /// then turned by `turn` degrees about Z (`--light-rotation`: the radiance along `d`
+    /// is what was along `Rz(-turn) d`); the map itself when both are zero.
+    pub fn oriented(self, rotation: [f64; 3], turn: f64) -> EnvironmentMap {
+        if rotation == [0.0; 3] && turn == 0.0 {
+            return self;
+        }
+        let mapping = euler_xyz(rotation.map(f64::to_radians));
+        let turned = euler_xyz([0.0, 0.0, -turn.to_radians()]);
+        let m = [0, 1, 2].map(|i| [0, 1, 2].map(|j| (0..3).map(|k| mapping[i][k] * turned[k][j]).sum::<f64>()));
+        self.rotated(&m)
+    }
+
     /// Bilinear lookup in direction `dir` (need not be unit).
     pub fn lookup(&self, dir: [f64; 3]) -> [f32; 3] {
         BilinearTaps::new(self.width, self.height, dir).read(|column, row| self.texels[row * self.width + column])
@@ -337,6 +350,23 @@ pub enum Light {
     /// The same radiance from every direction.
     Constant([f32; 3]),
     /// Coefficients in the crate's SH convention (`crate::sh::basis`), order^2 of them.
+    Sh(Vec<[f64; 3]>),
+}
+
+/// What a light is made from, its files resolved (`Scene::light_source`), as a transfer
+/// file's header records it.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum LightSource {
+    /// A map times `strength`, behind a Mapping rotation (Euler XYZ, degrees) and turned
+    /// `turn` degrees about Z.
+    Environment {
+        file: PathBuf,
+        strength: f32,
+        rotation: [f64; 3],
+        turn: f64,
+    },
+    Constant([f32; 3]),
     Sh(Vec<[f64; 3]>),
 }
 

@@ -67,7 +67,7 @@
 
 pub mod camera;
 pub mod error;
-mod exr_read;
+pub(crate) mod exr_read;
 pub mod gbuffer;
 pub mod heightmap;
 pub mod light;
@@ -78,7 +78,7 @@ pub use camera::{Camera, Sphere};
 pub use error::{SceneError, MAX_IMAGE_PIXELS, MAX_IMAGE_SIDE};
 pub use gbuffer::{ChannelNames, GBuffer};
 pub use heightmap::HeightMap;
-pub use light::{EnvironmentMap, Light, PointLight, SunLight, MAX_SUNS};
+pub use light::{EnvironmentMap, Light, LightSource, PointLight, SunLight, MAX_SUNS};
 
 use serde::Deserialize;
 use std::collections::BTreeMap;
@@ -719,6 +719,24 @@ impl Scene {
         Ok(())
     }
 
+    /// What the light of `frame` is made from, files resolved: what a relight needs to
+    /// build it again ([`crate::transfer`]).
+    pub fn light_source(&self, frame: i64) -> LightSource {
+        match &self.light_spec {
+            LightSpec::Environment { path, strength, rotation } => {
+                let file = path.resolve(&self.dir, frame);
+                LightSource::Environment {
+                    file: std::path::absolute(&file).unwrap_or(file),
+                    strength: *strength,
+                    rotation: *rotation,
+                    turn: self.light_turn,
+                }
+            }
+            LightSpec::Constant(c) => LightSource::Constant(*c),
+            LightSpec::Sh(v) => LightSource::Sh(v.clone()),
+        }
+    }
+
     /// The light of `frame` (shared when its path has no `#`).
     pub fn light(&self, frame: i64) -> Result<Arc<Light>, SceneError> {
         match &self.static_light {
@@ -745,16 +763,8 @@ impl Scene {
     fn read_light(&self, frame: i64) -> Result<Light, SceneError> {
         match &self.light_spec {
             LightSpec::Environment { path, strength, rotation } => {
-                let mut map = EnvironmentMap::read(&path.resolve(&self.dir, frame))?;
-                // The Mapping rotation, then the turn about Z (the light turned by +turn:
-                // the radiance along d is what was along Rz(-turn) d).
-                let mapping = light::euler_xyz(rotation.map(f64::to_radians));
-                let turn = light::euler_xyz([0.0, 0.0, -self.light_turn.to_radians()]);
-                let m = [0, 1, 2].map(|i| [0, 1, 2].map(|j| (0..3).map(|k| mapping[i][k] * turn[k][j]).sum::<f64>()));
-                if *rotation != [0.0; 3] || self.light_turn != 0.0 {
-                    map = map.rotated(&m);
-                }
-                Ok(Light::Environment { map, strength: *strength })
+                let map = EnvironmentMap::read(&path.resolve(&self.dir, frame))?;
+                Ok(Light::Environment { map: map.oriented(*rotation, self.light_turn), strength: *strength })
             }
             LightSpec::Constant(c) => Ok(Light::Constant(*c)),
             LightSpec::Sh(v) => Ok(Light::Sh(v.clone())),

@@ -18,6 +18,7 @@
 //! multilayer files accepts it (Blender 4 and 5, Nuke, oiiotool, the `exr` crate).
 //! Compression ZIP (16 scan lines per block), lossless.
 
+use exr::meta::attribute::{AttributeValue, Text};
 use exr::prelude::{
     f16, AnyChannel, AnyChannels, Blocks, Compression, Encoding, FlatSamples, Image, Layer, LayerAttributes, LineOrder,
     WritableImage,
@@ -92,7 +93,7 @@ pub fn write_exr_channels(
         .iter()
         .map(|(name, values)| OutputChannel { name: name.to_string(), sample_type: SampleType::Float, values })
         .collect();
-    write_exr_layers(path, width, height, &list)
+    write_exr_layers(path, width, height, &list, &[])
 }
 
 /// How a channel is stored (`logsh render --colour-type`).
@@ -111,13 +112,15 @@ pub struct OutputChannel<'a> {
     pub values: &'a [f32],
 }
 
-/// Writes `channels` as one ZIP-compressed part, atomically (see the module doc).
+/// Writes `channels` as one ZIP-compressed part, atomically (see the module doc), with
+/// `attributes` as text attributes of the part (Latin-1 text).
 /// Channel names must be distinct; they are sorted in the file, as EXR requires.
 pub fn write_exr_layers(
     path: &Path,
     width: usize,
     height: usize,
     channels: &[OutputChannel],
+    attributes: &[(&str, String)],
 ) -> Result<(), OutputError> {
     for c in channels {
         check_len(path, width, height, c.values.len())?;
@@ -132,9 +135,19 @@ pub fn write_exr_layers(
             AnyChannel::new(c.name.as_str(), samples)
         })
         .collect();
+    let mut layer_attributes = LayerAttributes::default();
+    for (name, value) in attributes {
+        let text = |s: &str| {
+            Text::new_or_none(s).ok_or_else(|| OutputError::Encode {
+                file: path.to_path_buf(),
+                message: format!("attribute {name} is not Latin-1 text"),
+            })
+        };
+        layer_attributes.other.insert(text(name)?, AttributeValue::Text(text(value)?));
+    }
     let layer = Layer::new(
         (width, height),
-        LayerAttributes::default(),
+        layer_attributes,
         Encoding { compression: Compression::ZIP16, blocks: Blocks::ScanLines, line_order: LineOrder::Increasing },
         AnyChannels::sort(list.into_iter().collect()),
     );

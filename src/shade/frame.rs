@@ -172,22 +172,32 @@ pub enum PixelWork {
     Shade { point: SurfacePoint, tint: [f32; 3] },
 }
 
-/// The frame walk shared by the CPU and GPU executors: background from the light along
-/// the camera ray, water through the reflection G-buffer (the reflected point shaded as
-/// seen from the water surface, or the sky and the Sun lamps in the mirror direction, or
-/// a point lamp the mirror ray meets first),
+/// Where a pixel's colour comes from: the frame walk shared by the CPU and GPU executors
+/// and the transfer layers ([`crate::transfer`]).
+#[derive(Clone, Copy, Debug)]
+pub enum PixelSource {
+    /// The background: the light along the camera ray (`None`: no camera, black).
+    Background { ray: Option<[f64; 3]> },
+    /// Water mirroring the sky along `mirror`: `tint` times the light and the scene's Sun
+    /// lamps there.
+    WaterSky { tint: [f32; 3], mirror: [f64; 3] },
+    /// Water whose mirror ray meets a point lamp first: `tint` times its radiance.
+    WaterLamp { tint: [f32; 3], radiance: [f32; 3] },
+    /// A point to shade, its result times `tint` (1 but for water).
+    Surface { point: SurfacePoint, tint: [f32; 3] },
+}
+
+/// Background from the light along the camera ray, water through the reflection
+/// G-buffer (the reflected point shaded as seen from the water surface, or the sky and
+/// the Sun lamps in the mirror direction, or a point lamp the mirror ray meets first),
 /// every other pixel its own surface point.
-pub fn pixel_work(materials: &BTreeMap<u32, Material>, frame: &Frame, x: usize, y: usize) -> PixelWork {
+pub fn pixel_source(materials: &BTreeMap<u32, Material>, frame: &Frame, x: usize, y: usize) -> PixelSource {
     let g = &frame.gbuffer;
     let i = g.index(x, y);
     match g.material[i] {
-        0 => {
-            let sky = match &frame.camera {
-                Some(camera) => frame.light.radiance(camera.ray_direction(x as f64 + 0.5, y as f64 + 0.5)),
-                None => [0.0; 3],
-            };
-            PixelWork::Fixed([sky[0], sky[1], sky[2], 0.0])
-        }
+        0 => PixelSource::Background {
+            ray: frame.camera.as_ref().map(|camera| camera.ray_direction(x as f64 + 0.5, y as f64 + 0.5)),
+        },
         m => match materials.get(&m) {
             Some(Material::Water { tint }) => {
                 let reflection = frame.reflection.as_ref().expect("checked before shading");
@@ -196,25 +206,41 @@ pub fn pixel_work(materials: &BTreeMap<u32, Material>, frame: &Frame, x: usize, 
                 // A lamp the mirror ray meets before the reflected surface (Cycles shows
                 // lamps to glossy rays): the pixel is its radiance.
                 if let Some(radiance) = mirrored_lamp(frame, water.position, mirror, reflection, i) {
-                    return PixelWork::Fixed([
-                        tint[0] * radiance[0],
-                        tint[1] * radiance[1],
-                        tint[2] * radiance[2],
-                        1.0,
-                    ]);
+                    return PixelSource::WaterLamp { tint: *tint, radiance };
                 }
                 if reflection.material[i] == 0 {
-                    let mut sky = frame.light.radiance(mirror);
-                    // The scene's Sun lamps, which the map does not hold, are mirrored too.
-                    for (s, sun) in sky.iter_mut().zip(mirrored_suns(frame, mirror)) {
-                        *s += sun;
-                    }
-                    PixelWork::Fixed([tint[0] * sky[0], tint[1] * sky[1], tint[2] * sky[2], 1.0])
+                    PixelSource::WaterSky { tint: *tint, mirror }
                 } else {
-                    PixelWork::Shade { point: surface_at(reflection, i, Some(water.position), frame), tint: *tint }
+                    PixelSource::Surface { point: surface_at(reflection, i, Some(water.position), frame), tint: *tint }
                 }
             }
-            _ => PixelWork::Shade { point: surface_at(g, i, None, frame), tint: [1.0; 3] },
+            _ => PixelSource::Surface { point: surface_at(g, i, None, frame), tint: [1.0; 3] },
         },
+    }
+}
+
+/// What pixel `(x, y)` needs from an executor ([`pixel_source`]).
+pub fn pixel_work(materials: &BTreeMap<u32, Material>, frame: &Frame, x: usize, y: usize) -> PixelWork {
+    work_of(frame, pixel_source(materials, frame, x, y))
+}
+
+/// What a pixel of `source` needs from an executor.
+pub fn work_of(frame: &Frame, source: PixelSource) -> PixelWork {
+    let tinted = |tint: [f32; 3], c: [f32; 3]| [tint[0] * c[0], tint[1] * c[1], tint[2] * c[2], 1.0];
+    match source {
+        PixelSource::Background { ray } => {
+            let sky = ray.map_or([0.0; 3], |d| frame.light.radiance(d));
+            PixelWork::Fixed([sky[0], sky[1], sky[2], 0.0])
+        }
+        PixelSource::WaterLamp { tint, radiance } => PixelWork::Fixed(tinted(tint, radiance)),
+        PixelSource::WaterSky { tint, mirror } => {
+            let mut sky = frame.light.radiance(mirror);
+            // The scene's Sun lamps, which the map does not hold, are mirrored too.
+            for (s, sun) in sky.iter_mut().zip(mirrored_suns(frame, mirror)) {
+                *s += sun;
+            }
+            PixelWork::Fixed(tinted(tint, sky))
+        }
+        PixelSource::Surface { point, tint } => PixelWork::Shade { point, tint },
     }
 }

@@ -44,7 +44,8 @@ use std::f64::consts::{FRAC_PI_2, PI};
 use std::sync::{Arc, OnceLock};
 
 /// The shape of a sharp lobe about `R` (`--glossy`).
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
 pub enum SharpLobe {
     /// GGX of width `alpha` in reflected space, with GGX's directional albedo.
     Ggx { alpha: f64 },

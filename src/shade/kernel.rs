@@ -194,7 +194,7 @@ pub const SH_MAX_EXPONENT: f64 = 1024.0;
 /// The map the glossy term reflects: the light's own map (its suns taken out, which the
 /// sun term reflects), a constant light as a small constant map; `None` for a light
 /// given only as SH coefficients.
-fn glossy_map(light: &Light) -> Option<(Cow<'_, EnvironmentMap>, f32)> {
+pub(crate) fn glossy_map(light: &Light) -> Option<(Cow<'_, EnvironmentMap>, f32)> {
     match light {
         Light::Environment { map, strength } => Some((Cow::Borrowed(map), *strength)),
         Light::Constant(c) => Some((
@@ -609,6 +609,28 @@ impl<T: Real> ShadingKernel<T> {
         point: &SurfacePoint,
         reflected: [f64; 3],
     ) -> [f64; 3] {
+        let (cone, sh_weight) = self.prefiltered_weights(occluders, sharp, point, reflected);
+        let by_sh = if sh_weight > 0.0 {
+            let shadowed = self.lit(occlusion, phong, reflected);
+            let open = open_lit(self.order, &sharp.open, reflected, &self.light);
+            occlusion_ratio(shadowed, open)
+        } else {
+            0.0
+        };
+        let weight = cone + sh_weight * by_sh;
+        sharp.prefiltered.lookup(reflected).map(|c| f64::from(c) * weight)
+    }
+
+    /// The two light-independent factors of the prefiltered glossy term's weight
+    /// `A(n . v) O`: `A share cone` and `A (1 - share)`, the second to be multiplied by
+    /// log-SH's occlusion ratio ([`occlusion_ratio`]).
+    pub(crate) fn prefiltered_weights(
+        &self,
+        occluders: Occluders,
+        sharp: &SharpGlossy<T>,
+        point: &SurfacePoint,
+        reflected: [f64; 3],
+    ) -> (f64, f64) {
         let share = sharp.cone_share;
         let by_cone = if share > 0.0 {
             let core = DiskDirections::new(reflected, sharp.lobe.core_radius());
@@ -625,26 +647,9 @@ impl<T: Real> ShadingKernel<T> {
         } else {
             0.0
         };
-        let by_sh = if share < 1.0 {
-            let count = coefficient_count(self.order);
-            let shadowed = self.lit(occlusion, phong, reflected);
-            let mut open = [T::zero(); MAX_COEFFICIENTS];
-            add_rotated_zonal(self.order, &sharp.open, T::one(), reflected.map(T::of), &mut open[..count]);
-            let open = self.light.each_ref().map(|light| {
-                light.iter().zip(&open[..count]).fold(T::zero(), |acc, (&l, &v)| acc + l * v).max(T::zero())
-            });
-            let lum = |c: [T; 3]| (0..3).map(|i| LUMINANCE[i] * c[i].to_f64().unwrap_or(0.0)).sum::<f64>();
-            match lum(open) {
-                below if below > 1e-12 => (lum(shadowed) / below).clamp(0.0, 1.0),
-                _ => 1.0,
-            }
-        } else {
-            0.0
-        };
-        let occluded = share * by_cone + (1.0 - share) * by_sh;
         // n . v = n . R, R the view mirrored about n.
-        let weight = albedo_lookup(&sharp.albedo, dot(reflected, point.normal)) * occluded;
-        sharp.prefiltered.lookup(reflected).map(|c| f64::from(c) * weight)
+        let albedo = albedo_lookup(&sharp.albedo, dot(reflected, point.normal));
+        (albedo * share * by_cone, albedo * (1.0 - share))
     }
 
     /// The sharp lights' diffuse and specular radiance at `point` ([`super::sun`]), each
@@ -654,6 +659,17 @@ impl<T: Real> ShadingKernel<T> {
         occluders: Occluders,
         point: &SurfacePoint,
         material: &Material,
+    ) -> ([f32; 3], [f32; 3]) {
+        self.sharp_lit(occluders, point, material, &self.suns)
+    }
+
+    /// [`sunlit`](Self::sunlit) with `suns` (some of the kernel's) and every point lamp.
+    pub(crate) fn sharp_lit(
+        &self,
+        occluders: Occluders,
+        point: &SurfacePoint,
+        material: &Material,
+        suns: &[SunDisk],
     ) -> ([f32; 3], [f32; 3]) {
         let (mut diffuse, mut glossy) = ([0.0f64; 3], [0.0f64; 3]);
         let (albedo, phong) = match material {
@@ -668,7 +684,7 @@ impl<T: Real> ShadingKernel<T> {
         let axis = reflect_view(point.view_origin, point.position, n);
         let sharp_albedo = sharp.map(|sharp| albedo_lookup(&sharp.albedo, dot(axis, n)));
         let lamps = self.points.iter().map(|lamp| SunDisk::of_lamp(lamp, point.position, n));
-        for sun in self.suns.iter().map(Cow::Borrowed).chain(lamps.map(Cow::Owned)) {
+        for sun in suns.iter().map(Cow::Borrowed).chain(lamps.map(Cow::Owned)) {
             let v =
                 sun.visibility(occluders.blockers, occluders.horizons, self.ground, point.position, n, point.object);
             let d = sun.reflected(&v, |z| Lobe::Diffuse.value(z), n);
@@ -707,6 +723,28 @@ fn open_lobe<T: Real>(order: usize, exp: &Exponentiator, lobe: &LobeTable<T>) ->
     (0..order).map(|l| e[l * l + l]).collect()
 }
 
+/// `max(exp*(lobe about axis) . L, 0)` per colour channel, `open` the lobe's
+/// exponentiated ZH about +Z ([`SharpGlossy::open`]): the open lobe's light, the
+/// denominator of the specular occlusion.
+pub(crate) fn open_lit<T: Real>(order: usize, open: &[T], axis: [f64; 3], light: &[Vec<T>; 3]) -> [T; 3] {
+    let count = coefficient_count(order);
+    let mut rotated = [T::zero(); MAX_COEFFICIENTS];
+    add_rotated_zonal(order, open, T::one(), axis.map(T::of), &mut rotated[..count]);
+    light
+        .each_ref()
+        .map(|light| light.iter().zip(&rotated[..count]).fold(T::zero(), |acc, (&l, &v)| acc + l * v).max(T::zero()))
+}
+
+/// log-SH's specular occlusion, `lum(shadowed) / lum(open)` in `[0, 1]`, 1 where the open
+/// lobe gets no light.
+pub(crate) fn occlusion_ratio<T: Real>(shadowed: [T; 3], open: [T; 3]) -> f64 {
+    let lum = |c: [T; 3]| (0..3).map(|i| LUMINANCE[i] * c[i].to_f64().unwrap_or(0.0)).sum::<f64>();
+    match lum(open) {
+        below if below > 1e-12 => (lum(shadowed) / below).clamp(0.0, 1.0),
+        _ => 1.0,
+    }
+}
+
 /// Whether the kernel's scalar is f32 (the throughput path) rather than the f64 oracle.
 fn is_f32<T: Real>() -> bool {
     std::any::TypeId::of::<T>() == std::any::TypeId::of::<f32>()
@@ -727,4 +765,7 @@ pub fn reflect_view(eye: [f64; 3], p: [f64; 3], n: [f64; 3]) -> [f64; 3] {
 
 // The same shading split into compositing passes and visibility terms (`logsh render`).
 mod pixel_passes;
+mod transfer;
+pub(crate) use pixel_passes::ratio as visibility_ratio;
 pub use pixel_passes::{PixelPasses, LUMINANCE};
+pub use transfer::{GlossyTransfer, PointTransfer};

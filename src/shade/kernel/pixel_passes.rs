@@ -55,7 +55,7 @@ impl PixelPasses {
 
 /// `lum(numerator) / lum(unoccluded)`, or 1 where the unoccluded receiver gets no light
 /// (a black light shadows nothing).
-fn ratio<T: Real>(numerator: [T; 3], unoccluded: [T; 3]) -> f32 {
+pub(crate) fn ratio<T: Real>(numerator: [T; 3], unoccluded: [T; 3]) -> f32 {
     let lum = |c: [T; 3]| (0..3).map(|i| LUMINANCE[i] * c[i].to_f64().unwrap_or(0.0)).sum::<f64>();
     let below = lum(unoccluded);
     if below > 1e-12 {

@@ -1,0 +1,110 @@
+//! How a relight compares with shading again (`logsh relight` against `logsh render`),
+//! in accuracy and in time, one run per scene:
+//!
+//! ```text
+//! cargo run --release --example relight_accuracy -- [--rotation DEG] [--repeats N] SCENE...
+//! ```
+//!
+//! Per scene (its first frame): the transfer is rendered with `--sharp-lights off`,
+//! written as `logsh render --transfer` writes it (half floats) and read back, then relit
+//! with the light turned by `DEG`. It is compared with a fresh shade of the turned light,
+//! with `--sharp-lights off` (what a relight equals: the target is 0.002) and with the
+//! default `auto` (what relighting does to the suns taken out of a map). Errors are
+//! `logsh::compare`'s: mean absolute over non-background pixels, RGB, over the open white
+//! floor; "worst" is the largest pixel's. Times are the medians of `N` runs of the
+//! shading call and of the relight call (reading the file and building the light
+//! excluded, which a sequence does once), and of the two whole processes' work
+//! as they run in a sequence. Where the scene directory holds a converged Cycles render of
+//! the frame (`cycles.NNNN.exr`, `blender_scripts/render_cycles.py`) and the light is not
+//! turned, the relit frame and the default shade are also compared with it.
+
+use logsh::compare::{frame_error, unoccluded_value};
+use logsh::scene::output::SampleType;
+use logsh::scene::Scene;
+use logsh::shade::{shade_frame_passes, ShadingSettings};
+use logsh::transfer::{relight, shade_with_transfer, RelightLight, RelightOptions, TransferFrame};
+use std::path::PathBuf;
+use std::time::Instant;
+
+fn median(mut times: Vec<f64>) -> f64 {
+    times.sort_by(f64::total_cmp);
+    times[times.len() / 2]
+}
+
+fn main() -> anyhow::Result<()> {
+    let mut args = std::env::args().skip(1);
+    let (mut rotation, mut repeats, mut scenes) = (0.0f64, 3usize, Vec::new());
+    while let Some(a) = args.next() {
+        match a.as_str() {
+            "--rotation" => rotation = args.next().expect("--rotation DEG").parse()?,
+            "--repeats" => repeats = args.next().expect("--repeats N").parse()?,
+            _ => scenes.push(PathBuf::from(a)),
+        }
+    }
+    let temp = tempfile::tempdir()?;
+    println!("| scene | size | vs shade, sharp lights off (mean / worst) | vs shade, sharp lights auto | vs Cycles: relit / shade auto | relight | shade | ratio |");
+    println!("| --- | --- | --- | --- | --- | --- | --- | --- |");
+    for dir in &scenes {
+        let settings = ShadingSettings { sharp_lights: false, ..ShadingSettings::default() };
+        let scene = Scene::load(dir)?;
+        let number = scene.default_frame();
+        let frame = scene.frame(number)?;
+        let (passes, transfer) = shade_with_transfer(&scene, &frame, &settings)?;
+        let file = temp.path().join("transfer.exr");
+        logsh::render::write_passes_with_transfer(&file, &passes, &transfer, SampleType::Half)?;
+        let transfer = TransferFrame::read(&file)?;
+
+        let mut turned = Scene::load(dir)?;
+        turned.turn_light(rotation)?;
+        let turned_frame = turned.frame(number)?;
+        let unoccluded = unoccluded_value(&turned_frame).expect("a map or constant light");
+        let mut shade_times = Vec::new();
+        let mut truth = None;
+        for _ in 0..repeats {
+            let started = Instant::now();
+            truth = Some(shade_frame_passes(&turned, &turned_frame, &settings)?);
+            shade_times.push(started.elapsed().as_secs_f64());
+        }
+        let truth = truth.expect("one repeat at least");
+        let auto = shade_frame_passes(&turned, &turned_frame, &ShadingSettings::default())?;
+
+        let options = RelightOptions { rotation, ..RelightOptions::default() };
+        let light = RelightLight::new(options.source(&transfer.header), &transfer.header, &file)?;
+        let mut relight_times = Vec::new();
+        let mut relit = None;
+        for _ in 0..repeats {
+            let started = Instant::now();
+            relit = Some(relight(&transfer, &light));
+            relight_times.push(started.elapsed().as_secs_f64());
+        }
+        let relit = relit.expect("one repeat at least");
+        let rgb = |p: &logsh::shade::ShadedPasses| p.beauty.iter().map(|c| [c[0], c[1], c[2]]).collect::<Vec<_>>();
+        let material = &frame.gbuffer.material;
+        let off = frame_error(material, &rgb(&relit), &rgb(&truth), unoccluded);
+        let worst = off.per_pixel.iter().fold(0.0f64, |a, &b| a.max(b));
+        let with_suns = frame_error(material, &rgb(&relit), &rgb(&auto), unoccluded);
+        let cycles = dir.join(format!("cycles.{number:04}.exr"));
+        let against_cycles = match logsh::compare::read_rgb(&cycles) {
+            Ok((_, _, truth)) if rotation == 0.0 => format!(
+                "{:.4} / {:.4}",
+                frame_error(material, &rgb(&relit), &truth, unoccluded).mean,
+                frame_error(material, &rgb(&auto), &truth, unoccluded).mean
+            ),
+            _ => "-".into(),
+        };
+        let (r, s) = (median(relight_times), median(shade_times));
+        println!(
+            "| {} | {}x{} | {:.5} / {:.4} | {:.4} | {against_cycles} | {:.1} ms | {:.1} ms | {:.0}x |",
+            dir.display(),
+            frame.gbuffer.width,
+            frame.gbuffer.height,
+            off.mean,
+            worst,
+            with_suns.mean,
+            1e3 * r,
+            1e3 * s,
+            s / r
+        );
+    }
+    Ok(())
+}

@@ -1,0 +1,156 @@
+//! The kernel's shading kept as transfer vectors (`logsh render --transfer`,
+//! [`crate::transfer`]): what [`ShadingKernel::shade_passes`] dots with the light, before
+//! the dot, so that any other light relights the point.
+//!
+//! `exp*(V + lobe)` does not depend on the light (paper 000, Eq. 9: visibility and BRDF are
+//! summed in log space, the light enters only in the final dot product), so
+//! `max(exp*(V + D) . L', 0)` is the diffuse term under any light `L'` with exactly the
+//! visibility the point had. The prefiltered glossy term keeps what does not depend on
+//! the light (the cone test, the lobe's albedo, the mirror direction) and the transfer its
+//! log-SH share of the specular occlusion needs; the scene's own lamps are light that a
+//! relight leaves where it was, kept as radiance.
+
+use super::{Occluders, ShadingKernel, SurfacePoint};
+use crate::scene::Material;
+use crate::sh::{add_rotated_zonal, coefficient_count, Real, MAX_COEFFICIENTS};
+use crate::shade::glossy::SharpLobe;
+
+/// How a point's glossy term reads the light.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum GlossyTransfer {
+    /// No glossy term.
+    None,
+    /// `--glossy sh` (or a light without a map): `max(specular_transfer . L, 0)`.
+    Sh,
+    /// The prefiltered map of the material's lobe along `direction`, times
+    /// `cone + sh_weight * ratio`, `ratio` the log-SH share of the specular occlusion
+    /// under the light ([`ShadingKernel::prefiltered_glossy`]).
+    Prefiltered { material: u32, direction: [f64; 3], cone: f64, sh_weight: f64 },
+}
+
+/// One surface point's transfer vectors (`coefficient_count(order)` entries each) and
+/// the light-independent rest of its shading, before any water tint.
+#[derive(Clone, Copy, Debug)]
+pub struct PointTransfer {
+    /// `exp*(V + D)`: the diffuse term is `albedo * max(diffuse . L, 0)`.
+    pub diffuse: [f32; MAX_COEFFICIENTS],
+    /// `exp*(T + D)`, the receiver without blockers or height field: the denominator of
+    /// the visibility passes.
+    pub unoccluded: [f32; MAX_COEFFICIENTS],
+    /// The numerators of `visibility_heightfield` and `visibility_blockers` where the
+    /// frame has both (otherwise each equals `diffuse` or `unoccluded`).
+    pub heightfield: [f32; MAX_COEFFICIENTS],
+    pub blockers: [f32; MAX_COEFFICIENTS],
+    /// `exp*(V + Phong lobe about R)` with `--glossy sh`, `exp*(V_occlusion + Phong lobe)`
+    /// for the prefiltered term; zero without a glossy term.
+    pub specular: [f32; MAX_COEFFICIENTS],
+    pub glossy: GlossyTransfer,
+    pub albedo: [f32; 3],
+    pub specular_colour: [f32; 3],
+    /// The scene's Sun and point lamps' share of the diffuse and specular passes (albedo
+    /// and specular colour applied): light that a relight of the environment keeps.
+    pub lamps_diffuse: [f32; 3],
+    pub lamps_specular: [f32; 3],
+}
+
+impl PointTransfer {
+    /// A point that nothing lights.
+    pub const DARK: PointTransfer = PointTransfer {
+        diffuse: [0.0; MAX_COEFFICIENTS],
+        unoccluded: [0.0; MAX_COEFFICIENTS],
+        heightfield: [0.0; MAX_COEFFICIENTS],
+        blockers: [0.0; MAX_COEFFICIENTS],
+        specular: [0.0; MAX_COEFFICIENTS],
+        glossy: GlossyTransfer::None,
+        albedo: [0.0; 3],
+        specular_colour: [0.0; 3],
+        lamps_diffuse: [0.0; 3],
+        lamps_specular: [0.0; 3],
+    };
+}
+
+impl<T: Real> ShadingKernel<T> {
+    /// The prefiltered glossy lobes, by material: the lobe and its exponentiated ZH about
+    /// +Z ([`super::SharpGlossy::open`]).
+    pub fn prefiltered_lobes(&self) -> Vec<(u32, SharpLobe, Vec<f64>)> {
+        let lobes = self.materials.iter().filter_map(|(&index, lobes)| lobes.sharp.as_ref().map(|s| (index, s)));
+        lobes
+            .map(|(index, sharp)| (index, sharp.lobe, sharp.open.iter().map(|v| v.to_f64().unwrap_or(0.0)).collect()))
+            .collect()
+    }
+
+    /// Whether the ground plane hides the lower hemisphere (from the prefiltered glossy
+    /// term's map too).
+    pub fn has_ground(&self) -> bool {
+        self.ground.is_some()
+    }
+
+    /// `exp*(visibility + lobe about axis)`, floored as [`Self::lit`] floors it, into `out`.
+    fn transfer(&self, visibility: &[T], lobe: &super::LobeTable<T>, axis: [f64; 3], out: &mut [f32]) {
+        let count = coefficient_count(self.order);
+        let mut f = [T::zero(); MAX_COEFFICIENTS];
+        f[..count].copy_from_slice(&visibility[..count]);
+        add_rotated_zonal(self.order, &lobe.zonal, T::one(), axis.map(T::of), &mut f[..count]);
+        let floored = self.overlap_floor.then(|| (&visibility[..count], self.log_epsilon.to_f64().unwrap_or(0.0)));
+        let mut e = [T::zero(); MAX_COEFFICIENTS];
+        self.exp.exp(&f[..count], floored, lobe.log_peak, &mut e[..count]);
+        for (o, v) in out[..count].iter_mut().zip(&e[..count]) {
+            *o = v.to_f32().unwrap_or(0.0);
+        }
+    }
+
+    /// The transfer of `point` (module doc); [`PointTransfer::DARK`] for an unknown
+    /// material or water (whose caller transfers the reflected point instead).
+    /// `scene_suns` is how many of the kernel's suns are the scene's own Sun lamps (the
+    /// rest were taken out of the map, and a relight holds them in SH).
+    pub fn shade_transfer(&self, occluders: Occluders, point: &SurfacePoint, scene_suns: usize) -> PointTransfer {
+        let count = coefficient_count(self.order);
+        let (p, n) = (point.position, point.normal);
+        let Some((full, occlusion)) = self.surface_visibility(occluders, point) else {
+            return PointTransfer::DARK;
+        };
+        let lobes = &self.materials[&point.material];
+        let (albedo, specular_colour) = match &lobes.material {
+            Material::Diffuse { albedo } | Material::Heightfield { albedo } => (*albedo, [0.0; 3]),
+            Material::Phong { albedo, specular, .. } => (*albedo, *specular),
+            Material::Water { .. } => return PointTransfer::DARK,
+        };
+        let mut out = PointTransfer { albedo, specular_colour, ..PointTransfer::DARK };
+        self.transfer(&full, &self.diffuse, n, &mut out.diffuse);
+        let none = Occluders { blockers: None, horizons: None };
+        let mut unoccluded = [T::zero(); MAX_COEFFICIENTS];
+        self.add_visibility(none, p, n, point.object, &mut unoccluded[..count]);
+        self.transfer(&unoccluded, &self.diffuse, n, &mut out.unoccluded);
+        if occluders.blockers.is_some() && occluders.horizons.is_some() && self.wedge.is_some() {
+            let spheres_only = Occluders { blockers: occluders.blockers, horizons: None };
+            let mut blockers = [T::zero(); MAX_COEFFICIENTS];
+            self.add_visibility(spheres_only, p, n, point.object, &mut blockers[..count]);
+            let mut heightfield = [T::zero(); MAX_COEFFICIENTS];
+            for i in 0..count {
+                heightfield[i] = full[i] - blockers[i] + unoccluded[i];
+            }
+            self.transfer(&heightfield, &self.diffuse, n, &mut out.heightfield);
+            self.transfer(&blockers, &self.diffuse, n, &mut out.blockers);
+        }
+        if let Material::Phong { .. } = lobes.material {
+            let phong = lobes.phong.as_ref().expect("phong materials carry their lobe");
+            let reflected = super::reflect_view(point.view_origin, p, n);
+            out.glossy = match &lobes.sharp {
+                Some(sharp) => {
+                    let (cone, sh_weight) = self.prefiltered_weights(occluders, sharp, point, reflected);
+                    if sh_weight > 0.0 {
+                        self.transfer(&occlusion, phong, reflected, &mut out.specular);
+                    }
+                    GlossyTransfer::Prefiltered { material: point.material, direction: reflected, cone, sh_weight }
+                }
+                None => {
+                    self.transfer(&full, phong, reflected, &mut out.specular);
+                    GlossyTransfer::Sh
+                }
+            };
+        }
+        (out.lamps_diffuse, out.lamps_specular) =
+            self.sharp_lit(occluders, point, &lobes.material, &self.suns[..scene_suns.min(self.suns.len())]);
+        out
+    }
+}

@@ -1,0 +1,444 @@
+//! The transfer layers of a frame in memory, their EXR channels and header, and reading
+//! them back (the table in the [module doc](super)).
+
+use super::lobe_code;
+use crate::scene::exr_read::ExrChannels;
+use crate::scene::output::SampleType;
+use crate::scene::{LightSource, SceneError};
+use crate::sh::{coefficient_count, MAX_ORDER, MIN_ORDER};
+use crate::shade::glossy::SharpLobe;
+use crate::shade::kernel::{GlossyTransfer, PointTransfer};
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+use std::path::Path;
+
+/// The name of the header attribute that holds [`TransferHeader`] as JSON.
+pub const TRANSFER_ATTRIBUTE: &str = "logshTransfer";
+
+/// The SH convention of the transfer vectors, spelled out for readers of the file
+/// ([`crate::sh::basis`]).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ShConvention {
+    pub order: usize,
+    pub basis: String,
+    pub index: String,
+    pub normalisation: String,
+    pub axes: String,
+}
+
+impl ShConvention {
+    pub fn of_order(order: usize) -> Self {
+        Self {
+            order,
+            basis: "real spherical harmonics, no Condon-Shortley phase: y_l^m = sqrt(2) K_l^m P_l^m(cos theta) \
+                    cos(m phi) for m > 0, K_l^0 P_l(cos theta) for m = 0, sqrt(2) K_l^|m| P_l^|m|(cos theta) \
+                    sin(|m| phi) for m < 0"
+                .into(),
+            index: "coefficient k = l (l + 1) + m, bands l = 0..order".into(),
+            normalisation: "orthonormal over the sphere: f_k = integral of f y_k, the constant 1 is \
+                            [2 sqrt(pi), 0, ...], the integral of a product is the dot product"
+                .into(),
+            axes: "world space of the Blender scene: right-handed, Z up; theta from +Z, phi from +X towards +Y".into(),
+        }
+    }
+}
+
+/// A prefiltered glossy lobe of the frame (`glossy_lobe = 3 + j` for the `j`-th).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PrefilteredLobe {
+    /// The material it belongs to.
+    pub material: u32,
+    pub lobe: SharpLobe,
+    /// `exp*(Phong lobe)` about +Z as ZH (`order` values): the specular occlusion's
+    /// unoccluded denominator.
+    pub open: Vec<f64>,
+}
+
+/// What a transfer file's header records (module doc).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TransferHeader {
+    pub version: u32,
+    /// The scene directory and frame number the frame was rendered from.
+    pub scene: std::path::PathBuf,
+    pub frame: i64,
+    pub sh: ShConvention,
+    /// The light the frame was rendered with.
+    pub light: LightSource,
+    /// `--light-window`, applied to the light's projection.
+    pub light_window: String,
+    /// The ground plane hides the map's lower hemisphere from the prefiltered glossy term.
+    pub sky_only: bool,
+    /// The frame has a height field, sphere blockers (which visibility passes are not 1).
+    pub heightfield: bool,
+    pub blockers: bool,
+    pub lobes: Vec<PrefilteredLobe>,
+}
+
+/// The transfer layers of one frame, row-major from the top row; the SH layers hold
+/// `count` coefficients per pixel.
+#[derive(Clone, Debug)]
+pub struct TransferFrame {
+    pub width: usize,
+    pub height: usize,
+    pub header: TransferHeader,
+    pub diffuse: Vec<f32>,
+    pub unoccluded: Vec<f32>,
+    /// Present in frames with both a height field and blockers.
+    pub heightfield: Option<Vec<f32>>,
+    pub blockers: Option<Vec<f32>>,
+    /// Present in scenes with a Phong material.
+    pub specular: Option<Vec<f32>>,
+    pub albedo: Vec<[f32; 3]>,
+    pub specular_colour: Vec<[f32; 3]>,
+    pub lamps_diffuse: Vec<[f32; 3]>,
+    pub lamps_specular: Vec<[f32; 3]>,
+    pub glossy_lobe: Vec<f32>,
+    pub glossy_direction: Vec<[f32; 3]>,
+    pub glossy_weight: Vec<[f32; 2]>,
+    /// 1 where a surface was shaded, 0 on the background (the beauty's alpha).
+    pub alpha: Vec<f32>,
+    /// The G-buffer's world position and normal (`P`, `N`), passed through.
+    pub position: Vec<[f32; 3]>,
+    pub normal: Vec<[f32; 3]>,
+}
+
+/// What one pixel's transfer is, beyond a surface point's: how it reads the light
+/// directly (background, water mirroring the sky) and its tint.
+pub enum PixelTransfer<'a> {
+    /// The background: the light along the camera ray (`None`: black).
+    Background { ray: Option<[f64; 3]> },
+    /// Water mirroring the sky along `mirror`, and the scene's Sun lamps there.
+    Mirror { tint: [f32; 3], mirror: [f64; 3], suns: [f32; 3] },
+    /// Water mirroring a lamp.
+    Lamp { tint: [f32; 3], radiance: [f32; 3] },
+    /// A surface point, times `tint`.
+    Surface { point: &'a PointTransfer, tint: [f32; 3] },
+}
+
+impl TransferFrame {
+    /// An empty frame of `width` x `height` to [`push`](Self::push) pixels into, with the
+    /// optional layers the frame has.
+    pub fn new(
+        width: usize,
+        height: usize,
+        header: TransferHeader,
+        heightfield_and_blockers: bool,
+        phong: bool,
+    ) -> Self {
+        let layer = |present: bool| present.then(Vec::new);
+        Self {
+            width,
+            height,
+            header,
+            diffuse: Vec::new(),
+            unoccluded: Vec::new(),
+            heightfield: layer(heightfield_and_blockers),
+            blockers: layer(heightfield_and_blockers),
+            specular: layer(phong),
+            albedo: Vec::new(),
+            specular_colour: Vec::new(),
+            lamps_diffuse: Vec::new(),
+            lamps_specular: Vec::new(),
+            glossy_lobe: Vec::new(),
+            glossy_direction: Vec::new(),
+            glossy_weight: Vec::new(),
+            alpha: Vec::new(),
+            position: Vec::new(),
+            normal: Vec::new(),
+        }
+    }
+
+    pub fn order(&self) -> usize {
+        self.header.sh.order
+    }
+
+    pub fn count(&self) -> usize {
+        coefficient_count(self.order())
+    }
+
+    /// The index of each prefiltered lobe's material in [`TransferHeader::lobes`].
+    pub fn lobe_indices(&self) -> BTreeMap<u32, usize> {
+        self.header.lobes.iter().enumerate().map(|(j, lobe)| (lobe.material, j)).collect()
+    }
+
+    /// Appends one pixel (row-major order); `lobes` from [`Self::lobe_indices`].
+    pub fn push(&mut self, pixel: PixelTransfer, lobes: &BTreeMap<u32, usize>) {
+        let count = self.count();
+        let dark = PointTransfer::DARK;
+        let tinted = |tint: [f32; 3], c: [f32; 3]| [0, 1, 2].map(|k| tint[k] * c[k]);
+        let to_f32 = |d: [f64; 3]| d.map(|c| c as f32);
+        let (point, tint, alpha, lobe, direction, lamps_specular, colour) = match pixel {
+            PixelTransfer::Background { ray } => {
+                let lobe = if ray.is_some() { lobe_code::MIRROR } else { lobe_code::NONE };
+                (&dark, [1.0; 3], 0.0, lobe, ray.map_or([0.0; 3], to_f32), [0.0; 3], [1.0; 3])
+            }
+            PixelTransfer::Mirror { tint, mirror, suns } => {
+                (&dark, tint, 1.0, lobe_code::MIRROR, to_f32(mirror), tinted(tint, suns), tint)
+            }
+            PixelTransfer::Lamp { tint, radiance } => {
+                (&dark, tint, 1.0, lobe_code::NONE, [0.0; 3], tinted(tint, radiance), [0.0; 3])
+            }
+            PixelTransfer::Surface { point, tint } => {
+                let (lobe, direction) = match point.glossy {
+                    GlossyTransfer::None => (lobe_code::NONE, [0.0; 3]),
+                    GlossyTransfer::Sh => (lobe_code::SH, [0.0; 3]),
+                    GlossyTransfer::Prefiltered { material, direction, .. } => {
+                        (lobe_code::PREFILTERED + lobes[&material] as f32, to_f32(direction))
+                    }
+                };
+                (
+                    point,
+                    tint,
+                    1.0,
+                    lobe,
+                    direction,
+                    tinted(tint, point.lamps_specular),
+                    tinted(tint, point.specular_colour),
+                )
+            }
+        };
+        self.diffuse.extend_from_slice(&point.diffuse[..count]);
+        self.unoccluded.extend_from_slice(&point.unoccluded[..count]);
+        for (layer, values) in [
+            (&mut self.heightfield, &point.heightfield),
+            (&mut self.blockers, &point.blockers),
+            (&mut self.specular, &point.specular),
+        ] {
+            if let Some(layer) = layer {
+                layer.extend_from_slice(&values[..count]);
+            }
+        }
+        self.albedo.push(tinted(tint, point.albedo));
+        self.specular_colour.push(colour);
+        self.lamps_diffuse.push(tinted(tint, point.lamps_diffuse));
+        self.lamps_specular.push(lamps_specular);
+        self.glossy_lobe.push(lobe);
+        self.glossy_direction.push(direction);
+        self.glossy_weight.push(match point.glossy {
+            GlossyTransfer::Prefiltered { cone, sh_weight, .. } => [cone as f32, sh_weight as f32],
+            _ => [0.0; 2],
+        });
+        self.alpha.push(alpha);
+    }
+
+    /// Appends the pixels of `rows` (frames of the same layers, pushed in order).
+    pub fn append(&mut self, rows: TransferFrame) {
+        self.diffuse.extend(rows.diffuse);
+        self.unoccluded.extend(rows.unoccluded);
+        for (layer, values) in [
+            (&mut self.heightfield, rows.heightfield),
+            (&mut self.blockers, rows.blockers),
+            (&mut self.specular, rows.specular),
+        ] {
+            if let (Some(layer), Some(values)) = (layer, values) {
+                layer.extend(values);
+            }
+        }
+        self.albedo.extend(rows.albedo);
+        self.specular_colour.extend(rows.specular_colour);
+        self.lamps_diffuse.extend(rows.lamps_diffuse);
+        self.lamps_specular.extend(rows.lamps_specular);
+        self.glossy_lobe.extend(rows.glossy_lobe);
+        self.glossy_direction.extend(rows.glossy_direction);
+        self.glossy_weight.extend(rows.glossy_weight);
+        self.alpha.extend(rows.alpha);
+    }
+
+    /// The SH layers present, by name.
+    pub fn sh_layers(&self) -> Vec<(&'static str, &[f32])> {
+        let mut layers = vec![("sh_diffuse", self.diffuse.as_slice()), ("sh_unoccluded", self.unoccluded.as_slice())];
+        for (name, layer) in
+            [("sh_heightfield", &self.heightfield), ("sh_blockers", &self.blockers), ("sh_specular", &self.specular)]
+        {
+            if let Some(values) = layer {
+                layers.push((name, values.as_slice()));
+            }
+        }
+        layers
+    }
+
+    /// The EXR channels of the layers (module doc), SH and colour layers as `colour`; the
+    /// frame's `P`, `N` and alpha are the passes' own and not repeated.
+    pub fn channels(&self, colour: SampleType) -> Vec<(String, SampleType, Vec<f32>)> {
+        let count = self.count();
+        let mut channels = Vec::new();
+        for (name, values) in self.sh_layers() {
+            for k in 0..count {
+                let channel = format!("{name}_{}.{}", k - k % 4, ["R", "G", "B", "A"][k % 4]);
+                channels.push((channel, colour, values.iter().skip(k).step_by(count).copied().collect()));
+            }
+        }
+        let mut triple = |layer: &str, names: [&str; 3], values: &[[f32; 3]], kind: SampleType| {
+            for (k, channel) in names.iter().enumerate() {
+                channels.push((format!("{layer}.{channel}"), kind, values.iter().map(|v| v[k]).collect()));
+            }
+        };
+        let rgb = ["R", "G", "B"];
+        triple("albedo", rgb, &self.albedo, colour);
+        triple("specular_colour", rgb, &self.specular_colour, colour);
+        triple("lamps_diffuse", rgb, &self.lamps_diffuse, colour);
+        triple("lamps_specular", rgb, &self.lamps_specular, colour);
+        triple("glossy_direction", ["X", "Y", "Z"], &self.glossy_direction, SampleType::Float);
+        channels.push(("glossy_lobe.V".into(), SampleType::Float, self.glossy_lobe.clone()));
+        for (k, channel) in ["X", "Y"].iter().enumerate() {
+            channels.push((
+                format!("glossy_weight.{channel}"),
+                colour,
+                self.glossy_weight.iter().map(|w| w[k]).collect(),
+            ));
+        }
+        channels
+    }
+
+    /// The header as the JSON text of [`TRANSFER_ATTRIBUTE`]; EXR text is Latin-1, so
+    /// every other character (a file name's) is escaped as JSON `\u` escapes.
+    pub fn header_text(&self) -> String {
+        let json = serde_json::to_string(&self.header).expect("the header always serialises");
+        let mut text = String::with_capacity(json.len());
+        for c in json.chars() {
+            if c.is_ascii() {
+                text.push(c);
+            } else {
+                let mut units = [0u16; 2];
+                for unit in c.encode_utf16(&mut units) {
+                    text.push_str(&format!("\\u{unit:04x}"));
+                }
+            }
+        }
+        text
+    }
+
+    /// Reads the transfer layers of a frame that `logsh render --transfer` wrote.
+    pub fn read(file: &Path) -> Result<TransferFrame, SceneError> {
+        let meta = exr::meta::MetaData::read_from_file(file, false)
+            .map_err(|e| crate::scene::error::exr_error(file, "a frame with transfer layers", e))?;
+        let text = meta.headers.iter().find_map(|h| {
+            h.own_attributes
+                .other
+                .iter()
+                .find(|(k, _)| k.as_slice() == TRANSFER_ATTRIBUTE.as_bytes())
+                .map(|(_, v)| v.clone())
+        });
+        let header: TransferHeader = match text {
+            Some(exr::meta::attribute::AttributeValue::Text(t)) => {
+                serde_json::from_str(&t.to_string()).map_err(|e| {
+                    SceneError::invalid(file, format!("its {TRANSFER_ATTRIBUTE} header does not read: {e}"))
+                })?
+            }
+            _ => {
+                return Err(SceneError::invalid(
+                    file,
+                    "has no transfer layers (no logshTransfer header): render it with `logsh render --transfer`",
+                ))
+            }
+        };
+        let order = header.sh.order;
+        if !(MIN_ORDER..=MAX_ORDER).contains(&order) {
+            return Err(SceneError::invalid(
+                file,
+                format!("its transfer order {order} is not in {MIN_ORDER}..={MAX_ORDER}"),
+            ));
+        }
+        let mut exr = ExrChannels::read(file, "a frame with transfer layers")?;
+        exr.use_size_of("sh_diffuse_0.R");
+        let (width, height) = (exr.width, exr.height);
+        let count = coefficient_count(order);
+        let sh = |exr: &mut ExrChannels, name: &str| -> Result<Vec<f32>, SceneError> {
+            let mut values = vec![0.0f32; width * height * count];
+            for k in 0..count {
+                let channel = exr.take(file, &format!("{name}_{}.{}", k - k % 4, ["R", "G", "B", "A"][k % 4]))?;
+                for (i, v) in channel.into_iter().enumerate() {
+                    values[i * count + k] = v;
+                }
+            }
+            Ok(values)
+        };
+        let diffuse = sh(&mut exr, "sh_diffuse")?;
+        let unoccluded = sh(&mut exr, "sh_unoccluded")?;
+        let optional = |exr: &mut ExrChannels, name: &str| -> Result<Option<Vec<f32>>, SceneError> {
+            if exr.has(&format!("{name}_0.R")) {
+                sh(exr, name).map(Some)
+            } else {
+                Ok(None)
+            }
+        };
+        let heightfield = optional(&mut exr, "sh_heightfield")?;
+        let blockers = optional(&mut exr, "sh_blockers")?;
+        let specular = optional(&mut exr, "sh_specular")?;
+        if heightfield.is_some() != blockers.is_some() {
+            return Err(SceneError::invalid(file, "has one of sh_heightfield and sh_blockers without the other"));
+        }
+        let triple = |exr: &mut ExrChannels, layer: &str, names: [&str; 3]| -> Result<Vec<[f32; 3]>, SceneError> {
+            let [a, b, c] = names.map(|n| exr.take(file, &format!("{layer}.{n}")));
+            let (a, b, c) = (a?, b?, c?);
+            Ok((0..a.len()).map(|i| [a[i], b[i], c[i]]).collect())
+        };
+        let rgb = ["R", "G", "B"];
+        let xyz = ["X", "Y", "Z"];
+        let albedo = triple(&mut exr, "albedo", rgb)?;
+        let specular_colour = triple(&mut exr, "specular_colour", rgb)?;
+        let lamps_diffuse = triple(&mut exr, "lamps_diffuse", rgb)?;
+        let lamps_specular = triple(&mut exr, "lamps_specular", rgb)?;
+        let glossy_direction = triple(&mut exr, "glossy_direction", xyz)?;
+        let position = triple(&mut exr, "P", xyz)?;
+        let normal = triple(&mut exr, "N", xyz)?;
+        let glossy_lobe = exr.take(file, "glossy_lobe.V")?;
+        let (x, y) = (exr.take(file, "glossy_weight.X")?, exr.take(file, "glossy_weight.Y")?);
+        let glossy_weight = x.into_iter().zip(y).map(|(x, y)| [x, y]).collect();
+        let alpha = exr.take(file, "A")?;
+        let lobes = header.lobes.len();
+        let last = lobe_code::PREFILTERED + lobes as f32 - 1.0;
+        if let Some(i) =
+            glossy_lobe.iter().position(|&c| !(c == c.round() && (0.0..=last.max(lobe_code::SH)).contains(&c)))
+        {
+            return Err(SceneError::invalid(
+                file,
+                format!(
+                    "glossy_lobe.V is {} at pixel ({}, {}), not a lobe of the header",
+                    glossy_lobe[i],
+                    i % width,
+                    i / width
+                ),
+            ));
+        }
+        if specular.is_none() && glossy_lobe.iter().any(|&c| c >= lobe_code::SH) {
+            return Err(SceneError::invalid(file, "its pixels read sh_specular, which it does not hold"));
+        }
+        if header.lobes.iter().any(|l| l.open.len() != order) {
+            return Err(SceneError::invalid(
+                file,
+                format!("a prefiltered lobe of its header has not {order} ZH values"),
+            ));
+        }
+        let finite = |v: &[f32]| v.iter().all(|x| x.is_finite());
+        let all_finite = finite(&diffuse)
+            && finite(&unoccluded)
+            && [&heightfield, &blockers, &specular].iter().all(|l| l.as_ref().is_none_or(|v| finite(v)))
+            && [&albedo, &specular_colour, &lamps_diffuse, &lamps_specular, &glossy_direction]
+                .iter()
+                .all(|l| l.iter().all(|v| finite(v)));
+        if !all_finite {
+            return Err(SceneError::NonFinite { file: file.to_path_buf(), what: "a transfer layer".into() });
+        }
+        Ok(TransferFrame {
+            width,
+            height,
+            header,
+            diffuse,
+            unoccluded,
+            heightfield,
+            blockers,
+            specular,
+            albedo,
+            specular_colour,
+            lamps_diffuse,
+            lamps_specular,
+            glossy_lobe,
+            glossy_direction,
+            glossy_weight,
+            alpha,
+            position,
+            normal,
+        })
+    }
+}

@@ -1,0 +1,79 @@
+//! Transfer layers (`logsh render --transfer`) and relighting from them (`logsh relight`,
+//! `logsh view`).
+//!
+//! Per pixel, logsh's environment term is `max(exp*(V + lobe) . L, 0)`: the exponentiated
+//! log visibility plus BRDF lobe (paper 000, Eq. 9) dotted with the light's SH vector.
+//! The first factor does not depend on the light, so written out it relights the pixel
+//! under any other light, with the shadows that light casts through the same
+//! visibility. [`relight`] recomputes the beauty and every compositing pass of
+//! [`crate::render`] that way.
+//!
+//! # Layers (added to the frame's EXR; "colour" is `--colour-type`, half by default)
+//!
+//! | channels | type | what |
+//! |---|---|---|
+//! | `sh_diffuse_<k>.{R,G,B,A}` | colour | `exp*(V + D)`, coefficients `k..k+3` (the last block may be shorter) |
+//! | `sh_unoccluded_<k>.*` | colour | `exp*(T + D)`: the visibility passes' denominator |
+//! | `sh_heightfield_<k>.*`, `sh_blockers_<k>.*` | colour | their numerators; only in frames with both |
+//! | `sh_specular_<k>.*` | colour | the glossy transfer (below); only in scenes with a Phong material |
+//! | `albedo.{R,G,B}`, `specular_colour.{R,G,B}` | colour | the material's colours, times water's tint |
+//! | `lamps_diffuse.{R,G,B}`, `lamps_specular.{R,G,B}` | colour | the scene's Sun and point lamps, shaded (kept by a relight) |
+//! | `glossy_lobe.V` | float | what the glossy term reads: 0 nothing, 1 the light itself (mirror, background), 2 `sh_specular`, `3 + j` the header's prefiltered lobe `j` |
+//! | `glossy_direction.{X,Y,Z}` | float | the direction it reads along: the mirrored view, or the camera ray |
+//! | `glossy_weight.{X,Y}` | colour | prefiltered lobes: `A share cone` and `A (1 - share)` |
+//!
+//! `D` is the diffuse lobe about the normal, `V` the log visibility, `T` the tangent and
+//! ground planes alone. Relit, per pixel and colour channel, with `L` the light's SH vector:
+//!
+//! ```text
+//! diffuse   = albedo max(sh_diffuse . L, 0) + lamps_diffuse
+//! specular  = specular_colour G + lamps_specular            (alpha 1)
+//! environment = specular_colour G                            (alpha 0, the background)
+//! G = max(sh_specular . L, 0)                         lobe 2
+//!   = P_j(R) (X + Y ratio)                            lobe 3 + j, R = glossy_direction
+//!   = light(R)                                        lobe 1
+//! ratio = lum(max(sh_specular . L, 0)) / lum(max(open_j(R) . L, 0)), clamped to [0, 1]
+//! visibility_x = lum(max(sh_x . L, 0)) / lum(max(sh_unoccluded . L, 0))
+//! ```
+//!
+//! with `P_j` the light prefiltered with lobe `j` and `open_j` its exponentiated lobe
+//! (both as [`crate::shade::glossy`] builds them; the header lists the lobes).
+//!
+//! # Header (`logshTransfer`, a JSON text attribute of the part)
+//!
+//! The SH convention (order, basis, normalisation, axes, coefficient index), the light the
+//! frame was shaded with (map file, strength, Mapping rotation, turn), the window, whether
+//! the ground plane hides the lower hemisphere, and the prefiltered lobes.
+//!
+//! # Size
+//!
+//! Per pixel at order `n`, in half floats: `n^2` per transfer layer (diffuse, unoccluded,
+//! specular with a Phong material, heightfield and blockers with both occluders), 14
+//! colour values and 4 floats. At order 4 with everything, `5 x 16 x 2 + 14 x 2 + 4 x 4 =
+//! 204` bytes, 106 MB uncompressed at 960 x 540 before ZIP; a diffuse scene of spheres
+//! only, `2 x 16 x 2 + 44 = 108` bytes.
+//!
+//! # What a relight cannot keep
+//!
+//! The transfer holds the environment wholly in SH: a relight equals a shade with
+//! `--sharp-lights off`. Suns that a render took out of the map (`--sharp-lights auto`)
+//! come back as part of the SH light, with the soft shadows SH gives them; the scene's
+//! own Sun and point lamps stay as they were rendered (`lamps_*`), as `--light-rotation`
+//! leaves point lamps.
+
+mod layers;
+mod relight;
+mod shade;
+
+pub use layers::{PixelTransfer, PrefilteredLobe, ShConvention, TransferFrame, TransferHeader, TRANSFER_ATTRIBUTE};
+pub use relight::{relight, RelightLight, RelightOptions, SampledMap, SAMPLED_MAP_WIDTH};
+pub use shade::shade_with_transfer;
+
+/// `glossy_lobe` codes (module doc).
+pub mod lobe_code {
+    pub const NONE: f32 = 0.0;
+    pub const MIRROR: f32 = 1.0;
+    pub const SH: f32 = 2.0;
+    /// The first prefiltered lobe; lobe `j` is `PREFILTERED + j`.
+    pub const PREFILTERED: f32 = 3.0;
+}

@@ -1,0 +1,295 @@
+//! `logsh relight`: the passes of a frame recomputed from its transfer layers under a
+//! light turned, scaled or swapped (the formulas in the [module doc](super)).
+
+use super::layers::{TransferFrame, TransferHeader};
+use super::lobe_code;
+use crate::scene::light::equirectangular_to_direction;
+use crate::scene::{EnvironmentMap, Light, LightSource, SceneError};
+use crate::sh::{coefficient_count, rotate_z};
+use crate::shade::compositing::ShadedPasses;
+use crate::shade::glossy::{MapLevels, Prefiltered};
+use crate::shade::kernel::{glossy_map, occlusion_ratio, open_lit, visibility_ratio};
+use crate::shade::LightWindow;
+use clap::ValueEnum;
+use rayon::prelude::*;
+use std::path::{Path, PathBuf};
+
+/// How the light of a relight differs from the one the frame was rendered with.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct RelightOptions {
+    /// Another environment map (`--light`), in place of the rendered light; its Mapping
+    /// rotation is none.
+    pub light: Option<PathBuf>,
+    /// Degrees about Z on top of the rendered turn (`--light-rotation`).
+    pub rotation: f64,
+    /// The map's strength (`--strength`): the rendered one by default, 1 for `--light`;
+    /// it scales a constant or SH light too.
+    pub strength: Option<f32>,
+}
+
+impl RelightOptions {
+    /// The light to relight with, from the one `header` records.
+    pub fn source(&self, header: &TransferHeader) -> LightSource {
+        match (&self.light, &header.light) {
+            (Some(file), _) => LightSource::Environment {
+                file: file.clone(),
+                strength: self.strength.unwrap_or(1.0),
+                rotation: [0.0; 3],
+                turn: self.rotation,
+            },
+            (None, LightSource::Environment { file, strength, rotation, turn }) => LightSource::Environment {
+                file: file.clone(),
+                strength: self.strength.unwrap_or(*strength),
+                rotation: *rotation,
+                turn: turn + self.rotation,
+            },
+            (None, LightSource::Constant(c)) => LightSource::Constant(c.map(|v| v * self.strength.unwrap_or(1.0))),
+            (None, LightSource::Sh(v)) => {
+                let order = (v.len() as f64).sqrt().round() as usize;
+                let scale = f64::from(self.strength.unwrap_or(1.0));
+                let mut turned: Vec<[f64; 3]> = v.iter().map(|c| c.map(|x| x * scale)).collect();
+                for k in 0..3 {
+                    let mut channel: Vec<f64> = turned.iter().map(|c| c[k]).collect();
+                    rotate_z(order, &mut channel, self.rotation.to_radians());
+                    for (c, x) in turned.iter_mut().zip(channel) {
+                        c[k] = x;
+                    }
+                }
+                LightSource::Sh(turned)
+            }
+        }
+    }
+}
+
+/// The light of a relight, ready for the pixels: its SH vector (windowed as the render's
+/// was) and its map prefiltered with each of the frame's glossy lobes.
+pub struct RelightLight {
+    pub source: LightSource,
+    light: Light,
+    /// Per colour channel, `order^2` coefficients.
+    sh: [Vec<f32>; 3],
+    /// The same, RGB per coefficient (the order the pixels' dot products read them).
+    interleaved: Vec<[f32; 3]>,
+    /// Per lobe of the header; `None` for a light without a map.
+    prefiltered: Vec<Option<Prefiltered>>,
+    /// The lobes' `open` ZH, as f32.
+    open: Vec<Vec<f32>>,
+    /// What it was built for, to be reused by the next frame of a sequence.
+    key: (usize, String, bool, Vec<super::layers::PrefilteredLobe>),
+}
+
+impl RelightLight {
+    /// Reads and projects `source` for frames of `header`'s convention and lobes; `frame`
+    /// is the file `header` came from, named in its errors.
+    pub fn new(source: LightSource, header: &TransferHeader, frame: &Path) -> Result<Self, SceneError> {
+        let order = header.sh.order;
+        let light = match &source {
+            LightSource::Environment { file, strength, rotation, turn } => {
+                if !strength.is_finite() || *strength < 0.0 {
+                    return Err(SceneError::invalid(file, format!("strength {strength} is not a finite value >= 0")));
+                }
+                let map = EnvironmentMap::read(file)?;
+                Light::Environment { map: map.oriented(*rotation, *turn), strength: *strength }
+            }
+            LightSource::Constant(c) => Light::Constant(*c),
+            LightSource::Sh(v) => {
+                if v.len() < coefficient_count(order) {
+                    return Err(SceneError::invalid(
+                        frame,
+                        format!(
+                            "its header's SH light has {} coefficients; order {order} needs {}",
+                            v.len(),
+                            order * order
+                        ),
+                    ));
+                }
+                Light::Sh(v[..coefficient_count(order)].to_vec())
+            }
+        };
+        let window = LightWindow::from_str(&header.light_window, true).map_err(|_| {
+            SceneError::invalid(frame, format!("its header names an unknown light window \"{}\"", header.light_window))
+        })?;
+        let mut coefficients = light.sh_coefficients(order);
+        window.apply(order, &mut coefficients);
+        let sh = [0, 1, 2].map(|k| coefficients.iter().map(|c| c[k] as f32).collect());
+        let interleaved = coefficients.iter().map(|c| c.map(|v| v as f32)).collect();
+        let levels = (!header.lobes.is_empty())
+            .then(|| glossy_map(&light))
+            .flatten()
+            .map(|(map, strength)| MapLevels::new(&map, strength, header.sky_only));
+        let prefiltered =
+            header.lobes.iter().map(|lobe| levels.as_ref().map(|levels| levels.prefilter(lobe.lobe))).collect();
+        let open = header.lobes.iter().map(|lobe| lobe.open.iter().map(|&v| v as f32).collect()).collect();
+        let key = (order, header.light_window.clone(), header.sky_only, header.lobes.clone());
+        Ok(Self { source, light, sh, interleaved, prefiltered, open, key })
+    }
+
+    /// Whether this light serves frames of `header` relit from `source`.
+    pub fn serves(&self, source: &LightSource, header: &TransferHeader) -> bool {
+        self.source == *source
+            && self.key == (header.sh.order, header.light_window.clone(), header.sky_only, header.lobes.clone())
+    }
+}
+
+/// An equirectangular grid of radiance in the orientation of [`EnvironmentMap`], read
+/// bilinearly (the viewer's copy of a map the relight reads).
+pub struct SampledMap {
+    pub width: usize,
+    pub height: usize,
+    pub texels: Vec<[f32; 3]>,
+}
+
+impl SampledMap {
+    /// `radiance` at the texel centres of a `width` x `height` grid.
+    fn sample(width: usize, height: usize, radiance: impl Fn([f64; 3]) -> [f32; 3] + Sync) -> Self {
+        let texels = (0..width * height)
+            .into_par_iter()
+            .map(|i| {
+                let (column, row) = (i % width, i / width);
+                radiance(equirectangular_to_direction(
+                    (column as f64 + 0.5) / width as f64,
+                    1.0 - (row as f64 + 0.5) / height as f64,
+                ))
+            })
+            .collect();
+        Self { width, height, texels }
+    }
+}
+
+/// The widest grid [`RelightLight::sampled_maps`] gives a map (a preview's reflections).
+pub const SAMPLED_MAP_WIDTH: usize = 1024;
+
+/// The grid of the open lobes' light: band-limited at order 8 or less, so a texel every
+/// 5.6 degrees holds it to bilinear accuracy.
+const OPEN_LIGHT_GRID: [usize; 2] = [64, 32];
+
+impl RelightLight {
+    /// The light's SH vector per colour channel, as the relight dots it.
+    pub fn sh(&self) -> &[Vec<f32>; 3] {
+        &self.sh
+    }
+
+    /// What the glossy lookups read, as grids: the light itself (lobe code 1), then each
+    /// prefiltered lobe's map, then each lobe's open light `max(open_j(R) . L, 0)`. Maps
+    /// wider than [`SAMPLED_MAP_WIDTH`] are resampled to it.
+    pub fn sampled_maps(&self, order: usize) -> Vec<SampledMap> {
+        let size = |width: usize, height: usize| {
+            if width > SAMPLED_MAP_WIDTH {
+                (SAMPLED_MAP_WIDTH, (height * SAMPLED_MAP_WIDTH / width).max(1))
+            } else {
+                (width, height)
+            }
+        };
+        let (width, height) = match &self.light {
+            Light::Environment { map, .. } => size(map.width, map.height),
+            _ => (OPEN_LIGHT_GRID[0], OPEN_LIGHT_GRID[1]),
+        };
+        let mut maps = vec![SampledMap::sample(width, height, |d| self.light.radiance(d))];
+        for prefiltered in &self.prefiltered {
+            maps.push(match prefiltered {
+                Some(map) => {
+                    let (width, height) = size(map.width, map.height);
+                    SampledMap::sample(width, height, |d| map.lookup(d))
+                }
+                None => SampledMap { width: 1, height: 1, texels: vec![[0.0; 3]] },
+            });
+        }
+        for open in &self.open {
+            let [width, height] = OPEN_LIGHT_GRID;
+            maps.push(SampledMap::sample(width, height, |d| open_lit(order, open, d, &self.sh)));
+        }
+        maps
+    }
+}
+
+/// One relit pixel.
+#[derive(Clone, Copy)]
+struct Relit {
+    diffuse: [f32; 3],
+    specular: [f32; 3],
+    environment: [f32; 3],
+    visibility: [f32; 3],
+}
+
+/// The passes of `frame` under `light` ([`RelightLight::new`] from the frame's header).
+pub fn relight(frame: &TransferFrame, light: &RelightLight) -> ShadedPasses {
+    let count = frame.count();
+    let order = frame.order();
+    let pixels: Vec<Relit> = (0..frame.width * frame.height)
+        .into_par_iter()
+        .with_min_len(256)
+        .map(|i| {
+            let dot = |layer: &[f32]| -> [f32; 3] {
+                let t = &layer[i * count..(i + 1) * count];
+                let mut sum = [0.0f32; 3];
+                for (v, l) in t.iter().zip(&light.interleaved[..count]) {
+                    for k in 0..3 {
+                        sum[k] += v * l[k];
+                    }
+                }
+                sum.map(|s| s.max(0.0))
+            };
+            let (albedo, colour) = (frame.albedo[i], frame.specular_colour[i]);
+            let lit = dot(&frame.diffuse);
+            let diffuse = [0, 1, 2].map(|k| albedo[k] * lit[k] + frame.lamps_diffuse[i][k]);
+            let direction = frame.glossy_direction[i].map(f64::from);
+            let code = frame.glossy_lobe[i];
+            let glossy: [f32; 3] = if code == lobe_code::NONE {
+                [0.0; 3]
+            } else if code == lobe_code::MIRROR {
+                light.light.radiance(direction)
+            } else if code == lobe_code::SH {
+                dot(frame.specular.as_deref().expect("checked on reading"))
+            } else {
+                let j = (code - lobe_code::PREFILTERED) as usize;
+                let [cone, sh_weight] = frame.glossy_weight[i].map(f64::from);
+                let by_sh = if sh_weight > 0.0 {
+                    let shadowed = dot(frame.specular.as_deref().expect("checked on reading"));
+                    occlusion_ratio(shadowed, open_lit(order, &light.open[j], direction, &light.sh))
+                } else {
+                    0.0
+                };
+                let weight = cone + sh_weight * by_sh;
+                match &light.prefiltered[j] {
+                    Some(map) => map.lookup(direction).map(|c| (f64::from(c) * weight) as f32),
+                    None => [0.0; 3],
+                }
+            };
+            let reflected = [0, 1, 2].map(|k| colour[k] * glossy[k]);
+            let (specular, environment) = if frame.alpha[i] > 0.0 {
+                ([0, 1, 2].map(|k| reflected[k] + frame.lamps_specular[i][k]), [0.0; 3])
+            } else {
+                ([0.0; 3], reflected)
+            };
+            let unoccluded = dot(&frame.unoccluded);
+            let visibility = visibility_ratio(lit, unoccluded);
+            let parts = match (&frame.heightfield, &frame.blockers) {
+                (Some(h), Some(b)) => [visibility_ratio(dot(h), unoccluded), visibility_ratio(dot(b), unoccluded)],
+                _ if frame.header.heightfield => [visibility, 1.0],
+                _ if frame.header.blockers => [1.0, visibility],
+                _ => [1.0, 1.0],
+            };
+            Relit { diffuse, specular, environment, visibility: [visibility, parts[0], parts[1]] }
+        })
+        .collect();
+    ShadedPasses {
+        width: frame.width,
+        height: frame.height,
+        beauty: pixels
+            .iter()
+            .zip(&frame.alpha)
+            .map(|(p, &a)| {
+                let (d, s, e) = (p.diffuse, p.specular, p.environment);
+                [d[0] + s[0] + e[0], d[1] + s[1] + e[1], d[2] + s[2] + e[2], a]
+            })
+            .collect(),
+        diffuse: pixels.iter().map(|p| p.diffuse).collect(),
+        specular: pixels.iter().map(|p| p.specular).collect(),
+        environment: pixels.iter().map(|p| p.environment).collect(),
+        visibility: pixels.iter().map(|p| p.visibility[0]).collect(),
+        visibility_heightfield: pixels.iter().map(|p| p.visibility[1]).collect(),
+        visibility_blockers: pixels.iter().map(|p| p.visibility[2]).collect(),
+        position: frame.position.clone(),
+        normal: frame.normal.clone(),
+    }
+}

@@ -1,0 +1,105 @@
+//! A frame shaded on the CPU into its compositing passes and, from the same plan, its
+//! transfer layers (`logsh render --transfer`).
+
+use super::layers::{PixelTransfer, PrefilteredLobe, ShConvention, TransferFrame, TransferHeader};
+use crate::scene::{Frame, Scene};
+use crate::sh::Real;
+use crate::shade::compositing::{assemble, Pixel, ShadedPasses};
+use crate::shade::frame::mirrored_suns;
+use crate::shade::{
+    pixel_source, work_of, FramePlan, Occluders, PixelSource, PixelWork, PlannedKernel, ShadeError, ShadingKernel,
+    ShadingSettings,
+};
+use clap::ValueEnum;
+use rayon::prelude::*;
+
+/// The passes of `frame` (as [`crate::shade::shade_frame_passes`] gives them) and its
+/// transfer layers.
+pub fn shade_with_transfer(
+    scene: &Scene,
+    frame: &Frame,
+    settings: &ShadingSettings,
+) -> Result<(ShadedPasses, TransferFrame), ShadeError> {
+    let plan = FramePlan::new(scene, frame, settings)?;
+    let pyramid = plan.terrain.as_ref().map(|terrain| terrain.horizon_pyramid(&plan.settings));
+    let blockers = (!plan.blockers.is_empty()).then_some(&plan.blockers);
+    let occluders = Occluders { blockers, horizons: pyramid.as_ref() };
+    Ok(match plan.kernel.as_ref() {
+        PlannedKernel::F32(kernel) => walk(kernel, occluders, &plan),
+        PlannedKernel::F64(kernel) => walk(kernel, occluders, &plan),
+    })
+}
+
+/// The header of a frame shaded by `kernel` under `plan`.
+fn header<T: Real>(kernel: &ShadingKernel<T>, plan: &FramePlan) -> TransferHeader {
+    let window = plan.settings.light_window.to_possible_value().expect("every window has a name");
+    TransferHeader {
+        version: 1,
+        scene: std::path::absolute(&plan.scene.dir).unwrap_or_else(|_| plan.scene.dir.clone()),
+        frame: plan.frame.number,
+        sh: ShConvention::of_order(kernel.order()),
+        light: plan.scene.light_source(plan.frame.number),
+        light_window: window.get_name().to_string(),
+        sky_only: kernel.has_ground(),
+        heightfield: plan.terrain.is_some(),
+        blockers: !plan.blockers.is_empty(),
+        lobes: kernel
+            .prefiltered_lobes()
+            .into_iter()
+            .map(|(material, lobe, open)| PrefilteredLobe { material, lobe, open })
+            .collect(),
+    }
+}
+
+fn walk<T: Real>(kernel: &ShadingKernel<T>, occluders: Occluders, plan: &FramePlan) -> (ShadedPasses, TransferFrame) {
+    let frame = plan.frame;
+    let g = &frame.gbuffer;
+    let header = header(kernel, plan);
+    let both = header.heightfield && header.blockers;
+    let phong = plan.contents.phong;
+    let scene_suns = frame.suns.len();
+    let empty = TransferFrame::new(g.width, g.height, header, both, phong);
+    let lobes = empty.lobe_indices();
+    let rows: Vec<(Vec<Pixel>, TransferFrame)> = (0..g.height)
+        .into_par_iter()
+        .map(|y| {
+            let mut pixels = Vec::with_capacity(g.width);
+            let mut transfer = empty.clone();
+            for x in 0..g.width {
+                let source = pixel_source(&plan.scene.materials, frame, x, y);
+                let (pixel, pixel_transfer) = match (work_of(frame, source), source) {
+                    (PixelWork::Shade { point, tint }, _) => {
+                        let passes = kernel.shade_passes(occluders, &point);
+                        let point_transfer = kernel.shade_transfer(occluders, &point, scene_suns);
+                        transfer.push(PixelTransfer::Surface { point: &point_transfer, tint }, &lobes);
+                        pixels.push(Pixel::shaded(passes, tint));
+                        continue;
+                    }
+                    (PixelWork::Fixed(colour), PixelSource::Background { ray }) => {
+                        (Pixel::fixed(colour), PixelTransfer::Background { ray })
+                    }
+                    (PixelWork::Fixed(colour), PixelSource::WaterSky { tint, mirror }) => (
+                        Pixel::fixed(colour),
+                        PixelTransfer::Mirror { tint, mirror, suns: mirrored_suns(frame, mirror) },
+                    ),
+                    (PixelWork::Fixed(colour), PixelSource::WaterLamp { tint, radiance }) => {
+                        (Pixel::fixed(colour), PixelTransfer::Lamp { tint, radiance })
+                    }
+                    (PixelWork::Fixed(_), PixelSource::Surface { .. }) => unreachable!("a surface is always shaded"),
+                };
+                transfer.push(pixel_transfer, &lobes);
+                pixels.push(pixel);
+            }
+            (pixels, transfer)
+        })
+        .collect();
+    let mut transfer = empty;
+    let mut pixels = Vec::with_capacity(g.width * g.height);
+    for (row, row_transfer) in rows {
+        pixels.extend(row);
+        transfer.append(row_transfer);
+    }
+    transfer.position = g.position.clone();
+    transfer.normal = g.normal.clone();
+    (assemble(frame, &pixels), transfer)
+}

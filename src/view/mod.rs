@@ -1,0 +1,289 @@
+//! `logsh view`: a local web page that shows the frames of a render and relights them in
+//! the browser from their transfer layers ([`crate::transfer`]).
+//!
+//! The server listens on 127.0.0.1 only and answers GET requests:
+//!
+//! | path | body |
+//! |---|---|
+//! | `/` | the page (`page.html`: canvas, sliders, the relight in JavaScript) |
+//! | `/frames.json` | the frames of the directory: file names |
+//! | `/frame/<i>/meta.json` | size, order, the light's SH vector, the lobes, the layout of the next two |
+//! | `/frame/<i>/pixels.bin` | the transfer layers, little-endian f32, one array after another |
+//! | `/frame/<i>/maps.bin` | the maps the glossy lookups read ([`RelightLight::sampled_maps`]) |
+//! | `/frame/<i>/cycles.bin` | the Cycles render of the frame as RGB f32, where one is found |
+//! | `/bench/start`, `/bench/end?runs=N` | the page's `?bench=N` mode: the server prints the time between the two |
+//!
+//! The page turns the light about Z by rotating its SH vector (exact, [`crate::sh::rotate_z`])
+//! and reading the maps along `Rz(-turn) R`; strength scales the environment, exposure
+//! the image. It is the relight of [`crate::transfer::relight`] but for the maps, read
+//! from grids at most [`crate::transfer::SAMPLED_MAP_WIDTH`] wide and the open lobes'
+//! light from a 64 x 32 grid: a preview, for which `logsh relight` gives the frame.
+
+use crate::transfer::{RelightLight, RelightOptions, TransferFrame};
+use anyhow::{anyhow, Context, Result};
+use std::collections::HashMap;
+use std::io::{BufRead, BufReader, Write};
+use std::net::{TcpListener, TcpStream};
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex};
+
+/// The page, with its script inline.
+const PAGE: &str = include_str!("page.html");
+
+/// What `logsh view` serves.
+pub struct Viewer {
+    frames: Vec<PathBuf>,
+    /// The bodies of each frame's requests, built on first request.
+    built: Mutex<HashMap<usize, Arc<FrameBodies>>>,
+    /// When the page's benchmark started ([`PAGE`]'s `?bench=N`).
+    bench: Mutex<Option<std::time::Instant>>,
+}
+
+/// The responses of one frame.
+struct FrameBodies {
+    meta: String,
+    pixels: Vec<u8>,
+    maps: Vec<u8>,
+    cycles: Option<Vec<u8>>,
+}
+
+impl Viewer {
+    /// The frames of `dir` that hold transfer layers, by file name.
+    pub fn new(dir: &Path) -> Result<Self> {
+        let entries =
+            std::fs::read_dir(dir).with_context(|| format!("{}: cannot list the directory", dir.display()))?;
+        let mut frames: Vec<PathBuf> = entries
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| p.extension().is_some_and(|e| e.eq_ignore_ascii_case("exr")))
+            .filter(|p| has_transfer(p))
+            .collect();
+        frames.sort();
+        if frames.is_empty() {
+            return Err(anyhow!(
+                "{}: no frames with transfer layers; render them with `logsh render --transfer --out {}`",
+                dir.display(),
+                dir.display()
+            ));
+        }
+        Ok(Self { frames, built: Mutex::new(HashMap::new()), bench: Mutex::new(None) })
+    }
+
+    /// Listens on 127.0.0.1:`port` (0: any free port) and serves until the process ends;
+    /// `ready` receives the page's address once the socket listens.
+    pub fn serve(self, port: u16, ready: impl FnOnce(&str)) -> Result<()> {
+        let listener =
+            TcpListener::bind(("127.0.0.1", port)).with_context(|| format!("cannot listen on port {port}"))?;
+        let address = format!("http://{}/", listener.local_addr()?);
+        ready(&address);
+        let viewer = Arc::new(self);
+        for stream in listener.incoming() {
+            let Ok(stream) = stream else { continue };
+            let viewer = viewer.clone();
+            std::thread::spawn(move || {
+                if let Err(e) = viewer.answer(stream) {
+                    eprintln!("view: {e:#}");
+                }
+            });
+        }
+        Ok(())
+    }
+
+    fn answer(&self, stream: TcpStream) -> Result<()> {
+        let mut reader = BufReader::new(stream.try_clone()?);
+        let mut request = String::new();
+        reader.read_line(&mut request)?;
+        loop {
+            let mut header = String::new();
+            if reader.read_line(&mut header)? == 0 || header.trim().is_empty() {
+                break;
+            }
+        }
+        let mut parts = request.split_whitespace();
+        let (method, target) = (parts.next().unwrap_or(""), parts.next().unwrap_or(""));
+        let (path, query) = target.split_once('?').unwrap_or((target, ""));
+        let response = if method != "GET" {
+            Response::error(405, "only GET is served")
+        } else if path.starts_with("/bench/") {
+            self.bench(path, query)
+        } else {
+            self.route(path)
+        };
+        response.send(stream)
+    }
+
+    /// Times the page's benchmark by the server's clock and prints it.
+    fn bench(&self, path: &str, query: &str) -> Response {
+        let mut started = self.bench.lock().unwrap_or_else(|p| p.into_inner());
+        match (path, started.take()) {
+            ("/bench/start", _) => *started = Some(std::time::Instant::now()),
+            ("/bench/end", Some(start)) => {
+                let runs: f64 = query.strip_prefix("runs=").and_then(|n| n.parse().ok()).unwrap_or(1.0);
+                let ms = 1e3 * start.elapsed().as_secs_f64();
+                eprintln!("view: {runs} relights in the browser took {ms:.0} ms, {:.1} ms each", ms / runs);
+            }
+            _ => return Response::error(404, "no benchmark started"),
+        }
+        Response::ok("text/plain", Vec::new())
+    }
+
+    fn route(&self, path: &str) -> Response {
+        match path {
+            "/" | "/index.html" => Response::ok("text/html; charset=utf-8", PAGE.as_bytes().to_vec()),
+            "/frames.json" => {
+                let names: Vec<String> = self
+                    .frames
+                    .iter()
+                    .map(|f| f.file_name().unwrap_or_default().to_string_lossy().into_owned())
+                    .collect();
+                Response::ok("application/json", serde_json::to_vec(&names).expect("names serialise"))
+            }
+            _ => {
+                let mut parts = path.trim_start_matches('/').split('/');
+                let (Some("frame"), Some(index), Some(what), None) =
+                    (parts.next(), parts.next(), parts.next(), parts.next())
+                else {
+                    return Response::error(404, "no such page");
+                };
+                let Some(index) = index.parse::<usize>().ok().filter(|&i| i < self.frames.len()) else {
+                    return Response::error(404, "no such frame");
+                };
+                let bodies = match self.bodies(index) {
+                    Ok(bodies) => bodies,
+                    Err(e) => return Response::error(500, &format!("{e:#}")),
+                };
+                match what {
+                    "meta.json" => Response::ok("application/json", bodies.meta.as_bytes().to_vec()),
+                    "pixels.bin" => Response::ok("application/octet-stream", bodies.pixels.clone()),
+                    "maps.bin" => Response::ok("application/octet-stream", bodies.maps.clone()),
+                    "cycles.bin" => match &bodies.cycles {
+                        Some(rgb) => Response::ok("application/octet-stream", rgb.clone()),
+                        None => Response::error(404, "no Cycles render of this frame"),
+                    },
+                    _ => Response::error(404, "no such page"),
+                }
+            }
+        }
+    }
+
+    /// Frame `index`'s responses, built once.
+    fn bodies(&self, index: usize) -> Result<Arc<FrameBodies>> {
+        if let Some(bodies) = self.built.lock().unwrap_or_else(|p| p.into_inner()).get(&index) {
+            return Ok(bodies.clone());
+        }
+        let file = &self.frames[index];
+        let frame = TransferFrame::read(file)?;
+        let light = RelightLight::new(RelightOptions::default().source(&frame.header), &frame.header, file)?;
+        let bodies = Arc::new(frame_bodies(file, &frame, &light));
+        self.built.lock().unwrap_or_else(|p| p.into_inner()).insert(index, bodies.clone());
+        Ok(bodies)
+    }
+}
+
+/// Whether `file`'s header says it holds transfer layers.
+fn has_transfer(file: &Path) -> bool {
+    exr::meta::MetaData::read_from_file(file, false).is_ok_and(|meta| {
+        meta.headers.iter().any(|h| {
+            h.own_attributes.other.keys().any(|k| k.as_slice() == crate::transfer::TRANSFER_ATTRIBUTE.as_bytes())
+        })
+    })
+}
+
+/// The Cycles render of the frame: `cycles.NNNN.exr` beside the frame, or in the scene
+/// directory it was rendered from.
+fn cycles_render(file: &Path, frame: &TransferFrame) -> Option<Vec<[f32; 3]>> {
+    let name = format!("cycles.{:04}.exr", frame.header.frame);
+    let beside = file.parent().map(|d| d.join(&name));
+    [beside, Some(frame.header.scene.join(&name))].into_iter().flatten().find_map(|candidate| {
+        crate::compare::read_rgb(&candidate)
+            .ok()
+            .filter(|(w, h, _)| (*w, *h) == (frame.width, frame.height))
+            .map(|(_, _, rgb)| rgb)
+    })
+}
+
+fn frame_bodies(file: &Path, frame: &TransferFrame, light: &RelightLight) -> FrameBodies {
+    let mut pixels = Vec::new();
+    let mut layout = Vec::new();
+    let mut put = |name: &str, components: usize, values: &mut dyn Iterator<Item = f32>| {
+        let start = pixels.len() / 4;
+        for v in values {
+            pixels.extend_from_slice(&v.to_le_bytes());
+        }
+        layout.push(serde_json::json!({"name": name, "components": components, "offset": start}));
+    };
+    let count = frame.count();
+    put("diffuse", count, &mut frame.diffuse.iter().copied());
+    put("unoccluded", count, &mut frame.unoccluded.iter().copied());
+    if let Some(specular) = &frame.specular {
+        put("specular", count, &mut specular.iter().copied());
+    }
+    for (name, values) in [
+        ("albedo", &frame.albedo),
+        ("specular_colour", &frame.specular_colour),
+        ("lamps_diffuse", &frame.lamps_diffuse),
+        ("lamps_specular", &frame.lamps_specular),
+        ("glossy_direction", &frame.glossy_direction),
+    ] {
+        put(name, 3, &mut values.iter().flatten().copied());
+    }
+    put("glossy_lobe", 1, &mut frame.glossy_lobe.iter().copied());
+    put("glossy_weight", 2, &mut frame.glossy_weight.iter().flatten().copied());
+    put("alpha", 1, &mut frame.alpha.iter().copied());
+    let mut maps = Vec::new();
+    let mut map_layout = Vec::new();
+    for map in light.sampled_maps(frame.order()) {
+        map_layout.push(serde_json::json!({"width": map.width, "height": map.height, "offset": maps.len() / 4}));
+        for v in map.texels.iter().flatten() {
+            maps.extend_from_slice(&v.to_le_bytes());
+        }
+    }
+    let cycles = cycles_render(file, frame).map(|rgb| rgb.iter().flatten().flat_map(|v| v.to_le_bytes()).collect());
+    let meta = serde_json::json!({
+        "file": file.file_name().unwrap_or_default().to_string_lossy(),
+        "width": frame.width,
+        "height": frame.height,
+        "order": frame.order(),
+        "light": light.sh(),
+        "lobes": frame.header.lobes.len(),
+        "pixels": layout,
+        "maps": map_layout,
+        "cycles": cycles.is_some(),
+    });
+    FrameBodies { meta: meta.to_string(), pixels, maps, cycles }
+}
+
+/// An HTTP response.
+struct Response {
+    status: u16,
+    content_type: &'static str,
+    body: Vec<u8>,
+}
+
+impl Response {
+    fn ok(content_type: &'static str, body: Vec<u8>) -> Self {
+        Self { status: 200, content_type, body }
+    }
+
+    fn error(status: u16, message: &str) -> Self {
+        Self { status, content_type: "text/plain; charset=utf-8", body: message.as_bytes().to_vec() }
+    }
+
+    fn send(self, mut stream: TcpStream) -> Result<()> {
+        let reason = match self.status {
+            200 => "OK",
+            404 => "Not Found",
+            405 => "Method Not Allowed",
+            _ => "Internal Server Error",
+        };
+        write!(
+            stream,
+            "HTTP/1.1 {} {reason}\r\nContent-Type: {}\r\nContent-Length: {}\r\nCache-Control: no-store\r\nConnection: close\r\n\r\n",
+            self.status,
+            self.content_type,
+            self.body.len()
+        )?;
+        stream.write_all(&self.body)?;
+        stream.flush()?;
+        Ok(())
+    }
+}

@@ -1,0 +1,243 @@
+//! `logsh view` as a black box: the server answers on 127.0.0.1 with the page and a
+//! frame's data, and in a real headless browser (Chromium) the page loads and relights the
+//! frame as `logsh relight` does.
+//!
+//! Without a browser the browser test says on stderr that it did not run, and passes,
+//! unless `LOGSH_REQUIRE_BROWSER=1` (which `.ci/run` sets once it has installed Debian's
+//! `chromium`).
+
+use assert_cmd::cargo::cargo_bin;
+use std::io::{BufRead, BufReader, Read, Write};
+use std::net::TcpStream;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+
+/// A running `logsh view`, stopped when dropped.
+struct Server {
+    child: Child,
+    address: String,
+}
+
+impl Server {
+    fn start(dir: &Path) -> Self {
+        let mut child = Command::new(cargo_bin("logsh"))
+            .args(["view", dir.to_str().unwrap(), "--port", "0", "--no-open"])
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        let mut line = String::new();
+        BufReader::new(child.stdout.take().unwrap()).read_line(&mut line).unwrap();
+        let address = line.split_whitespace().find(|w| w.starts_with("http://")).expect(&line).to_string();
+        assert!(address.starts_with("http://127.0.0.1:"), "served on the loopback only: {address}");
+        Self { child, address }
+    }
+
+    /// Status and body of `method path`.
+    fn request(&self, method: &str, path: &str) -> (u16, Vec<u8>) {
+        let host = self.address.trim_start_matches("http://").trim_end_matches('/');
+        let mut stream = TcpStream::connect(host).unwrap();
+        write!(stream, "{method} {path} HTTP/1.1\r\nHost: {host}\r\nConnection: close\r\n\r\n").unwrap();
+        let mut response = Vec::new();
+        stream.read_to_end(&mut response).unwrap();
+        let split = response.windows(4).position(|w| w == b"\r\n\r\n").expect("a header");
+        let head = String::from_utf8_lossy(&response[..split]).into_owned();
+        let status = head.split_whitespace().nth(1).unwrap().parse().unwrap();
+        (status, response[split + 4..].to_vec())
+    }
+
+    /// Stops the server and returns what it printed on stderr.
+    fn stop(mut self) -> String {
+        let _ = self.child.kill();
+        let mut stderr = String::new();
+        self.child.stderr.take().unwrap().read_to_string(&mut stderr).unwrap();
+        stderr
+    }
+}
+
+impl Drop for Server {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+fn run(args: &[&str]) {
+    let output = Command::new(cargo_bin("logsh")).args(args).output().unwrap();
+    assert!(output.status.success(), "logsh {args:?}: {}", String::from_utf8_lossy(&output.stderr));
+}
+
+/// `gbuffers/cones` (whose directory holds a Cycles render) rendered with its transfer,
+/// under a map whose light comes mostly from a warm patch low in the south-east, so that
+/// turning it moves the shadows and reflections.
+fn rendered_cones(dir: &Path) -> PathBuf {
+    let sample = Path::new(env!("CARGO_MANIFEST_DIR")).join("gbuffers/cones");
+    let scene = dir.join("cones");
+    std::fs::create_dir_all(&scene).unwrap();
+    for entry in std::fs::read_dir(&sample).unwrap() {
+        let entry = entry.unwrap();
+        std::fs::copy(entry.path(), scene.join(entry.file_name())).unwrap();
+    }
+    let (width, height) = (128usize, 64usize);
+    let mut rgb = [vec![0.0f32; width * height], vec![0.0f32; width * height], vec![0.0f32; width * height]];
+    for row in 0..height {
+        for column in 0..width {
+            let patch = (40..52).contains(&column) && (20..28).contains(&row);
+            let sky = 1.0 - row as f32 / height as f32;
+            let texel = if patch { [12.0, 7.0, 2.5] } else { [0.15 * sky, 0.25 * sky, 0.6 * sky] };
+            for k in 0..3 {
+                rgb[k][row * width + column] = texel[k];
+            }
+        }
+    }
+    let map = scene.join("patch.exr");
+    logsh::scene::output::write_exr_channels(&map, width, height, &[("R", &rgb[0]), ("G", &rgb[1]), ("B", &rgb[2])])
+        .unwrap();
+    let file = scene.join("scene.json");
+    let mut json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&file).unwrap()).unwrap();
+    json["light"] = serde_json::json!({"environment": "patch.exr"});
+    std::fs::write(&file, serde_json::to_string_pretty(&json).unwrap()).unwrap();
+    let out = dir.join("frames");
+    run(&[
+        "render",
+        scene.to_str().unwrap(),
+        "--frames",
+        "1",
+        "--out",
+        out.to_str().unwrap(),
+        "--transfer",
+        "--progress",
+        "none",
+    ]);
+    out
+}
+
+#[test]
+fn the_server_answers_the_page_and_a_frames_data() {
+    let dir = tempfile::tempdir().unwrap();
+    let frames = rendered_cones(dir.path());
+    let server = Server::start(&frames);
+    let (status, page) = server.request("GET", "/");
+    assert_eq!(status, 200);
+    assert!(String::from_utf8_lossy(&page).contains("<canvas"), "the page");
+    let (_, names) = server.request("GET", "/frames.json");
+    assert_eq!(serde_json::from_slice::<Vec<String>>(&names).unwrap(), ["render.0001.exr"]);
+    let (status, meta) = server.request("GET", "/frame/0/meta.json");
+    assert_eq!(status, 200, "{}", String::from_utf8_lossy(&meta));
+    let meta: serde_json::Value = serde_json::from_slice(&meta).unwrap();
+    assert_eq!(
+        (meta["width"].as_u64(), meta["height"].as_u64(), meta["order"].as_u64()),
+        (Some(240), Some(135), Some(4))
+    );
+    assert_eq!(meta["cycles"], true, "the scene directory's cycles.0001.exr is found");
+    assert_eq!(meta["light"].as_array().unwrap().len(), 3);
+    let floats: u64 = meta["pixels"].as_array().unwrap().iter().map(|l| l["components"].as_u64().unwrap()).sum();
+    let (_, pixels) = server.request("GET", "/frame/0/pixels.bin");
+    assert_eq!(pixels.len() as u64, 4 * floats * 240 * 135, "every layer of the layout");
+    let (_, cycles) = server.request("GET", "/frame/0/cycles.bin");
+    assert_eq!(cycles.len(), 4 * 3 * 240 * 135);
+    assert_eq!(server.request("GET", "/frame/1/meta.json").0, 404);
+    assert_eq!(server.request("GET", "/../Cargo.toml").0, 404);
+    assert_eq!(server.request("POST", "/").0, 405);
+    server.stop();
+}
+
+#[test]
+fn a_directory_without_transfer_layers_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let output = Command::new(cargo_bin("logsh"))
+        .args(["view", dir.path().to_str().unwrap(), "--no-open", "--port", "0"])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("--transfer") && stderr.contains(dir.path().to_str().unwrap()), "{stderr}");
+}
+
+/// Debian's Chromium, or another Chromium-based browser on the PATH.
+fn browser() -> Option<PathBuf> {
+    ["chromium", "chromium-browser", "google-chrome", "google-chrome-stable"].iter().find_map(|name| {
+        let found = Command::new("which").arg(name).output().ok()?;
+        found.status.success().then(|| PathBuf::from(String::from_utf8_lossy(&found.stdout).trim()))
+    })
+}
+
+/// The browser's screenshot of `url`, `width` x `height` pixels, after the page's script
+/// and fetches have run.
+fn screenshot(browser: &Path, url: &str, width: usize, height: usize, file: &Path) -> image::RgbaImage {
+    let output = Command::new(browser)
+        .args([
+            "--headless",
+            "--no-sandbox",
+            "--disable-gpu",
+            "--hide-scrollbars",
+            "--force-device-scale-factor=1",
+            &format!("--window-size={width},{height}"),
+            "--virtual-time-budget=30000",
+            &format!("--screenshot={}", file.display()),
+            url,
+        ])
+        .output()
+        .unwrap();
+    assert!(file.is_file(), "no screenshot: {}", String::from_utf8_lossy(&output.stderr));
+    image::open(file).unwrap().to_rgba8()
+}
+
+/// Mean absolute difference in 8-bit levels between the screenshot's top-left corner and
+/// `preview` over `preview`'s opaque (surface) pixels.
+fn difference(shot: &image::RgbaImage, preview: &image::RgbaImage) -> f64 {
+    let mut sum = 0.0;
+    let mut count = 0;
+    for (x, y, p) in preview.enumerate_pixels() {
+        if p[3] == 255 {
+            let s = shot.get_pixel(x, y);
+            sum += (0..3).map(|k| (f64::from(s[k]) - f64::from(p[k])).abs()).sum::<f64>() / 3.0;
+            count += 1;
+        }
+    }
+    sum / count as f64
+}
+
+#[test]
+fn the_page_relights_in_a_headless_browser() {
+    let Some(browser) = browser() else {
+        if std::env::var("LOGSH_REQUIRE_BROWSER").is_ok_and(|v| v == "1") {
+            panic!("LOGSH_REQUIRE_BROWSER=1 but no Chromium is installed");
+        }
+        // Past the test harness's capture: a skipped browser test is never silent.
+        let _ = std::io::stderr().write_all(
+            b"tests/view.rs: the headless browser test DID NOT RUN: no chromium (apt-get install chromium)\n",
+        );
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let frames = rendered_cones(dir.path());
+    let frame = frames.join("render.0001.exr");
+    for turn in ["0", "75"] {
+        run(&[
+            "relight",
+            frame.to_str().unwrap(),
+            "--light-rotation",
+            turn,
+            "--out",
+            dir.path().join(turn).to_str().unwrap(),
+        ]);
+    }
+    let preview = |turn: &str| image::open(dir.path().join(turn).join("render.0001.png")).unwrap().to_rgba8();
+    let server = Server::start(&frames);
+    let url = |query: &str| format!("{}?{query}", server.address);
+    let shot = screenshot(&browser, &url("rotation=75"), 480, 400, &dir.path().join("shot.png"));
+    let (to_turned, to_unturned) = (difference(&shot, &preview("75")), difference(&shot, &preview("0")));
+    println!("screenshot at 75 degrees: {to_turned:.2} levels from logsh relight at 75, {to_unturned:.2} from 0");
+    assert!(to_turned < 1.5, "the page's relight differs from logsh relight by {to_turned:.2} levels");
+    assert!(to_unturned > 3.0 * to_turned, "the page must turn the light: {to_unturned:.2} from the unturned frame");
+    // The wipe shows Cycles' render on the right.
+    let wiped = screenshot(&browser, &url("rotation=75&wipe=0"), 480, 400, &dir.path().join("wiped.png"));
+    assert!(difference(&wiped, &preview("75")) > to_turned + 1.0, "the wipe must show the Cycles render");
+    // Interactive rates, timed by the server's clock (reported, not asserted).
+    let _ = screenshot(&browser, &url("bench=5"), 480, 400, &dir.path().join("bench.png"));
+    let log = server.stop();
+    let timing = log.lines().find(|l| l.contains("relights in the browser")).unwrap_or("no timing reported");
+    println!("{timing}");
+    let _ = std::io::stderr().write_all(format!("tests/view.rs: {timing}\n").as_bytes());
+}
