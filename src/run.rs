@@ -369,8 +369,9 @@ pub fn relight(args: &crate::cli::RelightArgs) -> Result<()> {
         let name = file.file_name().ok_or_else(|| anyhow!("{}: not a file", file.display()))?;
         let exr = args.out.join(name).with_extension("exr");
         let png = exr.with_extension("png");
+        let json = exr.with_extension("light.json");
         let canonical = |p: &Path| std::fs::canonicalize(p).ok();
-        for output in [&exr, &png] {
+        for output in [&exr, &png, &json] {
             if let Some(existing) = canonical(output) {
                 if args.frames.iter().any(|f| canonical(f).as_ref() == Some(&existing))
                     || args.light.as_deref().and_then(canonical).as_ref() == Some(&existing)
@@ -379,17 +380,17 @@ pub fn relight(args: &crate::cli::RelightArgs) -> Result<()> {
                 }
             }
         }
-        if outputs.iter().any(|(e, _): &(std::path::PathBuf, _)| *e == exr) {
+        if outputs.iter().any(|(e, _, _): &(std::path::PathBuf, _, _)| *e == exr) {
             return Err(anyhow!("{}: two frames would be written to the same file", exr.display()));
         }
-        outputs.push((exr, png));
+        outputs.push((exr, png, json));
     }
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create output directory {}", args.out.display()))?;
     let started = Instant::now();
     let mut light: Option<RelightLight> = None;
     let (mut reading, mut building, mut relighting) = (0.0, 0.0, 0.0);
-    for (file, (exr, png)) in args.frames.iter().zip(&outputs) {
+    for (file, (exr, png, json)) in args.frames.iter().zip(&outputs) {
         let t = Instant::now();
         let frame = TransferFrame::read(file)?;
         reading += t.elapsed().as_secs_f64();
@@ -404,6 +405,8 @@ pub fn relight(args: &crate::cli::RelightArgs) -> Result<()> {
         relighting += t.elapsed().as_secs_f64();
         crate::render::write_passes(exr, &passes, args.colour_type)?;
         output::write_png_preview(png, passes.width, passes.height, &passes.beauty)?;
+        let light = light.as_ref().expect("built above");
+        output::write_text(json, &(serde_json::to_string_pretty(&light.description())? + "\n"))?;
     }
     let count = args.frames.len();
     eprintln!(

@@ -21,7 +21,9 @@
 //! | `P.{X,Y,Z}`, `N.{X,Y,Z}` | float | world position and normal of the G-buffer |
 //!
 //! "colour" is half by default (`--colour-type float` stores f32); see
-//! [`crate::shade::compositing`] and docs/design.md for the pass definitions.
+//! [`crate::shade::compositing`] and docs/design.md for the pass definitions. With
+//! `--transfer` the file also holds the transfer layers of [`crate::transfer`] and their
+//! header, and the frame is shaded on the CPU.
 
 pub mod frames;
 pub mod progress;

@@ -132,6 +132,23 @@ impl ExrChannels {
         Ok(self.data[index].clone())
     }
 
+    /// [`take`](Self::take) without the copy, for a reader that takes each channel once:
+    /// the channel is moved out, and taking it again is an error.
+    pub fn take_once(&mut self, file: &Path, name: &str) -> Result<Vec<f32>, SceneError> {
+        let Some(&index) = self.channels.get(name) else {
+            return self.take(file, name);
+        };
+        if self.sizes[index] != [self.width, self.height] || self.data[index].is_empty() {
+            return self.take(file, name).and_then(|_| {
+                Err(SceneError::invalid(
+                    file,
+                    format!("channel \"{name}\" is read twice (it appears twice in the file)"),
+                ))
+            });
+        }
+        Ok(std::mem::take(&mut self.data[index]))
+    }
+
     /// Makes the size of `name`'s part the reference size for later `take` calls.
     pub fn use_size_of(&mut self, name: &str) {
         if let Some(&index) = self.channels.get(name) {

@@ -33,6 +33,8 @@ pub struct FoldedQuadrature {
     nodes: usize,
     /// `basis[k * nodes + i] = y_k(x_i)`.
     basis: Vec<f32>,
+    /// `w_i`.
+    weights: Vec<f32>,
     /// Per channel, `w_i L(x_i)`.
     light: [Vec<f32>; 3],
 }
@@ -47,7 +49,9 @@ impl FoldedQuadrature {
         let node_basis = quadrature.basis();
         let mut basis = vec![0.0f32; count * nodes];
         let mut folded = [vec![0.0f32; nodes], vec![0.0f32; nodes], vec![0.0f32; nodes]];
+        let mut padded = vec![0.0f32; nodes];
         for (i, w) in weights.iter().enumerate() {
+            padded[i] = *w as f32;
             let y = &node_basis[i * count..(i + 1) * count];
             for (k, value) in y.iter().enumerate() {
                 basis[k * nodes + i] = *value as f32;
@@ -57,7 +61,7 @@ impl FoldedQuadrature {
                 channel[i] = (w * radiance) as f32;
             }
         }
-        Self { count, nodes, basis, light: folded }
+        Self { count, nodes, basis, weights: padded, light: folded }
     }
 
     /// `exp*(f) . L` per channel, clamped at 0, with the nodes' values floored and capped
@@ -79,35 +83,48 @@ impl FoldedQuadrature {
         self.lit_lanes(f, floored, ceiling)
     }
 
+    /// `exp*(f)` itself, projected back to SH at the same nodes into `out[..order^2]`:
+    /// [`ExactExp::exp_floored`] in f32 lanes (the transfer vectors of
+    /// [`crate::transfer`]).
+    pub fn project(&self, f: &[f32], floored: Option<(&[f32], f32)>, ceiling: f32, out: &mut [f32]) {
+        #[cfg(target_arch = "x86_64")]
+        if *HAS_AVX2_FMA {
+            // SAFETY: the processor supports the features the function is compiled for.
+            return unsafe { self.project_avx2(f, floored, ceiling, out) };
+        }
+        self.project_lanes(f, floored, ceiling, out)
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    unsafe fn project_avx2(&self, f: &[f32], floored: Option<(&[f32], f32)>, ceiling: f32, out: &mut [f32]) {
+        self.project_lanes(f, floored, ceiling, out)
+    }
+
     #[inline(always)]
-    fn lit_lanes(&self, f: &[f32], floored: Option<(&[f32], f32)>, ceiling: f32) -> [f32; 3] {
-        let count = self.count;
-        let nodes = self.nodes;
-        let mut acc = [[0.0f32; LANES]; 3];
+    fn project_lanes(&self, f: &[f32], floored: Option<(&[f32], f32)>, ceiling: f32, out: &mut [f32]) {
+        let (count, nodes) = (self.count, self.nodes);
+        let mut acc = [[0.0f32; LANES]; super::MAX_COEFFICIENTS];
         for start in (0..nodes).step_by(LANES) {
-            let mut value = [0.0f32; LANES];
-            for (k, &fk) in f[..count].iter().enumerate() {
+            let e = exp_lanes(self.block_values(f, floored, ceiling, start));
+            let w: &[f32; LANES] = self.weights[start..][..LANES].try_into().expect("a block");
+            for (k, channel) in acc[..count].iter_mut().enumerate() {
                 let y: &[f32; LANES] = self.basis[k * nodes + start..][..LANES].try_into().expect("a block");
                 for lane in 0..LANES {
-                    value[lane] += fk * y[lane];
+                    channel[lane] += e[lane] * w[lane] * y[lane];
                 }
             }
-            if let Some((v, floor)) = floored {
-                let mut part = [0.0f32; LANES];
-                for (k, &vk) in v[..count].iter().enumerate() {
-                    let y: &[f32; LANES] = self.basis[k * nodes + start..][..LANES].try_into().expect("a block");
-                    for lane in 0..LANES {
-                        part[lane] += vk * y[lane];
-                    }
-                }
-                for lane in 0..LANES {
-                    value[lane] += (floor - part[lane]).max(0.0);
-                }
-            }
-            for v in &mut value {
-                *v = v.min(ceiling);
-            }
-            let e = exp_lanes(value);
+        }
+        for (o, lanes) in out[..count].iter_mut().zip(&acc) {
+            *o = lanes.iter().sum();
+        }
+    }
+
+    #[inline(always)]
+    fn lit_lanes(&self, f: &[f32], floored: Option<(&[f32], f32)>, ceiling: f32) -> [f32; 3] {
+        let mut acc = [[0.0f32; LANES]; 3];
+        for start in (0..self.nodes).step_by(LANES) {
+            let e = exp_lanes(self.block_values(f, floored, ceiling, start));
             for (channel, light) in acc.iter_mut().zip(&self.light) {
                 let w: &[f32; LANES] = light[start..][..LANES].try_into().expect("a block");
                 for lane in 0..LANES {
@@ -116,6 +133,35 @@ impl FoldedQuadrature {
             }
         }
         acc.map(|lanes| lanes.iter().sum::<f32>().max(0.0))
+    }
+
+    /// The log values at the block of nodes from `start`, floored and capped.
+    #[inline(always)]
+    fn block_values(&self, f: &[f32], floored: Option<(&[f32], f32)>, ceiling: f32, start: usize) -> [f32; LANES] {
+        let (count, nodes) = (self.count, self.nodes);
+        let mut value = [0.0f32; LANES];
+        for (k, &fk) in f[..count].iter().enumerate() {
+            let y: &[f32; LANES] = self.basis[k * nodes + start..][..LANES].try_into().expect("a block");
+            for lane in 0..LANES {
+                value[lane] += fk * y[lane];
+            }
+        }
+        if let Some((v, floor)) = floored {
+            let mut part = [0.0f32; LANES];
+            for (k, &vk) in v[..count].iter().enumerate() {
+                let y: &[f32; LANES] = self.basis[k * nodes + start..][..LANES].try_into().expect("a block");
+                for lane in 0..LANES {
+                    part[lane] += vk * y[lane];
+                }
+            }
+            for lane in 0..LANES {
+                value[lane] += (floor - part[lane]).max(0.0);
+            }
+        }
+        for v in &mut value {
+            *v = v.min(ceiling);
+        }
+        value
     }
 }
 
@@ -160,8 +206,9 @@ mod tests {
         assert!(exp_lanes([1000.0; LANES]).iter().all(|v| v.is_finite()));
     }
 
-    /// The folded sum equals projecting `exp*(f)` back to SH and dotting with the light, for
-    /// log vectors of the magnitudes pixels have, with and without the floor.
+    /// The folded sum equals projecting `exp*(f)` back to SH and dotting with the light, and
+    /// the lanes' projection equals the f64 one, for log vectors of the magnitudes pixels
+    /// have, with and without the floor.
     #[test]
     fn folding_the_light_equals_projecting_then_dotting() {
         for order in [3, 4, 6, 8] {
@@ -182,6 +229,13 @@ mod tests {
                     let f32s: Vec<f32> = f.iter().map(|&x| x as f32).collect();
                     let v32s: Vec<f32> = v.iter().map(|&x| x as f32).collect();
                     let got = folded.lit(&f32s, floor.map(|fl| (&v32s[..], fl as f32)), 1.0);
+                    let mut projected = vec![0.0f32; count];
+                    folded.project(&f32s, floor.map(|fl| (&v32s[..], fl as f32)), 1.0, &mut projected);
+                    let largest = e.iter().fold(1e-3f64, |a, b| a.max(b.abs()));
+                    for k in 0..count {
+                        let error = (f64::from(projected[k]) - e[k]).abs() / largest;
+                        assert!(error < 2e-5, "order {order}, |f| {magnitude}, floor {floor:?}: projected {k} {error}");
+                    }
                     for c in 0..3 {
                         let scale = expected.iter().fold(1e-3f64, |a, b| a.max(b.abs()));
                         let error = (f64::from(got[c]) - expected[c]).abs() / scale;

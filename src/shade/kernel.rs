@@ -660,16 +660,18 @@ impl<T: Real> ShadingKernel<T> {
         point: &SurfacePoint,
         material: &Material,
     ) -> ([f32; 3], [f32; 3]) {
-        self.sharp_lit(occluders, point, material, &self.suns)
+        self.sharp_lit(occluders, point, material, &self.suns, true)
     }
 
-    /// [`sunlit`](Self::sunlit) with `suns` (some of the kernel's) and every point lamp.
+    /// [`sunlit`](Self::sunlit) with `suns` (some of the kernel's), and with every point
+    /// lamp where `lamps`.
     pub(crate) fn sharp_lit(
         &self,
         occluders: Occluders,
         point: &SurfacePoint,
         material: &Material,
         suns: &[SunDisk],
+        lamps: bool,
     ) -> ([f32; 3], [f32; 3]) {
         let (mut diffuse, mut glossy) = ([0.0f64; 3], [0.0f64; 3]);
         let (albedo, phong) = match material {
@@ -683,7 +685,7 @@ impl<T: Real> ShadingKernel<T> {
         let sharp = self.materials.get(&point.material).and_then(|lobes| lobes.sharp.as_ref());
         let axis = reflect_view(point.view_origin, point.position, n);
         let sharp_albedo = sharp.map(|sharp| albedo_lookup(&sharp.albedo, dot(axis, n)));
-        let lamps = self.points.iter().map(|lamp| SunDisk::of_lamp(lamp, point.position, n));
+        let lamps = self.points.iter().filter(|_| lamps).map(|lamp| SunDisk::of_lamp(lamp, point.position, n));
         for sun in suns.iter().map(Cow::Borrowed).chain(lamps.map(Cow::Owned)) {
             let v =
                 sun.visibility(occluders.blockers, occluders.horizons, self.ground, point.position, n, point.object);

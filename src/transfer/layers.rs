@@ -346,7 +346,7 @@ impl TransferFrame {
         let sh = |exr: &mut ExrChannels, name: &str| -> Result<Vec<f32>, SceneError> {
             let mut values = vec![0.0f32; width * height * count];
             for k in 0..count {
-                let channel = exr.take(file, &format!("{name}_{}.{}", k - k % 4, ["R", "G", "B", "A"][k % 4]))?;
+                let channel = exr.take_once(file, &format!("{name}_{}.{}", k - k % 4, ["R", "G", "B", "A"][k % 4]))?;
                 for (i, v) in channel.into_iter().enumerate() {
                     values[i * count + k] = v;
                 }
@@ -369,7 +369,7 @@ impl TransferFrame {
             return Err(SceneError::invalid(file, "has one of sh_heightfield and sh_blockers without the other"));
         }
         let triple = |exr: &mut ExrChannels, layer: &str, names: [&str; 3]| -> Result<Vec<[f32; 3]>, SceneError> {
-            let [a, b, c] = names.map(|n| exr.take(file, &format!("{layer}.{n}")));
+            let [a, b, c] = names.map(|n| exr.take_once(file, &format!("{layer}.{n}")));
             let (a, b, c) = (a?, b?, c?);
             Ok((0..a.len()).map(|i| [a[i], b[i], c[i]]).collect())
         };
@@ -382,10 +382,10 @@ impl TransferFrame {
         let glossy_direction = triple(&mut exr, "glossy_direction", xyz)?;
         let position = triple(&mut exr, "P", xyz)?;
         let normal = triple(&mut exr, "N", xyz)?;
-        let glossy_lobe = exr.take(file, "glossy_lobe.V")?;
-        let (x, y) = (exr.take(file, "glossy_weight.X")?, exr.take(file, "glossy_weight.Y")?);
-        let glossy_weight = x.into_iter().zip(y).map(|(x, y)| [x, y]).collect();
-        let alpha = exr.take(file, "A")?;
+        let glossy_lobe = exr.take_once(file, "glossy_lobe.V")?;
+        let (x, y) = (exr.take_once(file, "glossy_weight.X")?, exr.take_once(file, "glossy_weight.Y")?);
+        let glossy_weight: Vec<[f32; 2]> = x.into_iter().zip(y).map(|(x, y)| [x, y]).collect();
+        let alpha = exr.take_once(file, "A")?;
         let lobes = header.lobes.len();
         let last = lobe_code::PREFILTERED + lobes as f32 - 1.0;
         if let Some(i) =
@@ -416,7 +416,9 @@ impl TransferFrame {
             && [&heightfield, &blockers, &specular].iter().all(|l| l.as_ref().is_none_or(|v| finite(v)))
             && [&albedo, &specular_colour, &lamps_diffuse, &lamps_specular, &glossy_direction]
                 .iter()
-                .all(|l| l.iter().all(|v| finite(v)));
+                .all(|l| l.iter().all(|v| finite(v)))
+            && glossy_weight.iter().all(|w| finite(w))
+            && finite(&alpha);
         if !all_finite {
             return Err(SceneError::NonFinite { file: file.to_path_buf(), what: "a transfer layer".into() });
         }

@@ -169,6 +169,18 @@ impl RelightLight {
         &self.sh
     }
 
+    /// What `logsh relight` writes beside each frame (`<frame>.light.json`): the light's
+    /// source and its SH vector, RGB per coefficient in the header's convention, which a
+    /// compositor dots with the transfer layers (docs/compositing.md).
+    pub fn description(&self) -> serde_json::Value {
+        serde_json::json!({
+            "source": self.source,
+            "order": self.key.0,
+            "light_window": self.key.1,
+            "sh": self.interleaved,
+        })
+    }
+
     /// What the glossy lookups read, as grids: the light itself (lobe code 1), then each
     /// prefiltered lobe's map, then each lobe's open light `max(open_j(R) . L, 0)`. Maps
     /// wider than [`SAMPLED_MAP_WIDTH`] are resampled to it.

@@ -69,8 +69,7 @@ fn walk<T: Real>(kernel: &ShadingKernel<T>, occluders: Occluders, plan: &FramePl
                 let source = pixel_source(&plan.scene.materials, frame, x, y);
                 let (pixel, pixel_transfer) = match (work_of(frame, source), source) {
                     (PixelWork::Shade { point, tint }, _) => {
-                        let passes = kernel.shade_passes(occluders, &point);
-                        let point_transfer = kernel.shade_transfer(occluders, &point, scene_suns);
+                        let (passes, point_transfer) = kernel.shade_transfer(occluders, &point, scene_suns);
                         transfer.push(PixelTransfer::Surface { point: &point_transfer, tint }, &lobes);
                         pixels.push(Pixel::shaded(passes, tint));
                         continue;

@@ -10,7 +10,7 @@
 //! log-SH share of the specular occlusion needs; the scene's own lamps are light that a
 //! relight leaves where it was, kept as radiance.
 
-use super::{Occluders, ShadingKernel, SurfacePoint};
+use super::{occlusion_ratio, open_lit, visibility_ratio, Occluders, PixelPasses, ShadingKernel, SurfacePoint};
 use crate::scene::Material;
 use crate::sh::{add_rotated_zonal, coefficient_count, Real, MAX_COEFFICIENTS};
 use crate::shade::glossy::SharpLobe;
@@ -85,12 +85,21 @@ impl<T: Real> ShadingKernel<T> {
         self.ground.is_some()
     }
 
-    /// `exp*(visibility + lobe about axis)`, floored as [`Self::lit`] floors it, into `out`.
+    /// `exp*(visibility + lobe about axis)`, floored as [`Self::lit`] floors it, into `out`:
+    /// in f32 lanes where `lit` folds the light ([`crate::sh::FoldedQuadrature::project`]).
     fn transfer(&self, visibility: &[T], lobe: &super::LobeTable<T>, axis: [f64; 3], out: &mut [f32]) {
         let count = coefficient_count(self.order);
         let mut f = [T::zero(); MAX_COEFFICIENTS];
         f[..count].copy_from_slice(&visibility[..count]);
         add_rotated_zonal(self.order, &lobe.zonal, T::one(), axis.map(T::of), &mut f[..count]);
+        if let Some(folded) = &self.folded {
+            let as_f32 = |v: &[T]| -> [f32; MAX_COEFFICIENTS] {
+                std::array::from_fn(|k| v.get(k).and_then(|x| x.to_f32()).unwrap_or(0.0))
+            };
+            let (f32s, v32s) = (as_f32(&f[..count]), as_f32(&visibility[..count]));
+            let floored = self.overlap_floor.then(|| (&v32s[..count], self.log_epsilon.to_f32().unwrap_or(0.0)));
+            return folded.project(&f32s[..count], floored, lobe.log_peak as f32, out);
+        }
         let floored = self.overlap_floor.then(|| (&visibility[..count], self.log_epsilon.to_f64().unwrap_or(0.0)));
         let mut e = [T::zero(); MAX_COEFFICIENTS];
         self.exp.exp(&f[..count], floored, lobe.log_peak, &mut e[..count]);
@@ -99,21 +108,37 @@ impl<T: Real> ShadingKernel<T> {
         }
     }
 
-    /// The transfer of `point` (module doc); [`PointTransfer::DARK`] for an unknown
-    /// material or water (whose caller transfers the reflected point instead).
-    /// `scene_suns` is how many of the kernel's suns are the scene's own Sun lamps (the
-    /// rest were taken out of the map, and a relight holds them in SH).
-    pub fn shade_transfer(&self, occluders: Occluders, point: &SurfacePoint, scene_suns: usize) -> PointTransfer {
+    /// The transfer of `point` (module doc), and its passes as
+    /// [`shade_passes`](Self::shade_passes) gives them, computed from the transfer: the
+    /// visibility is summed and exponentiated once for both. The passes differ from
+    /// `shade_passes`' by the f32 kernel's folded quadrature against the projection and
+    /// dot here (2e-5 relative, [`crate::sh::folded`]). [`PointTransfer::DARK`] and
+    /// unshaded passes for an unknown material or water (whose caller transfers the
+    /// reflected point instead). `scene_suns` is how many of the kernel's suns are the
+    /// scene's own Sun lamps (the rest were taken out of the map, and a relight holds them
+    /// in SH).
+    pub fn shade_transfer(
+        &self,
+        occluders: Occluders,
+        point: &SurfacePoint,
+        scene_suns: usize,
+    ) -> (PixelPasses, PointTransfer) {
         let count = coefficient_count(self.order);
         let (p, n) = (point.position, point.normal);
+        let dark = (PixelPasses::UNSHADED, PointTransfer::DARK);
         let Some((full, occlusion)) = self.surface_visibility(occluders, point) else {
-            return PointTransfer::DARK;
+            return dark;
         };
         let lobes = &self.materials[&point.material];
         let (albedo, specular_colour) = match &lobes.material {
             Material::Diffuse { albedo } | Material::Heightfield { albedo } => (*albedo, [0.0; 3]),
             Material::Phong { albedo, specular, .. } => (*albedo, *specular),
-            Material::Water { .. } => return PointTransfer::DARK,
+            Material::Water { .. } => return dark,
+        };
+        // The render's light (its suns taken out), as the passes dot it.
+        let light: [Vec<f32>; 3] = self.light.each_ref().map(|c| c.iter().map(|v| v.to_f32().unwrap_or(0.0)).collect());
+        let lit = |t: &[f32]| -> [f32; 3] {
+            light.each_ref().map(|l| l.iter().zip(&t[..count]).map(|(a, b)| a * b).sum::<f32>().max(0.0))
         };
         let mut out = PointTransfer { albedo, specular_colour, ..PointTransfer::DARK };
         self.transfer(&full, &self.diffuse, n, &mut out.diffuse);
@@ -121,36 +146,68 @@ impl<T: Real> ShadingKernel<T> {
         let mut unoccluded = [T::zero(); MAX_COEFFICIENTS];
         self.add_visibility(none, p, n, point.object, &mut unoccluded[..count]);
         self.transfer(&unoccluded, &self.diffuse, n, &mut out.unoccluded);
-        if occluders.blockers.is_some() && occluders.horizons.is_some() && self.wedge.is_some() {
-            let spheres_only = Occluders { blockers: occluders.blockers, horizons: None };
-            let mut blockers = [T::zero(); MAX_COEFFICIENTS];
-            self.add_visibility(spheres_only, p, n, point.object, &mut blockers[..count]);
-            let mut heightfield = [T::zero(); MAX_COEFFICIENTS];
-            for i in 0..count {
-                heightfield[i] = full[i] - blockers[i] + unoccluded[i];
+        let (lit_diffuse, lit_unoccluded) = (lit(&out.diffuse), lit(&out.unoccluded));
+        let visibility = visibility_ratio(lit_diffuse, lit_unoccluded);
+        let has_heightfield = occluders.horizons.is_some() && self.wedge.is_some();
+        let (visibility_heightfield, visibility_blockers) = match (has_heightfield, occluders.blockers.is_some()) {
+            (false, false) => (1.0, 1.0),
+            (true, false) => (visibility, 1.0),
+            (false, true) => (1.0, visibility),
+            (true, true) => {
+                let spheres_only = Occluders { blockers: occluders.blockers, horizons: None };
+                let mut blockers = [T::zero(); MAX_COEFFICIENTS];
+                self.add_visibility(spheres_only, p, n, point.object, &mut blockers[..count]);
+                let mut heightfield = [T::zero(); MAX_COEFFICIENTS];
+                for i in 0..count {
+                    heightfield[i] = full[i] - blockers[i] + unoccluded[i];
+                }
+                self.transfer(&heightfield, &self.diffuse, n, &mut out.heightfield);
+                self.transfer(&blockers, &self.diffuse, n, &mut out.blockers);
+                (
+                    visibility_ratio(lit(&out.heightfield), lit_unoccluded),
+                    visibility_ratio(lit(&out.blockers), lit_unoccluded),
+                )
             }
-            self.transfer(&heightfield, &self.diffuse, n, &mut out.heightfield);
-            self.transfer(&blockers, &self.diffuse, n, &mut out.blockers);
-        }
+        };
+        let mut glossy = [0.0f32; 3];
         if let Material::Phong { .. } = lobes.material {
             let phong = lobes.phong.as_ref().expect("phong materials carry their lobe");
             let reflected = super::reflect_view(point.view_origin, p, n);
             out.glossy = match &lobes.sharp {
                 Some(sharp) => {
                     let (cone, sh_weight) = self.prefiltered_weights(occluders, sharp, point, reflected);
-                    if sh_weight > 0.0 {
+                    let by_sh = if sh_weight > 0.0 {
                         self.transfer(&occlusion, phong, reflected, &mut out.specular);
-                    }
+                        let open = open_lit(self.order, &sharp.open, reflected, &self.light)
+                            .map(|v| v.to_f32().unwrap_or(0.0));
+                        occlusion_ratio(lit(&out.specular), open)
+                    } else {
+                        0.0
+                    };
+                    let weight = cone + sh_weight * by_sh;
+                    glossy = sharp.prefiltered.lookup(reflected).map(|c| (f64::from(c) * weight) as f32);
                     GlossyTransfer::Prefiltered { material: point.material, direction: reflected, cone, sh_weight }
                 }
                 None => {
                     self.transfer(&full, phong, reflected, &mut out.specular);
+                    glossy = lit(&out.specular);
                     GlossyTransfer::Sh
                 }
             };
         }
+        let scene_suns = scene_suns.min(self.suns.len());
         (out.lamps_diffuse, out.lamps_specular) =
-            self.sharp_lit(occluders, point, &lobes.material, &self.suns[..scene_suns.min(self.suns.len())]);
-        out
+            self.sharp_lit(occluders, point, &lobes.material, &self.suns[..scene_suns], true);
+        let (extracted_diffuse, extracted_specular) =
+            self.sharp_lit(occluders, point, &lobes.material, &self.suns[scene_suns..], false);
+        let passes = PixelPasses {
+            diffuse: [0, 1, 2].map(|k| lit_diffuse[k] * albedo[k] + (out.lamps_diffuse[k] + extracted_diffuse[k])),
+            specular: [0, 1, 2]
+                .map(|k| glossy[k] * specular_colour[k] + (out.lamps_specular[k] + extracted_specular[k])),
+            visibility,
+            visibility_heightfield,
+            visibility_blockers,
+        };
+        (passes, out)
     }
 }
