@@ -570,3 +570,47 @@ fn primitives_fit_their_volume() {
         assert!((1..=most_spheres).contains(&count), "{name}: {count} spheres");
     }
 }
+
+/// `blender_scripts/relight_compositor.py` builds the diffuse relight in Blender's
+/// compositor from a frame's transfer layers; turned 40 degrees there, it equals `logsh
+/// relight --light-rotation 40`'s diffuse pass (which turns the map by resampling it, the
+/// compositor the SH vector exactly).
+#[test]
+fn the_compositor_recipe_relights_the_diffuse_pass() {
+    let Some(python) = bpy_python() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let frames = dir.path().join("frames");
+    let logsh = |args: &[&str]| {
+        let output = Command::cargo_bin("logsh").unwrap().args(args).output().unwrap();
+        assert_ok(&output, &format!("logsh {args:?}"));
+    };
+    let cones = Path::new(REPO).join("gbuffers/cones");
+    let path = |p: &Path| p.to_str().unwrap().to_string();
+    logsh(&["render", &path(&cones), "--frames", "1", "--out", &path(&frames), "--transfer", "--progress", "none"]);
+    let frame = frames.join("render.0001.exr");
+    let (unturned, turned) = (dir.path().join("relit0"), dir.path().join("relit40"));
+    logsh(&["relight", &path(&frame), "--out", &path(&unturned)]);
+    logsh(&["relight", &path(&frame), "--light-rotation", "40", "--out", &path(&turned)]);
+    let composite = dir.path().join("composite.exr");
+    let light = unturned.join("render.0001.light.json");
+    let args = [frame.as_path(), light.as_path(), Path::new("--rotation"), Path::new("40"), Path::new("--write"), &composite];
+    assert_ok(&run_python(&python, "blender_scripts/relight_compositor.py", &args), "relight_compositor.py");
+    let (blender, relit, before) = (
+        raw_channels(&composite),
+        raw_channels(&turned.join("render.0001.exr")),
+        raw_channels(&unturned.join("render.0001.exr")),
+    );
+    let floor = logsh::compare::unoccluded_value(&Scene::load(&cones).unwrap().frame(1).unwrap()).unwrap();
+    let mean = |a: &HashMap<String, Vec<f32>>, b: &HashMap<String, Vec<f32>>| {
+        let mut sum = 0.0;
+        for (k, c) in ["R", "G", "B"].iter().enumerate() {
+            let (x, y) = (&a[*c], &b[&format!("diffuse.{c}")]);
+            sum += x.iter().zip(y).map(|(p, q)| f64::from((p - q).abs())).sum::<f64>() / x.len() as f64 / floor[k];
+        }
+        sum / 3.0
+    };
+    let (to_turned, to_unturned) = (mean(&blender, &relit), mean(&blender, &before));
+    println!("Blender's compositor turned 40 degrees: {to_turned:.5} from logsh relight at 40, {to_unturned:.5} from 0");
+    assert!(to_turned <= 2e-3, "the compositor's relight differs from logsh relight by {to_turned}");
+    assert!(to_unturned > 3.0 * to_turned, "the compositor must turn the light: {to_unturned}");
+}

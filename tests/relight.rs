@@ -98,11 +98,20 @@ const RELIT_TOLERANCE: f64 = 0.002;
 fn relit_equals_a_fresh_shade_under_the_same_turned_light() {
     let dir = tempfile::tempdir().unwrap();
     let cones = Path::new(env!("CARGO_MANIFEST_DIR")).join("gbuffers/cones");
-    for (scene, turn) in [(dunes(dir.path()), 0.0), (dunes(dir.path()), 120.0), (cones, -90.0)] {
-        let out = dir.path().join(format!("out{turn}"));
+    let cases: [(PathBuf, f64, &[&str]); 5] = [
+        (dunes(dir.path()), 0.0, &[]),
+        (dunes(dir.path()), 120.0, &[]),
+        (cones.clone(), -90.0, &[]),
+        // The glossy term in log-SH, and the f64 kernel.
+        (cones.clone(), 30.0, &["--glossy", "sh"]),
+        (cones, 30.0, &["--precision", "f64"]),
+    ];
+    for (case, (scene, turn, extra)) in cases.iter().enumerate() {
+        let turn = *turn;
+        let out = dir.path().join(format!("out{case}"));
         let (transfer, shaded, relit) = (out.join("transfer"), out.join("shaded"), out.join("relit"));
         let turn_arg = format!("{turn}");
-        let common = ["--frames", "1", "--sharp-lights", "off", "--progress", "none"];
+        let common = [&["--frames", "1", "--sharp-lights", "off", "--progress", "none"][..], extra].concat();
         run(&[&["render", path(&scene), "--out", path(&transfer), "--transfer"], &common[..]].concat());
         run(&[
             &["render", path(&scene), "--out", path(&shaded), "--device", "cpu", "--light-rotation", &turn_arg],
@@ -112,8 +121,8 @@ fn relit_equals_a_fresh_shade_under_the_same_turned_light() {
         let frame = transfer.join("render.0001.exr");
         run(&["relight", path(&frame), "--light-rotation", &turn_arg, "--out", path(&relit)]);
         assert!(relit.join("render.0001.png").is_file(), "a preview is written");
-        let what = format!("{} turned {turn}", scene.display());
-        let worst = compare(&scene, turn, &relit.join("render.0001.exr"), &shaded.join("render.0001.exr"), &what);
+        let what = format!("{} {extra:?} turned {turn}", scene.display());
+        let worst = compare(scene, turn, &relit.join("render.0001.exr"), &shaded.join("render.0001.exr"), &what);
         assert!(worst <= RELIT_TOLERANCE, "{what}: relit differs from shaded by {worst}");
     }
 }

@@ -1,0 +1,187 @@
+"""Builds logsh's diffuse relight in Blender's compositor from a frame's transfer layers
+(`logsh render --transfer`), with the environment's turn and strength as two Value nodes
+a compositor can drive (docs/compositing.md).
+
+    python blender_scripts/relight_compositor.py FRAME.exr LIGHT.json [--rotation DEG]
+        [--strength S] [--write OUT.exr] [--save OUT.blend]
+    blender -b -P blender_scripts/relight_compositor.py -- FRAME.exr LIGHT.json ...
+
+LIGHT.json is what `logsh relight` writes beside each frame (`<frame>.light.json`: the
+light's SH vector, RGB per coefficient). The node tree computes, per colour channel,
+
+    diffuse = albedo * max(strength * sum_k sh_diffuse_k L'_k, 0) + lamps_diffuse
+
+with `L'` the light turned by `rotation` degrees about Z: band by band the `(m, -m)` pair
+turns by `m` times the angle (`rotate_z` in src/sh/rotation.rs), which the tree does with
+cosine and sine nodes, so the turn stays live. With `--write`, the composite is rendered
+to OUT.exr (linear, float); with `--save`, the .blend is kept. The glossy term reads a
+prefiltered map along each pixel's mirror direction, which a compositor cannot: take it
+from `logsh relight`.
+"""
+import argparse
+import json
+import os
+import sys
+
+
+def arguments():
+    argv = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else sys.argv[1:]
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("frame", help="a frame rendered with logsh render --transfer")
+    parser.add_argument("light", help="the light's SH vector, <frame>.light.json from logsh relight")
+    parser.add_argument("--rotation", type=float, default=0.0, help="degrees about Z (the Value node's start)")
+    parser.add_argument("--strength", type=float, default=1.0, help="the environment's strength (the Value node's start)")
+    parser.add_argument("--write", help="render the composite to this EXR")
+    parser.add_argument("--save", help="save the .blend with the node tree")
+    return parser.parse_args(argv)
+
+
+def exr_size(path):
+    """Width and height of an EXR's data window, from its header."""
+    import struct
+
+    with open(path, "rb") as f:
+        if f.read(4) != b"\x76\x2f\x31\x01":
+            fail(f"{path}: not an EXR file")
+        f.read(4)
+        while True:
+            name = b"".join(iter(lambda: f.read(1), b"\x00"))
+            if not name:
+                fail(f"{path}: no dataWindow in its header")
+            b"".join(iter(lambda: f.read(1), b"\x00"))
+            (size,) = struct.unpack("<i", f.read(4))
+            value = f.read(size)
+            if name == b"dataWindow":
+                x0, y0, x1, y1 = struct.unpack("<4i", value)
+                return x1 - x0 + 1, y1 - y0 + 1
+
+
+def fail(message):
+    print(f"error: {message}", file=sys.stderr)
+    sys.exit(1)
+
+
+class Tree:
+    """A compositor node tree with arithmetic on sockets."""
+
+    def __init__(self, tree):
+        self.tree = tree
+        self.column = 0
+
+    def node(self, kind, **settings):
+        node = self.tree.nodes.new(kind)
+        for key, value in settings.items():
+            setattr(node, key, value)
+        self.column += 1
+        node.location = (200 * (self.column // 40), -60 * (self.column % 40))
+        return node
+
+    def link(self, output, node_input):
+        self.tree.links.new(output, node_input)
+
+    def math(self, operation, a, b=None):
+        node = self.node("ShaderNodeMath", operation=operation)
+        for socket, value in ((node.inputs[0], a), (node.inputs[1], b)):
+            if value is None:
+                continue
+            if isinstance(value, (int, float)):
+                socket.default_value = float(value)
+            else:
+                self.link(value, socket)
+        return node.outputs[0]
+
+    def total(self, sockets):
+        """The sum of `sockets` as a balanced tree of Add nodes."""
+        while len(sockets) > 1:
+            sockets = [self.math("ADD", sockets[i], sockets[i + 1]) if i + 1 < len(sockets) else sockets[i]
+                       for i in range(0, len(sockets), 2)]
+        return sockets[0]
+
+    def channels(self, output):
+        separate = self.node("CompositorNodeSeparateColor")
+        self.link(output, separate.inputs[0])
+        return [separate.outputs[k] for k in range(4)]
+
+
+def build(scene, image, light, rotation, strength):
+    import bpy
+
+    tree = bpy.data.node_groups.new("logsh diffuse relight", "CompositorNodeTree")
+    scene.compositing_node_group = tree
+    tree.interface.new_socket("Image", in_out="OUTPUT", socket_type="NodeSocketColor")
+    t = Tree(tree)
+    source = t.node("CompositorNodeImage", image=image)
+    order = light["order"]
+    count = order * order
+    names = {o.name for o in source.outputs}
+    for layer in [f"sh_diffuse_{b}" for b in range(0, count, 4)] + ["albedo", "lamps_diffuse"]:
+        if layer not in names:
+            fail(f"{image.filepath}: no {layer} pass (render it with logsh render --transfer at order {order})")
+    coefficients = []
+    for block in range(0, count, 4):
+        coefficients += t.channels(source.outputs[f"sh_diffuse_{block}"])[: min(4, count - block)]
+    turn = t.node("ShaderNodeValue", label="environment rotation (degrees)")
+    turn.outputs[0].default_value = rotation
+    scale = t.node("ShaderNodeValue", label="environment strength")
+    scale.outputs[0].default_value = strength
+    radians = t.math("RADIANS", turn.outputs[0])
+    phases = [(t.math("COSINE", t.math("MULTIPLY", radians, m)), t.math("SINE", t.math("MULTIPLY", radians, m)))
+              for m in range(order)]
+    sh = light["sh"]
+    albedo = t.channels(source.outputs["albedo"])
+    lamps = t.channels(source.outputs["lamps_diffuse"])
+    combine = t.node("CompositorNodeCombineColor")
+    for c in range(3):
+        terms = [t.math("MULTIPLY", coefficients[l * l + l], sh[l * l + l][c]) for l in range(order)]
+        for m in range(1, order):
+            # T . rotate_z(L) over the (l, m), (l, -m) pairs of every band l >= m:
+            # cos(m a) sum (a T_m + b T_-m) + sin(m a) sum (a T_-m - b T_m).
+            along, across = [], []
+            for l in range(m, order):
+                plus, minus = l * l + l + m, l * l + l - m
+                a, b = sh[plus][c], sh[minus][c]
+                along += [t.math("MULTIPLY", coefficients[plus], a), t.math("MULTIPLY", coefficients[minus], b)]
+                across += [t.math("MULTIPLY", coefficients[minus], a), t.math("MULTIPLY", coefficients[plus], -b)]
+            terms.append(t.math("MULTIPLY", t.total(along), phases[m][0]))
+            terms.append(t.math("MULTIPLY", t.total(across), phases[m][1]))
+        lit = t.math("MAXIMUM", t.math("MULTIPLY", t.total(terms), scale.outputs[0]), 0.0)
+        t.link(t.math("ADD", t.math("MULTIPLY", lit, albedo[c]), lamps[c]), combine.inputs[c])
+    t.link(source.outputs["Alpha"], combine.inputs[3])
+    output = t.node("NodeGroupOutput")
+    t.link(combine.outputs[0], output.inputs[0])
+
+
+def main():
+    import bpy
+
+    args = arguments()
+    for path in (args.frame, args.light):
+        if not os.path.isfile(path):
+            fail(f"{path}: no such file")
+    with open(args.light) as f:
+        light = json.load(f)
+    if not isinstance(light.get("order"), int) or len(light.get("sh", [])) != light["order"] ** 2:
+        fail(f"{args.light}: not a light written by logsh relight (an order and order^2 RGB coefficients)")
+    if args.write and os.path.abspath(args.write) in (os.path.abspath(args.frame), os.path.abspath(args.light)):
+        fail(f"{args.write}: would be written over an input")
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scene = bpy.context.scene
+    image = bpy.data.images.load(os.path.abspath(args.frame))
+    build(scene, image, light, args.rotation, args.strength)
+    # The composite has the scene's resolution: the frame's.
+    scene.render.resolution_x, scene.render.resolution_y = exr_size(args.frame)
+    scene.render.resolution_percentage = 100
+    if args.write:
+        scene.render.engine = "BLENDER_WORKBENCH"
+        scene.render.image_settings.file_format = "OPEN_EXR"
+        scene.render.image_settings.color_depth = "32"
+        scene.render.filepath = os.path.abspath(args.write)
+        bpy.ops.render.render(write_still=True)
+        print(f"wrote {args.write}")
+    if args.save:
+        bpy.ops.wm.save_as_mainfile(filepath=os.path.abspath(args.save))
+        print(f"saved {args.save}")
+
+
+if __name__ == "__main__":
+    main()
