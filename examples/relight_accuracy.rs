@@ -12,9 +12,10 @@
 //! default `auto` (what relighting does to the suns taken out of a map). Errors are
 //! `logsh::compare`'s: mean absolute over non-background pixels, RGB, over the open white
 //! floor; "worst" is the largest pixel's. Times are the medians of `N` runs of the
-//! shading call and of the relight call (reading the file and building the light
-//! excluded, which a sequence does once), and of the two whole processes' work
-//! as they run in a sequence. Where the scene directory holds a converged Cycles render of
+//! shading call and of the relight call, as the frames of a sequence run them (the light
+//! and the kernel built once), and the first run of each, cold: the relight with its
+//! light read, projected and prefiltered, the shade with its tables; reading the
+//! transfer file is not counted. Where the scene directory holds a converged Cycles render of
 //! the frame (`cycles.NNNN.exr`, `blender_scripts/render_cycles.py`) and the light is not
 //! turned, the relit frame and the default shade are also compared with it.
 
@@ -42,8 +43,8 @@ fn main() -> anyhow::Result<()> {
         }
     }
     let temp = tempfile::tempdir()?;
-    println!("| scene | size | vs shade, sharp lights off (mean / worst) | vs shade, sharp lights auto | vs Cycles: relit / shade auto | relight | shade | ratio |");
-    println!("| --- | --- | --- | --- | --- | --- | --- | --- |");
+    println!("| scene | size | vs shade, sharp lights off (mean / worst) | vs shade, sharp lights auto | vs Cycles: relit / shade auto | relight | shade | ratio | cold: relight / shade | ratio |");
+    println!("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |");
     for dir in &scenes {
         let settings = ShadingSettings { sharp_lights: false, ..ShadingSettings::default() };
         let scene = Scene::load(dir)?;
@@ -69,7 +70,9 @@ fn main() -> anyhow::Result<()> {
         let auto = shade_frame_passes(&turned, &turned_frame, &ShadingSettings::default())?;
 
         let options = RelightOptions { rotation, ..RelightOptions::default() };
+        let started = Instant::now();
         let light = RelightLight::new(options.source(&transfer.header), &transfer.header, &file)?;
+        let building = started.elapsed().as_secs_f64();
         let mut relight_times = Vec::new();
         let mut relit = None;
         for _ in 0..repeats {
@@ -92,9 +95,10 @@ fn main() -> anyhow::Result<()> {
             ),
             _ => "-".into(),
         };
+        let (cold_relight, cold_shade) = (building + relight_times[0], shade_times[0]);
         let (r, s) = (median(relight_times), median(shade_times));
         println!(
-            "| {} | {}x{} | {:.5} / {:.4} | {:.4} | {against_cycles} | {:.1} ms | {:.1} ms | {:.0}x |",
+            "| {} | {}x{} | {:.5} / {:.4} | {:.4} | {against_cycles} | {:.1} ms | {:.1} ms | {:.0}x | {:.1} / {:.1} ms | {:.0}x |",
             dir.display(),
             frame.gbuffer.width,
             frame.gbuffer.height,
@@ -103,7 +107,10 @@ fn main() -> anyhow::Result<()> {
             with_suns.mean,
             1e3 * r,
             1e3 * s,
-            s / r
+            s / r,
+            1e3 * cold_relight,
+            1e3 * cold_shade,
+            cold_shade / cold_relight
         );
     }
     Ok(())

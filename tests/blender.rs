@@ -593,7 +593,8 @@ fn the_compositor_recipe_relights_the_diffuse_pass() {
     logsh(&["relight", &path(&frame), "--light-rotation", "40", "--out", &path(&turned)]);
     let composite = dir.path().join("composite.exr");
     let light = unturned.join("render.0001.light.json");
-    let args = [frame.as_path(), light.as_path(), Path::new("--rotation"), Path::new("40"), Path::new("--write"), &composite];
+    let args =
+        [frame.as_path(), light.as_path(), Path::new("--rotation"), Path::new("40"), Path::new("--write"), &composite];
     assert_ok(&run_python(&python, "blender_scripts/relight_compositor.py", &args), "relight_compositor.py");
     let (blender, relit, before) = (
         raw_channels(&composite),
@@ -610,7 +611,9 @@ fn the_compositor_recipe_relights_the_diffuse_pass() {
         sum / 3.0
     };
     let (to_turned, to_unturned) = (mean(&blender, &relit), mean(&blender, &before));
-    println!("Blender's compositor turned 40 degrees: {to_turned:.5} from logsh relight at 40, {to_unturned:.5} from 0");
+    println!(
+        "Blender's compositor turned 40 degrees: {to_turned:.5} from logsh relight at 40, {to_unturned:.5} from 0"
+    );
     assert!(to_turned <= 2e-3, "the compositor's relight differs from logsh relight by {to_turned}");
     assert!(to_unturned > 3.0 * to_turned, "the compositor must turn the light: {to_unturned}");
 }

@@ -307,6 +307,32 @@ fn bad_relight_inputs_are_refused_with_the_file_named() {
         })
         .collect();
     let broken = dir.path().join("broken.exr");
-    logsh::scene::output::write_exr_layers(&broken, 96, 54, &list, &[("logshTransfer", text)]).unwrap();
+    logsh::scene::output::write_exr_layers(&broken, 96, 54, &list, &[("logshTransfer", text.clone())]).unwrap();
     assert_fails_naming(&["relight", path(&broken), "--out", o], &["broken.exr", "sh_unoccluded_0.R"]);
+    // Headers a relight cannot use: each refused with the file and what is wrong.
+    let all = channels(&frame);
+    let whole: Vec<logsh::scene::output::OutputChannel> = all
+        .iter()
+        .map(|(name, values)| logsh::scene::output::OutputChannel {
+            name: name.clone(),
+            sample_type: logsh::scene::output::SampleType::Float,
+            values,
+        })
+        .collect();
+    let header: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let environment = |strength: f64| serde_json::json!({"environment": {"file": "sky.exr", "strength": strength, "rotation": [0.0, 0.0, 0.0], "turn": 0.0}});
+    let edits = [
+        ("/sh/order", serde_json::json!(12), "order 12"),
+        ("/light", serde_json::json!({"sh": vec![[1.0, 1.0, 1.0]; 100]}), "100 coefficients"),
+        ("/lobes/0/lobe", serde_json::json!({"ggx": {"alpha": -1.0}}), "lobe of material"),
+        ("/light", environment(-1.0), "strength"),
+    ];
+    for (pointer, value, needle) in edits {
+        let mut edited = header.clone();
+        *edited.pointer_mut(pointer).unwrap() = value;
+        let file = dir.path().join("edited.exr");
+        let text = serde_json::to_string(&edited).unwrap();
+        logsh::scene::output::write_exr_layers(&file, 96, 54, &whole, &[("logshTransfer", text)]).unwrap();
+        assert_fails_naming(&["relight", path(&file), "--out", o], &["edited.exr", needle]);
+    }
 }

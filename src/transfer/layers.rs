@@ -74,6 +74,56 @@ pub struct TransferHeader {
     pub lobes: Vec<PrefilteredLobe>,
 }
 
+/// Most prefiltered lobes a frame may list (one per Phong material).
+pub const MAX_LOBES: usize = 1024;
+
+impl TransferHeader {
+    /// Refuses a header a relight cannot use, naming `file`: an order outside the
+    /// supported range, a light or lobe that is not finite or out of range.
+    fn check(&self, file: &Path) -> Result<(), SceneError> {
+        let order = self.sh.order;
+        let bad = |what: String| Err(SceneError::invalid(file, format!("its {TRANSFER_ATTRIBUTE} header: {what}")));
+        if !(MIN_ORDER..=MAX_ORDER).contains(&order) {
+            return bad(format!("transfer order {order} is not in {MIN_ORDER}..={MAX_ORDER}"));
+        }
+        let finite = |v: &[f64]| v.iter().all(|x| x.is_finite());
+        match &self.light {
+            LightSource::Environment { strength, rotation, turn, .. } => {
+                if !(strength.is_finite() && *strength >= 0.0) || !finite(rotation) || !turn.is_finite() {
+                    return bad("the environment's strength or rotation is not a finite value".into());
+                }
+            }
+            LightSource::Constant(c) => {
+                if !c.iter().all(|v| v.is_finite() && *v >= 0.0) {
+                    return bad("the constant light is not finite and >= 0".into());
+                }
+            }
+            LightSource::Sh(v) => {
+                let n = (v.len() as f64).sqrt().round() as usize;
+                if n * n != v.len() || !(order..=MAX_ORDER).contains(&n) || !v.iter().all(|c| finite(c)) {
+                    return bad(format!(
+                        "the SH light has {} coefficients; give n^2 finite ones, n from {order} to {MAX_ORDER}",
+                        v.len()
+                    ));
+                }
+            }
+        }
+        if self.lobes.len() > MAX_LOBES {
+            return bad(format!("{} prefiltered lobes, more than {MAX_LOBES}", self.lobes.len()));
+        }
+        for lobe in &self.lobes {
+            let width = match lobe.lobe {
+                SharpLobe::Ggx { alpha } => alpha > 0.0 && alpha <= 1.0,
+                SharpLobe::Phong { exponent } => exponent.is_finite() && exponent > 0.0,
+            };
+            if !width || lobe.open.len() != order || !finite(&lobe.open) {
+                return bad(format!("the lobe of material {} is not a finite lobe of order {order}", lobe.material));
+            }
+        }
+        Ok(())
+    }
+}
+
 /// The transfer layers of one frame, row-major from the top row; the SH layers hold
 /// `count` coefficients per pixel.
 #[derive(Clone, Debug)]
@@ -332,13 +382,8 @@ impl TransferFrame {
                 ))
             }
         };
+        header.check(file)?;
         let order = header.sh.order;
-        if !(MIN_ORDER..=MAX_ORDER).contains(&order) {
-            return Err(SceneError::invalid(
-                file,
-                format!("its transfer order {order} is not in {MIN_ORDER}..={MAX_ORDER}"),
-            ));
-        }
         let mut exr = ExrChannels::read(file, "a frame with transfer layers")?;
         exr.use_size_of("sh_diffuse_0.R");
         let (width, height) = (exr.width, exr.height);
@@ -403,12 +448,6 @@ impl TransferFrame {
         }
         if specular.is_none() && glossy_lobe.iter().any(|&c| c >= lobe_code::SH) {
             return Err(SceneError::invalid(file, "its pixels read sh_specular, which it does not hold"));
-        }
-        if header.lobes.iter().any(|l| l.open.len() != order) {
-            return Err(SceneError::invalid(
-                file,
-                format!("a prefiltered lobe of its header has not {order} ZH values"),
-            ));
         }
         let finite = |v: &[f32]| v.iter().all(|x| x.is_finite());
         let all_finite = finite(&diffuse)

@@ -21,7 +21,6 @@
 
 use crate::transfer::{RelightLight, RelightOptions, TransferFrame};
 use anyhow::{anyhow, Context, Result};
-use std::collections::HashMap;
 use std::io::{BufRead, BufReader, Write};
 use std::net::{TcpListener, TcpStream};
 use std::path::{Path, PathBuf};
@@ -33,8 +32,8 @@ const PAGE: &str = include_str!("page.html");
 /// What `logsh view` serves.
 pub struct Viewer {
     frames: Vec<PathBuf>,
-    /// The bodies of each frame's requests, built on first request.
-    built: Mutex<HashMap<usize, Arc<FrameBodies>>>,
+    /// The bodies of the frames last asked for (at most [`KEPT_FRAMES`]), newest last.
+    built: Mutex<Vec<(usize, Arc<FrameBodies>)>>,
     /// When the page's benchmark started ([`PAGE`]'s `?bench=N`).
     bench: Mutex<Option<std::time::Instant>>,
 }
@@ -65,7 +64,7 @@ impl Viewer {
                 dir.display()
             ));
         }
-        Ok(Self { frames, built: Mutex::new(HashMap::new()), bench: Mutex::new(None) })
+        Ok(Self { frames, built: Mutex::new(Vec::new()), bench: Mutex::new(None) })
     }
 
     /// Listens on 127.0.0.1:`port` (0: any free port) and serves until the process ends;
@@ -165,19 +164,29 @@ impl Viewer {
         }
     }
 
-    /// Frame `index`'s responses, built once.
+    /// Frame `index`'s responses, built on its first request and kept while it is among
+    /// the last [`KEPT_FRAMES`] asked for (a 960 x 540 frame's are about 140 MB).
     fn bodies(&self, index: usize) -> Result<Arc<FrameBodies>> {
-        if let Some(bodies) = self.built.lock().unwrap_or_else(|p| p.into_inner()).get(&index) {
+        let built = || self.built.lock().unwrap_or_else(|p| p.into_inner());
+        if let Some((_, bodies)) = built().iter().find(|(i, _)| *i == index) {
             return Ok(bodies.clone());
         }
         let file = &self.frames[index];
         let frame = TransferFrame::read(file)?;
         let light = RelightLight::new(RelightOptions::default().source(&frame.header), &frame.header, file)?;
         let bodies = Arc::new(frame_bodies(file, &frame, &light));
-        self.built.lock().unwrap_or_else(|p| p.into_inner()).insert(index, bodies.clone());
+        let mut kept = built();
+        kept.retain(|(i, _)| *i != index);
+        kept.push((index, bodies.clone()));
+        if kept.len() > KEPT_FRAMES {
+            kept.remove(0);
+        }
         Ok(bodies)
     }
 }
+
+/// How many frames' responses the server keeps.
+const KEPT_FRAMES: usize = 2;
 
 /// Whether `file`'s header says it holds transfer layers.
 fn has_transfer(file: &Path) -> bool {
