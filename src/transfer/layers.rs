@@ -89,7 +89,7 @@ impl TransferHeader {
         let finite = |v: &[f64]| v.iter().all(|x| x.is_finite());
         match &self.light {
             LightSource::Environment { strength, rotation, turn, .. } => {
-                if !(strength.is_finite() && *strength >= 0.0) || !finite(rotation) || !turn.is_finite() {
+                if !(strength.is_finite() && *strength >= 0.0 && finite(rotation) && turn.is_finite()) {
                     return bad("the environment's strength or rotation is not a finite value".into());
                 }
             }
