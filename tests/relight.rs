@@ -112,9 +112,9 @@ fn relit_equals_a_fresh_shade_under_the_same_turned_light() {
         let (transfer, shaded, relit) = (out.join("transfer"), out.join("shaded"), out.join("relit"));
         let turn_arg = format!("{turn}");
         let common = [&["--frames", "1", "--sharp-lights", "off", "--progress", "none"][..], extra].concat();
-        run(&[&["render", path(&scene), "--out", path(&transfer), "--transfer"], &common[..]].concat());
+        run(&[&["render", path(scene), "--out", path(&transfer), "--transfer"], &common[..]].concat());
         run(&[
-            &["render", path(&scene), "--out", path(&shaded), "--device", "cpu", "--light-rotation", &turn_arg],
+            &["render", path(scene), "--out", path(&shaded), "--device", "cpu", "--light-rotation", &turn_arg],
             &common[..],
         ]
         .concat());
