@@ -82,7 +82,7 @@ fn write_image(scene: &Scene, dir: &Path, stem: &str, width: usize, height: usiz
         scene.check_output_path(path)?;
     }
     output::write_exr_rgba(&exr, width, height, rgba)?;
-    output::write_png_preview(&png, width, height, rgba)?;
+    output::write_png_preview(&png, width, height, rgba, &scene.view)?;
     Ok(())
 }
 
@@ -353,6 +353,7 @@ pub fn info(args: &crate::cli::InfoArgs) -> Result<()> {
 
 /// `logsh relight`.
 pub fn relight(args: &crate::cli::RelightArgs) -> Result<()> {
+    use crate::scene::ViewTransform;
     use crate::transfer::{relight, RelightLight, RelightOptions, TransferFrame};
     if args.out.exists() && !args.out.is_dir() {
         return Err(anyhow!("--out {}: exists and is not a directory", args.out.display()));
@@ -404,7 +405,11 @@ pub fn relight(args: &crate::cli::RelightArgs) -> Result<()> {
         let passes = relight(&frame, light.as_ref().expect("built above"));
         relighting += t.elapsed().as_secs_f64();
         crate::render::write_passes(exr, &passes, args.colour_type)?;
-        output::write_png_preview(png, passes.width, passes.height, &passes.beauty)?;
+        let view = match &frame.header.view {
+            Some(spec) => ViewTransform::load(spec, Path::new("/"), file)?,
+            None => ViewTransform::default(),
+        };
+        output::write_png_preview(png, passes.width, passes.height, &passes.beauty, &view)?;
         let light = light.as_ref().expect("built above");
         output::write_text(json, &(serde_json::to_string_pretty(&light.description())? + "\n"))?;
     }

@@ -617,3 +617,72 @@ fn the_compositor_recipe_relights_the_diffuse_pass() {
     assert!(to_turned <= 2e-3, "the compositor's relight differs from logsh relight by {to_turned}");
     assert!(to_unturned > 3.0 * to_turned, "the compositor must turn the light: {to_unturned}");
 }
+
+/// The PNG preview applies the scene's exposure and view transform as Blender shows them:
+/// logsh's preview of its own linear beauty against Blender's `save_render` of the same
+/// EXR with the .blend's colour management, under a sky bright enough to turn a plain sRGB
+/// preview white.
+#[test]
+fn previews_follow_the_scenes_view_transform() {
+    let Some(python) = bpy_python() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    for (transform, look, exposure) in
+        [("AgX", "None", -1.5), ("Filmic", "Medium High Contrast", -2.5), ("Standard", "None", -4.0)]
+    {
+        let blend = dir.path().join(format!("{transform}.blend"));
+        let setup = format!(
+            "bpy.ops.mesh.primitive_plane_add(size=10); bpy.ops.mesh.primitive_uv_sphere_add(location=(0, 0, 1)); \
+             bpy.ops.object.camera_add(location=(6, -6, 5), rotation=(math.radians(58), 0, math.radians(45))); \
+             s = bpy.context.scene; s.camera = bpy.context.object; \
+             w = bpy.data.worlds.new('World'); s.world = w; w.use_nodes = True; \
+             w.node_tree.nodes['Background'].inputs['Color'].default_value = (0.6, 0.75, 1.0, 1); \
+             w.node_tree.nodes['Background'].inputs['Strength'].default_value = 12.0; \
+             s.view_settings.view_transform = '{transform}'; s.view_settings.look = '{look}'; \
+             s.view_settings.exposure = {exposure}"
+        );
+        make_blend(&python, &blend, &setup);
+        let scene = dir.path().join(transform);
+        assert_ok(&export_frame_1(&python, &blend, &scene, "48x27"), "exporting");
+        let json: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(scene.join("scene.json")).unwrap()).unwrap();
+        assert_eq!(json["view"]["transform"], transform);
+        assert_eq!(json["view"]["lut"].is_object(), transform != "Standard", "{}", json["view"]);
+        let shaded = dir.path().join(format!("{transform}-shaded"));
+        let output = Command::cargo_bin("logsh")
+            .unwrap()
+            .args(["shade", "--device", "cpu", "--out"])
+            .arg(&shaded)
+            .arg(&scene)
+            .output()
+            .unwrap();
+        assert_ok(&output, "logsh shade");
+        let blender_png = dir.path().join(format!("{transform}-blender.png"));
+        let script = format!(
+            "import bpy; bpy.ops.wm.open_mainfile(filepath={:?}); s = bpy.context.scene; \
+             i = bpy.data.images.load({:?}); s.render.image_settings.file_format = 'PNG'; \
+             s.render.image_settings.color_depth = '8'; s.render.image_settings.color_mode = 'RGB'; \
+             i.save_render({:?}, scene=s)",
+            blend.to_str().unwrap(),
+            shaded.join("beauty.0001.exr").to_str().unwrap(),
+            blender_png.to_str().unwrap()
+        );
+        assert_ok(&std::process::Command::new(&python).args(["-c", &script]).output().unwrap(), "save_render");
+        let ours = image::open(shaded.join("beauty.0001.png")).unwrap().to_rgba8();
+        let theirs = image::open(&blender_png).unwrap().to_rgb8();
+        let (mut sum, mut worst, mut level) = (0.0f64, 0u8, 0.0f64);
+        for (a, b) in ours.pixels().zip(theirs.pixels()) {
+            assert_eq!(a[3], 255, "an opaque preview, as Blender's film is");
+            for k in 0..3 {
+                let d = a[k].abs_diff(b[k]);
+                sum += f64::from(d);
+                worst = worst.max(d);
+                level += f64::from(a[k]);
+            }
+        }
+        let count = 3.0 * f64::from(ours.width() * ours.height());
+        let (mean, level) = (sum / count, level / count);
+        println!("{transform} ({look}, exposure {exposure}): preview {mean:.3} levels from Blender's, worst {worst}, mean level {level:.0}");
+        assert!(mean <= 1.0 && worst <= 6, "{transform}: mean {mean} levels, worst {worst}");
+        assert!(level < 240.0, "{transform}: the preview must not be white ({level:.0})");
+    }
+}

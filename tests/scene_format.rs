@@ -6,6 +6,7 @@ use exr::prelude::{AnyChannel, AnyChannels, Encoding, FlatSamples, Image, Layer,
 use logsh::scene::light::{direction_to_equirectangular, equirectangular_to_direction};
 use logsh::scene::output::{write_exr_rgba, write_png_preview};
 use logsh::scene::{EnvironmentMap, Light, Scene, SceneError};
+use logsh::scene::{ViewSpec, ViewTransform};
 use logsh::synth::{self, GBufferLayout, SphereOverPlane};
 use std::f64::consts::PI;
 use std::path::Path;
@@ -440,10 +441,19 @@ fn outputs_round_trip_atomically() {
     }
 
     let png_path = dir.path().join("out.png");
-    write_png_preview(&png_path, 3, 2, &rgba).unwrap();
+    write_png_preview(&png_path, 3, 2, &rgba, &ViewTransform::default()).unwrap();
     let png = image::open(&png_path).unwrap().to_rgba8();
-    // sRGB(0.5) = 0.7354 -> 188; 2.0 clamps to 255; alpha 0.5 -> 128 (kept linear).
-    assert_eq!(png.get_pixel(0, 0).0, [0, 188, 255, 128]);
+    // sRGB(0.5) = 0.7354 -> 188; 2.0 clamps to 255; opaque, as Blender's film is by default.
+    assert_eq!(png.get_pixel(0, 0).0, [0, 188, 255, 255]);
+    // With Film > Transparent, alpha 0.5 -> 128 (kept linear); exposure +1 doubles 0.2 to
+    // 0.4, sRGB 0.665 -> 170.
+    let spec: ViewSpec =
+        serde_json::from_value(serde_json::json!({"transform": "Standard", "exposure": 1.0, "transparent": true}))
+            .unwrap();
+    let view = ViewTransform::load(&spec, dir.path(), &png_path).unwrap();
+    write_png_preview(&png_path, 3, 2, &rgba, &view).unwrap();
+    let png = image::open(&png_path).unwrap().to_rgba8();
+    assert_eq!(png.get_pixel(1, 0).0, [170, 255, 255, 128]);
     let leftovers: Vec<_> = std::fs::read_dir(dir.path()).unwrap().map(|e| e.unwrap().file_name()).collect();
     assert_eq!(leftovers.len(), 2, "no temporary files left: {leftovers:?}");
 

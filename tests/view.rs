@@ -69,7 +69,7 @@ fn run(args: &[&str]) {
 
 /// `gbuffers/cones` (whose directory holds a Cycles render) rendered with its transfer,
 /// under a map whose light comes mostly from a warm patch low in the south-east, so that
-/// turning it moves the shadows and reflections.
+/// turning it moves the shadows and reflections, and shown through a view transform's LUT.
 fn rendered_cones(dir: &Path) -> PathBuf {
     let sample = Path::new(env!("CARGO_MANIFEST_DIR")).join("gbuffers/cones");
     let scene = dir.join("cones");
@@ -93,9 +93,34 @@ fn rendered_cones(dir: &Path) -> PathBuf {
     let map = scene.join("patch.exr");
     logsh::scene::output::write_exr_channels(&map, width, height, &[("R", &rgb[0]), ("G", &rgb[1]), ("B", &rgb[2])])
         .unwrap();
+    // A view transform given by its LUT, as the exporter writes one: a tone curve
+    // `x / (1 + x)` per channel through sRGB, sampled on 9^3 points over 2^-8 to 2^4.
+    let (n, range) = (9usize, [-8.0f32, 4.0]);
+    let curve = |i: usize| {
+        let x = (range[0] + (range[1] - range[0]) * i as f32 / (n - 1) as f32).exp2();
+        logsh::scene::output::linear_to_srgb(x / (1.0 + x))
+    };
+    let mut lut = [vec![0.0f32; n * n * n], vec![0.0f32; n * n * n], vec![0.0f32; n * n * n]];
+    for b in 0..n {
+        for g in 0..n {
+            for r in 0..n {
+                let i = b * n * n + g * n + r;
+                (lut[0][i], lut[1][i], lut[2][i]) = (curve(r), curve(g), curve(b));
+            }
+        }
+    }
+    logsh::scene::output::write_exr_channels(
+        &scene.join("view_lut.exr"),
+        n * n,
+        n,
+        &[("R", &lut[0]), ("G", &lut[1]), ("B", &lut[2])],
+    )
+    .unwrap();
     let file = scene.join("scene.json");
     let mut json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&file).unwrap()).unwrap();
     json["light"] = serde_json::json!({"environment": "patch.exr"});
+    json["view"] = serde_json::json!({"transform": "Filmic", "exposure": 0.5,
+        "lut": {"file": "view_lut.exr", "size": n, "log2_range": range}});
     std::fs::write(&file, serde_json::to_string_pretty(&json).unwrap()).unwrap();
     let out = dir.join("frames");
     run(&[

@@ -177,6 +177,7 @@ def export(scene, options, log=print):
     changes = Changes()
     frame_before = scene.frame_current
     try:
+        view = export_view(scene, out, changes)
         view_layer = configure_render(scene, options, changes)
         lights = export_lamps(scene, view_layer, start, end)
         objects = renderable_objects(scene, view_layer)
@@ -193,6 +194,7 @@ def export(scene, options, log=print):
             "blockers": "blockers.####.json",
             "materials": {str(i): m for i, m in sorted(table.items())},
             "light": export_world(scene, out, options, log),
+            "view": view,
         }
         if lights:
             description["lights"] = lights
@@ -242,6 +244,66 @@ def export(scene, options, log=print):
         changes.undo()
         scene.frame_set(frame_before)
     log(f"wrote {out}")
+    return description
+
+
+# ---- colour management -----------------------------------------------------------------
+
+# The grid on which the view transform is sampled for logsh's previews: VIEW_LUT_SIZE
+# values per channel, 2^t for t evenly spaced over VIEW_LUT_LOG2 (linear 1.5e-5 to 256:
+# every transform Blender ships is black below and white above).
+VIEW_LUT_SIZE = 33
+VIEW_LUT_LOG2 = (-16.0, 8.0)
+
+
+def export_view(scene, out, changes):
+    """The scene's colour management as logsh's PNG previews apply it (`view` in
+    scene.json): the view transform, look, exposure, gamma, display and Film > Transparent,
+    and, unless it is plain Standard, the transform itself sampled through Blender's own
+    `Image.save_render` on a grid of linear colours at exposure 0 (`view_lut.exr`; logsh
+    applies the exposure in front of it)."""
+    view, display = scene.view_settings, scene.display_settings.display_device
+    description = {
+        "transform": view.view_transform,
+        "look": view.look,
+        "exposure": float(view.exposure),
+        "gamma": float(view.gamma),
+        "display": display,
+        "transparent": bool(scene.render.film_transparent),
+    }
+    if (view.view_transform, view.look, view.gamma, display) == ("Standard", "None", 1.0, "sRGB") \
+            and not view.use_curve_mapping:
+        return description
+    n = VIEW_LUT_SIZE
+    lo, hi = VIEW_LUT_LOG2
+    axis = 2.0 ** np.linspace(lo, hi, n)
+    # Column r + n g, row b; Blender's pixels run from the bottom row up.
+    b, g, r = np.meshgrid(axis, axis, axis, indexing="ij")
+    grid = np.stack([r.reshape(n, n * n), g.reshape(n, n * n), b.reshape(n, n * n), np.ones((n, n * n))], axis=-1)
+    image = bpy.data.images.new("logsh view transform", n * n, n, float_buffer=True, alpha=True)
+    path = new_file(out, "view_lut.png.tmp")
+    try:
+        image.pixels.foreach_set(grid.astype(np.float32).ravel())
+        changes.set(view, "exposure", 0.0)
+        settings = scene.render.image_settings
+        if hasattr(settings, "media_type"):
+            changes.set(settings, "media_type", "IMAGE")  # Blender 5: before file_format
+        changes.set(settings, "file_format", "PNG")
+        changes.set(settings, "color_depth", "16")
+        changes.set(settings, "color_mode", "RGB")
+        image.save_render(path, scene=scene)
+        shown = bpy.data.images.load(path)
+        shown.colorspace_settings.name = "Non-Color"
+        values = np.empty(n * n * n * 4, dtype=np.float32)
+        shown.pixels.foreach_get(values)
+        bpy.data.images.remove(shown)
+    finally:
+        bpy.data.images.remove(image)
+        if os.path.exists(path):
+            os.remove(path)
+    values = values.reshape(n, n * n, 4)
+    write_exr(new_file(out, "view_lut.exr"), {c: values[..., k] for k, c in enumerate("RGB")})
+    description["lut"] = {"file": "view_lut.exr", "size": n, "log2_range": [lo, hi]}
     return description
 
 

@@ -173,7 +173,7 @@ fn render_frame(
         write_passes(exr, &passes, options.colour)?;
         passes
     };
-    output::write_png_preview(png, passes.width, passes.height, &passes.beauty)
+    output::write_png_preview(png, passes.width, passes.height, &passes.beauty, &scene.view)
         .with_context(|| format!("frame {frame}: cannot write the preview"))?;
     Ok(())
 }

@@ -36,6 +36,8 @@
 //! - Ground: an optional `{"height": z}`, an infinite horizontal plane at world Z `z` that
 //!   hides everything below the horizontal from receivers above it (a flat floor the
 //!   exporter found); not together with `heightfield`.
+//! - View: an optional `view` object, the colour management the PNG previews apply
+//!   (see [`view`]).
 //! - G-buffers: see [`gbuffer`] for channel names, layouts and per-pixel checks.
 //!
 //! # Channel-name overrides
@@ -73,12 +75,14 @@ pub mod heightmap;
 pub mod light;
 pub mod output;
 mod paths;
+pub mod view;
 
 pub use camera::{Camera, Sphere};
 pub use error::{SceneError, MAX_IMAGE_PIXELS, MAX_IMAGE_SIDE};
 pub use gbuffer::{ChannelNames, GBuffer};
 pub use heightmap::HeightMap;
 pub use light::{EnvironmentMap, Light, LightSource, PointLight, SunLight, MAX_SUNS};
+pub use view::{ViewSpec, ViewTransform};
 
 use serde::Deserialize;
 use std::collections::BTreeMap;
@@ -250,6 +254,8 @@ pub struct Scene {
     /// Degrees the whole light is turned about Z on top of scene.json (`--light-rotation`).
     pub light_turn: f64,
     pub channels: ChannelNames,
+    /// How previews show the linear image (`view` in scene.json; Standard without it).
+    pub view: ViewTransform,
     static_light: Option<Arc<Light>>,
     static_height_map: Option<Arc<HeightMap>>,
 }
@@ -277,6 +283,7 @@ struct SceneFile {
     light: LightFile,
     lights: Option<Vec<SharpLightFile>>,
     channels: Option<gbuffer::ChannelOverrides>,
+    view: Option<view::ViewSpec>,
 }
 
 #[derive(Deserialize)]
@@ -347,6 +354,9 @@ impl SceneFile {
         }
         if let Some(h) = &self.heightfield {
             paths::check_inside(file, dir, "heightfield.heights", &h.heights)?;
+        }
+        if let Some(lut) = self.view.as_ref().and_then(|v| v.lut.as_ref()) {
+            paths::check_inside(file, dir, "view.lut.file", &lut.file.to_string_lossy())?;
         }
         Ok(())
     }
@@ -634,6 +644,10 @@ impl Scene {
             }
         }
         let channels = ChannelNames::from_overrides(raw.channels.as_ref());
+        let view = match &raw.view {
+            Some(spec) => ViewTransform::load(spec, dir, &file)?,
+            None => ViewTransform::default(),
+        };
 
         let mut scene = Scene {
             dir: dir.to_path_buf(),
@@ -650,6 +664,7 @@ impl Scene {
             points,
             light_turn: 0.0,
             channels,
+            view,
             static_light: None,
             static_height_map: None,
         };

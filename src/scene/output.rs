@@ -169,19 +169,31 @@ pub fn linear_to_srgb(x: f32) -> f32 {
     }
 }
 
-/// Writes an 8-bit RGBA PNG: colour through the sRGB transfer function (clamped to
-/// `[0, 1]`), alpha kept linear.
-pub fn write_png_preview(path: &Path, width: usize, height: usize, rgba: &[[f32; 4]]) -> Result<(), OutputError> {
+/// Writes an 8-bit RGBA PNG preview: colour through `view` (the scene's exposure and view
+/// transform, [`super::view`]), alpha linear where `view` keeps the background
+/// transparent and opaque otherwise.
+pub fn write_png_preview(
+    path: &Path,
+    width: usize,
+    height: usize,
+    rgba: &[[f32; 4]],
+    view: &super::ViewTransform,
+) -> Result<(), OutputError> {
     check_len(path, width, height, rgba.len())?;
     let q = |v: f32| (v * 255.0 + 0.5).clamp(0.0, 255.0) as u8;
     let mut bytes = Vec::with_capacity(rgba.len() * 4);
     for p in rgba {
-        bytes.extend_from_slice(&[
-            q(linear_to_srgb(p[0])),
-            q(linear_to_srgb(p[1])),
-            q(linear_to_srgb(p[2])),
-            q(if p[3].is_nan() { 0.0 } else { p[3].clamp(0.0, 1.0) }),
-        ]);
+        let [r, g, b] = view.display([p[0], p[1], p[2]], 0.0);
+        let alpha = if view.transparent {
+            if p[3].is_nan() {
+                0.0
+            } else {
+                p[3].clamp(0.0, 1.0)
+            }
+        } else {
+            1.0
+        };
+        bytes.extend_from_slice(&[q(r), q(g), q(b), q(alpha)]);
     }
     write_atomically(
         path,

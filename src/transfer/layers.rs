@@ -72,6 +72,9 @@ pub struct TransferHeader {
     pub heightfield: bool,
     pub blockers: bool,
     pub lobes: Vec<PrefilteredLobe>,
+    /// The scene's colour management for previews, its LUT file absolute
+    /// ([`crate::scene::view`]).
+    pub view: Option<crate::scene::ViewSpec>,
 }
 
 /// Most prefiltered lobes a frame may list (one per Phong material).

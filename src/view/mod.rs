@@ -9,16 +9,18 @@
 //! | `/frames.json` | the frames of the directory: file names |
 //! | `/frame/<i>/meta.json` | size, order, the light's SH vector, the lobes, the layout of the next two |
 //! | `/frame/<i>/pixels.bin` | the transfer layers, little-endian f32, one array after another |
-//! | `/frame/<i>/maps.bin` | the maps the glossy lookups read ([`RelightLight::sampled_maps`]) |
+//! | `/frame/<i>/maps.bin` | the maps the glossy lookups read ([`RelightLight::sampled_maps`]), then the scene's view transform LUT ([`crate::scene::view`]) |
 //! | `/frame/<i>/cycles.bin` | the Cycles render of the frame as RGB f32, where one is found |
 //! | `/bench/start`, `/bench/end?runs=N` | the page's `?bench=N` mode: the server prints the time between the two |
 //!
 //! The page turns the light about Z by rotating its SH vector (exact, [`crate::sh::rotate_z`])
 //! and reading the maps along `Rz(-turn) R`; strength scales the environment, exposure
-//! the image. It is the relight of [`crate::transfer::relight`] but for the maps, read
+//! adds to the scene's, and the image is shown through the scene's view transform as the
+//! PNG previews are. It is the relight of [`crate::transfer::relight`] but for the maps, read
 //! from grids at most [`crate::transfer::SAMPLED_MAP_WIDTH`] wide and the open lobes'
 //! light from a 64 x 32 grid: a preview, for which `logsh relight` gives the frame.
 
+use crate::scene::ViewTransform;
 use crate::transfer::{RelightLight, RelightOptions, TransferFrame};
 use anyhow::{anyhow, Context, Result};
 use std::io::{BufRead, BufReader, Write};
@@ -174,7 +176,11 @@ impl Viewer {
         let file = &self.frames[index];
         let frame = TransferFrame::read(file)?;
         let light = RelightLight::new(RelightOptions::default().source(&frame.header), &frame.header, file)?;
-        let bodies = Arc::new(frame_bodies(file, &frame, &light));
+        let view = match &frame.header.view {
+            Some(spec) => ViewTransform::load(spec, Path::new("/"), file)?,
+            None => ViewTransform::default(),
+        };
+        let bodies = Arc::new(frame_bodies(file, &frame, &light, &view));
         let mut kept = built();
         kept.retain(|(i, _)| *i != index);
         kept.push((index, bodies.clone()));
@@ -210,7 +216,7 @@ fn cycles_render(file: &Path, frame: &TransferFrame) -> Option<Vec<[f32; 3]>> {
     })
 }
 
-fn frame_bodies(file: &Path, frame: &TransferFrame, light: &RelightLight) -> FrameBodies {
+fn frame_bodies(file: &Path, frame: &TransferFrame, light: &RelightLight, view: &ViewTransform) -> FrameBodies {
     let mut pixels = Vec::new();
     let mut layout = Vec::new();
     let mut put = |name: &str, components: usize, values: &mut dyn Iterator<Item = f32>| {
@@ -246,6 +252,14 @@ fn frame_bodies(file: &Path, frame: &TransferFrame, light: &RelightLight) -> Fra
             maps.extend_from_slice(&v.to_le_bytes());
         }
     }
+    // The scene's view transform: its LUT after the maps, as one more grid.
+    let lut = view.lut().map(|lut| {
+        let offset = maps.len() / 4;
+        for v in lut.values.iter().flatten() {
+            maps.extend_from_slice(&v.to_le_bytes());
+        }
+        serde_json::json!({"size": lut.size, "log2_range": lut.log2_range, "offset": offset})
+    });
     let cycles = cycles_render(file, frame).map(|rgb| rgb.iter().flatten().flat_map(|v| v.to_le_bytes()).collect());
     let meta = serde_json::json!({
         "file": file.file_name().unwrap_or_default().to_string_lossy(),
@@ -257,6 +271,7 @@ fn frame_bodies(file: &Path, frame: &TransferFrame, light: &RelightLight) -> Fra
         "pixels": layout,
         "maps": map_layout,
         "cycles": cycles.is_some(),
+        "view": {"exposure": view.exposure, "transparent": view.transparent, "lut": lut},
     });
     FrameBodies { meta: meta.to_string(), pixels, maps, cycles }
 }
