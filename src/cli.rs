@@ -311,7 +311,7 @@ pub struct RelightArgs {
     /// Strength of the map [default: the rendered strength; 1 with --light]; scales a constant or SH light too.
     #[arg(long, allow_negative_numbers = true)]
     pub strength: Option<f32>,
-    /// Output directory; receives each frame's relit EXR (beauty and passes, same file name) and a PNG preview.
+    /// Output directory; receives each frame's relit EXR (beauty and passes, same file name), a PNG preview and <frame>.light.json (the light's SH vector).
     #[arg(long)]
     pub out: PathBuf,
     /// Storage of the colour passes and visibility terms (P and N are always float).
