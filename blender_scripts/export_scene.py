@@ -15,6 +15,8 @@ per-frame sphere blockers and camera, height map, materials and the World's ligh
     --fit-error E           relative volume error at which an object's fit stops adding spheres (0.1)
     --heightfield NAME      the terrain object (default: the one with logsh_heightfield set)
     --heightmap-size N      height map samples along the terrain's longer side (256)
+    --supersample N         G-buffer samples per pixel along each axis, 1 to 4 (1): the
+                            G-buffers at N times the output size, which logsh resolves
 
 What is exported and how materials and blockers are derived is documented at the top of
 `blender_scripts/logsh_exporter/exporter.py`; the add-on in the same folder runs the same
@@ -77,6 +79,7 @@ def main(argv):
     parser.add_argument("--fit-error", type=float, default=Options.fit_error)
     parser.add_argument("--heightfield")
     parser.add_argument("--heightmap-size", type=int, default=Options.heightmap_size)
+    parser.add_argument("--supersample", type=int, default=Options.supersample)
     args = parser.parse_args(argv)
 
     if args.blend:
@@ -90,7 +93,7 @@ def main(argv):
         sys.exit("error: --spheres must be >= 1, --fit-error in (0, 1), --heightmap-size >= 2")
     options = Options(out=args.out, frames=args.frames, resolution=args.resolution, spheres=args.spheres,
                       fit_error=args.fit_error, heightfield=args.heightfield,
-                      heightmap_size=args.heightmap_size)
+                      heightmap_size=args.heightmap_size, supersample=args.supersample)
     try:
         export(scene, options)
     except ExportError as e:

@@ -72,6 +72,9 @@ pub struct ReferenceArgs {
     /// How each pixel is integrated: `sampled` (importance sampling of the map and the BRDF, exact visibility; statistical error estimate), `meridians` (deterministic, slow under a map), `auto` (meridians under a constant light, sampled otherwise).
     #[arg(long, value_enum, default_value_t = Integration::Auto)]
     pub integration: Integration,
+    /// How a supersampled scene's samples are resolved to the camera's pixels (see `logsh shade --help`).
+    #[arg(long, value_enum, default_value_t = crate::shade::PixelFilter::Box)]
+    pub pixel_filter: crate::shade::PixelFilter,
 }
 
 #[derive(Args, Debug)]
@@ -142,6 +145,9 @@ pub enum Switch {
 /// from `--quality`.
 #[derive(Args, Debug, Clone)]
 pub struct ShadingArgs {
+    /// How a supersampled scene's samples are resolved to the camera's pixels: box (the mean of the pixel's samples) or blackman-harris (Blender's default filter, 1.5 px); no effect without `supersample` in scene.json.
+    #[arg(long, value_enum, default_value_t = crate::shade::PixelFilter::Box)]
+    pub pixel_filter: crate::shade::PixelFilter,
     /// Preset of every knob below; any knob given on its own overrides it.
     #[arg(long, value_enum, default_value_t = Quality::Default)]
     pub quality: Quality,

@@ -26,11 +26,11 @@ pub fn shade(args: &ShadeArgs) -> Result<()> {
     let (shaded, timings) = shaded?;
     let elapsed = started.elapsed();
     let stem = format!("beauty.{frame_number:04}");
-    write_image(&scene, &args.out, &stem, shaded.width, shaded.height, &shaded.rgba)?;
+    let (width, height) =
+        write_image(&scene, &args.out, &stem, (shaded.width, shaded.height), &shaded.rgba, args.shading.pixel_filter)?;
     eprintln!(
-        "shaded frame {frame_number} ({}x{}) at order {}, eps {}, {:?} on {} in {:.2} s: {}, {}",
-        shaded.width,
-        shaded.height,
+        "shaded frame {frame_number} ({width}x{height}{}) at order {}, eps {}, {:?} on {} in {:.2} s: {}, {}",
+        if scene.supersample > 1 { format!(", {0}x{0} samples per pixel", scene.supersample) } else { String::new() },
         settings.order,
         settings.epsilon,
         settings.exp,
@@ -72,18 +72,34 @@ fn print_notices(executor: &Executor) {
     }
 }
 
-/// Writes `<stem>.exr` (linear RGBA) and `<stem>.png` (sRGB preview) into `dir`, after
-/// checking that neither is one of the scene's inputs.
-fn write_image(scene: &Scene, dir: &Path, stem: &str, width: usize, height: usize, rgba: &[[f32; 4]]) -> Result<()> {
+/// Writes `<stem>.exr` (linear RGBA) and `<stem>.png` (the scene's preview) into `dir`,
+/// after checking that neither is one of the scene's inputs; a supersampled frame is
+/// resolved to the camera's resolution with `filter` first. Returns the size written.
+fn write_image(
+    scene: &Scene,
+    dir: &Path,
+    stem: &str,
+    (width, height): (usize, usize),
+    rgba: &[[f32; 4]],
+    filter: crate::shade::PixelFilter,
+) -> Result<(usize, usize)> {
     std::fs::create_dir_all(dir).with_context(|| format!("cannot create output directory {}", dir.display()))?;
     let exr = dir.join(format!("{stem}.exr"));
     let png = dir.join(format!("{stem}.png"));
     for path in [&exr, &png] {
         scene.check_output_path(path)?;
     }
+    let n = scene.supersample;
+    let resolved;
+    let (width, height, rgba) = if n > 1 {
+        resolved = crate::shade::Resolve::new(n, width / n, height / n, filter).filter(rgba);
+        (width / n, height / n, resolved.as_slice())
+    } else {
+        (width, height, rgba)
+    };
     output::write_exr_rgba(&exr, width, height, rgba)?;
     output::write_png_preview(&png, width, height, rgba, &scene.view)?;
-    Ok(())
+    Ok((width, height))
 }
 
 /// A progress bar on a terminal, nothing otherwise (logs stay clean).
@@ -119,7 +135,7 @@ pub fn reference(args: &ReferenceArgs) -> Result<()> {
         let started = Instant::now();
         let image = render_reference(&scene, &frame, &options, &|rows| bar.set_position(rows as u64))?;
         bar.finish_and_clear();
-        write_image(&scene, &args.out, &stem, image.width, image.height, &image.rgba)?;
+        write_image(&scene, &args.out, &stem, (image.width, image.height), &image.rgba, args.pixel_filter)?;
         eprintln!(
             "{stem}: {:?} light, {:?}, {:.1} s, {} pixel(s) above the tolerance {} (largest error estimate {:.2e})",
             light,
@@ -151,9 +167,9 @@ pub fn sweep(args: &SweepArgs) -> Result<()> {
         &scene,
         &args.out,
         &format!("reference.{frame_number:04}"),
-        reference.width,
-        reference.height,
+        (reference.width, reference.height),
         &reference.rgba,
+        crate::shade::PixelFilter::Box,
     )?;
     let executor = Executor::select(args.device, &crate::shade::ShadingSettings::default())?;
     print_notices(&executor);
@@ -285,8 +301,17 @@ pub fn render(args: &crate::cli::RenderArgs) -> Result<()> {
         skip_existing: args.skip_existing,
         colour: args.colour_type,
         transfer: args.transfer,
+        pixel_filter: args.shading.pixel_filter,
         settings,
     };
+    if args.transfer && scene.supersample > 1 {
+        return Err(anyhow!(
+            "{}: --transfer writes one transfer per pixel and this scene is supersampled ({n}x{n} samples per \
+             pixel); render its transfer from a scene exported without --supersample",
+            scene.scene_file().display(),
+            n = scene.supersample
+        ));
+    }
     check_outputs(&scene, &options)?;
     // A frame's light that cannot be read fails that frame, in the sequence below.
     if let Some(light) = options.frames.first().and_then(|&first| scene.light(first).ok()) {

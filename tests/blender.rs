@@ -686,3 +686,46 @@ fn previews_follow_the_scenes_view_transform() {
         assert!(level < 240.0, "{transform}: the preview must not be white ({level:.0})");
     }
 }
+
+/// `export_scene.py --supersample 2`: G-buffers (and the reflection G-buffer) at twice the
+/// camera's size, `supersample` in scene.json, and logsh resolving its outputs to the
+/// camera's size; the resolved edge pixels carry partial alpha, the point-sampled ones not.
+#[test]
+fn supersampled_export_resolves_to_the_camera() {
+    let Some(python) = bpy_python() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let blend = dir.path().join("tiny.blend");
+    assert_ok(&run_python(&python, "blender_scripts/scenes/tiny.py", &[Path::new("--save"), &blend]), "tiny.py");
+    let mut alphas = Vec::new();
+    for n in ["1", "2"] {
+        let scene_dir = dir.path().join(format!("n{n}"));
+        let args = [Path::new("--resolution"), Path::new("32x18"), Path::new("--frames"), Path::new("1-1")];
+        let more =
+            [Path::new("--blend"), &blend, Path::new("--out"), &scene_dir, Path::new("--supersample"), Path::new(n)];
+        assert_ok(&run_python(&python, "blender_scripts/export_scene.py", &[&args[..], &more[..]].concat()), "export");
+        let scene = Scene::load(&scene_dir).unwrap();
+        let frame = scene.frame(1).unwrap();
+        let k: usize = n.parse().unwrap();
+        assert_eq!(scene.supersample, k);
+        assert_eq!((frame.gbuffer.width, frame.gbuffer.height), (32 * k, 18 * k));
+        if let Some(r) = &frame.reflection {
+            assert_eq!((r.width, r.height), (32 * k, 18 * k), "the reflection G-buffer is supersampled too");
+        }
+        let shaded = dir.path().join(format!("shaded{n}"));
+        let output = Command::cargo_bin("logsh")
+            .unwrap()
+            .args(["shade", "--device", "cpu", "--out"])
+            .arg(&shaded)
+            .arg(&scene_dir)
+            .output()
+            .unwrap();
+        assert_ok(&output, "logsh shade");
+        let alpha = raw_channels(&shaded.join("beauty.0001.exr"))["A"].clone();
+        assert_eq!(alpha.len(), 32 * 18, "resolved to the camera's 32x18");
+        alphas.push(alpha);
+    }
+    let partial = |a: &[f32]| a.iter().filter(|&&v| v > 0.01 && v < 0.99).count();
+    println!("edge pixels with partial alpha: point-sampled {}, 2x2 {}", partial(&alphas[0]), partial(&alphas[1]));
+    assert_eq!(partial(&alphas[0]), 0);
+    assert!(partial(&alphas[1]) > 5, "the resolved frame has anti-aliased edges");
+}

@@ -560,3 +560,19 @@ fn suns_and_sharp_glossy_match() {
         }
     }
 }
+
+/// A supersampled frame is shaded at its samples' resolution on both executors (its
+/// camera scaled to the G-buffer's size on reading), then resolved by the same filter.
+#[test]
+fn supersampled_frames_match() {
+    let Some(gpu) = gpu() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let options = logsh::synth::ExampleOptions { width: 32, height: 18, ..Default::default() };
+    let synth = logsh::synth::example("dunes", options).unwrap();
+    logsh::synth::write_scene_supersampled(&dir.path().join("n2"), &synth, 2).unwrap();
+    let scene = Scene::load(&dir.path().join("n2")).unwrap();
+    let frame = scene.frame(1).unwrap();
+    let camera = frame.camera.as_ref().expect("a camera");
+    assert_eq!((frame.gbuffer.width, camera.resolution), (64, [64, 36]));
+    check_parity(gpu, &scene, &frame, &ShadingSettings::default(), "dunes 32x18, 2x2 samples").expect("shaded");
+}

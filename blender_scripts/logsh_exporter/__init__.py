@@ -49,6 +49,9 @@ class LOGSH_OT_export_scene(bpy.types.Operator, ExportHelper):
                              description="Relative volume error at which an object's sphere fit stops")
     heightfield: bpy.props.EnumProperty(name="Height field", items=_heightfield_items)
     heightmap_size: IntProperty(name="Height map size", default=exporter.Options.heightmap_size, min=2)
+    supersample: IntProperty(name="Supersample", default=1, min=1, max=exporter.MAX_SUPERSAMPLE,
+                             description="G-buffer samples per pixel along each axis, which logsh resolves "
+                                         "to anti-aliased outputs")
 
     def invoke(self, context, event):
         self.frame_start, self.frame_end = context.scene.frame_start, context.scene.frame_end
@@ -63,6 +66,7 @@ class LOGSH_OT_export_scene(bpy.types.Operator, ExportHelper):
             fit_error=self.fit_error,
             heightfield=self.heightfield or None,
             heightmap_size=self.heightmap_size,
+            supersample=self.supersample,
         )
         try:
             exporter.export(context.scene, options, log=lambda line: self.report({"INFO"}, line))
@@ -87,6 +91,7 @@ class LOGSH_OT_export_scene(bpy.types.Operator, ExportHelper):
         layout.prop(self, "fit_error")
         layout.prop(self, "heightfield")
         layout.prop(self, "heightmap_size")
+        layout.prop(self, "supersample")
 
 
 def _menu(self, context):

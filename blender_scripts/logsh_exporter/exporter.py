@@ -91,6 +91,7 @@ FLAT_THICKNESS = 0.02
 # Roughness 0.027 (module doc): sharper than any environment map resolves.
 MAX_EXPONENT = 1.0e6
 VIEW_LAYER = "ViewLayer"
+MAX_SUPERSAMPLE = 4
 
 
 class ExportError(Exception):
@@ -116,6 +117,10 @@ class Options:
     heightmap_size: int = 256
     # Environment maps wider than this are box-filtered down (SH order 8 needs far less).
     sky_max_width: int = 1024
+    # G-buffer samples per camera pixel along each axis, 1 to MAX_SUPERSAMPLE: the
+    # G-buffers at this multiple of the output size, one sample at each sub-pixel centre,
+    # which logsh resolves to the output size with a pixel filter.
+    supersample: int = 1
 
 
 # ---- undoable scene changes ------------------------------------------------------------
@@ -185,7 +190,8 @@ def export(scene, options, log=print):
         table, index_of = material_table(objects, terrain, changes)
         object_index = object_indices(objects, changes)
         water = {i for i, m in table.items() if m["type"] == "water"}
-        width, height = output_size(scene)
+        # The camera's size; the G-buffers are `supersample` times it along each axis.
+        width, height = (size // options.supersample for size in output_size(scene))
         description = {
             "version": 1,
             "frames": {"start": start, "end": end},
@@ -208,6 +214,8 @@ def export(scene, options, log=print):
                         f"soft falloff {'on' if light['soft_falloff'] else 'off'}")
         if water:
             description["reflection_gbuffer"] = "reflection.####.exr"
+        if options.supersample > 1:
+            description["supersample"] = options.supersample
 
         scene.frame_set(start)
         ground = find_ground(objects, terrain, log)
@@ -232,7 +240,8 @@ def export(scene, options, log=print):
                                       frame, log)
             write_blockers(new_file(out, f"blockers.{frame:04d}.json"), frame, spheres)
             if water:
-                write_reflection(scene, depsgraph, camera, index_of, water, new_file(out, f"reflection.{frame:04d}.exr"))
+                sampled = dict(camera, resolution=[width * options.supersample, height * options.supersample])
+                write_reflection(scene, depsgraph, sampled, index_of, water, new_file(out, f"reflection.{frame:04d}.exr"))
             log(f"frame {frame}: {len(spheres)} blocker spheres, {time.time() - began:.1f} s")
         write_json(new_file(out, "scene.json"), description)
     except BaseException:
@@ -330,6 +339,13 @@ def configure_render(scene, options, changes):
     if options.resolution:
         changes.set(render, "resolution_x", int(options.resolution[0]))
         changes.set(render, "resolution_y", int(options.resolution[1]))
+        changes.set(render, "resolution_percentage", 100)
+    if not 1 <= options.supersample <= MAX_SUPERSAMPLE:
+        raise ExportError(f"supersample {options.supersample} is not from 1 to {MAX_SUPERSAMPLE}")
+    if options.supersample > 1:
+        width, height = output_size(scene)
+        changes.set(render, "resolution_x", width * options.supersample)
+        changes.set(render, "resolution_y", height * options.supersample)
         changes.set(render, "resolution_percentage", 100)
     if render.pixel_aspect_x != render.pixel_aspect_y:
         raise ExportError("pixel aspect is not 1 (Output > Format > Aspect); logsh's camera has square pixels")

@@ -52,6 +52,8 @@ pub struct SequenceOptions {
     pub colour: SampleType,
     /// Add the transfer layers ([`crate::transfer`]), shading on the CPU.
     pub transfer: bool,
+    /// How a supersampled scene is resolved ([`crate::shade::resolve`]).
+    pub pixel_filter: crate::shade::PixelFilter,
     pub settings: ShadingSettings,
 }
 
@@ -169,7 +171,12 @@ fn render_frame(
         write_passes_with_transfer(exr, &passes, &transfer, options.colour)?;
         passes
     } else {
-        let passes = executor.shade_passes(scene, &data, &options.settings)?;
+        let mut passes = executor.shade_passes(scene, &data, &options.settings)?;
+        let n = data.supersample;
+        if n > 1 {
+            passes = crate::shade::Resolve::new(n, passes.width / n, passes.height / n, options.pixel_filter)
+                .passes(&passes);
+        }
         write_passes(exr, &passes, options.colour)?;
         passes
     };

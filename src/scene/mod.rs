@@ -228,7 +228,12 @@ pub struct Frame {
     pub points: Vec<PointLight>,
     /// The scene's ground plane height (`ground` in scene.json).
     pub ground: Option<f64>,
+    /// G-buffer samples per output pixel along each axis ([`Scene::supersample`]).
+    pub supersample: usize,
 }
+
+/// Most G-buffer samples per camera pixel along each axis (`supersample`).
+pub const MAX_SUPERSAMPLE: usize = 4;
 
 /// A loaded and validated `scene.json`.
 #[derive(Clone, Debug)]
@@ -256,6 +261,10 @@ pub struct Scene {
     pub channels: ChannelNames,
     /// How previews show the linear image (`view` in scene.json; Standard without it).
     pub view: ViewTransform,
+    /// G-buffer samples per camera pixel along each axis (`supersample`, 1 to
+    /// [`MAX_SUPERSAMPLE`]): the G-buffers are this many times the camera's resolution,
+    /// and the outputs are resolved back to it ([`crate::shade::resolve`]).
+    pub supersample: usize,
     static_light: Option<Arc<Light>>,
     static_height_map: Option<Arc<HeightMap>>,
 }
@@ -284,6 +293,7 @@ struct SceneFile {
     lights: Option<Vec<SharpLightFile>>,
     channels: Option<gbuffer::ChannelOverrides>,
     view: Option<view::ViewSpec>,
+    supersample: Option<u32>,
 }
 
 #[derive(Deserialize)]
@@ -648,6 +658,13 @@ impl Scene {
             Some(spec) => ViewTransform::load(spec, dir, &file)?,
             None => ViewTransform::default(),
         };
+        let supersample = raw.supersample.unwrap_or(1) as usize;
+        if !(1..=MAX_SUPERSAMPLE).contains(&supersample) {
+            return Err(SceneError::invalid(
+                &file,
+                format!("\"supersample\": {supersample} is not from 1 to {MAX_SUPERSAMPLE}"),
+            ));
+        }
 
         let mut scene = Scene {
             dir: dir.to_path_buf(),
@@ -665,6 +682,7 @@ impl Scene {
             light_turn: 0.0,
             channels,
             view,
+            supersample,
             static_light: None,
             static_height_map: None,
         };
@@ -835,8 +853,11 @@ impl Scene {
             None => None,
             Some(t) => {
                 let cfile = t.resolve(&self.dir, frame);
-                let c = Camera::read(&cfile, frame)?;
-                let res = [c.resolution[0] as usize, c.resolution[1] as usize];
+                let mut c = Camera::read(&cfile, frame)?;
+                // A supersampled G-buffer holds `supersample` samples per camera pixel
+                // along each axis; the frame is shaded at that resolution.
+                let n = self.supersample;
+                let res = [c.resolution[0] as usize * n, c.resolution[1] as usize * n];
                 if res != [gbuffer.width, gbuffer.height] {
                     return Err(SceneError::SizeMismatch {
                         file: cfile,
@@ -845,6 +866,7 @@ impl Scene {
                         reference: gfile,
                     });
                 }
+                c.resolution = [res[0] as u32, res[1] as u32];
                 Some(c)
             }
         };
@@ -863,6 +885,7 @@ impl Scene {
             suns: self.suns.clone(),
             points: self.points.clone(),
             ground: self.ground,
+            supersample: self.supersample,
         })
     }
 

@@ -328,6 +328,13 @@ pub fn write_environment_exr(path: &Path, width: usize, height: usize, texels: &
 
 /// Writes the scene into `out` (created if needed); see the module doc for the files.
 pub fn write_scene(out: &Path, scene: &SynthScene) -> Result<(), SynthError> {
+    write_scene_supersampled(out, scene, 1)
+}
+
+/// [`write_scene`] with `supersample` G-buffer samples per camera pixel along each axis,
+/// as the exporter's `--supersample` writes them: the G-buffers ray cast at that multiple
+/// of the cameras' resolution, the cameras as they are, `supersample` in scene.json.
+pub fn write_scene_supersampled(out: &Path, scene: &SynthScene, supersample: u32) -> Result<(), SynthError> {
     let first = scene.frames.first().ok_or_else(|| SynthError::Invalid("no frames".into()))?;
     for (k, f) in scene.frames.iter().enumerate() {
         if f.number != first.number + k as i64 {
@@ -358,8 +365,13 @@ pub fn write_scene(out: &Path, scene: &SynthScene) -> Result<(), SynthError> {
             json!({"environment": "sky.exr", "strength": 1.0})
         }
     };
+    if supersample > 1 {
+        description["supersample"] = json!(supersample);
+    }
     for frame in &scene.frames {
-        let (primary, reflection) = scene.render_frame(frame);
+        let mut sampled = frame.clone();
+        sampled.camera.resolution = frame.camera.resolution.map(|r| r * supersample);
+        let (primary, reflection) = scene.render_frame(&sampled);
         let name = |stem: &str, ext: &str| out.join(format!("{stem}.{:04}.{ext}", frame.number));
         write_gbuffer_exr(&name("gbuffer", "exr"), &primary, scene.layout)?;
         if let Some(r) = &reflection {
