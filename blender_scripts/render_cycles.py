@@ -30,7 +30,9 @@ and turned back into the Cycles shader that means the same thing:
 
 The World is used as it is (the same light logsh reads). Each pixel's samples are taken
 at its centre (box filter of width 0.01 px), as for the G-buffer, so the two images
-compare pixel for pixel; no denoising, no clamping.
+compare pixel for pixel; no denoising, no clamping. `--filter box1` or `--filter
+blackman-harris` render with a 1-px box or Blender's default 1.5-px Blackman-Harris
+instead: the truth for a supersampled export that logsh resolves with the same filter.
 """
 import argparse
 import json
@@ -94,6 +96,9 @@ def main(argv):
     parser.add_argument("--resolution", type=size)
     parser.add_argument("--seed", type=int, default=0, help="Cycles' noise seed (two seeds measure the noise)")
     parser.add_argument("--ladder", type=sample_ladder, help="time renders at these sample counts (1,2,4,...)")
+    parser.add_argument("--filter", choices=["centre", "box1", "blackman-harris"], default="centre",
+                        help="pixel filter: each pixel's centre (as a point-sampled G-buffer), a 1-px box, or 1.5-px "
+                             "Blackman-Harris")
     args = parser.parse_args(argv)
     if args.blend:
         bpy.ops.wm.open_mainfile(filepath=os.path.abspath(args.blend), load_ui=False)
@@ -122,8 +127,11 @@ def main(argv):
     cycles.seed = args.seed
     cycles.use_adaptive_sampling = False
     cycles.use_denoising = False
-    cycles.pixel_filter_type = "BOX"
-    cycles.filter_width = DATA_FILTER_WIDTH
+    cycles.pixel_filter_type, cycles.filter_width = {
+        "centre": ("BOX", DATA_FILTER_WIDTH),
+        "box1": ("BOX", 1.0),
+        "blackman-harris": ("BLACKMAN_HARRIS", 1.5),
+    }[args.filter]
     cycles.max_bounces = 1 if water else 0
     cycles.glossy_bounces = 1 if water else 0
     cycles.diffuse_bounces = cycles.transmission_bounces = cycles.volume_bounces = 0

@@ -148,6 +148,9 @@ pub struct ShadingArgs {
     /// How a supersampled scene's samples are resolved to the camera's pixels: box (the mean of the pixel's samples) or blackman-harris (Blender's default filter, 1.5 px); no effect without `supersample` in scene.json.
     #[arg(long, value_enum, default_value_t = crate::shade::PixelFilter::Box)]
     pub pixel_filter: crate::shade::PixelFilter,
+    /// Shade every sample of a supersampled scene, not only the pixels whose samples differ (material, object, normal or depth): what adaptive shading saves is measured against it.
+    #[arg(long)]
+    pub every_sample: bool,
     /// Preset of every knob below; any knob given on its own overrides it.
     #[arg(long, value_enum, default_value_t = Quality::Default)]
     pub quality: Quality,
@@ -208,6 +211,11 @@ pub struct ShadingArgs {
 }
 
 impl ShadingArgs {
+    /// How a supersampled scene is shaded and resolved.
+    pub fn resolving(&self) -> crate::shade::Resolving {
+        crate::shade::Resolving { filter: self.pixel_filter, every_sample: self.every_sample }
+    }
+
     /// The settings these flags describe, checked.
     pub fn settings(&self) -> Result<ShadingSettings, SettingsError> {
         let mut settings = self.quality.settings();
@@ -269,6 +277,9 @@ pub struct ExampleArgs {
     /// Image height in pixels.
     #[arg(long, default_value_t = 180)]
     pub height: u32,
+    /// G-buffer samples per pixel along each axis, 1 to 4 (as the exporter's --supersample).
+    #[arg(long, default_value_t = 1)]
+    pub supersample: u32,
 }
 
 #[derive(Args, Debug)]

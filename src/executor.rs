@@ -12,8 +12,8 @@
 
 use crate::gpu::{Gpu, GpuError, Specialisation};
 use crate::scene::{Frame, Scene};
-use crate::shade::{Precision, ShadeError, ShadedFrame, ShadedPasses, ShadingSettings};
-use crate::timing::StageTimings;
+use crate::shade::{adaptive, Precision, Resolve, Resolving, ShadeError, ShadedFrame, ShadedPasses, ShadingSettings};
+use crate::timing::{Clock, StageTimings};
 use std::sync::Mutex;
 
 /// Where shading runs (`--device`).
@@ -174,6 +174,67 @@ impl Executor {
             |gpu| gpu.shade_frame_passes(scene, frame, settings),
             || crate::shade::shade_frame_passes(scene, frame, settings),
         )
+    }
+
+    /// [`shade_passes`](Self::shade_passes) at the camera's resolution: a supersampled
+    /// frame shaded where its samples differ ([`crate::shade::adaptive`], unless
+    /// `resolving.every_sample`), then resolved ([`crate::shade::resolve`]).
+    pub fn shade_passes_resolved(
+        &self,
+        scene: &Scene,
+        frame: &Frame,
+        settings: &ShadingSettings,
+        resolving: Resolving,
+    ) -> Result<ShadedPasses, ExecutorError> {
+        let n = frame.supersample;
+        if n <= 1 {
+            return self.shade_passes(scene, frame, settings);
+        }
+        let passes = if resolving.every_sample {
+            self.shade_passes(scene, frame, settings)?
+        } else {
+            let selection = adaptive::select(frame);
+            let packed = self.shade_passes(scene, &selection.packed, settings)?;
+            selection.scatter_passes(&scene.materials, frame, &packed)
+        };
+        let g = &frame.gbuffer;
+        Ok(Resolve::new(n, g.width / n, g.height / n, resolving.filter).passes(&passes))
+    }
+
+    /// [`shade_timed`](Self::shade_timed) at the camera's resolution, as
+    /// [`shade_passes_resolved`](Self::shade_passes_resolved) resolves; the timings add
+    /// the stages "adaptive" (choosing, packing and scattering the samples) and "resolve".
+    pub fn shade_resolved_timed(
+        &self,
+        scene: &Scene,
+        frame: &Frame,
+        settings: &ShadingSettings,
+        resolving: Resolving,
+    ) -> Result<(ShadedFrame, StageTimings), ExecutorError> {
+        let n = frame.supersample;
+        if n <= 1 {
+            return self.shade_timed(scene, frame, settings, Specialisation::Full);
+        }
+        let (rgba, mut timings) = if resolving.every_sample {
+            let (shaded, timings) = self.shade_timed(scene, frame, settings, Specialisation::Full)?;
+            (shaded.rgba, timings)
+        } else {
+            let started = std::time::Instant::now();
+            let selection = adaptive::select(frame);
+            let select_time = started.elapsed();
+            let (shaded, mut timings) = self.shade_timed(scene, &selection.packed, settings, Specialisation::Full)?;
+            let started = std::time::Instant::now();
+            let rgba = selection.scatter_rgba(&scene.materials, frame, &shaded.rgba);
+            timings.add("adaptive", (select_time + started.elapsed()).as_secs_f64() * 1e3, Clock::Wall);
+            timings.samples = Some((selection.shaded, selection.samples));
+            (rgba, timings)
+        };
+        let g = &frame.gbuffer;
+        let (width, height) = (g.width / n, g.height / n);
+        let started = std::time::Instant::now();
+        let rgba = Resolve::new(n, width, height, resolving.filter).filter(&rgba);
+        timings.add_wall("resolve", started);
+        Ok((ShadedFrame { width, height, rgba }, timings))
     }
 
     /// Shades and times each stage; `specialisation` only matters on the GPU (see

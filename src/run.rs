@@ -21,16 +21,20 @@ pub fn shade(args: &ShadeArgs) -> Result<()> {
     let executor = Executor::select(args.shading.device, &settings)?;
     print_notices(&executor);
     let started = Instant::now();
-    let shaded = executor.shade_timed(&scene, &frame, &settings, crate::gpu::Specialisation::Full);
+    let shaded = executor.shade_resolved_timed(&scene, &frame, &settings, args.shading.resolving());
     print_notices(&executor);
     let (shaded, timings) = shaded?;
     let elapsed = started.elapsed();
     let stem = format!("beauty.{frame_number:04}");
-    let (width, height) =
-        write_image(&scene, &args.out, &stem, (shaded.width, shaded.height), &shaded.rgba, args.shading.pixel_filter)?;
+    let (width, height) = (shaded.width, shaded.height);
+    write_image(&scene, &args.out, &stem, (width, height), &shaded.rgba, None)?;
     eprintln!(
         "shaded frame {frame_number} ({width}x{height}{}) at order {}, eps {}, {:?} on {} in {:.2} s: {}, {}",
-        if scene.supersample > 1 { format!(", {0}x{0} samples per pixel", scene.supersample) } else { String::new() },
+        match timings.samples {
+            Some((shaded, all)) => format!(", {0}x{0} samples per pixel, {shaded} of {all} shaded", scene.supersample),
+            None if scene.supersample > 1 => format!(", {0}x{0} samples per pixel, all shaded", scene.supersample),
+            None => String::new(),
+        },
         settings.order,
         settings.epsilon,
         settings.exp,
@@ -73,15 +77,16 @@ fn print_notices(executor: &Executor) {
 }
 
 /// Writes `<stem>.exr` (linear RGBA) and `<stem>.png` (the scene's preview) into `dir`,
-/// after checking that neither is one of the scene's inputs; a supersampled frame is
-/// resolved to the camera's resolution with `filter` first. Returns the size written.
+/// after checking that neither is one of the scene's inputs; a frame of a supersampled
+/// scene's samples is resolved to the camera's resolution with `filter` first (`None`:
+/// the image is at the camera's resolution already). Returns the size written.
 fn write_image(
     scene: &Scene,
     dir: &Path,
     stem: &str,
     (width, height): (usize, usize),
     rgba: &[[f32; 4]],
-    filter: crate::shade::PixelFilter,
+    filter: Option<crate::shade::PixelFilter>,
 ) -> Result<(usize, usize)> {
     std::fs::create_dir_all(dir).with_context(|| format!("cannot create output directory {}", dir.display()))?;
     let exr = dir.join(format!("{stem}.exr"));
@@ -91,7 +96,7 @@ fn write_image(
     }
     let n = scene.supersample;
     let resolved;
-    let (width, height, rgba) = if n > 1 {
+    let (width, height, rgba) = if let Some(filter) = filter.filter(|_| n > 1) {
         resolved = crate::shade::Resolve::new(n, width / n, height / n, filter).filter(rgba);
         (width / n, height / n, resolved.as_slice())
     } else {
@@ -135,7 +140,7 @@ pub fn reference(args: &ReferenceArgs) -> Result<()> {
         let started = Instant::now();
         let image = render_reference(&scene, &frame, &options, &|rows| bar.set_position(rows as u64))?;
         bar.finish_and_clear();
-        write_image(&scene, &args.out, &stem, (image.width, image.height), &image.rgba, args.pixel_filter)?;
+        write_image(&scene, &args.out, &stem, (image.width, image.height), &image.rgba, Some(args.pixel_filter))?;
         eprintln!(
             "{stem}: {:?} light, {:?}, {:.1} s, {} pixel(s) above the tolerance {} (largest error estimate {:.2e})",
             light,
@@ -169,7 +174,7 @@ pub fn sweep(args: &SweepArgs) -> Result<()> {
         &format!("reference.{frame_number:04}"),
         (reference.width, reference.height),
         &reference.rgba,
-        crate::shade::PixelFilter::Box,
+        Some(crate::shade::PixelFilter::Box),
     )?;
     let executor = Executor::select(args.device, &crate::shade::ShadingSettings::default())?;
     print_notices(&executor);
@@ -221,12 +226,13 @@ pub fn example(args: &ExampleArgs) -> Result<()> {
             args.out.display()
         ));
     }
-    crate::synth::example_scene(
-        name,
-        &args.out,
-        crate::synth::ExampleOptions { width: args.width, height: args.height, ..Default::default() },
-    )
-    .with_context(|| format!("cannot write example scene {name} to {}", args.out.display()))?;
+    if !(1..=crate::scene::MAX_SUPERSAMPLE as u32).contains(&args.supersample) {
+        return Err(anyhow!("--supersample {}: give 1 to {}", args.supersample, crate::scene::MAX_SUPERSAMPLE));
+    }
+    let options = crate::synth::ExampleOptions { width: args.width, height: args.height, ..Default::default() };
+    crate::synth::example(name, options)
+        .and_then(|scene| crate::synth::write_scene_supersampled(&args.out, &scene, args.supersample))
+        .with_context(|| format!("cannot write example scene {name} to {}", args.out.display()))?;
     eprintln!("wrote example scene {name} to {}", args.out.display());
     Ok(())
 }
@@ -301,7 +307,7 @@ pub fn render(args: &crate::cli::RenderArgs) -> Result<()> {
         skip_existing: args.skip_existing,
         colour: args.colour_type,
         transfer: args.transfer,
-        pixel_filter: args.shading.pixel_filter,
+        resolving: args.shading.resolving(),
         settings,
     };
     if args.transfer && scene.supersample > 1 {

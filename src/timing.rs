@@ -30,6 +30,9 @@ pub struct StageTimings {
     pub device: String,
     /// Whether that was a GPU (whose program can be specialised, `bench --specialise`).
     pub on_gpu: bool,
+    /// Of a supersampled frame shaded adaptively: the samples shaded, and the frame's.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub samples: Option<(usize, usize)>,
 }
 
 impl StageTimings {

@@ -575,4 +575,7 @@ fn supersampled_frames_match() {
     let camera = frame.camera.as_ref().expect("a camera");
     assert_eq!((frame.gbuffer.width, camera.resolution), (64, [64, 36]));
     check_parity(gpu, &scene, &frame, &ShadingSettings::default(), "dunes 32x18, 2x2 samples").expect("shaded");
+    // The packed frame of adaptive shading, its samples in rows of their own.
+    let packed = logsh::shade::adaptive::select(&frame).packed;
+    check_parity(gpu, &scene, &packed, &ShadingSettings::default(), "dunes 32x18, adaptive samples").expect("shaded");
 }

@@ -52,8 +52,8 @@ pub struct SequenceOptions {
     pub colour: SampleType,
     /// Add the transfer layers ([`crate::transfer`]), shading on the CPU.
     pub transfer: bool,
-    /// How a supersampled scene is resolved ([`crate::shade::resolve`]).
-    pub pixel_filter: crate::shade::PixelFilter,
+    /// How a supersampled scene is shaded and resolved ([`crate::shade::resolve`]).
+    pub resolving: crate::shade::Resolving,
     pub settings: ShadingSettings,
 }
 
@@ -171,12 +171,7 @@ fn render_frame(
         write_passes_with_transfer(exr, &passes, &transfer, options.colour)?;
         passes
     } else {
-        let mut passes = executor.shade_passes(scene, &data, &options.settings)?;
-        let n = data.supersample;
-        if n > 1 {
-            passes = crate::shade::Resolve::new(n, passes.width / n, passes.height / n, options.pixel_filter)
-                .passes(&passes);
-        }
+        let passes = executor.shade_passes_resolved(scene, &data, &options.settings, options.resolving)?;
         write_passes(exr, &passes, options.colour)?;
         passes
     };

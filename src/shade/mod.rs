@@ -4,6 +4,7 @@
 //! math both executors share; [`sun`] its sharp lights, [`sharp_lights`] the suns taken
 //! out of an environment map); [`cpu`] is the CPU executor (the GPU one is in
 //! `src/gpu/`); [`compositing`] assembles the passes of `logsh render`.
+pub mod adaptive;
 pub mod blocker_tree;
 pub mod compositing;
 pub mod cpu;
@@ -22,5 +23,5 @@ pub use cpu::{shade_frame, shade_frame_passes, shade_frame_timed};
 pub use frame::{pixel_source, pixel_work, work_of, PixelSource, PixelWork, ShadeError, ShadedFrame};
 pub use kernel::{Exponentiator, Occluders, PixelPasses, ShadingKernel, SurfacePoint};
 pub use plan::{FrameContents, FramePlan, PlannedKernel, Terrain};
-pub use resolve::{PixelFilter, Resolve};
+pub use resolve::{PixelFilter, Resolve, Resolving};
 pub use settings::{default_epsilon, GlossyMethod, LightWindow, Precision, Quality, SettingsError, ShadingSettings};

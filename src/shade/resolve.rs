@@ -28,6 +28,15 @@ pub enum PixelFilter {
     BlackmanHarris,
 }
 
+/// How a supersampled frame becomes the camera's pixels.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Resolving {
+    pub filter: PixelFilter,
+    /// Shade every sample, not only where a pixel's samples differ
+    /// ([`super::adaptive`]): what adaptive shading saves is measured against this.
+    pub every_sample: bool,
+}
+
 /// Width of Blender's default Blackman-Harris pixel filter, in pixels.
 pub const BLACKMAN_HARRIS_WIDTH: f64 = 1.5;
 
