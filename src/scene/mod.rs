@@ -38,6 +38,9 @@
 //!   exporter found); not together with `heightfield`.
 //! - View: an optional `view` object, the colour management the PNG previews apply
 //!   (see [`view`]).
+//! - Supersample: an optional `supersample`, 1 to [`MAX_SUPERSAMPLE`]: the G-buffers hold
+//!   that many samples per camera pixel along each axis, and the camera's `resolution`
+//!   times it must be their size ([`crate::shade::resolve`]).
 //! - G-buffers: see [`gbuffer`] for channel names, layouts and per-pixel checks.
 //!
 //! # Channel-name overrides
