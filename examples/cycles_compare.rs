@@ -64,6 +64,11 @@ fn main() {
     let runs = if quick { &all_runs[..1] } else { &all_runs[..] };
     for dir in dirs {
         let scene = Scene::load(&dir).unwrap_or_else(|e| panic!("{e}"));
+        assert!(
+            scene.supersample == 1,
+            "{}: a supersampled scene; compare it with examples/edge_accuracy.rs",
+            dir.display()
+        );
         let number = scene.default_frame();
         let frame = scene.frame(number).unwrap_or_else(|e| panic!("{e}"));
         let (width, height, cycles) =

@@ -78,6 +78,11 @@ fn main() {
     println!("| --- | --- | --- | --- | --- | --- |");
     for dir in args.iter().map(PathBuf::from) {
         let scene = Scene::load(&dir).unwrap_or_else(|e| panic!("{e}"));
+        assert!(
+            scene.supersample == 1,
+            "{}: a supersampled scene; compare it with examples/edge_accuracy.rs",
+            dir.display()
+        );
         let number = scene.default_frame();
         let frame = scene.frame(number).unwrap_or_else(|e| panic!("{e}"));
         let unoccluded = unoccluded_value(&frame).expect("a scene with an environment or constant light");
