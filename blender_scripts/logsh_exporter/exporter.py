@@ -11,7 +11,10 @@ What is written into the output directory, per frame `####`:
   index of 1.5), so each pixel gets exactly one sample at its centre: 1 sample, a box
   pixel filter of the smallest width Cycles accepts (0.01 px), no denoising, no motion
   blur, no depth of field. The file also holds Blender's Combined pass, which nothing
-  reads.
+  reads. With `supersample` N > 1 (`--supersample`), the G-buffers and the reflection
+  G-buffer are N times the output size, one sample at each sub-pixel centre, which logsh
+  shades and resolves to the camera's size (scene.json `supersample`; the cameras keep the
+  output size).
 - `reflection.####.exr` when a material is water: for each water pixel, the world
   position, normal and material index of the surface seen in the mirror direction, found
   by ray casting the evaluated scene (`Scene.ray_cast`); Blender 4's single-part layout
