@@ -33,6 +33,9 @@ What is written into the output directory, per frame `####`:
   setting logsh does not model (nodes, Temperature, Cast Shadow off, Diffuse or
   Specular factors other than 1, Normalize off, hidden from Diffuse or Glossy rays),
   stops the export with the lamp's name.
+- `view_lut.exr` unless the Color Management is plain Standard: Blender's view transform,
+  look and gamma sampled through `Image.save_render` on a 33^3 grid of linear colours, which
+  logsh's previews apply after the exposure (scene.json `view`, `src/scene/view.rs`).
 
 Scene markup, all optional (custom properties, set in the Object or Material tab):
 
