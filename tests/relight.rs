@@ -5,7 +5,6 @@
 mod support;
 
 use assert_cmd::Command;
-use exr::prelude::{read_all_flat_layers_from_file, FlatSamples};
 use logsh::compare::unoccluded_value;
 use logsh::scene::output::write_exr_channels;
 use logsh::scene::{LightSource, Scene};
@@ -13,6 +12,7 @@ use logsh::synth::{self, ExampleOptions};
 use logsh::transfer::TransferFrame;
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
+use support::exr_channels as channels;
 
 fn logsh() -> Command {
     Command::cargo_bin("logsh").unwrap()
@@ -24,23 +24,18 @@ fn run(args: &[&str]) {
     assert!(output.status.success(), "logsh {args:?}: {}", String::from_utf8_lossy(&output.stderr));
 }
 
-/// Every channel of an EXR as f32, by full name.
-fn channels(path: &Path) -> HashMap<String, Vec<f32>> {
-    let image = read_all_flat_layers_from_file(path).unwrap();
-    let layer = &image.layer_data[0];
-    layer
-        .channel_data
-        .list
+/// Writes `channels` (as f32) with `header` as the `logshTransfer` attribute: a 96x54 frame
+/// with its transfer layers cut or its header edited.
+fn write_frame(file: &Path, channels: &HashMap<String, Vec<f32>>, header: &str) {
+    let list: Vec<logsh::scene::output::OutputChannel> = channels
         .iter()
-        .map(|c| {
-            let values = match &c.sample_data {
-                FlatSamples::F16(v) => v.iter().map(|h| h.to_f32()).collect(),
-                FlatSamples::F32(v) => v.clone(),
-                FlatSamples::U32(v) => v.iter().map(|&u| u as f32).collect(),
-            };
-            (c.name.to_string(), values)
+        .map(|(name, values)| logsh::scene::output::OutputChannel {
+            name: name.clone(),
+            sample_type: logsh::scene::output::SampleType::Float,
+            values,
         })
-        .collect()
+        .collect();
+    logsh::scene::output::write_exr_layers(file, 96, 54, &list, &[("logshTransfer", header.to_string())]).unwrap();
 }
 
 /// The synthetic dune scene (height field, blockers, water, a Phong sphere, a sky map).
@@ -298,27 +293,11 @@ fn bad_relight_inputs_are_refused_with_the_file_named() {
         exr::meta::attribute::AttributeValue::Text(t) => t.to_string(),
         other => panic!("{other:?}"),
     };
-    let list: Vec<logsh::scene::output::OutputChannel> = cut
-        .iter()
-        .map(|(name, values)| logsh::scene::output::OutputChannel {
-            name: name.clone(),
-            sample_type: logsh::scene::output::SampleType::Float,
-            values,
-        })
-        .collect();
     let broken = dir.path().join("broken.exr");
-    logsh::scene::output::write_exr_layers(&broken, 96, 54, &list, &[("logshTransfer", text.clone())]).unwrap();
+    write_frame(&broken, &cut, &text);
     assert_fails_naming(&["relight", path(&broken), "--out", o], &["broken.exr", "sh_unoccluded_0.R"]);
     // Headers a relight cannot use: each refused with the file and what is wrong.
     let all = channels(&frame);
-    let whole: Vec<logsh::scene::output::OutputChannel> = all
-        .iter()
-        .map(|(name, values)| logsh::scene::output::OutputChannel {
-            name: name.clone(),
-            sample_type: logsh::scene::output::SampleType::Float,
-            values,
-        })
-        .collect();
     let header: serde_json::Value = serde_json::from_str(&text).unwrap();
     let environment = |strength: f64| serde_json::json!({"environment": {"file": "sky.exr", "strength": strength, "rotation": [0.0, 0.0, 0.0], "turn": 0.0}});
     let edits = [
@@ -332,7 +311,7 @@ fn bad_relight_inputs_are_refused_with_the_file_named() {
         *edited.pointer_mut(pointer).unwrap() = value;
         let file = dir.path().join("edited.exr");
         let text = serde_json::to_string(&edited).unwrap();
-        logsh::scene::output::write_exr_layers(&file, 96, 54, &whole, &[("logshTransfer", text)]).unwrap();
+        write_frame(&file, &all, &text);
         assert_fails_naming(&["relight", path(&file), "--out", o], &["edited.exr", needle]);
     }
 }

@@ -3,33 +3,16 @@
 //! still adding up to the beauty, position and normal from the nearest sample, and bad
 //! sizes refused.
 
+mod support;
+
 use assert_cmd::Command;
-use exr::prelude::{read_all_flat_layers_from_file, FlatSamples};
 use logsh::synth::{self, ExampleOptions, SynthScene};
-use std::collections::HashMap;
 use std::path::{Path, PathBuf};
+use support::exr_channels as channels;
 
 fn logsh(args: &[&str]) {
     let output = Command::cargo_bin("logsh").unwrap().args(args).output().unwrap();
     assert!(output.status.success(), "logsh {args:?}: {}", String::from_utf8_lossy(&output.stderr));
-}
-
-fn channels(path: &Path) -> HashMap<String, Vec<f32>> {
-    let image = read_all_flat_layers_from_file(path).unwrap();
-    let layer = &image.layer_data[0];
-    layer
-        .channel_data
-        .list
-        .iter()
-        .map(|c| {
-            let values = match &c.sample_data {
-                FlatSamples::F16(v) => v.iter().map(|h| h.to_f32()).collect(),
-                FlatSamples::F32(v) => v.clone(),
-                FlatSamples::U32(v) => v.iter().map(|&u| u as f32).collect(),
-            };
-            (c.name.to_string(), values)
-        })
-        .collect()
 }
 
 /// The synthetic dunes (terrain, water, blockers, a sky above the horizon) at 48x27.

@@ -506,14 +506,9 @@ impl<T: Real> ShadingKernel<T> {
     /// exponentiations are built never to produce).
     fn lit(&self, visibility: &[T], lobe: &LobeTable<T>, axis: [f64; 3]) -> [T; 3] {
         let count = coefficient_count(self.order);
-        let mut f = [T::zero(); MAX_COEFFICIENTS];
-        f[..count].copy_from_slice(&visibility[..count]);
-        add_rotated_zonal(self.order, &lobe.zonal, T::one(), axis.map(T::of), &mut f[..count]);
+        let f = self.with_lobe(visibility, lobe, axis);
         if let Some(folded) = &self.folded {
-            let as_f32 = |v: &[T]| -> [f32; MAX_COEFFICIENTS] {
-                std::array::from_fn(|k| v.get(k).and_then(|x| x.to_f32()).unwrap_or(0.0))
-            };
-            let (f32s, v32s) = (as_f32(&f[..count]), as_f32(&visibility[..count]));
+            let (f32s, v32s) = (as_f32_array(&f[..count]), as_f32_array(&visibility[..count]));
             let floored = self.overlap_floor.then(|| (&v32s[..count], self.log_epsilon.to_f32().unwrap_or(0.0)));
             let ceiling = lobe.log_peak as f32;
             return folded.lit(&f32s[..count], floored, ceiling).map(|c| T::of(f64::from(c)));
@@ -524,6 +519,52 @@ impl<T: Real> ShadingKernel<T> {
         let dot =
             |light: &[T]| light.iter().zip(&e[..count]).fold(T::zero(), |acc, (&l, &v)| acc + l * v).max(T::zero());
         [dot(&self.light[0]), dot(&self.light[1]), dot(&self.light[2])]
+    }
+
+    /// `visibility + lobe about axis`: the log function [`Self::lit`] and the transfer
+    /// exponentiate.
+    pub(crate) fn with_lobe(&self, visibility: &[T], lobe: &LobeTable<T>, axis: [f64; 3]) -> [T; MAX_COEFFICIENTS] {
+        let count = coefficient_count(self.order);
+        let mut f = [T::zero(); MAX_COEFFICIENTS];
+        f[..count].copy_from_slice(&visibility[..count]);
+        add_rotated_zonal(self.order, &lobe.zonal, T::one(), axis.map(T::of), &mut f[..count]);
+        f
+    }
+
+    /// The visibility terms of the height field and of the blockers apart
+    /// ([`PixelPasses`]), given the combined one: each is the combined ratio where the
+    /// other occluder set is absent, 1 where its own is; with both, `ratio_of(part, log
+    /// vector)` gives the ratio of the height field's log visibility (`T + V_hf = full -
+    /// (T + V_blockers) + T`, one horizon march serving both) and of the blockers'.
+    pub(crate) fn split_visibility(
+        &self,
+        occluders: Occluders,
+        point: &SurfacePoint,
+        full: &[T],
+        unoccluded: &[T],
+        visibility: f32,
+        mut ratio_of: impl FnMut(OccluderSet, &[T]) -> f32,
+    ) -> (f32, f32) {
+        let has_heightfield = occluders.horizons.is_some() && self.wedge.is_some();
+        match (has_heightfield, occluders.blockers.is_some()) {
+            (false, false) => (1.0, 1.0),
+            (true, false) => (visibility, 1.0),
+            (false, true) => (1.0, visibility),
+            (true, true) => {
+                let count = coefficient_count(self.order);
+                let spheres_only = Occluders { blockers: occluders.blockers, horizons: None };
+                let mut blockers = [T::zero(); MAX_COEFFICIENTS];
+                self.add_visibility(spheres_only, point.position, point.normal, point.object, &mut blockers[..count]);
+                let mut heightfield = [T::zero(); MAX_COEFFICIENTS];
+                for i in 0..count {
+                    heightfield[i] = full[i] - blockers[i] + unoccluded[i];
+                }
+                (
+                    ratio_of(OccluderSet::Heightfield, &heightfield[..count]),
+                    ratio_of(OccluderSet::Blockers, &blockers[..count]),
+                )
+            }
+        }
     }
 
     /// Outgoing radiance of a surface point (docs/design.md, material types). Water is not a
@@ -745,6 +786,18 @@ pub(crate) fn occlusion_ratio<T: Real>(shadowed: [T; 3], open: [T; 3]) -> f64 {
         below if below > 1e-12 => (lum(shadowed) / below).clamp(0.0, 1.0),
         _ => 1.0,
     }
+}
+
+/// One of the occluder sets whose visibility term is a pass of its own.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum OccluderSet {
+    Heightfield,
+    Blockers,
+}
+
+/// `v` in f32, zero-padded to [`MAX_COEFFICIENTS`] (what [`FoldedQuadrature`] reads).
+pub(crate) fn as_f32_array<T: Real>(v: &[T]) -> [f32; MAX_COEFFICIENTS] {
+    std::array::from_fn(|k| v.get(k).and_then(|x| x.to_f32()).unwrap_or(0.0))
 }
 
 /// Whether the kernel's scalar is f32 (the throughput path) rather than the f64 oracle.

@@ -4,6 +4,26 @@
 
 pub mod sharp;
 
+/// Every channel of a single-part EXR as f32, by full name.
+pub fn exr_channels(path: &std::path::Path) -> std::collections::HashMap<String, Vec<f32>> {
+    use exr::prelude::{read_all_flat_layers_from_file, FlatSamples};
+    let image = read_all_flat_layers_from_file(path).unwrap();
+    let layer = &image.layer_data[0];
+    layer
+        .channel_data
+        .list
+        .iter()
+        .map(|c| {
+            let values = match &c.sample_data {
+                FlatSamples::F16(v) => v.iter().map(|h| h.to_f32()).collect(),
+                FlatSamples::F32(v) => v.clone(),
+                FlatSamples::U32(v) => v.iter().map(|&u| u as f32).collect(),
+            };
+            (c.name.to_string(), values)
+        })
+        .collect()
+}
+
 /// Asserts `|actual - expected| <= tolerance` for scalars or slices, printing the worst
 /// entry and its difference.
 #[macro_export]

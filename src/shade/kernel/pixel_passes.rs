@@ -87,26 +87,10 @@ impl<T: Real> ShadingKernel<T> {
         self.add_visibility(none, p, n, point.object, &mut unoccluded[..count]);
         let lit_unoccluded = self.lit(&unoccluded, &self.diffuse, n);
         let visibility = ratio(lit_diffuse, lit_unoccluded);
-        let has_heightfield = occluders.horizons.is_some() && self.wedge.is_some();
-        let has_blockers = occluders.blockers.is_some();
-        let (visibility_heightfield, visibility_blockers) = match (has_heightfield, has_blockers) {
-            (false, false) => (1.0, 1.0),
-            (true, false) => (visibility, 1.0),
-            (false, true) => (1.0, visibility),
-            (true, true) => {
-                let spheres_only = Occluders { blockers: occluders.blockers, horizons: None };
-                let mut blockers = [T::zero(); MAX_COEFFICIENTS];
-                self.add_visibility(spheres_only, p, n, point.object, &mut blockers[..count]);
-                let mut heightfield = [T::zero(); MAX_COEFFICIENTS];
-                for i in 0..count {
-                    heightfield[i] = full[i] - blockers[i] + unoccluded[i];
-                }
-                (
-                    ratio(self.lit(&heightfield, &self.diffuse, n), lit_unoccluded),
-                    ratio(self.lit(&blockers, &self.diffuse, n), lit_unoccluded),
-                )
-            }
-        };
+        let (visibility_heightfield, visibility_blockers) =
+            self.split_visibility(occluders, point, &full, &unoccluded, visibility, |_, log| {
+                ratio(self.lit(log, &self.diffuse, n), lit_unoccluded)
+            });
         PixelPasses { diffuse, specular, visibility, visibility_heightfield, visibility_blockers }
     }
 }

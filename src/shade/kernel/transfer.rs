@@ -10,9 +10,12 @@
 //! log-SH share of the specular occlusion needs; the scene's own lamps are light that a
 //! relight leaves where it was, kept as radiance.
 
-use super::{occlusion_ratio, open_lit, visibility_ratio, Occluders, PixelPasses, ShadingKernel, SurfacePoint};
+use super::{
+    as_f32_array, occlusion_ratio, open_lit, visibility_ratio, OccluderSet, Occluders, PixelPasses, ShadingKernel,
+    SurfacePoint,
+};
 use crate::scene::Material;
-use crate::sh::{add_rotated_zonal, coefficient_count, Real, MAX_COEFFICIENTS};
+use crate::sh::{coefficient_count, Real, MAX_COEFFICIENTS};
 use crate::shade::glossy::SharpLobe;
 
 /// How a point's glossy term reads the light.
@@ -89,14 +92,9 @@ impl<T: Real> ShadingKernel<T> {
     /// in f32 lanes where `lit` folds the light ([`crate::sh::FoldedQuadrature::project`]).
     fn transfer(&self, visibility: &[T], lobe: &super::LobeTable<T>, axis: [f64; 3], out: &mut [f32]) {
         let count = coefficient_count(self.order);
-        let mut f = [T::zero(); MAX_COEFFICIENTS];
-        f[..count].copy_from_slice(&visibility[..count]);
-        add_rotated_zonal(self.order, &lobe.zonal, T::one(), axis.map(T::of), &mut f[..count]);
+        let f = self.with_lobe(visibility, lobe, axis);
         if let Some(folded) = &self.folded {
-            let as_f32 = |v: &[T]| -> [f32; MAX_COEFFICIENTS] {
-                std::array::from_fn(|k| v.get(k).and_then(|x| x.to_f32()).unwrap_or(0.0))
-            };
-            let (f32s, v32s) = (as_f32(&f[..count]), as_f32(&visibility[..count]));
+            let (f32s, v32s) = (as_f32_array(&f[..count]), as_f32_array(&visibility[..count]));
             let floored = self.overlap_floor.then(|| (&v32s[..count], self.log_epsilon.to_f32().unwrap_or(0.0)));
             return folded.project(&f32s[..count], floored, lobe.log_peak as f32, out);
         }
@@ -136,9 +134,10 @@ impl<T: Real> ShadingKernel<T> {
             Material::Water { .. } => return dark,
         };
         // The render's light (its suns taken out), as the passes dot it.
-        let light: [Vec<f32>; 3] = self.light.each_ref().map(|c| c.iter().map(|v| v.to_f32().unwrap_or(0.0)).collect());
         let lit = |t: &[f32]| -> [f32; 3] {
-            light.each_ref().map(|l| l.iter().zip(&t[..count]).map(|(a, b)| a * b).sum::<f32>().max(0.0))
+            self.light
+                .each_ref()
+                .map(|l| l.iter().zip(&t[..count]).map(|(a, b)| a.to_f32().unwrap_or(0.0) * b).sum::<f32>().max(0.0))
         };
         let mut out = PointTransfer { albedo, specular_colour, ..PointTransfer::DARK };
         self.transfer(&full, &self.diffuse, n, &mut out.diffuse);
@@ -148,27 +147,15 @@ impl<T: Real> ShadingKernel<T> {
         self.transfer(&unoccluded, &self.diffuse, n, &mut out.unoccluded);
         let (lit_diffuse, lit_unoccluded) = (lit(&out.diffuse), lit(&out.unoccluded));
         let visibility = visibility_ratio(lit_diffuse, lit_unoccluded);
-        let has_heightfield = occluders.horizons.is_some() && self.wedge.is_some();
-        let (visibility_heightfield, visibility_blockers) = match (has_heightfield, occluders.blockers.is_some()) {
-            (false, false) => (1.0, 1.0),
-            (true, false) => (visibility, 1.0),
-            (false, true) => (1.0, visibility),
-            (true, true) => {
-                let spheres_only = Occluders { blockers: occluders.blockers, horizons: None };
-                let mut blockers = [T::zero(); MAX_COEFFICIENTS];
-                self.add_visibility(spheres_only, p, n, point.object, &mut blockers[..count]);
-                let mut heightfield = [T::zero(); MAX_COEFFICIENTS];
-                for i in 0..count {
-                    heightfield[i] = full[i] - blockers[i] + unoccluded[i];
-                }
-                self.transfer(&heightfield, &self.diffuse, n, &mut out.heightfield);
-                self.transfer(&blockers, &self.diffuse, n, &mut out.blockers);
-                (
-                    visibility_ratio(lit(&out.heightfield), lit_unoccluded),
-                    visibility_ratio(lit(&out.blockers), lit_unoccluded),
-                )
-            }
-        };
+        let (visibility_heightfield, visibility_blockers) =
+            self.split_visibility(occluders, point, &full, &unoccluded, visibility, |set, log| {
+                let transfer = match set {
+                    OccluderSet::Heightfield => &mut out.heightfield,
+                    OccluderSet::Blockers => &mut out.blockers,
+                };
+                self.transfer(log, &self.diffuse, n, transfer);
+                visibility_ratio(lit(transfer), lit_unoccluded)
+            });
         let mut glossy = [0.0f32; 3];
         if let Material::Phong { .. } = lobes.material {
             let phong = lobes.phong.as_ref().expect("phong materials carry their lobe");
