@@ -1,10 +1,10 @@
 //! Log visibility of a spherical blocker (paper 000, Eq. 24-26, Section 4.2).
 
-use crate::sh::basis::{legendre, normalisation, Real};
+use crate::sh::basis::{legendre, normalisation_of, Real};
 
 /// `2 pi K_l`, `K_l = sqrt((2l+1)/(4 pi))`: the factor of band `l` in the cap's closed form.
 pub fn cap_scale(l: usize) -> f64 {
-    std::f64::consts::TAU * normalisation(l, 0)
+    std::f64::consts::TAU * normalisation_of(l, 0)
 }
 
 /// Writes the `order` ZH coefficients of the log visibility of a cap of angular radius
@@ -18,7 +18,7 @@ pub fn cap_log_zh<T: Real>(order: usize, log_epsilon: T, alpha: T, out: &mut [T]
     let mut p = [T::zero(); crate::sh::MAX_ORDER + 2];
     legendre(order + 1, x, &mut p);
     for l in 0..order {
-        let integral = if l == 0 { T::one() - x } else { (p[l - 1] - p[l + 1]) / T::of((2 * l + 1) as f64) };
+        let integral = if l == 0 { T::one() - x } else { (p[l - 1] - p[l + 1]) * T::of(1.0 / (2 * l + 1) as f64) };
         out[l] = log_epsilon * T::of(cap_scale(l)) * integral;
     }
 }

@@ -76,12 +76,38 @@ const TABULATED_BANDS: usize = 2 * MAX_ORDER;
 struct BasisFactors {
     normalisation: [[f64; TABULATED_BANDS]; TABULATED_BANDS],
     double_factorial: [f64; TABULATED_BANDS],
+    /// The upward recurrence's `(2l - 1) / (l - m)` and `(l + m - 1) / (l - m)`, so that
+    /// a basis evaluation divides nothing (`m = 0` is [`legendre`]'s).
+    recurrence: [[(f64, f64); TABULATED_BANDS]; TABULATED_BANDS],
+    /// [`funk_hecke_factor`]'s values.
+    funk_hecke: [f64; TABULATED_BANDS],
 }
 
 static FACTORS: std::sync::LazyLock<BasisFactors> = std::sync::LazyLock::new(|| BasisFactors {
     normalisation: std::array::from_fn(|l| std::array::from_fn(|m| if m <= l { normalisation(l, m) } else { 0.0 })),
     double_factorial: std::array::from_fn(double_factorial_odd),
+    recurrence: std::array::from_fn(|l| std::array::from_fn(|m| recurrence_factors(l, m))),
+    funk_hecke: std::array::from_fn(computed_funk_hecke_factor),
 });
+
+/// `(2l - 1) / (l - m)` and `(l + m - 1) / (l - m)`: `Q_l^m = a z Q_{l-1}^m - b Q_{l-2}^m`
+/// (0 where `l <= m`, which the recurrence never reads).
+fn recurrence_factors(l: usize, m: usize) -> (f64, f64) {
+    if l <= m {
+        return (0.0, 0.0);
+    }
+    let d = (l - m) as f64;
+    ((2 * l - 1) as f64 / d, (l + m - 1) as f64 / d)
+}
+
+/// [`normalisation`]`(l, m)`, read from a table for the bands the kernels use.
+pub fn normalisation_of(l: usize, m: usize) -> f64 {
+    if l < TABULATED_BANDS && m <= l {
+        FACTORS.normalisation[l][m]
+    } else {
+        normalisation(l, m)
+    }
+}
 
 /// Evaluates all `order * order` basis functions at the unit direction `(x, y, z)` into
 /// `out[..order * order]`.
@@ -107,8 +133,8 @@ pub fn eval_basis<T: Real>(order: usize, dir: [T; 3], out: &mut [T]) {
                 q_prev = q;
                 q = z * T::of((2 * m + 1) as f64) * q_prev;
             } else if l > m + 1 {
-                let next =
-                    (T::of((2 * l - 1) as f64) * z * q - T::of((l + m - 1) as f64) * q_prev) / T::of((l - m) as f64);
+                let (a, b) = if l < TABULATED_BANDS { factors.recurrence[l][m] } else { recurrence_factors(l, m) };
+                let next = T::of(a) * z * q - T::of(b) * q_prev;
                 q_prev = q;
                 q = next;
             }
@@ -143,12 +169,24 @@ pub fn eval_expansion<T: Real>(order: usize, coeffs: &[T], dir: [T; 3]) -> T {
 
 /// Legendre polynomials `P_0(z) ..= P_{count-1}(z)` (unnormalised, `P_l(1) = 1`).
 pub fn legendre<T: Real>(count: usize, z: T, out: &mut [T]) {
-    for l in 0..count {
-        out[l] = match l {
+    let factors: &BasisFactors = &FACTORS;
+    // The last two values are carried in locals: reading them back from `out` right after
+    // writing them stalls on store forwarding.
+    let (mut before, mut last) = (T::zero(), T::one());
+    for (l, o) in out[..count].iter_mut().enumerate() {
+        let value = match l {
             0 => T::one(),
             1 => z,
-            _ => (T::of((2 * l - 1) as f64) * z * out[l - 1] - T::of((l - 1) as f64) * out[l - 2]) / T::of(l as f64),
+            _ => {
+                let (a, b) = if l < TABULATED_BANDS { factors.recurrence[l][0] } else { recurrence_factors(l, 0) };
+                T::of(a) * z * last - T::of(b) * before
+            }
         };
+        if l > 0 {
+            before = last;
+        }
+        last = value;
+        *o = value;
     }
 }
 
@@ -158,8 +196,17 @@ pub fn nlp_scale(l: usize) -> f64 {
     ((2 * l + 1) as f64 / 2.0).sqrt()
 }
 
-/// `sqrt(4 pi / (2l + 1))`, the Funk-Hecke factor of paper 000, Eq. 5.
+/// `sqrt(4 pi / (2l + 1))`, the Funk-Hecke factor of paper 000, Eq. 5 (from a table for
+/// the bands the kernels use: it is read per blocker and pixel).
 pub fn funk_hecke_factor(l: usize) -> f64 {
+    if l < TABULATED_BANDS {
+        FACTORS.funk_hecke[l]
+    } else {
+        computed_funk_hecke_factor(l)
+    }
+}
+
+fn computed_funk_hecke_factor(l: usize) -> f64 {
     (4.0 * std::f64::consts::PI / (2 * l + 1) as f64).sqrt()
 }
 

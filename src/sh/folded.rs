@@ -80,7 +80,15 @@ impl FoldedQuadrature {
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma")]
     unsafe fn lit_avx2(&self, f: &[f32], floored: Option<(&[f32], f32)>, ceiling: f32) -> [f32; 3] {
-        self.lit_lanes(f, floored, ceiling)
+        use std::arch::x86_64::*;
+        let mut acc = [_mm256_setzero_ps(); 3];
+        self.for_each_block_avx2(f, floored, ceiling, |start, e| {
+            for (channel, light) in acc.iter_mut().zip(&self.light) {
+                let w = _mm256_loadu_ps(light[start..][..LANES].as_ptr());
+                *channel = _mm256_fmadd_ps(e, w, *channel);
+            }
+        });
+        acc.map(|lanes| avx2::sum(lanes).max(0.0))
     }
 
     /// `exp*(f)` itself, projected back to SH at the same nodes into `out[..order^2]`:
@@ -98,7 +106,92 @@ impl FoldedQuadrature {
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma")]
     unsafe fn project_avx2(&self, f: &[f32], floored: Option<(&[f32], f32)>, ceiling: f32, out: &mut [f32]) {
-        self.project_lanes(f, floored, ceiling, out)
+        use std::arch::x86_64::*;
+        let (count, nodes) = (self.count, self.nodes);
+        let mut acc = [_mm256_setzero_ps(); super::MAX_COEFFICIENTS];
+        self.for_each_block_avx2(f, floored, ceiling, |start, e| {
+            let ew = _mm256_mul_ps(e, _mm256_loadu_ps(self.weights[start..][..LANES].as_ptr()));
+            for (k, channel) in acc[..count].iter_mut().enumerate() {
+                let y = _mm256_loadu_ps(self.basis[k * nodes + start..][..LANES].as_ptr());
+                *channel = _mm256_fmadd_ps(ew, y, *channel);
+            }
+        });
+        for (o, lanes) in out[..count].iter_mut().zip(&acc) {
+            *o = avx2::sum(*lanes);
+        }
+    }
+
+    /// `e^{f(x_i)}` of every block of nodes ([`Self::block_values`], then [`exp_lanes`]) in
+    /// AVX2 registers, handed to `each(start, e)` in order. Four blocks are summed at once,
+    /// so that the multiply-add chains over the coefficients overlap instead of waiting on
+    /// each other.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    unsafe fn for_each_block_avx2(
+        &self,
+        f: &[f32],
+        floored: Option<(&[f32], f32)>,
+        ceiling: f32,
+        mut each: impl FnMut(usize, std::arch::x86_64::__m256),
+    ) {
+        const GROUP: usize = 4;
+        let mut start = 0;
+        while start + GROUP * LANES <= self.nodes {
+            for (b, e) in self.block_group_avx2::<GROUP>(f, floored, ceiling, start).into_iter().enumerate() {
+                each(start + b * LANES, e);
+            }
+            start += GROUP * LANES;
+        }
+        while start < self.nodes {
+            let [e] = self.block_group_avx2::<1>(f, floored, ceiling, start);
+            each(start, e);
+            start += LANES;
+        }
+    }
+
+    /// `e^{f(x_i)}` of the `B` blocks of nodes from `start`, floored and capped as
+    /// [`Self::block_values`] does; the log value and its floor's argument share one pass
+    /// over the basis rows.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    unsafe fn block_group_avx2<const B: usize>(
+        &self,
+        f: &[f32],
+        floored: Option<(&[f32], f32)>,
+        ceiling: f32,
+        start: usize,
+    ) -> [std::arch::x86_64::__m256; B] {
+        use std::arch::x86_64::*;
+        let (count, nodes) = (self.count, self.nodes);
+        let rows = |k: usize| -> [__m256; B] {
+            let row = &self.basis[k * nodes + start..][..B * LANES];
+            std::array::from_fn(|b| _mm256_loadu_ps(row[b * LANES..].as_ptr()))
+        };
+        let mut value = [_mm256_setzero_ps(); B];
+        if let Some((v, floor)) = floored {
+            let mut part = [_mm256_setzero_ps(); B];
+            for (k, (&fk, &vk)) in f[..count].iter().zip(&v[..count]).enumerate() {
+                let (fk, vk, y) = (_mm256_set1_ps(fk), _mm256_set1_ps(vk), rows(k));
+                for b in 0..B {
+                    value[b] = _mm256_fmadd_ps(fk, y[b], value[b]);
+                    part[b] = _mm256_fmadd_ps(vk, y[b], part[b]);
+                }
+            }
+            let floor = _mm256_set1_ps(floor);
+            for b in 0..B {
+                value[b] = _mm256_add_ps(value[b], _mm256_max_ps(_mm256_sub_ps(floor, part[b]), _mm256_setzero_ps()));
+            }
+        } else {
+            for (k, &fk) in f[..count].iter().enumerate() {
+                let (fk, y) = (_mm256_set1_ps(fk), rows(k));
+                for b in 0..B {
+                    value[b] = _mm256_fmadd_ps(fk, y[b], value[b]);
+                }
+            }
+        }
+        let ceiling = _mm256_set1_ps(ceiling);
+        value.map(|x| avx2::exp(_mm256_min_ps(x, ceiling)))
     }
 
     #[inline(always)]
@@ -187,6 +280,49 @@ pub fn exp_lanes(x: [f32; LANES]) -> [f32; LANES] {
     out
 }
 
+/// [`exp_lanes`] and the lane sum in AVX2 and FMA registers: the same steps, with the
+/// polynomial's and the range reduction's multiply-adds fused.
+#[cfg(target_arch = "x86_64")]
+mod avx2 {
+    use std::arch::x86_64::*;
+
+    /// [`super::exp_lanes`] on one register. `2^n` comes from the shifted sum's bits
+    /// (`n` sits in its low mantissa bits), so no float-to-integer conversion is needed.
+    #[inline]
+    #[target_feature(enable = "avx2,fma")]
+    pub unsafe fn exp(x: __m256) -> __m256 {
+        const SHIFT: f32 = 12_582_912.0; // 1.5 * 2^23
+        const SHIFT_BITS: i32 = 0x4b40_0000; // the bits of SHIFT
+        const LN2_HI: f32 = 0.693_145_75;
+        const LN2_LO: f32 = 1.428_606_8e-6;
+        let below = _mm256_cmp_ps::<_CMP_LT_OQ>(x, _mm256_set1_ps(-87.0));
+        // max_ps returns its second operand for a NaN, so a NaN lane becomes -87.
+        let v = _mm256_min_ps(_mm256_max_ps(x, _mm256_set1_ps(-87.0)), _mm256_set1_ps(88.0));
+        let shifted = _mm256_fmadd_ps(v, _mm256_set1_ps(std::f32::consts::LOG2_E), _mm256_set1_ps(SHIFT));
+        let n = _mm256_sub_ps(shifted, _mm256_set1_ps(SHIFT));
+        let r = _mm256_fnmadd_ps(n, _mm256_set1_ps(LN2_LO), _mm256_fnmadd_ps(n, _mm256_set1_ps(LN2_HI), v));
+        let mut p = _mm256_set1_ps(1.0 / 720.0);
+        for c in [1.0 / 120.0, 1.0 / 24.0, 1.0 / 6.0, 0.5, 1.0, 1.0] {
+            p = _mm256_fmadd_ps(p, r, _mm256_set1_ps(c));
+        }
+        let exponent = _mm256_add_epi32(
+            _mm256_sub_epi32(_mm256_castps_si256(shifted), _mm256_set1_epi32(SHIFT_BITS)),
+            _mm256_set1_epi32(127),
+        );
+        let scale = _mm256_castsi256_ps(_mm256_slli_epi32::<23>(exponent));
+        _mm256_andnot_ps(below, _mm256_mul_ps(p, scale))
+    }
+
+    /// The sum of the eight lanes.
+    #[inline]
+    #[target_feature(enable = "avx2,fma")]
+    pub unsafe fn sum(x: __m256) -> f32 {
+        let quad = _mm_add_ps(_mm256_castps256_ps128(x), _mm256_extractf128_ps::<1>(x));
+        let pair = _mm_add_ps(quad, _mm_movehl_ps(quad, quad));
+        _mm_cvtss_f32(_mm_add_ss(pair, _mm_shuffle_ps::<0b01>(pair, pair)))
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -200,10 +336,57 @@ mod tests {
             let got = f64::from(exp_lanes([x as f32; LANES])[3]);
             let exact = (x as f32 as f64).exp();
             worst = worst.max((got - exact).abs() / exact);
+            #[cfg(target_arch = "x86_64")]
+            if *HAS_AVX2_FMA {
+                // SAFETY: the processor has AVX2 and FMA.
+                let got = unsafe {
+                    use std::arch::x86_64::*;
+                    _mm_cvtss_f32(_mm256_castps256_ps128(avx2::exp(_mm256_set1_ps(x as f32))))
+                };
+                worst = worst.max((f64::from(got) - exact).abs() / exact);
+            }
         }
         assert!(worst < 3e-7, "worst relative error {worst}");
         assert_eq!(exp_lanes([-100.0; LANES]), [0.0; LANES]);
         assert!(exp_lanes([1000.0; LANES]).iter().all(|v| v.is_finite()));
+    }
+
+    /// The AVX2 path (what `lit` and `project` run here when the processor has it) and the
+    /// portable lanes agree to f32 rounding, at every order, with and without the floor,
+    /// at a node count that is not a multiple of the AVX2 group.
+    #[test]
+    fn the_avx2_path_equals_the_portable_lanes() {
+        #[cfg(target_arch = "x86_64")]
+        if *HAS_AVX2_FMA {
+            for order in 2..=8 {
+                let count = coefficient_count(order);
+                let light: [Vec<f64>; 3] =
+                    std::array::from_fn(|c| (0..count).map(|k| 1.0 / (1.0 + (k + c) as f64)).collect());
+                let folded = FoldedQuadrature::new(&ExactExp::fast(order), &light);
+                let f: Vec<f32> = (0..count).map(|k| 2.5 * ((k as f32 + 0.4) * 1.7).sin()).collect();
+                let v: Vec<f32> = f.iter().map(|x| 0.8 * x - 0.1).collect();
+                for floored in [None, Some((&v[..], -2.3f32))] {
+                    // SAFETY: the processor has AVX2 and FMA.
+                    let (lit, mut projected) = (unsafe { folded.lit_avx2(&f, floored, 1.5) }, vec![0.0; count]);
+                    let lanes = folded.lit_lanes(&f, floored, 1.5);
+                    for c in 0..3 {
+                        assert!(
+                            (lit[c] - lanes[c]).abs() <= 2e-6 * lanes[c].abs().max(1.0),
+                            "order {order}: {lit:?} {lanes:?}"
+                        );
+                    }
+                    unsafe { folded.project_avx2(&f, floored, 1.5, &mut projected) };
+                    let mut expected = vec![0.0; count];
+                    folded.project_lanes(&f, floored, 1.5, &mut expected);
+                    let largest = expected.iter().fold(1.0f32, |a, b| a.max(b.abs()));
+                    for k in 0..count {
+                        assert!((projected[k] - expected[k]).abs() <= 2e-6 * largest, "order {order}, coefficient {k}");
+                    }
+                }
+            }
+            return;
+        }
+        eprintln!("no AVX2 and FMA here: the portable lanes are the only path");
     }
 
     /// The folded sum equals projecting `exp*(f)` back to SH and dotting with the light, and
