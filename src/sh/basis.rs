@@ -117,9 +117,24 @@ pub fn normalisation_of(l: usize, m: usize) -> f64 {
 /// no division: exact at the poles. Relative accuracy about 1e-15 (f64) or 1e-6 (f32)
 /// through order 8.
 pub fn eval_basis<T: Real>(order: usize, dir: [T; 3], out: &mut [T]) {
+    assert!(out.len() >= order * order, "eval_basis: output holds fewer than order^2 values");
+    // The supported orders each get a copy with the loops' bounds known, unrolled.
+    match order {
+        3 => eval_basis_of_order(3, dir, out),
+        4 => eval_basis_of_order(4, dir, out),
+        5 => eval_basis_of_order(5, dir, out),
+        6 => eval_basis_of_order(6, dir, out),
+        7 => eval_basis_of_order(7, dir, out),
+        8 => eval_basis_of_order(8, dir, out),
+        _ => eval_basis_of_order(order, dir, out),
+    }
+}
+
+/// [`eval_basis`] inlined into its caller, so that a constant `n` unrolls its loops.
+#[inline(always)]
+pub(crate) fn eval_basis_of_order<T: Real>(n: usize, dir: [T; 3], out: &mut [T]) {
     let [x, y, z] = dir;
-    let n = order;
-    assert!(out.len() >= n * n, "eval_basis: output holds fewer than order^2 values");
+    let out = &mut out[..n * n];
     let sqrt2 = T::SQRT_2();
     let factors: &BasisFactors = &FACTORS;
     // (x + i y)^m, starting at m = 0.

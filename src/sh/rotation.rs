@@ -1,7 +1,7 @@
 //! Rotations of SH expansions: zonal functions to any direction (Funk-Hecke) and any
 //! expansion about the z axis.
 
-use super::basis::{eval_basis, funk_hecke_factor, index, Real, MAX_COEFFICIENTS};
+use super::basis::{eval_basis, eval_basis_of_order, funk_hecke_factor, index, Real, MAX_COEFFICIENTS};
 
 /// Rotates a zonal function with ZH coefficients `zonal[l] = z_l` (the `y_l^0`
 /// coefficients of a function symmetric about +Z) so that its axis points along the unit
@@ -21,8 +21,23 @@ pub fn rotate_zonal<T: Real>(order: usize, zonal: &[T], dir: [T; 3], out: &mut [
 /// Like [`rotate_zonal`] but adds the rotated function into `acc`, scaled by `weight`: the
 /// inner loop of log-SH accumulation.
 pub fn add_rotated_zonal<T: Real>(order: usize, zonal: &[T], weight: T, dir: [T; 3], acc: &mut [T]) {
+    // The supported orders each get a copy with the loops' bounds known, unrolled.
+    match order {
+        3 => add_rotated_zonal_of_order(3, zonal, weight, dir, acc),
+        4 => add_rotated_zonal_of_order(4, zonal, weight, dir, acc),
+        5 => add_rotated_zonal_of_order(5, zonal, weight, dir, acc),
+        6 => add_rotated_zonal_of_order(6, zonal, weight, dir, acc),
+        7 => add_rotated_zonal_of_order(7, zonal, weight, dir, acc),
+        8 => add_rotated_zonal_of_order(8, zonal, weight, dir, acc),
+        _ => add_rotated_zonal_of_order(order, zonal, weight, dir, acc),
+    }
+}
+
+#[inline(always)]
+fn add_rotated_zonal_of_order<T: Real>(order: usize, zonal: &[T], weight: T, dir: [T; 3], acc: &mut [T]) {
+    let (zonal, acc) = (&zonal[..order], &mut acc[..order * order]);
     let mut y = [T::zero(); MAX_COEFFICIENTS];
-    eval_basis(order, dir, &mut y);
+    eval_basis_of_order(order, dir, &mut y);
     for l in 0..order {
         let scale = weight * T::of(funk_hecke_factor(l)) * zonal[l];
         for i in index(l, -(l as i32))..=index(l, l as i32) {
