@@ -61,6 +61,9 @@ impl RelightOptions {
     }
 }
 
+/// Partial sums of a pixel's dot products.
+const DOT_LANES: usize = 8;
+
 /// The light of a relight, ready for the pixels: its SH vector (windowed as the render's
 /// was) and its map prefiltered with each of the frame's glossy lobes.
 pub struct RelightLight {
@@ -68,8 +71,11 @@ pub struct RelightLight {
     light: Light,
     /// Per colour channel, `order^2` coefficients.
     sh: [Vec<f32>; 3],
-    /// The same, RGB per coefficient (the order the pixels' dot products read them).
+    /// The same, RGB per coefficient (`light.json`'s layout).
     interleaved: Vec<[f32; 3]>,
+    /// The same per channel in blocks of [`DOT_LANES`], zero-padded: the pixels' dot
+    /// products sum eight partial sums, which vectorises.
+    blocks: [Vec<[f32; DOT_LANES]>; 3],
     /// Per lobe of the header; `None` for a light without a map.
     prefiltered: Vec<Option<Prefiltered>>,
     /// The lobes' `open` ZH, as f32.
@@ -113,6 +119,12 @@ impl RelightLight {
         window.apply(order, &mut coefficients);
         let sh = [0, 1, 2].map(|k| coefficients.iter().map(|c| c[k] as f32).collect());
         let interleaved = coefficients.iter().map(|c| c.map(|v| v as f32)).collect();
+        let blocks = sh.each_ref().map(|channel: &Vec<f32>| {
+            channel
+                .chunks(DOT_LANES)
+                .map(|chunk| std::array::from_fn(|i| chunk.get(i).copied().unwrap_or(0.0)))
+                .collect()
+        });
         let levels = (!header.lobes.is_empty())
             .then(|| glossy_map(&light))
             .flatten()
@@ -121,7 +133,23 @@ impl RelightLight {
             header.lobes.iter().map(|lobe| levels.as_ref().map(|levels| levels.prefilter(lobe.lobe))).collect();
         let open = header.lobes.iter().map(|lobe| lobe.open.iter().map(|&v| v as f32).collect()).collect();
         let key = (order, header.light_window.clone(), header.sky_only, header.lobes.clone());
-        Ok(Self { source, light, sh, interleaved, prefiltered, open, key })
+        Ok(Self { source, light, sh, interleaved, blocks, prefiltered, open, key })
+    }
+
+    /// `transfer . L` per channel, clamped at 0, for one pixel's transfer vector.
+    #[inline]
+    fn dot(&self, transfer: &[f32]) -> [f32; 3] {
+        let mut sum = [[0.0f32; DOT_LANES]; 3];
+        for (b, chunk) in transfer.chunks(DOT_LANES).enumerate() {
+            let mut t = [0.0f32; DOT_LANES];
+            t[..chunk.len()].copy_from_slice(chunk);
+            for (channel, blocks) in sum.iter_mut().zip(&self.blocks) {
+                for lane in 0..DOT_LANES {
+                    channel[lane] += t[lane] * blocks[b][lane];
+                }
+            }
+        }
+        sum.map(|lanes| lanes.iter().sum::<f32>().max(0.0))
     }
 
     /// Whether this light serves frames of `header` relit from `source`.
@@ -231,16 +259,7 @@ pub fn relight(frame: &TransferFrame, light: &RelightLight) -> ShadedPasses {
         .into_par_iter()
         .with_min_len(256)
         .map(|i| {
-            let dot = |layer: &[f32]| -> [f32; 3] {
-                let t = &layer[i * count..(i + 1) * count];
-                let mut sum = [0.0f32; 3];
-                for (v, l) in t.iter().zip(&light.interleaved[..count]) {
-                    for k in 0..3 {
-                        sum[k] += v * l[k];
-                    }
-                }
-                sum.map(|s| s.max(0.0))
-            };
+            let dot = |layer: &[f32]| light.dot(&layer[i * count..(i + 1) * count]);
             let (albedo, colour) = (frame.albedo[i], frame.specular_colour[i]);
             let lit = dot(&frame.diffuse);
             let diffuse = [0, 1, 2].map(|k| albedo[k] * lit[k] + frame.lamps_diffuse[i][k]);
