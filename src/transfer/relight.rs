@@ -253,74 +253,92 @@ struct Relit {
 
 /// The passes of `frame` under `light` ([`RelightLight::new`] from the frame's header).
 pub fn relight(frame: &TransferFrame, light: &RelightLight) -> ShadedPasses {
-    let count = frame.count();
-    let order = frame.order();
-    let pixels: Vec<Relit> = (0..frame.width * frame.height)
-        .into_par_iter()
-        .with_min_len(256)
-        .map(|i| {
-            let dot = |layer: &[f32]| light.dot(&layer[i * count..(i + 1) * count]);
-            let (albedo, colour) = (frame.albedo[i], frame.specular_colour[i]);
-            let lit = dot(&frame.diffuse);
-            let diffuse = [0, 1, 2].map(|k| albedo[k] * lit[k] + frame.lamps_diffuse[i][k]);
-            let direction = frame.glossy_direction[i].map(f64::from);
-            let code = frame.glossy_lobe[i];
-            let glossy: [f32; 3] = if code == lobe_code::NONE {
-                [0.0; 3]
-            } else if code == lobe_code::MIRROR {
-                light.light.radiance(direction)
-            } else if code == lobe_code::SH {
-                dot(frame.specular.as_deref().expect("checked on reading"))
-            } else {
-                let j = (code - lobe_code::PREFILTERED) as usize;
-                let [cone, sh_weight] = frame.glossy_weight[i].map(f64::from);
-                let by_sh = if sh_weight > 0.0 {
-                    let shadowed = dot(frame.specular.as_deref().expect("checked on reading"));
-                    occlusion_ratio(shadowed, open_lit(order, &light.open[j], direction, &light.sh))
-                } else {
-                    0.0
-                };
-                let weight = cone + sh_weight * by_sh;
-                match &light.prefiltered[j] {
-                    Some(map) => map.lookup(direction).map(|c| (f64::from(c) * weight) as f32),
-                    None => [0.0; 3],
-                }
-            };
-            let reflected = [0, 1, 2].map(|k| colour[k] * glossy[k]);
-            let (specular, environment) = if frame.alpha[i] > 0.0 {
-                ([0, 1, 2].map(|k| reflected[k] + frame.lamps_specular[i][k]), [0.0; 3])
-            } else {
-                ([0.0; 3], reflected)
-            };
-            let unoccluded = dot(&frame.unoccluded);
-            let visibility = visibility_ratio(lit, unoccluded);
-            let parts = match (&frame.heightfield, &frame.blockers) {
-                (Some(h), Some(b)) => [visibility_ratio(dot(h), unoccluded), visibility_ratio(dot(b), unoccluded)],
-                _ if frame.header.heightfield => [visibility, 1.0],
-                _ if frame.header.blockers => [1.0, visibility],
-                _ => [1.0, 1.0],
-            };
-            Relit { diffuse, specular, environment, visibility: [visibility, parts[0], parts[1]] }
-        })
-        .collect();
-    ShadedPasses {
+    /// Pixels per parallel task.
+    const CHUNK: usize = 1024;
+    let n = frame.width * frame.height;
+    let mut passes = ShadedPasses {
         width: frame.width,
         height: frame.height,
-        beauty: pixels
-            .iter()
-            .zip(&frame.alpha)
-            .map(|(p, &a)| {
-                let (d, s, e) = (p.diffuse, p.specular, p.environment);
-                [d[0] + s[0] + e[0], d[1] + s[1] + e[1], d[2] + s[2] + e[2], a]
-            })
-            .collect(),
-        diffuse: pixels.iter().map(|p| p.diffuse).collect(),
-        specular: pixels.iter().map(|p| p.specular).collect(),
-        environment: pixels.iter().map(|p| p.environment).collect(),
-        visibility: pixels.iter().map(|p| p.visibility[0]).collect(),
-        visibility_heightfield: pixels.iter().map(|p| p.visibility[1]).collect(),
-        visibility_blockers: pixels.iter().map(|p| p.visibility[2]).collect(),
+        beauty: vec![[0.0; 4]; n],
+        diffuse: vec![[0.0; 3]; n],
+        specular: vec![[0.0; 3]; n],
+        environment: vec![[0.0; 3]; n],
+        visibility: vec![0.0; n],
+        visibility_heightfield: vec![0.0; n],
+        visibility_blockers: vec![0.0; n],
         position: frame.position.clone(),
         normal: frame.normal.clone(),
-    }
+    };
+    // Every pass is written in place: the frame's outputs are tens of MB at 960x540, and
+    // gathering them per pixel first doubled the memory traffic.
+    (
+        passes.beauty.par_chunks_mut(CHUNK),
+        passes.diffuse.par_chunks_mut(CHUNK),
+        passes.specular.par_chunks_mut(CHUNK),
+        passes.environment.par_chunks_mut(CHUNK),
+        passes.visibility.par_chunks_mut(CHUNK),
+        passes.visibility_heightfield.par_chunks_mut(CHUNK),
+        passes.visibility_blockers.par_chunks_mut(CHUNK),
+    )
+        .into_par_iter()
+        .enumerate()
+        .for_each(|(chunk, (beauty, diffuse, specular, environment, visibility, heightfield, blockers))| {
+            for j in 0..beauty.len() {
+                let i = chunk * CHUNK + j;
+                let p = relit_pixel(frame, light, i);
+                let (d, s, e) = (p.diffuse, p.specular, p.environment);
+                beauty[j] = [d[0] + s[0] + e[0], d[1] + s[1] + e[1], d[2] + s[2] + e[2], frame.alpha[i]];
+                (diffuse[j], specular[j], environment[j]) = (d, s, e);
+                [visibility[j], heightfield[j], blockers[j]] = p.visibility;
+            }
+        });
+    passes
+}
+
+/// Pixel `i` of `frame` under `light`.
+#[inline]
+fn relit_pixel(frame: &TransferFrame, light: &RelightLight, i: usize) -> Relit {
+    let (count, order) = (frame.count(), frame.order());
+    let dot = |layer: &[f32]| light.dot(&layer[i * count..(i + 1) * count]);
+    let (albedo, colour) = (frame.albedo[i], frame.specular_colour[i]);
+    let lit = dot(&frame.diffuse);
+    let diffuse = [0, 1, 2].map(|k| albedo[k] * lit[k] + frame.lamps_diffuse[i][k]);
+    let direction = frame.glossy_direction[i].map(f64::from);
+    let code = frame.glossy_lobe[i];
+    let glossy: [f32; 3] = if code == lobe_code::NONE {
+        [0.0; 3]
+    } else if code == lobe_code::MIRROR {
+        light.light.radiance(direction)
+    } else if code == lobe_code::SH {
+        dot(frame.specular.as_deref().expect("checked on reading"))
+    } else {
+        let j = (code - lobe_code::PREFILTERED) as usize;
+        let [cone, sh_weight] = frame.glossy_weight[i].map(f64::from);
+        let by_sh = if sh_weight > 0.0 {
+            let shadowed = dot(frame.specular.as_deref().expect("checked on reading"));
+            occlusion_ratio(shadowed, open_lit(order, &light.open[j], direction, &light.sh))
+        } else {
+            0.0
+        };
+        let weight = cone + sh_weight * by_sh;
+        match &light.prefiltered[j] {
+            Some(map) => map.lookup(direction).map(|c| (f64::from(c) * weight) as f32),
+            None => [0.0; 3],
+        }
+    };
+    let reflected = [0, 1, 2].map(|k| colour[k] * glossy[k]);
+    let (specular, environment) = if frame.alpha[i] > 0.0 {
+        ([0, 1, 2].map(|k| reflected[k] + frame.lamps_specular[i][k]), [0.0; 3])
+    } else {
+        ([0.0; 3], reflected)
+    };
+    let unoccluded = dot(&frame.unoccluded);
+    let visibility = visibility_ratio(lit, unoccluded);
+    let parts = match (&frame.heightfield, &frame.blockers) {
+        (Some(h), Some(b)) => [visibility_ratio(dot(h), unoccluded), visibility_ratio(dot(b), unoccluded)],
+        _ if frame.header.heightfield => [visibility, 1.0],
+        _ if frame.header.blockers => [1.0, visibility],
+        _ => [1.0, 1.0],
+    };
+    Relit { diffuse, specular, environment, visibility: [visibility, parts[0], parts[1]] }
 }
