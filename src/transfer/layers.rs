@@ -392,12 +392,14 @@ impl TransferFrame {
         let (width, height) = (exr.width, exr.height);
         let count = coefficient_count(order);
         let sh = |exr: &mut ExrChannels, name: &str| -> Result<Vec<f32>, SceneError> {
-            let mut values = vec![0.0f32; width * height * count];
-            for k in 0..count {
-                let channel = exr.take_once(file, &format!("{name}_{}.{}", k - k % 4, ["R", "G", "B", "A"][k % 4]))?;
-                for (i, v) in channel.into_iter().enumerate() {
-                    values[i * count + k] = v;
-                }
+            let channels = (0..count)
+                .map(|k| exr.take_once(file, &format!("{name}_{}.{}", k - k % 4, ["R", "G", "B", "A"][k % 4])))
+                .collect::<Result<Vec<_>, _>>()?;
+            // Pixel-major, written in order (a channel at a time strode across the whole
+            // buffer once per coefficient).
+            let mut values = Vec::with_capacity(width * height * count);
+            for i in 0..width * height {
+                values.extend(channels.iter().map(|channel| channel[i]));
             }
             Ok(values)
         };
