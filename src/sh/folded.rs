@@ -122,9 +122,10 @@ impl FoldedQuadrature {
     }
 
     /// `e^{f(x_i)}` of every block of nodes ([`Self::block_values`], then [`exp_lanes`]) in
-    /// AVX2 registers, handed to `each(start, e)` in order. Four blocks are summed at once,
-    /// so that the multiply-add chains over the coefficients overlap instead of waiting on
-    /// each other.
+    /// AVX2 registers, handed to `each(start, e)` in order. Five blocks are summed at once
+    /// (the `quad` grid of order 4 is 25 blocks), so that the multiply-add chains over the
+    /// coefficients overlap instead of waiting on each other; the blocks left over go
+    /// together too.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma")]
     unsafe fn for_each_block_avx2(
@@ -134,7 +135,7 @@ impl FoldedQuadrature {
         ceiling: f32,
         mut each: impl FnMut(usize, std::arch::x86_64::__m256),
     ) {
-        const GROUP: usize = 4;
+        const GROUP: usize = 5;
         let mut start = 0;
         while start + GROUP * LANES <= self.nodes {
             for (b, e) in self.block_group_avx2::<GROUP>(f, floored, ceiling, start).into_iter().enumerate() {
@@ -142,10 +143,17 @@ impl FoldedQuadrature {
             }
             start += GROUP * LANES;
         }
-        while start < self.nodes {
-            let [e] = self.block_group_avx2::<1>(f, floored, ceiling, start);
-            each(start, e);
-            start += LANES;
+        let mut rest = |group: &[std::arch::x86_64::__m256]| {
+            for (b, e) in group.iter().enumerate() {
+                each(start + b * LANES, *e);
+            }
+        };
+        match (self.nodes - start) / LANES {
+            0 => {}
+            1 => rest(&self.block_group_avx2::<1>(f, floored, ceiling, start)),
+            2 => rest(&self.block_group_avx2::<2>(f, floored, ceiling, start)),
+            3 => rest(&self.block_group_avx2::<3>(f, floored, ceiling, start)),
+            _ => rest(&self.block_group_avx2::<4>(f, floored, ceiling, start)),
         }
     }
 

@@ -797,7 +797,11 @@ pub(crate) enum OccluderSet {
 
 /// `v` in f32, zero-padded to [`MAX_COEFFICIENTS`] (what [`FoldedQuadrature`] reads).
 pub(crate) fn as_f32_array<T: Real>(v: &[T]) -> [f32; MAX_COEFFICIENTS] {
-    std::array::from_fn(|k| v.get(k).and_then(|x| x.to_f32()).unwrap_or(0.0))
+    let mut out = [0.0f32; MAX_COEFFICIENTS];
+    for (o, x) in out.iter_mut().zip(v) {
+        *o = x.to_f32().unwrap_or(0.0);
+    }
+    out
 }
 
 /// Whether the kernel's scalar is f32 (the throughput path) rather than the f64 oracle.
