@@ -162,6 +162,23 @@ impl ExactExp {
         }
     }
 
+    /// The first coefficient of [`Self::exp_floored`] alone (the same sum, so the same
+    /// value): what the fitted depths' white receiver under a constant light reads.
+    pub fn exp_floored_first(&self, f: &[f64], floored: Option<(&[f64], f64)>, ceiling: f64) -> f64 {
+        let count = coefficient_count(self.order);
+        let mut first = 0.0f64;
+        for (node, w) in self.weights.iter().enumerate() {
+            let y = &self.basis[node * count..(node + 1) * count];
+            let mut value: f64 = y.iter().zip(&f[..count]).map(|(a, b)| a * b).sum();
+            if let Some((v, floor)) = floored {
+                let v: f64 = y.iter().zip(&v[..count]).map(|(a, b)| a * b).sum();
+                value += (floor - v).max(0.0);
+            }
+            first += w * value.min(ceiling).exp() * y[0];
+        }
+        first
+    }
+
     /// `integral of exp(g)` and `integral of exp(g) g` over the sphere for the function
     /// with coefficients `g`: what the OL fit needs, without projecting.
     fn moments(&self, g: &[f64]) -> (f64, f64) {

@@ -263,10 +263,9 @@ impl<'a> DiffuseReceiver<'a> {
         let count = coefficient_count(self.order);
         let mut f = *visibility;
         add_rotated_zonal(self.order, &self.diffuse, 1.0, [0.0, 0.0, 1.0], &mut f[..count]);
-        let mut e = [0.0; MAX_COEFFICIENTS];
-        self.exp.exp(&f[..count], Some((&visibility[..count], self.log_epsilon)), self.log_peak, &mut e[..count]);
+        let first = self.exp.exp_first(&f[..count], Some((&visibility[..count], self.log_epsilon)), self.log_peak);
         // A constant unit light has the single coefficient sqrt(4 pi).
-        e[0] * (4.0 * std::f64::consts::PI).sqrt()
+        first * (4.0 * std::f64::consts::PI).sqrt()
     }
 }
 
@@ -371,6 +370,22 @@ mod tests {
                 paper += (bowl(&constant, width) / open - width.cos().powi(2)).abs();
             }
             assert!(fitted < 0.5 * paper, "order {order}: fitted {fitted}, log eps {paper}");
+        }
+    }
+
+    /// The receiver reads `exp*`'s first coefficient alone; it is the full projection's,
+    /// bit for bit, so the tables are those of projecting everything.
+    #[test]
+    fn the_first_coefficient_alone_is_the_projections() {
+        for (order, method) in [(4, ExpMethod::Quad), (6, ExpMethod::Quad), (4, ExpMethod::Exact), (4, ExpMethod::Hyb)]
+        {
+            let exp = Exponentiator::new(order, method, 1.0);
+            let count = coefficient_count(order);
+            let f: Vec<f64> = (0..count).map(|k| 1.7 * ((k as f64 + 0.3) * 2.1).sin()).collect();
+            let v: Vec<f64> = f.iter().map(|x| 0.6 * x).collect();
+            let mut out = vec![0.0; count];
+            exp.exp(&f, Some((&v, -2.3)), 0.4, &mut out);
+            assert_eq!(exp.exp_first(&f, Some((&v, -2.3)), 0.4).to_bits(), out[0].to_bits(), "{method:?}");
         }
     }
 

@@ -109,6 +109,21 @@ impl Exponentiator {
         }
     }
 
+    /// The first coefficient of [`Self::exp`] (f64), computed alone where the method is the
+    /// quadrature's.
+    pub fn exp_first(&self, f: &[f64], floored: Option<(&[f64], f64)>, ceiling: f64) -> f64 {
+        match self.method {
+            ExpMethod::Exact | ExpMethod::Quad => {
+                self.exact.as_ref().expect("always built").exp_floored_first(f, floored, ceiling)
+            }
+            _ => {
+                let mut out = [0.0; MAX_COEFFICIENTS];
+                self.exp(f, floored, ceiling, &mut out[..f.len()]);
+                out[0]
+            }
+        }
+    }
+
     fn exp_sh_space<T: Real>(&self, f: &[T], out: &mut [T]) {
         match self.method {
             ExpMethod::Series => exp_series(self.tensor.as_ref().expect("built with its table"), f, out),
