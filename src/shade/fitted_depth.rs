@@ -191,14 +191,15 @@ pub fn cap_form_factor(alpha: f64, beta: f64) -> f64 {
     }
     let (rings, sectors) = (96, 192);
     let (sin_beta, cos_beta) = beta.sin_cos();
+    let cos_phi: Vec<f64> =
+        (0..sectors).map(|j| (std::f64::consts::TAU * (j as f64 + 0.5) / sectors as f64).cos()).collect();
     let mut sum = 0.0;
     for i in 0..rings {
         let rho = alpha * (i as f64 + 0.5) / rings as f64;
         let (sin_rho, cos_rho) = rho.sin_cos();
-        for j in 0..sectors {
-            let phi = std::f64::consts::TAU * (j as f64 + 0.5) / sectors as f64;
+        for cos_phi in &cos_phi {
             // The direction at (rho, phi) about the axis (sin beta, 0, cos beta): its z.
-            let z = cos_rho * cos_beta - sin_rho * phi.cos() * sin_beta;
+            let z = cos_rho * cos_beta - sin_rho * cos_phi * sin_beta;
             sum += z.max(0.0) * sin_rho;
         }
     }
