@@ -1,6 +1,6 @@
-//! CPU kernel costs: each SH exponentiation on a typical per-pixel log vector, and the
-//! per-pixel blocker accumulation. Compare methods as ratios within one run:
-//! `cargo bench --bench kernels`.
+//! CPU kernel costs: each SH exponentiation on a typical per-pixel log vector, the
+//! per-pixel blocker accumulation and the height-field march. Compare methods as ratios
+//! within one run: `cargo bench --bench kernels`.
 use criterion::{criterion_group, criterion_main, Criterion};
 use logsh::logsh::training_log_vectors;
 use logsh::sh::{ExpMethod, MAX_COEFFICIENTS};
@@ -93,9 +93,41 @@ fn blockers(c: &mut Criterion) {
     }
 }
 
+/// One receiver's horizons at the default settings (16 azimuths, bicubic levels, maximum
+/// over steps) on a rough 129 x 129 field, for 16 points on it.
+fn horizons(c: &mut Criterion) {
+    use logsh::heightfield::{HeightField, HorizonPyramid, HorizonSettings};
+    let n = 129;
+    let heights: Vec<f32> = (0..n * n)
+        .map(|i| {
+            let (x, y) = ((i % n) as f32 * 0.1, (i / n) as f32 * 0.1);
+            (1.3 * x).sin() * (0.7 * y).cos() + 0.3 * (3.1 * x + 2.3 * y).sin()
+        })
+        .collect();
+    let field = HeightField::new(heights, n, n, [0.0, 0.0], [12.8, 12.8]).expect("a valid field");
+    let pyramid = HorizonPyramid::new(&field, HorizonSettings::default()).expect("default settings");
+    let points: Vec<[f64; 3]> = (0..16)
+        .map(|i| {
+            let (x, y) = (0.7 + 0.77 * i as f64, 6.4 + 3.0 * (i as f64).sin());
+            [x, y, field.height_at(x, y)]
+        })
+        .collect();
+    c.bench_function("horizons16/129x129", |b| {
+        b.iter(|| {
+            let mut out = [0.0f64; 16];
+            let mut sum = 0.0;
+            for p in &points {
+                pyramid.horizon_elevations(black_box(*p), &mut out);
+                sum += out.iter().sum::<f64>();
+            }
+            black_box(sum)
+        })
+    });
+}
+
 criterion_group! {
     name = benches;
     config = Criterion::default().sample_size(20).measurement_time(std::time::Duration::from_secs(1)).warm_up_time(std::time::Duration::from_millis(300));
-    targets = exponentiation, lighting, blockers
+    targets = exponentiation, lighting, blockers, horizons
 }
 criterion_main!(benches);
