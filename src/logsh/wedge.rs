@@ -68,16 +68,27 @@ impl WedgeOperator {
         let step = z_rotation_phases::<T>(n, T::of(self.wedge_width()));
         let mut phases = z_rotation_phases::<T>(n, T::zero());
         let mut wedge = [T::zero(); crate::sh::MAX_COEFFICIENTS];
+        // The operator in `T` once per call, column by column: a wedge is then a sum of
+        // columns scaled by its slices' values, which vectorises over the coefficients (each
+        // coefficient's sum is taken in the same order as a row's dot product).
+        let mut columns_t = [T::zero(); crate::sh::MAX_COEFFICIENTS * 2 * crate::sh::MAX_ORDER];
+        let columns_t = &mut columns_t[..count * columns];
+        for i in 0..count {
+            for j in 0..columns {
+                columns_t[j * count + i] = T::of(self.matrix[i * columns + j]);
+            }
+        }
         for k in 0..w {
             let first = &slices[k * n..(k + 1) * n];
             let second = &slices[((k + 1) % w) * n..((k + 1) % w + 1) * n];
-            for (i, out) in wedge[..count].iter_mut().enumerate() {
-                let row = &self.matrix[i * columns..(i + 1) * columns];
-                let mut sum = T::zero();
-                for j in 0..n {
-                    sum = sum + T::of(row[j]) * first[j] + T::of(row[n + j]) * second[j];
+            let wedge = &mut wedge[..count];
+            wedge.fill(T::zero());
+            for j in 0..n {
+                let (a, b) = (&columns_t[j * count..(j + 1) * count], &columns_t[(n + j) * count..(n + j + 1) * count]);
+                let (f, s) = (first[j], second[j]);
+                for i in 0..count {
+                    wedge[i] = wedge[i] + a[i] * f + b[i] * s;
                 }
-                *out = sum;
             }
             rotate_z_with(n, &mut wedge[..count], &phases[..n]);
             for (a, v) in acc[..count].iter_mut().zip(&wedge[..count]) {
