@@ -12,8 +12,11 @@
 //!
 //! This is the f32 throughput path of the CPU executor: the basis is stored
 //! coefficient-major and the nodes padded to [`LANES`], so that each block of nodes is a
-//! run of independent lanes the compiler vectorises, exponential included ([`exp_lanes`]).
-//! The f64 path ([`ExactExp::exp_floored`]) stays the oracle.
+//! run of independent lanes, exponential included ([`exp_lanes`]). Where the processor has
+//! AVX2 and FMA the blocks run in those registers, five at a time (`lit_avx2`,
+//! `project_avx2`: about 6x the portable lanes, which the compiler leaves scalar); the
+//! portable lanes run elsewhere, and the two agree to f32 rounding (`tests` below). The
+//! f64 path ([`ExactExp::exp_floored`]) stays the oracle.
 
 use super::basis::coefficient_count;
 use super::exp::ExactExp;
