@@ -145,14 +145,8 @@ impl ExactExp {
                 *a = c.to_f64().unwrap_or(f64::NAN);
             }
         }
-        for (node, w) in self.weights.iter().enumerate() {
-            let y = &self.basis[node * count..(node + 1) * count];
-            let mut value: f64 = y.iter().zip(&f64s[..count]).map(|(a, b)| a * b).sum();
-            if let Some((_, floor)) = floored {
-                let v: f64 = y.iter().zip(&v64s[..count]).map(|(a, b)| a * b).sum();
-                value += (floor - v).max(0.0);
-            }
-            let e = w * value.min(ceiling).exp();
+        let floored64 = floored.map(|(_, floor)| (&v64s[..count], floor));
+        for (y, e) in self.weighted_exps(&f64s[..count], floored64, ceiling) {
             for (a, b) in acc.iter_mut().zip(y) {
                 *a += e * b;
             }
@@ -165,18 +159,31 @@ impl ExactExp {
     /// The first coefficient of [`Self::exp_floored`] alone (the same sum, so the same
     /// value): what the fitted depths' white receiver under a constant light reads.
     pub fn exp_floored_first(&self, f: &[f64], floored: Option<(&[f64], f64)>, ceiling: f64) -> f64 {
-        let count = coefficient_count(self.order);
         let mut first = 0.0f64;
-        for (node, w) in self.weights.iter().enumerate() {
+        for (y, e) in self.weighted_exps(f, floored, ceiling) {
+            first += e * y[0];
+        }
+        first
+    }
+
+    /// Per node, the basis there and `w_i e^{f(x_i)}`, the node value floored and capped
+    /// as [`Self::exp_floored`] documents.
+    fn weighted_exps<'a>(
+        &'a self,
+        f: &'a [f64],
+        floored: Option<(&'a [f64], f64)>,
+        ceiling: f64,
+    ) -> impl Iterator<Item = (&'a [f64], f64)> + 'a {
+        let count = coefficient_count(self.order);
+        self.weights.iter().enumerate().map(move |(node, w)| {
             let y = &self.basis[node * count..(node + 1) * count];
             let mut value: f64 = y.iter().zip(&f[..count]).map(|(a, b)| a * b).sum();
             if let Some((v, floor)) = floored {
                 let v: f64 = y.iter().zip(&v[..count]).map(|(a, b)| a * b).sum();
                 value += (floor - v).max(0.0);
             }
-            first += w * value.min(ceiling).exp() * y[0];
-        }
-        first
+            (y, w * value.min(ceiling).exp())
+        })
     }
 
     /// `integral of exp(g)` and `integral of exp(g) g` over the sphere for the function
