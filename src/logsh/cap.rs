@@ -1,10 +1,10 @@
 //! Log visibility of a spherical blocker (paper 000, Eq. 24-26, Section 4.2).
 
-use crate::sh::basis::{legendre, normalisation_of, Real};
+use crate::sh::basis::{legendre, normalisation, Real};
 
 /// `2 pi K_l`, `K_l = sqrt((2l+1)/(4 pi))`: the factor of band `l` in the cap's closed form.
 pub fn cap_scale(l: usize) -> f64 {
-    std::f64::consts::TAU * normalisation_of(l, 0)
+    std::f64::consts::TAU * normalisation(l, 0)
 }
 
 /// Writes the `order` ZH coefficients of the log visibility of a cap of angular radius
