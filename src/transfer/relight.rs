@@ -71,8 +71,6 @@ pub struct RelightLight {
     light: Light,
     /// Per colour channel, `order^2` coefficients.
     sh: [Vec<f32>; 3],
-    /// The same, RGB per coefficient (`light.json`'s layout).
-    interleaved: Vec<[f32; 3]>,
     /// The same per channel in blocks of [`DOT_LANES`], zero-padded: the pixels' dot
     /// products sum eight partial sums, which vectorises.
     blocks: [Vec<[f32; DOT_LANES]>; 3],
@@ -118,7 +116,6 @@ impl RelightLight {
         let mut coefficients = light.sh_coefficients(order);
         window.apply(order, &mut coefficients);
         let sh = [0, 1, 2].map(|k| coefficients.iter().map(|c| c[k] as f32).collect());
-        let interleaved = coefficients.iter().map(|c| c.map(|v| v as f32)).collect();
         let blocks = sh.each_ref().map(|channel: &Vec<f32>| {
             channel
                 .chunks(DOT_LANES)
@@ -133,7 +130,7 @@ impl RelightLight {
             header.lobes.iter().map(|lobe| levels.as_ref().map(|levels| levels.prefilter(lobe.lobe))).collect();
         let open = header.lobes.iter().map(|lobe| lobe.open.iter().map(|&v| v as f32).collect()).collect();
         let key = (order, header.light_window.clone(), header.sky_only, header.lobes.clone());
-        Ok(Self { source, light, sh, interleaved, blocks, prefiltered, open, key })
+        Ok(Self { source, light, sh, blocks, prefiltered, open, key })
     }
 
     /// `transfer . L` per channel, clamped at 0, for one pixel's transfer vector.
@@ -205,7 +202,8 @@ impl RelightLight {
             "source": self.source,
             "order": self.key.0,
             "light_window": self.key.1,
-            "sh": self.interleaved,
+            // RGB per coefficient.
+            "sh": (0..self.sh[0].len()).map(|k| self.sh.each_ref().map(|channel| channel[k])).collect::<Vec<_>>(),
         })
     }
 
