@@ -344,6 +344,9 @@ pub struct HorizonPyramid {
     /// Per level and axis, grid units per world unit, `(n - 1) / (max - min)` (0 on an axis
     /// with one sample): a level read multiplies instead of dividing.
     grid_scales: Vec<[f64; 2]>,
+    /// Whether [`Self::horizon_elevations`] marches in AVX2 lanes (`lanes`): decided once,
+    /// when the pyramid is built.
+    in_lanes: bool,
     steps: Vec<MarchStep>,
     /// `(cos phi_k, sin phi_k)`.
     directions: Vec<[f64; 2]>,
@@ -378,7 +381,14 @@ impl HorizonPyramid {
                 std::array::from_fn(|a| if n[a] > 1 { (n[a] - 1) as f64 / (max[a] - min[a]) } else { 0.0 })
             })
             .collect();
-        Self { settings, min, max, levels, grid_scales, steps: plan.steps.clone(), directions: plan.directions.clone() }
+        #[cfg(target_arch = "x86_64")]
+        let in_lanes = settings.reconstruction == LevelReconstruction::BicubicBSpline
+            && settings.scale_max == ScaleMax::Steps
+            && lanes::available(&levels);
+        #[cfg(not(target_arch = "x86_64"))]
+        let in_lanes = false;
+        let (steps, directions) = (plan.steps.clone(), plan.directions.clone());
+        Self { settings, min, max, levels, grid_scales, in_lanes, steps, directions }
     }
 
     /// The settings it was built with.
@@ -448,11 +458,9 @@ impl HorizonPyramid {
             *r = self.sample_level(level, x, y);
         }
         #[cfg(target_arch = "x86_64")]
-        if self.settings.reconstruction == LevelReconstruction::BicubicBSpline
-            && self.settings.scale_max == ScaleMax::Steps
-            && lanes::available(self)
-        {
-            // SAFETY: `available` checked the processor's features and the levels' sizes.
+        if self.in_lanes {
+            // SAFETY: `lanes::available` checked the processor's features and the levels'
+            // sizes when the pyramid was built.
             unsafe { lanes::horizons(self, x, y, above, &receiver, out) };
             return;
         }
@@ -597,19 +605,19 @@ mod lanes {
     const SIXTH: f32 = 1.0 / 6.0;
     const TWO_THIRDS: f32 = 2.0 / 3.0;
 
-    /// Whether a pyramid can be marched here: AVX2 and FMA, and every level's samples
-    /// addressable by a 32-bit gather index.
-    pub fn available(pyramid: &HorizonPyramid) -> bool {
-        static HAS_AVX2_FMA: std::sync::LazyLock<bool> =
-            std::sync::LazyLock::new(|| is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma"));
-        *HAS_AVX2_FMA && pyramid.levels.iter().all(|l| l.heights.len() < i32::MAX as usize)
+    /// Whether a pyramid of `levels` can be marched here: AVX2 and FMA, and every level's
+    /// samples addressable by a 32-bit gather index.
+    pub fn available(levels: &[PyramidLevel]) -> bool {
+        is_x86_feature_detected!("avx2")
+            && is_x86_feature_detected!("fma")
+            && levels.iter().all(|l| l.heights.len() < i32::MAX as usize)
     }
 
     /// Writes the horizon elevations of every azimuth into `out` from `(x, y)`, `above`
     /// the surface, with the f64 receiver terms already sampled.
     ///
     /// # Safety
-    /// The processor has AVX2 and FMA, and [`available`] holds for `pyramid`.
+    /// The processor has AVX2 and FMA, and [`available`] holds for `pyramid`'s levels.
     #[target_feature(enable = "avx2,fma")]
     pub unsafe fn horizons(
         pyramid: &HorizonPyramid,
