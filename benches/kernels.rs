@@ -93,6 +93,71 @@ fn blockers(c: &mut Criterion) {
     }
 }
 
+/// The sphere caps of 64 receivers on a floor facing a wall of 400 spheres (the
+/// `wrecking_ball` sample's shape), clustered at the default ratio: each receiver walking
+/// the tree and adding its caps one by one in f32 (the kernel's scalar path), against
+/// packets of eight receivers sharing one walk ([`logsh::shade::cap_packet`]).
+fn blocker_packets(c: &mut Criterion) {
+    use logsh::logsh::{cap_log_zh, view_blocker, BlockerView};
+    use logsh::scene::Sphere;
+    use logsh::sh::add_rotated_zonal;
+    use logsh::shade::blocker_tree::BlockerTree;
+    use logsh::shade::cap_packet::{CapPacket, Receiver, LANES};
+    use logsh::shade::fitted_depth::{depth_at, DEPTH_INTERVALS};
+    let spheres: Vec<Sphere> = (0..400)
+        .map(|i| {
+            Sphere::new(
+                [(i % 40) as f64 * 0.25 - 5.0, 3.0 + (i / 200) as f64 * 0.25, 0.125 + ((i / 40) % 5) as f64 * 0.25],
+                0.15,
+            )
+        })
+        .collect();
+    let tree = BlockerTree::new(&spheres, logsh::shade::settings::DEFAULT_CLUSTER_RATIO);
+    let receivers: Vec<Receiver> = (0..64)
+        .map(|i| Receiver {
+            position: [(i % 16) as f32 * 0.4 - 3.0, (i / 16) as f32 * 0.5, 0.0],
+            normal: [0.0, 0.0, 1.0],
+            object: 0,
+        })
+        .collect();
+    let depths: Vec<f32> = (0..=DEPTH_INTERVALS).map(|k| -1.0 - 1.3 * k as f32 / DEPTH_INTERVALS as f32).collect();
+    for order in [4, 8] {
+        c.bench_function(&format!("caps400/walk per receiver/order{order}"), |b| {
+            b.iter(|| {
+                let mut total = 0.0f32;
+                for r in &receivers {
+                    let (p, n) = (r.position.map(f64::from), r.normal.map(f64::from));
+                    let mut acc = [0.0f32; MAX_COEFFICIENTS];
+                    let mut zonal = [0.0f32; 8];
+                    tree.visit(p, n, 0, |s| {
+                        let centre = s.center.map(|c| c as f32);
+                        if let BlockerView::Cap { direction, alpha, weight } =
+                            view_blocker(r.position, r.normal, centre, s.radius as f32, false)
+                        {
+                            cap_log_zh(order, depth_at(&depths, alpha), alpha, &mut zonal[..order]);
+                            add_rotated_zonal(order, &zonal[..order], weight, direction, &mut acc[..order * order]);
+                        }
+                    });
+                    total += acc[0];
+                }
+                black_box(total)
+            })
+        });
+        let packet = CapPacket::new(&tree, order, &depths, false);
+        c.bench_function(&format!("caps400/packets of 8/order{order}"), |b| {
+            b.iter(|| {
+                let mut total = 0.0f32;
+                let mut out = [[0.0f32; MAX_COEFFICIENTS]; LANES];
+                for chunk in receivers.chunks(LANES) {
+                    packet.sum(black_box(chunk), &mut out);
+                    total += out.iter().map(|o| o[0]).sum::<f32>();
+                }
+                black_box(total)
+            })
+        });
+    }
+}
+
 /// One receiver's horizons at the default settings (16 azimuths, bicubic levels, maximum
 /// over steps) on a rough 129 x 129 field, for 16 points on it.
 fn horizons(c: &mut Criterion) {
@@ -128,6 +193,6 @@ fn horizons(c: &mut Criterion) {
 criterion_group! {
     name = benches;
     config = Criterion::default().sample_size(20).measurement_time(std::time::Duration::from_secs(1)).warm_up_time(std::time::Duration::from_millis(300));
-    targets = exponentiation, lighting, blockers, horizons
+    targets = exponentiation, lighting, blockers, blocker_packets, horizons
 }
 criterion_main!(benches);

@@ -276,20 +276,7 @@ impl Gpu {
 
     /// The program's tables and material slots, and the frame's blocker tree.
     fn upload_inputs(&self, plan: &FramePlan, program: &ShadeProgram) -> Result<[wgpu::Buffer; 3], GpuError> {
-        let vec4 = |s: &crate::scene::Sphere| [s.center[0], s.center[1], s.center[2], s.radius].map(|v| v as f32);
-        let mut nodes: Vec<GpuBlockerNode> = plan
-            .blockers
-            .nodes
-            .iter()
-            .map(|node| GpuBlockerNode {
-                bounds: vec4(&node.bounds),
-                equivalent: vec4(&node.equivalent),
-                skip: node.skip,
-                leaf: node.leaf as u32,
-                object: node.equivalent.object,
-                pad: 0,
-            })
-            .collect();
+        let mut nodes: Vec<GpuBlockerNode> = plan.blockers.f32_nodes().to_vec();
         if nodes.is_empty() {
             nodes.push(GpuBlockerNode::default());
         }

@@ -29,6 +29,7 @@
 //! `cluster_ratio = 0` merges nothing: every sphere in front of the tangent plane is
 //! seen, as without the tree.
 
+use crate::gpu::layout::GpuBlockerNode;
 use crate::logsh::own_sphere_holds;
 use crate::scene::Sphere;
 
@@ -68,6 +69,8 @@ pub struct BlockerTree {
     pub nodes: Vec<BlockerNode>,
     /// Ratio of a cluster's bounding radius to its distance below which it is one cap.
     pub cluster_ratio: f64,
+    /// The same nodes in f32, as the WGSL pass and the CPU's packets walk them.
+    f32_nodes: Vec<GpuBlockerNode>,
 }
 
 impl BlockerTree {
@@ -79,11 +82,29 @@ impl BlockerTree {
         if !items.is_empty() {
             build(&mut items, &mut nodes);
         }
-        Self { nodes, cluster_ratio }
+        let vec4 = |s: &Sphere| [s.center[0], s.center[1], s.center[2], s.radius].map(|v| v as f32);
+        let f32_nodes = nodes
+            .iter()
+            .map(|node| GpuBlockerNode {
+                bounds: vec4(&node.bounds),
+                equivalent: vec4(&node.equivalent),
+                skip: node.skip,
+                leaf: node.leaf as u32,
+                object: node.equivalent.object,
+                pad: 0,
+            })
+            .collect();
+        Self { nodes, cluster_ratio, f32_nodes }
     }
 
     pub fn is_empty(&self) -> bool {
         self.nodes.is_empty()
+    }
+
+    /// The nodes in f32, in the same order: what the GPU pass uploads and the CPU's
+    /// packets walk ([`super::cap_packet`]).
+    pub fn f32_nodes(&self) -> &[GpuBlockerNode] {
+        &self.f32_nodes
     }
 
     /// Calls `see` with every sphere (or cluster's equivalent sphere) that a receiver of
@@ -123,14 +144,20 @@ impl BlockerTree {
         half_angle: f64,
         see: impl FnMut(&Sphere),
     ) {
+        let (sin_half, cos_half) = half_angle.sin_cos();
         self.walk(p, n, object, see, |node, d| {
             let r = node.bounds.radius;
-            let distance = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+            let squared = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
             // Outside the cone: the angle to the bounds' centre exceeds the cone's
-            // half-angle plus the bounds' own angular radius.
-            let outside = distance > r && {
-                let cos = ((d[0] * axis[0] + d[1] * axis[1] + d[2] * axis[2]) / distance).clamp(-1.0, 1.0);
-                cos.acos() > half_angle + (r / distance).asin()
+            // half-angle plus the bounds' own angular radius `beta = asin(r / |d|)`,
+            // compared by cosines while that sum is below pi (its sine positive), all
+            // times `|d|`, with a margin that keeps rounding from culling a grazing subtree.
+            let outside = squared > r * r && {
+                let along = d[0] * axis[0] + d[1] * axis[1] + d[2] * axis[2];
+                let tangent = (squared - r * r).sqrt();
+                let sin_sum = sin_half * tangent + cos_half * r;
+                let cos_sum = cos_half * tangent - sin_half * r;
+                sin_sum > 0.0 && along < cos_sum - 1e-9 * (tangent + r)
             };
             if outside {
                 Step::Skip

@@ -4,7 +4,7 @@
 
 use super::compositing::{assemble, Pixel, ShadedPasses};
 use super::frame::{pixel_work, PixelWork, ShadeError, ShadedFrame};
-use super::kernel::{Occluders, ShadingKernel, SurfacePoint};
+use super::kernel::{Caps, Occluders, ShadingKernel, SurfacePoint};
 use super::plan::{FramePlan, PlannedKernel};
 use super::settings::ShadingSettings;
 use crate::scene::{Frame, Scene};
@@ -45,7 +45,13 @@ pub fn shade_frame_passes(
 /// What the CPU executor writes per pixel.
 trait PixelResult: Copy + Send + Sync {
     fn fixed(colour: [f32; 4]) -> Self;
-    fn shaded<T: Real>(kernel: &ShadingKernel<T>, occluders: Occluders, point: &SurfacePoint, tint: [f32; 3]) -> Self;
+    fn shaded<T: Real>(
+        kernel: &ShadingKernel<T>,
+        occluders: Occluders,
+        point: &SurfacePoint,
+        caps: Caps,
+        tint: [f32; 3],
+    ) -> Self;
 }
 
 /// The beauty: RGBA, alpha 1 where a surface was shaded.
@@ -54,8 +60,14 @@ impl PixelResult for [f32; 4] {
         colour
     }
 
-    fn shaded<T: Real>(kernel: &ShadingKernel<T>, occluders: Occluders, point: &SurfacePoint, tint: [f32; 3]) -> Self {
-        let c = kernel.shade(occluders, point);
+    fn shaded<T: Real>(
+        kernel: &ShadingKernel<T>,
+        occluders: Occluders,
+        point: &SurfacePoint,
+        caps: Caps,
+        tint: [f32; 3],
+    ) -> Self {
+        let c = kernel.shade(occluders, point, caps);
         [tint[0] * c[0], tint[1] * c[1], tint[2] * c[2], 1.0]
     }
 }
@@ -66,8 +78,14 @@ impl PixelResult for Pixel {
         Pixel::fixed(colour)
     }
 
-    fn shaded<T: Real>(kernel: &ShadingKernel<T>, occluders: Occluders, point: &SurfacePoint, tint: [f32; 3]) -> Self {
-        Pixel::shaded(kernel.shade_passes(occluders, point), tint)
+    fn shaded<T: Real>(
+        kernel: &ShadingKernel<T>,
+        occluders: Occluders,
+        point: &SurfacePoint,
+        caps: Caps,
+        tint: [f32; 3],
+    ) -> Self {
+        Pixel::shaded(kernel.shade_passes(occluders, point, caps), tint)
     }
 }
 
@@ -91,14 +109,29 @@ fn shade_plan<P: PixelResult>(plan: &FramePlan) -> (Vec<P>, StageTimings) {
     (pixels, timings)
 }
 
+/// Shades the frame row by row; the sphere caps of a row's points are summed first, in
+/// packets ([`ShadingKernel::sum_caps`]).
 fn shade_pixels<P: PixelResult, T: Real>(kernel: &ShadingKernel<T>, occluders: Occluders, plan: &FramePlan) -> Vec<P> {
     let g = &plan.frame.gbuffer;
     let mut pixels = vec![P::fixed([0.0; 4]); g.width * g.height];
     pixels.par_chunks_mut(g.width).enumerate().for_each(|(y, row)| {
-        for (x, out) in row.iter_mut().enumerate() {
-            *out = match pixel_work(&plan.scene.materials, plan.frame, x, y) {
+        let work: Vec<PixelWork> = (0..g.width).map(|x| pixel_work(&plan.scene.materials, plan.frame, x, y)).collect();
+        let points: Vec<SurfacePoint> = work
+            .iter()
+            .filter_map(|w| match w {
+                PixelWork::Shade { point, .. } => Some(*point),
+                PixelWork::Fixed(_) => None,
+            })
+            .collect();
+        let caps = kernel.sum_caps(occluders.blockers, &points);
+        let mut shaded = 0;
+        for (out, work) in row.iter_mut().zip(work) {
+            *out = match work {
                 PixelWork::Fixed(colour) => P::fixed(colour),
-                PixelWork::Shade { point, tint } => P::shaded(kernel, occluders, &point, tint),
+                PixelWork::Shade { point, tint } => {
+                    shaded += 1;
+                    P::shaded(kernel, occluders, &point, caps.of(shaded - 1), tint)
+                }
             };
         }
     });

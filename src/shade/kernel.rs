@@ -3,6 +3,7 @@
 //! holds are the ones a GPU executor uploads.
 
 use super::blocker_tree::BlockerTree;
+use super::cap_packet::{CapPacket, Receiver, LANES};
 use super::fitted_depth::{banded_slice, depth_at, fitted_depths, DepthKey, DEPTH_INTERVALS};
 use super::frame::PixelWork;
 use super::glossy::{
@@ -228,6 +229,33 @@ pub struct Occluders<'a> {
     pub horizons: Option<&'a HorizonPyramid>,
 }
 
+/// Where a point's sphere caps come from: walked for it alone, or summed ahead with the
+/// other receivers of its packet ([`ShadingKernel::sum_caps`]).
+#[derive(Clone, Copy, Debug)]
+pub enum Caps<'a> {
+    Walk,
+    /// The caps' log vector, `order^2` coefficients.
+    Summed(&'a [f32]),
+}
+
+/// The sphere caps of a run of points, summed in packets where the kernel runs in f32 on
+/// a processor with AVX2 ([`CapPacket`]); otherwise each point walks the tree itself.
+#[derive(Clone, Debug, Default)]
+pub struct CapSums {
+    count: usize,
+    sums: Vec<f32>,
+}
+
+impl CapSums {
+    /// The caps of the `k`-th point.
+    pub fn of(&self, k: usize) -> Caps<'_> {
+        match self.sums.get(k * self.count..(k + 1) * self.count) {
+            Some(sum) if self.count > 0 => Caps::Summed(sum),
+            _ => Caps::Walk,
+        }
+    }
+}
+
 /// A point to shade: where, which way it faces, from where it is seen, what it is made of.
 #[derive(Clone, Copy, Debug)]
 pub struct SurfacePoint {
@@ -249,6 +277,8 @@ pub struct ShadingKernel<T> {
     /// Each cap's log depth per angular radius and each horizon band's per width
     /// ([`super::fitted_depth`]): fitted, or `log(eps)` throughout.
     pub(crate) cap_depths: Vec<T>,
+    /// `cap_depths` in f32, as the packets read them ([`CapPacket`]).
+    cap_depths_f32: Vec<f32>,
     pub(crate) band_depths: Vec<T>,
     pub(crate) ratio_attenuation: bool,
     pub(crate) tangent_occlusion: bool,
@@ -382,6 +412,7 @@ impl<T: Real> ShadingKernel<T> {
         Self {
             order,
             log_epsilon: T::of(epsilon.ln()),
+            cap_depths_f32: cap_depths.iter().map(|d| d.to_f32().unwrap_or(0.0)).collect(),
             cap_depths,
             band_depths,
             ratio_attenuation: settings.ratio_attenuation,
@@ -442,18 +473,51 @@ impl<T: Real> ShadingKernel<T> {
     /// would clamp the overlap twice (`eps^2`), which paper 000 Section 4.2 warns about and
     /// which measurably brightens unoccluded terrain (1.06 instead of 1.03 at order 4).
     pub fn add_visibility(&self, occluders: Occluders, p: [f64; 3], n: [f64; 3], object: u32, acc: &mut [T]) {
-        self.add_visibility_parts(occluders, p, n, object, acc, None);
+        self.add_visibility_parts(occluders, p, n, object, Caps::Walk, acc, None);
+    }
+
+    /// The sphere caps of each of `points` ([`Self::add_visibility`]'s blocker term), summed
+    /// [`LANES`] points at a time with one walk of the tree per packet ([`CapPacket`]);
+    /// empty (every point walks for itself) for the f64 kernel, without blockers, or where
+    /// the processor cannot run the packets.
+    pub fn sum_caps(&self, blockers: Option<&BlockerTree>, points: &[SurfacePoint]) -> CapSums {
+        let Some(tree) = blockers.filter(|_| is_f32::<T>() && CapPacket::available()) else {
+            return CapSums::default();
+        };
+        let count = coefficient_count(self.order);
+        let packet = CapPacket::new(tree, self.order, &self.cap_depths_f32, self.ratio_attenuation);
+        let mut sums = vec![0.0f32; points.len() * count];
+        for (chunk, out) in points.chunks(LANES).zip(sums.chunks_mut(LANES * count)) {
+            let receivers: Vec<Receiver> = chunk
+                .iter()
+                .map(|point| Receiver {
+                    position: point.position.map(|c| c as f32),
+                    normal: point.normal.map(|c| c as f32),
+                    object: point.object,
+                })
+                .collect();
+            let mut lanes = [[0.0f32; MAX_COEFFICIENTS]; LANES];
+            if !packet.sum(&receivers, &mut lanes) {
+                return CapSums::default();
+            }
+            for (o, lane) in out.chunks_mut(count).zip(&lanes) {
+                o.copy_from_slice(&lane[..count]);
+            }
+        }
+        CapSums { count, sums }
     }
 
     /// [`add_visibility`](Self::add_visibility), and into `occlusion` when given, the part
     /// the specular occlusion reads ([`super::glossy`]): the height field (unfolded) and
     /// the blockers, without the tangent plane and the ground plane.
+    #[allow(clippy::too_many_arguments)]
     pub(crate) fn add_visibility_parts(
         &self,
         occluders: Occluders,
         p: [f64; 3],
         n: [f64; 3],
         object: u32,
+        caps: Caps,
         acc: &mut [T],
         mut occlusion: Option<&mut [T]>,
     ) {
@@ -499,11 +563,22 @@ impl<T: Real> ShadingKernel<T> {
             }
             wedge.accumulate(&slices[..directions * order], acc);
         }
-        let pt = p.map(T::of);
-        let mut zonal = [T::zero(); crate::sh::MAX_ORDER];
         let Some(tree) = occluders.blockers else {
             return;
         };
+        if let Caps::Summed(sum) = caps {
+            for (a, c) in acc.iter_mut().zip(sum) {
+                *a = *a + T::of(f64::from(*c));
+            }
+            if let Some(occlusion) = occlusion {
+                for (a, c) in occlusion.iter_mut().zip(sum) {
+                    *a = *a + T::of(f64::from(*c));
+                }
+            }
+            return;
+        }
+        let pt = p.map(T::of);
+        let mut zonal = [T::zero(); crate::sh::MAX_ORDER];
         tree.visit(p, n, object, |sphere| {
             let view = view_blocker(pt, nt, sphere.center.map(T::of), T::of(sphere.radius), self.ratio_attenuation);
             if let BlockerView::Cap { direction, alpha, weight } = view {
@@ -551,10 +626,12 @@ impl<T: Real> ShadingKernel<T> {
     /// other occluder set is absent, 1 where its own is; with both, `ratio_of(part, log
     /// vector)` gives the ratio of the height field's log visibility (`T + V_hf = full -
     /// (T + V_blockers) + T`, one horizon march serving both) and of the blockers'.
+    #[allow(clippy::too_many_arguments)]
     pub(crate) fn split_visibility(
         &self,
         occluders: Occluders,
         point: &SurfacePoint,
+        caps: Caps,
         full: &[T],
         unoccluded: &[T],
         visibility: f32,
@@ -569,7 +646,8 @@ impl<T: Real> ShadingKernel<T> {
                 let count = coefficient_count(self.order);
                 let spheres_only = Occluders { blockers: occluders.blockers, horizons: None };
                 let mut blockers = [T::zero(); MAX_COEFFICIENTS];
-                self.add_visibility(spheres_only, point.position, point.normal, point.object, &mut blockers[..count]);
+                let (p, n) = (point.position, point.normal);
+                self.add_visibility_parts(spheres_only, p, n, point.object, caps, &mut blockers[..count], None);
                 let mut heightfield = [T::zero(); MAX_COEFFICIENTS];
                 for i in 0..count {
                     heightfield[i] = full[i] - blockers[i] + unoccluded[i];
@@ -584,8 +662,9 @@ impl<T: Real> ShadingKernel<T> {
 
     /// Outgoing radiance of a surface point (docs/design.md, material types). Water is not a
     /// surface material here: the caller shades the reflected point instead.
-    pub fn shade(&self, occluders: Occluders, point: &SurfacePoint) -> [f32; 3] {
-        let Some((visibility, occlusion)) = self.surface_visibility(occluders, point) else {
+    /// `caps`: where its sphere caps come from.
+    pub fn shade(&self, occluders: Occluders, point: &SurfacePoint, caps: Caps) -> [f32; 3] {
+        let Some((visibility, occlusion)) = self.surface_visibility(occluders, point, caps) else {
             return [0.0; 3];
         };
         let lobes = &self.materials[&point.material];
@@ -601,6 +680,7 @@ impl<T: Real> ShadingKernel<T> {
         &self,
         occluders: Occluders,
         point: &SurfacePoint,
+        caps: Caps,
     ) -> Option<([T; MAX_COEFFICIENTS], [T; MAX_COEFFICIENTS])> {
         let count = coefficient_count(self.order);
         let mut visibility = [T::zero(); MAX_COEFFICIENTS];
@@ -612,6 +692,7 @@ impl<T: Real> ShadingKernel<T> {
             point.position,
             point.normal,
             point.object,
+            caps,
             &mut visibility[..count],
             sharp.then_some(&mut occlusion[..count]),
         );

@@ -37,7 +37,7 @@
 
 use super::blocker_tree::BlockerTree;
 use crate::heightfield::HorizonPyramid;
-use crate::scene::camera::{cross, dot, frame_around};
+use crate::scene::camera::{dot, frame_around};
 use crate::scene::{PointLight, SunLight};
 use std::f64::consts::PI;
 
@@ -48,13 +48,28 @@ pub const DISK_DIRECTIONS: usize = 32;
 /// and angle `i` times the golden angle. Mapped to a cap by solid angle, they are
 /// uniform on it.
 pub fn disk_pattern() -> [[f64; 2]; DISK_DIRECTIONS] {
-    let golden = PI * (3.0 - 5f64.sqrt());
-    std::array::from_fn(|i| {
-        let r = ((i as f64 + 0.5) / DISK_DIRECTIONS as f64).sqrt();
-        let (s, c) = (golden * i as f64).sin_cos();
-        [r * c, r * s]
-    })
+    DISK_PATTERN.0
 }
+
+/// A point of [`disk_pattern`] in polar form: its squared radius and unit direction.
+type PolarPoint = (f64, [f64; 2]);
+
+/// [`disk_pattern`], and each point in polar form, computed once (a disk is built per
+/// pixel).
+static DISK_PATTERN: std::sync::LazyLock<([[f64; 2]; DISK_DIRECTIONS], [PolarPoint; DISK_DIRECTIONS])> =
+    std::sync::LazyLock::new(|| {
+        let golden = PI * (3.0 - 5f64.sqrt());
+        let points: [[f64; 2]; DISK_DIRECTIONS] = std::array::from_fn(|i| {
+            let r = ((i as f64 + 0.5) / DISK_DIRECTIONS as f64).sqrt();
+            let (s, c) = (golden * i as f64).sin_cos();
+            [r * c, r * s]
+        });
+        let polar = points.map(|[x, y]| {
+            let r2 = x * x + y * y;
+            (r2, if r2 > 0.0 { [x / r2.sqrt(), y / r2.sqrt()] } else { [1.0, 0.0] })
+        });
+        (points, polar)
+    });
 
 /// Angular radius of the patch of a disk of half-angle `half_angle` that each of its
 /// [`DISK_DIRECTIONS`] directions stands for.
@@ -97,11 +112,9 @@ impl DiskDirections {
     pub fn new(axis: [f64; 3], half_angle: f64) -> Self {
         let (e1, e2) = frame_around(axis);
         let one_minus_cos = 1.0 - half_angle.cos();
-        let directions = disk_pattern().map(|[x, y]| {
-            let r2 = x * x + y * y;
+        let directions = DISK_PATTERN.1.map(|(r2, [cos_phi, sin_phi])| {
             let cos_theta = 1.0 - one_minus_cos * r2;
             let sin_theta = (1.0 - cos_theta * cos_theta).max(0.0).sqrt();
-            let (cos_phi, sin_phi) = if r2 > 0.0 { (x / r2.sqrt(), y / r2.sqrt()) } else { (1.0, 0.0) };
             [0, 1, 2].map(|k| cos_theta * axis[k] + sin_theta * (cos_phi * e1[k] + sin_phi * e2[k]))
         });
         let horizontal = axis[0].hypot(axis[1]);
@@ -155,6 +168,7 @@ impl DiskDirections {
             }
         }
         if let Some(tree) = blockers {
+            let by_axis: [[f64; DISK_DIRECTIONS]; 3] = std::array::from_fn(|k| self.directions.map(|w| w[k]));
             tree.visit_cone(p, n, object, self.axis, self.half_angle + self.patch, |sphere| {
                 let d = [0, 1, 2].map(|k| sphere.center[k] - p[k]);
                 let distance = dot(d, d).sqrt();
@@ -168,21 +182,62 @@ impl DiskDirections {
                 // The cap's half-angle: asin(r / d), a hemisphere from inside.
                 let sin_cap = (sphere.radius / distance).min(1.0);
                 let cos_cap = (1.0 - sin_cap * sin_cap).sqrt();
-                for (b, w) in blocked.iter_mut().zip(&self.directions) {
-                    // x = cap - angle, in [-pi, pi/2]: below -pi/2 it is far outside.
-                    let (cos_a, sin_a) = (dot(axis, *w), norm(cross(axis, *w)));
-                    let cos_x = cos_cap * cos_a + sin_cap * sin_a;
-                    *b = b.max(if cos_x < 0.0 { 0.0 } else { covered(sin_cap * cos_a - cos_cap * sin_a) });
-                }
+                cover_by_cap(&by_axis, axis, [sin_cap, cos_cap], two_patches, &mut blocked);
             });
         }
         blocked.map(|b| 1.0 - b)
     }
 }
 
-fn norm(a: [f64; 3]) -> f64 {
-    dot(a, a).sqrt()
+/// Raises each direction's blocked share to what a cap about unit `axis` of half-angle
+/// with sine and cosine `cap` covers of its patch (module doc): the signed angle `x = cap -
+/// angle` from the cap's boundary, by its sine, without inverse trigonometry; below `-pi/2`
+/// it is far outside. The directions are given by coordinate, `by_axis[k][i]`; where the
+/// processor has AVX2, the same loop compiled for it (four directions per instruction,
+/// the same operations in the same order).
+fn cover_by_cap(
+    by_axis: &[[f64; DISK_DIRECTIONS]; 3],
+    axis: [f64; 3],
+    cap: [f64; 2],
+    two_patches: f64,
+    blocked: &mut [f64; DISK_DIRECTIONS],
+) {
+    #[inline(always)]
+    fn each(
+        by_axis: &[[f64; DISK_DIRECTIONS]; 3],
+        axis: [f64; 3],
+        [sin_cap, cos_cap]: [f64; 2],
+        two_patches: f64,
+        blocked: &mut [f64; DISK_DIRECTIONS],
+    ) {
+        for i in 0..DISK_DIRECTIONS {
+            let cos_a = axis[0] * by_axis[0][i] + axis[1] * by_axis[1][i] + axis[2] * by_axis[2][i];
+            let sin_a = (1.0 - cos_a * cos_a).max(0.0).sqrt();
+            let cos_x = cos_cap * cos_a + sin_cap * sin_a;
+            let share = (0.5 + (sin_cap * cos_a - cos_cap * sin_a) / two_patches).clamp(0.0, 1.0);
+            blocked[i] = blocked[i].max(if cos_x < 0.0 { 0.0 } else { share });
+        }
+    }
+    #[cfg(target_arch = "x86_64")]
+    if *HAS_AVX2 {
+        #[target_feature(enable = "avx2")]
+        unsafe fn avx2(
+            by_axis: &[[f64; DISK_DIRECTIONS]; 3],
+            axis: [f64; 3],
+            cap: [f64; 2],
+            two_patches: f64,
+            blocked: &mut [f64; DISK_DIRECTIONS],
+        ) {
+            each(by_axis, axis, cap, two_patches, blocked)
+        }
+        // SAFETY: the processor has AVX2.
+        return unsafe { avx2(by_axis, axis, cap, two_patches, blocked) };
+    }
+    each(by_axis, axis, cap, two_patches, blocked)
 }
+
+#[cfg(target_arch = "x86_64")]
+static HAS_AVX2: std::sync::LazyLock<bool> = std::sync::LazyLock::new(|| is_x86_feature_detected!("avx2"));
 
 /// A sun prepared for shading: its disk's directions and what they integrate to.
 #[derive(Clone, Debug)]

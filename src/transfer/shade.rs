@@ -66,11 +66,24 @@ fn walk<T: Real>(kernel: &ShadingKernel<T>, occluders: Occluders, plan: &FramePl
         .map(|y| {
             let mut pixels = Vec::with_capacity(g.width);
             let mut transfer = empty.clone();
-            for x in 0..g.width {
-                let source = pixel_source(&plan.scene.materials, frame, x, y);
-                let (pixel, pixel_transfer) = match (work_of(frame, source), source) {
+            let sources: Vec<PixelSource> =
+                (0..g.width).map(|x| pixel_source(&plan.scene.materials, frame, x, y)).collect();
+            let work: Vec<PixelWork> = sources.iter().map(|source| work_of(frame, *source)).collect();
+            let points: Vec<_> = work
+                .iter()
+                .filter_map(|w| match w {
+                    PixelWork::Shade { point, .. } => Some(*point),
+                    PixelWork::Fixed(_) => None,
+                })
+                .collect();
+            let caps = kernel.sum_caps(occluders.blockers, &points);
+            let mut shaded = 0;
+            for (work, source) in work.into_iter().zip(sources) {
+                let (pixel, pixel_transfer) = match (work, source) {
                     (PixelWork::Shade { point, tint }, _) => {
-                        let (passes, point_transfer) = kernel.shade_transfer(occluders, &point, scene_suns);
+                        shaded += 1;
+                        let caps = caps.of(shaded - 1);
+                        let (passes, point_transfer) = kernel.shade_transfer(occluders, &point, caps, scene_suns);
                         transfer.push(PixelTransfer::Surface { point: &point_transfer, tint }, &lobes);
                         pixels.push(Pixel::shaded(passes, tint));
                         continue;

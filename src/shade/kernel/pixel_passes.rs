@@ -20,7 +20,7 @@
 //! (the combined numerator is the diffuse term's own); fewer when the scene has no
 //! height field or no blockers, whose ratio is then the combined one.
 
-use super::{Occluders, ShadingKernel, SurfacePoint};
+use super::{Caps, Occluders, ShadingKernel, SurfacePoint};
 use crate::scene::Material;
 use crate::sh::{coefficient_count, Real, MAX_COEFFICIENTS};
 
@@ -67,10 +67,10 @@ pub(crate) fn ratio<T: Real>(numerator: [T; 3], unoccluded: [T; 3]) -> f32 {
 
 impl<T: Real> ShadingKernel<T> {
     /// [`shade`](Self::shade), split into passes, with the visibility terms (module doc).
-    pub fn shade_passes(&self, occluders: Occluders, point: &SurfacePoint) -> PixelPasses {
+    pub fn shade_passes(&self, occluders: Occluders, point: &SurfacePoint, caps: Caps) -> PixelPasses {
         let count = coefficient_count(self.order);
         let (p, n) = (point.position, point.normal);
-        let Some((full, occlusion)) = self.surface_visibility(occluders, point) else {
+        let Some((full, occlusion)) = self.surface_visibility(occluders, point, caps) else {
             return PixelPasses::UNSHADED;
         };
         let lobes = &self.materials[&point.material];
@@ -88,7 +88,7 @@ impl<T: Real> ShadingKernel<T> {
         let lit_unoccluded = self.lit(&unoccluded, &self.diffuse, n);
         let visibility = ratio(lit_diffuse, lit_unoccluded);
         let (visibility_heightfield, visibility_blockers) =
-            self.split_visibility(occluders, point, &full, &unoccluded, visibility, |_, log| {
+            self.split_visibility(occluders, point, caps, &full, &unoccluded, visibility, |_, log| {
                 ratio(self.lit(log, &self.diffuse, n), lit_unoccluded)
             });
         PixelPasses { diffuse, specular, visibility, visibility_heightfield, visibility_blockers }

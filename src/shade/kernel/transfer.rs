@@ -11,8 +11,8 @@
 //! relight leaves where it was, kept as radiance.
 
 use super::{
-    as_f32_array, occlusion_ratio, open_lit, visibility_ratio, OccluderSet, Occluders, PixelPasses, ShadingKernel,
-    SurfacePoint,
+    as_f32_array, occlusion_ratio, open_lit, visibility_ratio, Caps, OccluderSet, Occluders, PixelPasses,
+    ShadingKernel, SurfacePoint,
 };
 use crate::scene::Material;
 use crate::sh::{coefficient_count, Real, MAX_COEFFICIENTS};
@@ -119,12 +119,13 @@ impl<T: Real> ShadingKernel<T> {
         &self,
         occluders: Occluders,
         point: &SurfacePoint,
+        caps: Caps,
         scene_suns: usize,
     ) -> (PixelPasses, PointTransfer) {
         let count = coefficient_count(self.order);
         let (p, n) = (point.position, point.normal);
         let dark = (PixelPasses::UNSHADED, PointTransfer::DARK);
-        let Some((full, occlusion)) = self.surface_visibility(occluders, point) else {
+        let Some((full, occlusion)) = self.surface_visibility(occluders, point, caps) else {
             return dark;
         };
         let lobes = &self.materials[&point.material];
@@ -148,7 +149,7 @@ impl<T: Real> ShadingKernel<T> {
         let (lit_diffuse, lit_unoccluded) = (lit(&out.diffuse), lit(&out.unoccluded));
         let visibility = visibility_ratio(lit_diffuse, lit_unoccluded);
         let (visibility_heightfield, visibility_blockers) =
-            self.split_visibility(occluders, point, &full, &unoccluded, visibility, |set, log| {
+            self.split_visibility(occluders, point, caps, &full, &unoccluded, visibility, |set, log| {
                 let transfer = match set {
                     OccluderSet::Heightfield => &mut out.heightfield,
                     OccluderSet::Blockers => &mut out.blockers,
