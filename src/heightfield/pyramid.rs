@@ -322,6 +322,29 @@ pub struct PyramidLevel {
     pub heights: Vec<f32>,
 }
 
+/// A level's samples with one replicated sample before and two after each row and column,
+/// so that the four taps of a B-spline read along a row are four contiguous samples
+/// wherever the read falls (the same values `bspline_taps` clamps its indices to).
+#[derive(Clone, Debug)]
+struct PaddedLevel {
+    /// Samples per padded row, `columns + 3`.
+    stride: usize,
+    /// `rows + 3` padded rows; sample `(i, j)` of the level at `(j + 1) * stride + i + 1`.
+    samples: Vec<f32>,
+}
+
+impl PaddedLevel {
+    fn new(level: &PyramidLevel) -> Self {
+        let (columns, rows) = (level.columns, level.rows);
+        let stride = columns + 3;
+        let clamp = |k: usize, n: usize| k.saturating_sub(1).min(n - 1);
+        let samples = (0..(rows + 3) * stride)
+            .map(|at| level.heights[clamp(at / stride, rows) * columns + clamp(at % stride, columns)])
+            .collect();
+        Self { stride, samples }
+    }
+}
+
 /// One entry of the march's constant step table (SN08 Section 6 keeps `d_i`, `1/d_i`
 /// in constant arrays the same way).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -347,6 +370,9 @@ pub struct HorizonPyramid {
     /// Whether [`Self::horizon_elevations`] marches in AVX2 lanes (`lanes`): decided once,
     /// when the pyramid is built.
     in_lanes: bool,
+    /// The levels with their edge samples replicated around them, for the lanes (empty
+    /// where they do not run).
+    padded: Vec<PaddedLevel>,
     steps: Vec<MarchStep>,
     /// `(cos phi_k, sin phi_k)`.
     directions: Vec<[f64; 2]>,
@@ -387,8 +413,9 @@ impl HorizonPyramid {
             && lanes::available(&levels);
         #[cfg(not(target_arch = "x86_64"))]
         let in_lanes = false;
+        let padded = if in_lanes { levels.par_iter().map(PaddedLevel::new).collect() } else { Vec::new() };
         let (steps, directions) = (plan.steps.clone(), plan.directions.clone());
-        Self { settings, min, max, levels, grid_scales, in_lanes, steps, directions }
+        Self { settings, min, max, levels, grid_scales, in_lanes, padded, steps, directions }
     }
 
     /// The settings it was built with.
@@ -450,19 +477,19 @@ impl HorizonPyramid {
         }
         let (x, y) = (p[0], p[1]);
         let above = (p[2] - self.height_at(x, y)).max(0.0);
+        #[cfg(target_arch = "x86_64")]
+        if self.in_lanes {
+            // SAFETY: `lanes::available` checked the processor's features and the levels'
+            // sizes when the pyramid was built.
+            unsafe { lanes::horizons(self, x, y, above, out) };
+            return;
+        }
 
         // Receiver term f_L(x) of SN08 Eq. 2, once per level, shared by all azimuths.
         let used_levels = self.steps.last().map_or(1, |s| s.level + 1);
         let mut receiver = [0.0f64; MAX_LEVELS];
         for (level, r) in receiver.iter_mut().enumerate().take(used_levels) {
             *r = self.sample_level(level, x, y);
-        }
-        #[cfg(target_arch = "x86_64")]
-        if self.in_lanes {
-            // SAFETY: `lanes::available` checked the processor's features and the levels'
-            // sizes when the pyramid was built.
-            unsafe { lanes::horizons(self, x, y, above, &receiver, out) };
-            return;
         }
 
         for (k, out_k) in out.iter_mut().enumerate() {
@@ -588,8 +615,9 @@ impl HorizonPyramid {
 
 /// The march of [`HorizonPyramid::horizon_elevations`] over eight azimuths at once, in
 /// AVX2 and FMA registers: the default settings' bicubic B-spline levels and maximum over
-/// steps. Each lane is one azimuth; its 16 taps are gathered, and a lane stops counting
-/// after its own last step (the scalar march's `t_far` and step table).
+/// steps. Each lane is one azimuth; its 16 taps are four rows of four contiguous samples
+/// of the padded level, and a lane stops counting after its own last step (the scalar
+/// march's `t_far` and step table).
 ///
 /// Positions are f32 grid units, and a level read is the weighted sum of its taps'
 /// heights above the receiver term `f_L(x)` of the f64 march, so no two large sums cancel.
@@ -599,37 +627,31 @@ impl HorizonPyramid {
 /// (`tests` below).
 #[cfg(target_arch = "x86_64")]
 mod lanes {
-    use super::{HorizonPyramid, PyramidLevel, MAX_LEVELS};
+    use super::{HorizonPyramid, PaddedLevel, PyramidLevel, MAX_LEVELS};
     use std::arch::x86_64::*;
 
     const SIXTH: f32 = 1.0 / 6.0;
     const TWO_THIRDS: f32 = 2.0 / 3.0;
 
-    /// Whether a pyramid of `levels` can be marched here: AVX2 and FMA, and every level's
-    /// samples addressable by a 32-bit gather index.
+    /// Whether a pyramid of `levels` can be marched here: AVX2 and FMA, and every padded
+    /// level's samples addressable by a 32-bit index.
     pub fn available(levels: &[PyramidLevel]) -> bool {
         is_x86_feature_detected!("avx2")
             && is_x86_feature_detected!("fma")
-            && levels.iter().all(|l| l.heights.len() < i32::MAX as usize)
+            && levels.iter().all(|l| (l.columns + 3) * (l.rows + 3) < i32::MAX as usize)
     }
 
     /// Writes the horizon elevations of every azimuth into `out` from `(x, y)`, `above`
-    /// the surface, with the f64 receiver terms already sampled.
+    /// the surface.
     ///
     /// # Safety
     /// The processor has AVX2 and FMA, and [`available`] holds for `pyramid`'s levels.
     #[target_feature(enable = "avx2,fma")]
-    pub unsafe fn horizons(
-        pyramid: &HorizonPyramid,
-        x: f64,
-        y: f64,
-        above: f64,
-        receiver: &[f64; MAX_LEVELS],
-        out: &mut [f64],
-    ) {
+    pub unsafe fn horizons(pyramid: &HorizonPyramid, x: f64, y: f64, above: f64, out: &mut [f64]) {
         // Per level, the receiver's grid coordinates, the base the taps are read above
-        // (`f_L(x)` in f32) and the receiver read above it plus `h`, filled as the steps
-        // first reach the level (levels never decrease along the steps).
+        // (`f_L(x)`, the f64 march's receiver term, in f32) and the receiver read above it
+        // plus `h`, filled as the steps first reach the level (levels never decrease along
+        // the steps), so that levels beyond every lane's last step are never read.
         let mut origin = [[0.0f32; 2]; MAX_LEVELS];
         let mut base = [0.0f32; MAX_LEVELS];
         let mut start = [0.0f32; MAX_LEVELS];
@@ -656,7 +678,7 @@ mod lanes {
                 while read <= index {
                     let s = pyramid.grid_scales[read];
                     origin[read] = [((x - pyramid.min[0]) * s[0]) as f32, ((y - pyramid.min[1]) * s[1]) as f32];
-                    base[read] = receiver[read] as f32;
+                    base[read] = pyramid.sample_level(read, x, y) as f32;
                     let [u, v] = origin[read];
                     start[read] = rise_at(&pyramid.levels[read], u, v, base[read]) + above as f32;
                     read += 1;
@@ -664,7 +686,7 @@ mod lanes {
                 let [u0, v0] = origin[index].map(|g| _mm256_set1_ps(g));
                 let u = _mm256_fmadd_ps(_mm256_set1_ps((step.distance * scale[0]) as f32), dx, u0);
                 let v = _mm256_fmadd_ps(_mm256_set1_ps((step.distance * scale[1]) as f32), dy, v0);
-                let rise = rise_lanes(level, u, v, _mm256_set1_ps(base[index]));
+                let rise = rise_lanes(level, &pyramid.padded[index], u, v, _mm256_set1_ps(base[index]));
                 let climb = _mm256_sub_ps(rise, _mm256_set1_ps(start[index]));
                 let tangent = _mm256_mul_ps(climb, _mm256_set1_ps(step.inv_distance as f32));
                 let active = _mm256_castsi256_ps(_mm256_cmpgt_epi32(taken, _mm256_set1_epi32(j as i32)));
@@ -679,10 +701,13 @@ mod lanes {
     }
 
     /// The level's bicubic B-spline at grid coordinates `(u, v)` (clamped: the flat
-    /// continuation), less `base`, in each lane.
+    /// continuation), less `base`, in each lane. Each lane's four taps along a row are
+    /// four contiguous samples of the padded level (edge samples replicated, as
+    /// `bspline_taps` clamps them): eight 4-wide loads per row, transposed into the taps'
+    /// registers, in place of four gathers.
     #[target_feature(enable = "avx2,fma")]
     #[inline]
-    unsafe fn rise_lanes(level: &PyramidLevel, u: __m256, v: __m256, base: __m256) -> __m256 {
+    unsafe fn rise_lanes(level: &PyramidLevel, padded: &PaddedLevel, u: __m256, v: __m256, base: __m256) -> __m256 {
         let (columns, rows) = (level.columns as i32, level.rows as i32);
         let clamp =
             |g: __m256, n: i32| _mm256_min_ps(_mm256_max_ps(g, _mm256_setzero_ps()), _mm256_set1_ps((n - 1) as f32));
@@ -690,26 +715,40 @@ mod lanes {
         let (iu, iv) = (_mm256_cvttps_epi32(u), _mm256_cvttps_epi32(v));
         let wx = weights_lanes(_mm256_sub_ps(u, _mm256_cvtepi32_ps(iu)));
         let wy = weights_lanes(_mm256_sub_ps(v, _mm256_cvtepi32_ps(iv)));
-        // Replicated edge samples, as `bspline_taps` clamps them.
-        let tap = |i: __m256i, offset: i32, n: i32| {
-            _mm256_min_epi32(
-                _mm256_max_epi32(_mm256_add_epi32(i, _mm256_set1_epi32(offset)), _mm256_setzero_si256()),
-                _mm256_set1_epi32(n - 1),
-            )
-        };
-        let columns_at: [__m256i; 4] = std::array::from_fn(|c| tap(iu, c as i32 - 1, columns));
-        let heights = level.heights.as_ptr();
+        // Tap (iu - 1, iv - 1) of each lane is padded sample (iu, iv).
+        let mut first = [0i32; 8];
+        let at = _mm256_add_epi32(_mm256_mullo_epi32(iv, _mm256_set1_epi32(padded.stride as i32)), iu);
+        _mm256_storeu_si256(first.as_mut_ptr().cast(), at);
+        let samples = padded.samples.as_ptr();
         let mut sum = _mm256_setzero_ps();
         for (r, weight) in wy.iter().enumerate() {
-            let row = _mm256_mullo_epi32(tap(iv, r as i32 - 1, rows), _mm256_set1_epi32(columns));
+            let row = samples.add(r * padded.stride);
+            let taps = row_taps(row, &first);
             let mut line = _mm256_setzero_ps();
-            for (c, at) in columns_at.iter().enumerate() {
-                let h = _mm256_i32gather_ps::<4>(heights, _mm256_add_epi32(row, *at));
-                line = _mm256_fmadd_ps(wx[c], _mm256_sub_ps(h, base), line);
+            for (c, h) in taps.iter().enumerate() {
+                line = _mm256_fmadd_ps(wx[c], _mm256_sub_ps(*h, base), line);
             }
             sum = _mm256_fmadd_ps(*weight, line, sum);
         }
         sum
+    }
+
+    /// The four samples from `row + first[k]` of each lane `k`, as four registers of
+    /// eight lanes (tap `c` in register `c`): two 4x4 transposes.
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    unsafe fn row_taps(row: *const f32, first: &[i32; 8]) -> [__m256; 4] {
+        let load = |k: usize| _mm_loadu_ps(row.offset(first[k] as isize));
+        let pair = |k: usize| _mm256_set_m128(load(k + 4), load(k));
+        let (y0, y1, y2, y3) = (pair(0), pair(1), pair(2), pair(3));
+        let (t0, t1) = (_mm256_unpacklo_ps(y0, y1), _mm256_unpackhi_ps(y0, y1));
+        let (t2, t3) = (_mm256_unpacklo_ps(y2, y3), _mm256_unpackhi_ps(y2, y3));
+        [
+            _mm256_shuffle_ps::<0x44>(t0, t2),
+            _mm256_shuffle_ps::<0xEE>(t0, t2),
+            _mm256_shuffle_ps::<0x44>(t1, t3),
+            _mm256_shuffle_ps::<0xEE>(t1, t3),
+        ]
     }
 
     /// [`rise_lanes`] at one point, in scalar operations that round as each lane does
