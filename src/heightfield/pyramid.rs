@@ -468,6 +468,49 @@ impl HorizonPyramid {
     /// # Panics
     /// If `out.len() < W`.
     pub fn horizon_elevations(&self, p: [f64; 3], out: &mut [f64]) {
+        #[cfg(target_arch = "x86_64")]
+        if self.in_lanes && self.horizon_tangents_in_lanes(p, out) {
+            for o in out[..self.settings.directions].iter_mut() {
+                *o = o.atan();
+            }
+            return;
+        }
+        self.horizon_elevations_marched(p, out);
+    }
+
+    /// The tangents of [`Self::horizon_elevations`] (each `>= 0`): what the march finds
+    /// before its one arctangent per azimuth, for a caller that needs sines and
+    /// differences of the elevations rather than the angles.
+    pub fn horizon_tangents(&self, p: [f64; 3], out: &mut [f64]) {
+        #[cfg(target_arch = "x86_64")]
+        if self.in_lanes && self.horizon_tangents_in_lanes(p, out) {
+            return;
+        }
+        self.horizon_elevations_marched(p, out);
+        for o in out[..self.settings.directions].iter_mut() {
+            *o = o.tan();
+        }
+    }
+
+    /// The lanes' march (`lanes`) into `out` as tangents; `false` (nothing written) for a
+    /// point the lanes leave to the f64 march (non-finite, or an empty step table).
+    #[cfg(target_arch = "x86_64")]
+    fn horizon_tangents_in_lanes(&self, p: [f64; 3], out: &mut [f64]) -> bool {
+        let w = self.settings.directions;
+        assert!(out.len() >= w, "horizon_elevations: out has {} slots but W = {}", out.len(), w);
+        if self.steps.is_empty() || !p.iter().all(|v| v.is_finite()) {
+            return false;
+        }
+        let (x, y) = (p[0], p[1]);
+        let above = (p[2] - self.height_at(x, y)).max(0.0);
+        // SAFETY: `lanes::available` checked the processor's features and the levels'
+        // sizes when the pyramid was built.
+        unsafe { lanes::horizons(self, x, y, above, &mut out[..w]) };
+        true
+    }
+
+    /// [`Self::horizon_elevations`] by the f64 march, one azimuth after another.
+    fn horizon_elevations_marched(&self, p: [f64; 3], out: &mut [f64]) {
         let w = self.settings.directions;
         assert!(out.len() >= w, "horizon_elevations: out has {} slots but W = {}", out.len(), w);
         let out = &mut out[..w];
@@ -477,13 +520,6 @@ impl HorizonPyramid {
         }
         let (x, y) = (p[0], p[1]);
         let above = (p[2] - self.height_at(x, y)).max(0.0);
-        #[cfg(target_arch = "x86_64")]
-        if self.in_lanes {
-            // SAFETY: `lanes::available` checked the processor's features and the levels'
-            // sizes when the pyramid was built.
-            unsafe { lanes::horizons(self, x, y, above, out) };
-            return;
-        }
 
         // Receiver term f_L(x) of SN08 Eq. 2, once per level, shared by all azimuths.
         let used_levels = self.steps.last().map_or(1, |s| s.level + 1);
@@ -620,11 +656,11 @@ impl HorizonPyramid {
 /// march's `t_far` and step table).
 ///
 /// Positions are f32 grid units, and a level read is the weighted sum of its taps'
-/// heights above the receiver term `f_L(x)` of the f64 march, so no two large sums cancel.
-/// `f_L(x)` itself is read again the same way, in scalar operations that round as the lanes
-/// do, so a plane still gives exactly its own elevation and a flat surface exactly 0.
-/// Against the f64 march the horizons differ by the f32 rounding of the positions
-/// (`tests` below).
+/// heights above the receiver term `f_L(x)` (read in f32, eight levels per pass), so no
+/// two large sums cancel. `f_L(x)` itself is read again above that base the same way,
+/// with the same operations, so a plane still gives exactly its own elevation and a flat
+/// surface exactly 0. Against the f64 march the horizons differ by the f32 rounding of the
+/// positions (`tests` below).
 #[cfg(target_arch = "x86_64")]
 mod lanes {
     use super::{HorizonPyramid, PaddedLevel, PyramidLevel, MAX_LEVELS};
@@ -641,20 +677,19 @@ mod lanes {
             && levels.iter().all(|l| (l.columns + 3) * (l.rows + 3) < i32::MAX as usize)
     }
 
-    /// Writes the horizon elevations of every azimuth into `out` from `(x, y)`, `above`
-    /// the surface.
+    /// Writes the tangents of the horizon elevations of every azimuth (at least 0) into
+    /// `out` from `(x, y)`, `above` the surface.
     ///
     /// # Safety
     /// The processor has AVX2 and FMA, and [`available`] holds for `pyramid`'s levels.
     #[target_feature(enable = "avx2,fma")]
     pub unsafe fn horizons(pyramid: &HorizonPyramid, x: f64, y: f64, above: f64, out: &mut [f64]) {
         // Per level, the receiver's grid coordinates, the base the taps are read above
-        // (`f_L(x)`, the f64 march's receiver term, in f32) and the receiver read above it
-        // plus `h`, filled as the steps first reach the level (levels never decrease along
-        // the steps), so that levels beyond every lane's last step are never read.
-        let mut origin = [[0.0f32; 2]; MAX_LEVELS];
-        let mut base = [0.0f32; MAX_LEVELS];
-        let mut start = [0.0f32; MAX_LEVELS];
+        // (`f_L(x)` in f32) and the receiver read above it plus `h`, filled eight levels at
+        // a time as the steps reach them (levels never decrease along the steps), so that
+        // levels beyond every lane's last step are never read.
+        let mut receiver =
+            Receiver { origin: [[0.0f32; 2]; MAX_LEVELS], base: [0.0f32; MAX_LEVELS], start: [0.0f32; MAX_LEVELS] };
         let mut read = 0;
         for (chunk, part) in out.chunks_mut(8).enumerate() {
             let first = chunk * 8;
@@ -676,18 +711,14 @@ mod lanes {
                 let (index, level) = (step.level, &pyramid.levels[step.level]);
                 let scale = pyramid.grid_scales[index];
                 while read <= index {
-                    let s = pyramid.grid_scales[read];
-                    origin[read] = [((x - pyramid.min[0]) * s[0]) as f32, ((y - pyramid.min[1]) * s[1]) as f32];
-                    base[read] = pyramid.sample_level(read, x, y) as f32;
-                    let [u, v] = origin[read];
-                    start[read] = rise_at(&pyramid.levels[read], u, v, base[read]) + above as f32;
-                    read += 1;
+                    receivers(pyramid, x, y, above as f32, read, &mut receiver);
+                    read += 8;
                 }
-                let [u0, v0] = origin[index].map(|g| _mm256_set1_ps(g));
+                let [u0, v0] = receiver.origin[index].map(|g| _mm256_set1_ps(g));
                 let u = _mm256_fmadd_ps(_mm256_set1_ps((step.distance * scale[0]) as f32), dx, u0);
                 let v = _mm256_fmadd_ps(_mm256_set1_ps((step.distance * scale[1]) as f32), dy, v0);
-                let rise = rise_lanes(level, &pyramid.padded[index], u, v, _mm256_set1_ps(base[index]));
-                let climb = _mm256_sub_ps(rise, _mm256_set1_ps(start[index]));
+                let rise = rise_lanes(level, &pyramid.padded[index], u, v, _mm256_set1_ps(receiver.base[index]));
+                let climb = _mm256_sub_ps(rise, _mm256_set1_ps(receiver.start[index]));
                 let tangent = _mm256_mul_ps(climb, _mm256_set1_ps(step.inv_distance as f32));
                 let active = _mm256_castsi256_ps(_mm256_cmpgt_epi32(taken, _mm256_set1_epi32(j as i32)));
                 max_tan = _mm256_blendv_ps(max_tan, _mm256_max_ps(max_tan, tangent), active);
@@ -695,7 +726,7 @@ mod lanes {
             let mut tangents = [0.0f32; 8];
             _mm256_storeu_ps(tangents.as_mut_ptr(), max_tan);
             for (o, t) in part.iter_mut().zip(tangents) {
-                *o = f64::from(t).atan().max(0.0);
+                *o = f64::from(t).max(0.0);
             }
         }
     }
@@ -740,7 +771,14 @@ mod lanes {
     unsafe fn row_taps(row: *const f32, first: &[i32; 8]) -> [__m256; 4] {
         let load = |k: usize| _mm_loadu_ps(row.offset(first[k] as isize));
         let pair = |k: usize| _mm256_set_m128(load(k + 4), load(k));
-        let (y0, y1, y2, y3) = (pair(0), pair(1), pair(2), pair(3));
+        transpose(pair(0), pair(1), pair(2), pair(3))
+    }
+
+    /// Registers holding lanes `(k, k + 4)`'s four samples each, for `k = 0..4`, as four
+    /// registers of sample `c` in lanes `0..8`: a 4x4 transpose in each half.
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    unsafe fn transpose(y0: __m256, y1: __m256, y2: __m256, y3: __m256) -> [__m256; 4] {
         let (t0, t1) = (_mm256_unpacklo_ps(y0, y1), _mm256_unpackhi_ps(y0, y1));
         let (t2, t3) = (_mm256_unpacklo_ps(y2, y3), _mm256_unpackhi_ps(y2, y3));
         [
@@ -751,26 +789,84 @@ mod lanes {
         ]
     }
 
-    /// [`rise_lanes`] at one point, in scalar operations that round as each lane does
-    /// (the same clamps, truncation, fused multiply-adds and order).
+    /// The receiver's terms of one level: its grid coordinates, the base the march reads
+    /// the level's taps above, and its own read above that plus `h`.
+    pub struct Receiver {
+        pub origin: [[f32; 2]; MAX_LEVELS],
+        pub base: [f32; MAX_LEVELS],
+        pub start: [f32; MAX_LEVELS],
+    }
+
+    /// Fills `receiver` for levels `from..from + 8` (those the pyramid has), one level per
+    /// lane: the base is the level's B-spline at the receiver in f32 (within rounding of
+    /// `f_L(x)`, so the taps read above it are small and a constant level reads exactly 0
+    /// above it), and the start is the same B-spline read above the base with
+    /// [`rise_lanes`]' operations in its order, so that a lane's read at the receiver
+    /// itself cancels it exactly (a plane gives its own elevation).
+    #[target_feature(enable = "avx2,fma")]
+    unsafe fn receivers(pyramid: &HorizonPyramid, x: f64, y: f64, above: f32, from: usize, receiver: &mut Receiver) {
+        let count = (pyramid.levels.len() - from).min(8);
+        let (mut u, mut v, mut last_u, mut last_v) = ([0.0f32; 8], [0.0f32; 8], [0.0f32; 8], [0.0f32; 8]);
+        let mut strides = [0i32; 8];
+        let mut rows = [std::ptr::null::<f32>(); 8];
+        for lane in 0..8 {
+            // Lanes past the last level repeat it.
+            let level = from + lane.min(count - 1);
+            let (l, s) = (&pyramid.levels[level], pyramid.grid_scales[level]);
+            u[lane] = ((x - pyramid.min[0]) * s[0]) as f32;
+            v[lane] = ((y - pyramid.min[1]) * s[1]) as f32;
+            (last_u[lane], last_v[lane]) = ((l.columns - 1) as f32, (l.rows - 1) as f32);
+            strides[lane] = pyramid.padded[level].stride as i32;
+            rows[lane] = pyramid.padded[level].samples.as_ptr();
+        }
+        for lane in 0..count {
+            receiver.origin[from + lane] = [u[lane], v[lane]];
+        }
+        let load = |values: &[f32; 8]| _mm256_loadu_ps(values.as_ptr());
+        let clamp = |g: __m256, last: __m256| _mm256_min_ps(_mm256_max_ps(g, _mm256_setzero_ps()), last);
+        let (u, v) = (clamp(load(&u), load(&last_u)), clamp(load(&v), load(&last_v)));
+        let (iu, iv) = (_mm256_cvttps_epi32(u), _mm256_cvttps_epi32(v));
+        let wx = weights_lanes(_mm256_sub_ps(u, _mm256_cvtepi32_ps(iu)));
+        let wy = weights_lanes(_mm256_sub_ps(v, _mm256_cvtepi32_ps(iv)));
+        let stride = _mm256_loadu_si256(strides.as_ptr().cast());
+        let mut first = [0i32; 8];
+        _mm256_storeu_si256(first.as_mut_ptr().cast(), _mm256_add_epi32(_mm256_mullo_epi32(iv, stride), iu));
+        let taps: [[__m256; 4]; 4] = std::array::from_fn(|r| {
+            let at: [*const f32; 8] =
+                std::array::from_fn(|k| rows[k].offset((first[k] + r as i32 * strides[k]) as isize));
+            taps_at(&at)
+        });
+        let mut base = _mm256_setzero_ps();
+        for (row, weight) in taps.iter().zip(&wy) {
+            let mut line = _mm256_setzero_ps();
+            for (h, w) in row.iter().zip(&wx) {
+                line = _mm256_fmadd_ps(*w, *h, line);
+            }
+            base = _mm256_fmadd_ps(*weight, line, base);
+        }
+        let mut rise = _mm256_setzero_ps();
+        for (row, weight) in taps.iter().zip(&wy) {
+            let mut line = _mm256_setzero_ps();
+            for (h, w) in row.iter().zip(&wx) {
+                line = _mm256_fmadd_ps(*w, _mm256_sub_ps(*h, base), line);
+            }
+            rise = _mm256_fmadd_ps(*weight, line, rise);
+        }
+        let start = _mm256_add_ps(rise, _mm256_set1_ps(above));
+        let (mut bases, mut starts) = ([0.0f32; 8], [0.0f32; 8]);
+        _mm256_storeu_ps(bases.as_mut_ptr(), base);
+        _mm256_storeu_ps(starts.as_mut_ptr(), start);
+        receiver.base[from..from + count].copy_from_slice(&bases[..count]);
+        receiver.start[from..from + count].copy_from_slice(&starts[..count]);
+    }
+
+    /// The four samples from each lane's own address `at[k]`, as four registers of eight
+    /// lanes (sample `c` in register `c`): [`row_taps`] with an address per lane.
     #[target_feature(enable = "avx2,fma")]
     #[inline]
-    unsafe fn rise_at(level: &PyramidLevel, u: f32, v: f32, base: f32) -> f32 {
-        let (columns, rows) = (level.columns as i32, level.rows as i32);
-        let (u, v) = (u.max(0.0).min((columns - 1) as f32), v.max(0.0).min((rows - 1) as f32));
-        let (iu, iv) = (u as i32, v as i32);
-        let (wx, wy) = (weights_at(u - iu as f32), weights_at(v - iv as f32));
-        let mut sum = 0.0f32;
-        for (r, weight) in wy.iter().enumerate() {
-            let row = ((iv + r as i32 - 1).clamp(0, rows - 1) * columns) as usize;
-            let mut line = 0.0f32;
-            for (c, w) in wx.iter().enumerate() {
-                let h = level.heights[row + (iu + c as i32 - 1).clamp(0, columns - 1) as usize];
-                line = w.mul_add(h - base, line);
-            }
-            sum = weight.mul_add(line, sum);
-        }
-        sum
+    unsafe fn taps_at(at: &[*const f32; 8]) -> [__m256; 4] {
+        let pair = |k: usize| _mm256_set_m128(_mm_loadu_ps(at[k + 4]), _mm_loadu_ps(at[k]));
+        transpose(pair(0), pair(1), pair(2), pair(3))
     }
 
     /// The uniform cubic B-spline basis at eight fractions (`super::bspline_weights`).
@@ -786,21 +882,6 @@ mod lanes {
             _mm256_add_ps(_mm256_fmsub_ps(half, t3, t2), _mm256_set1_ps(TWO_THIRDS)),
             _mm256_add_ps(_mm256_fnmadd_ps(half, t3, _mm256_mul_ps(half, _mm256_add_ps(t2, t))), sixth),
             _mm256_mul_ps(t3, sixth),
-        ]
-    }
-
-    /// [`weights_lanes`] at one fraction, rounded as each lane is.
-    #[target_feature(enable = "avx2,fma")]
-    #[inline]
-    unsafe fn weights_at(t: f32) -> [f32; 4] {
-        let t2 = t * t;
-        let t3 = t2 * t;
-        let s = 1.0 - t;
-        [
-            s * s * s * SIXTH,
-            0.5f32.mul_add(t3, -t2) + TWO_THIRDS,
-            (-0.5f32).mul_add(t3, 0.5 * (t2 + t)) + SIXTH,
-            t3 * SIXTH,
         ]
     }
 }

@@ -11,7 +11,12 @@ use crate::sh::basis::{legendre, nlp_scale, Real};
 /// `P_{l+1}(-1) = P_{l-1}(-1)`), this is closed form at every order and reproduces Eq. 16
 /// at order 4. Exact up to rounding; `sigma` may lie anywhere in `[-pi/2, pi/2]`.
 pub fn nlp_slice<T: Real>(order: usize, log_epsilon: T, sigma: T, out: &mut [T]) {
-    let s = sigma.sin().max(-T::one()).min(T::one());
+    nlp_slice_of_sine(order, log_epsilon, sigma.sin(), out);
+}
+
+/// [`nlp_slice`] given `sin sigma` (clamped to `[-1, 1]`) rather than `sigma`.
+pub fn nlp_slice_of_sine<T: Real>(order: usize, log_epsilon: T, sine: T, out: &mut [T]) {
+    let s = sine.max(-T::one()).min(T::one());
     let mut p = [T::zero(); crate::sh::MAX_ORDER + 2];
     legendre(order + 1, s, &mut p);
     for l in 0..order {

@@ -19,6 +19,34 @@ pub struct WedgeOperator {
     pub directions: usize,
     /// Row-major, `order^2` rows of `2 * order` columns.
     pub matrix: Vec<f64>,
+    /// The full turn ([`WedgeTurn`]) in f64.
+    turn: Vec<f64>,
+}
+
+/// A full turn of `W` wedges as one `order^2 x (W order)` matrix: wedge `k`'s operator
+/// rotated about z by `phi_k` (Eq. 20 and the z-rotation of Section 4.1), its first half
+/// applied to slice `k` and its second half to slice `k + 1 (mod W)`, summed per slice.
+/// Stored column by column (`order^2` values per slice coefficient), so that a turn is a
+/// sum of columns scaled by the slices' values, which vectorises over the coefficients.
+/// Equal to the wedge-by-wedge sum up to rounding.
+#[derive(Clone, Debug)]
+pub struct WedgeTurn<T> {
+    count: usize,
+    columns: Vec<T>,
+}
+
+impl<T: Real> WedgeTurn<T> {
+    /// Adds the log-SH visibility of the turn to `acc` from the NLP slices
+    /// `slices[k * order..(k + 1) * order]` at azimuths `phi_k = k * dphi`.
+    pub fn accumulate(&self, slices: &[T], acc: &mut [T]) {
+        let count = self.count;
+        let acc = &mut acc[..count];
+        for (column, &s) in self.columns.chunks_exact(count).zip(slices) {
+            for (a, c) in acc.iter_mut().zip(column) {
+                *a = *a + *c * s;
+            }
+        }
+    }
 }
 
 impl WedgeOperator {
@@ -48,7 +76,13 @@ impl WedgeOperator {
                 }
             }
         }
-        Self { order, directions, matrix }
+        let turn = full_turn(order, directions, &matrix);
+        Self { order, directions, matrix, turn }
+    }
+
+    /// The full turn in `T` ([`WedgeTurn`]).
+    pub fn turn<T: Real>(&self) -> WedgeTurn<T> {
+        WedgeTurn { count: coefficient_count(self.order), columns: self.turn.iter().map(|&v| T::of(v)).collect() }
     }
 
     /// Width of one wedge in radians.
@@ -59,47 +93,33 @@ impl WedgeOperator {
     /// Adds the log-SH visibility of a full turn of wedges to `acc` from the NLP slices
     /// `slices[k * order..(k + 1) * order]` at azimuths `phi_k = k * dphi`: wedge `k`
     /// interpolates slices `k` and `k + 1 (mod W)` and is rotated about z by `phi_k`
-    /// (Eq. 20, then the z-rotation of Section 4.1).
+    /// (Eq. 20, then the z-rotation of Section 4.1). Per call it converts the turn to `T`;
+    /// a caller that accumulates many turns keeps one [`Self::turn`].
     pub fn accumulate<T: Real>(&self, slices: &[T], acc: &mut [T]) {
-        let n = self.order;
-        let count = coefficient_count(n);
-        let columns = 2 * n;
-        let w = self.directions;
-        let step = z_rotation_phases::<T>(n, T::of(self.wedge_width()));
-        let mut phases = z_rotation_phases::<T>(n, T::zero());
-        let mut wedge = [T::zero(); crate::sh::MAX_COEFFICIENTS];
-        // The operator in `T` once per call, column by column: a wedge is then a sum of
-        // columns scaled by its slices' values, which vectorises over the coefficients (each
-        // coefficient's sum is taken in the same order as a row's dot product).
-        let mut columns_t = [T::zero(); crate::sh::MAX_COEFFICIENTS * 2 * crate::sh::MAX_ORDER];
-        let columns_t = &mut columns_t[..count * columns];
-        for i in 0..count {
-            for j in 0..columns {
-                columns_t[j * count + i] = T::of(self.matrix[i * columns + j]);
+        self.turn::<T>().accumulate(slices, acc);
+    }
+}
+
+/// The columns of [`WedgeTurn`] for `matrix` at `order` and `directions`, in f64.
+fn full_turn(order: usize, directions: usize, matrix: &[f64]) -> Vec<f64> {
+    let (n, count) = (order, coefficient_count(order));
+    let columns = 2 * n;
+    let dphi = 2.0 * PI / directions as f64;
+    let mut turn = vec![0.0; directions * n * count];
+    let mut column = vec![0.0; count];
+    for k in 0..directions {
+        let phases = z_rotation_phases::<f64>(n, dphi * k as f64);
+        for j in 0..columns {
+            for (i, c) in column.iter_mut().enumerate() {
+                *c = matrix[i * columns + j];
             }
-        }
-        for k in 0..w {
-            let first = &slices[k * n..(k + 1) * n];
-            let second = &slices[((k + 1) % w) * n..((k + 1) % w + 1) * n];
-            let wedge = &mut wedge[..count];
-            wedge.fill(T::zero());
-            for j in 0..n {
-                let (a, b) = (&columns_t[j * count..(j + 1) * count], &columns_t[(n + j) * count..(n + j + 1) * count]);
-                let (f, s) = (first[j], second[j]);
-                for i in 0..count {
-                    wedge[i] = wedge[i] + a[i] * f + b[i] * s;
-                }
-            }
-            rotate_z_with(n, &mut wedge[..count], &phases[..n]);
-            for (a, v) in acc[..count].iter_mut().zip(&wedge[..count]) {
-                *a = *a + *v;
-            }
-            // Advance the rotation by one wedge: phase_m(k+1) = phase_m(k) * step_m.
-            for m in 0..n {
-                let (c, s) = phases[m];
-                let (cs, ss) = step[m];
-                phases[m] = (c * cs - s * ss, s * cs + c * ss);
+            rotate_z_with(n, &mut column, &phases[..n]);
+            // The first half weighs slice k, the second slice k + 1.
+            let slice = if j < n { k * n + j } else { ((k + 1) % directions) * n + (j - n) };
+            for (t, c) in turn[slice * count..(slice + 1) * count].iter_mut().zip(&column) {
+                *t += c;
             }
         }
     }
+    turn
 }

@@ -33,7 +33,7 @@
 
 use super::kernel::Exponentiator;
 use crate::logsh::minimise::scan_then_golden;
-use crate::logsh::{cap_log_zh, lobe_log_zh, nlp_slice, Lobe, WedgeOperator};
+use crate::logsh::{cap_log_zh, lobe_log_zh, nlp_slice, nlp_slice_of_sine, Lobe, WedgeOperator};
 use crate::sh::{add_rotated_zonal, coefficient_count, ExpMethod, Real, MAX_COEFFICIENTS};
 use rayon::prelude::*;
 use std::collections::HashMap;
@@ -176,6 +176,40 @@ pub fn banded_slice<T: Real>(order: usize, log_epsilon: T, bands: &[T], base: T,
     nlp_slice(order, T::one(), base, &mut below[..order]);
     nlp_slice(order, T::one(), sigma, out);
     let depth = depth_at(bands, sigma - base);
+    for (o, b) in out[..order].iter_mut().zip(&below[..order]) {
+        *o = log_epsilon * *b + depth * (*o - *b);
+    }
+}
+
+/// [`banded_slice`] with `base` and `sigma` given by their tangents (each in
+/// `(-pi/2, pi/2)`), as the horizon march and the tangent plane give them: the sines come
+/// from the tangents and the band's width from their difference, one arctangent where
+/// [`banded_slice`] takes three trigonometric functions.
+pub fn banded_slice_of_tangents<T: Real>(
+    order: usize,
+    log_epsilon: T,
+    bands: &[T],
+    base: f64,
+    sigma: f64,
+    out: &mut [T],
+) {
+    let sine = |t: f64| if t.abs() < 1e150 { t / (1.0 + t * t).sqrt() } else { t.signum() };
+    if sigma <= base {
+        nlp_slice_of_sine(order, log_epsilon, T::of(sine(sigma)), out);
+        return;
+    }
+    let mut below = [T::zero(); crate::sh::MAX_ORDER];
+    nlp_slice_of_sine(order, T::one(), T::of(sine(base)), &mut below[..order]);
+    nlp_slice_of_sine(order, T::one(), T::of(sine(sigma)), out);
+    // The difference of the two angles, by the tangent of a difference where that
+    // formula holds (the band narrower than pi/2; always where base >= 0).
+    let below_product = 1.0 + sigma * base;
+    let width = if below_product > 0.0 && below_product.is_finite() {
+        ((sigma - base) / below_product).atan()
+    } else {
+        sigma.atan() - base.atan()
+    };
+    let depth = depth_at(bands, T::of(width.max(0.0)));
     for (o, b) in out[..order].iter_mut().zip(&below[..order]) {
         *o = log_epsilon * *b + depth * (*o - *b);
     }

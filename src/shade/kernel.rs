@@ -4,7 +4,7 @@
 
 use super::blocker_tree::BlockerTree;
 use super::cap_packet::{CapPacket, Receiver, LANES};
-use super::fitted_depth::{banded_slice, depth_at, fitted_depths, DepthKey, DEPTH_INTERVALS};
+use super::fitted_depth::{banded_slice_of_tangents, depth_at, fitted_depths, DepthKey, DEPTH_INTERVALS};
 use super::frame::PixelWork;
 use super::glossy::{
     albedo_lookup, albedo_table, cone_share, cone_weights, ggx_alpha, MapLevels, Prefiltered, SharpLobe,
@@ -12,7 +12,9 @@ use super::glossy::{
 use super::settings::{GlossyMethod, ShadingSettings, MAX_DIRECTIONS};
 use super::sun::{DiskDirections, Planes, SunDisk, DISK_DIRECTIONS};
 use crate::heightfield::HorizonPyramid;
-use crate::logsh::{cap_log_zh, lobe_log_zh_as, optimal_lobe_epsilon, view_blocker, BlockerView, Lobe, WedgeOperator};
+use crate::logsh::{
+    cap_log_zh, lobe_log_zh_as, optimal_lobe_epsilon, view_blocker, BlockerView, Lobe, WedgeOperator, WedgeTurn,
+};
 use crate::scene::camera::dot;
 use crate::scene::{EnvironmentMap, Light, Material, PointLight, SunLight};
 use crate::sh::exp::{exp_hyb_with, exp_series, ExactExp, OlTable};
@@ -287,6 +289,10 @@ pub struct ShadingKernel<T> {
     pub(crate) overlap_floor: bool,
     pub(crate) exp: Exponentiator,
     pub(crate) wedge: Option<WedgeOperator>,
+    /// The wedge operator's full turn in `T`.
+    wedge_turn: Option<WedgeTurn<T>>,
+    /// Each wedge azimuth's `(sin, cos)`.
+    azimuths: Vec<(f64, f64)>,
     pub(crate) diffuse: LobeTable<T>,
     /// Log-ZH of the hemisphere behind the tangent plane, around -Z before rotation.
     pub(crate) tangent: Vec<T>,
@@ -400,6 +406,7 @@ impl<T: Real> ShadingKernel<T> {
         } else {
             (vec![T::of(epsilon.ln()); DEPTH_INTERVALS + 1], vec![T::of(epsilon.ln()); DEPTH_INTERVALS + 1])
         };
+        let wedge = has_heightfield.then(|| WedgeOperator::new(order, settings.horizon.directions));
         let channel = |c: usize| light.iter().map(|rgb| T::of(rgb[c])).collect::<Vec<T>>();
         // The f32 path dots with the light inside the quadrature (`crate::sh::folded`).
         let folded = (is_f32::<T>() && matches!(exp.method, ExpMethod::Quad | ExpMethod::Exact)).then(|| {
@@ -419,7 +426,11 @@ impl<T: Real> ShadingKernel<T> {
             tangent_occlusion: settings.tangent_occlusion,
             overlap_floor: settings.overlap_floor,
             exp,
-            wedge: has_heightfield.then(|| WedgeOperator::new(order, settings.horizon.directions)),
+            wedge_turn: wedge.as_ref().map(WedgeOperator::turn),
+            azimuths: wedge.as_ref().map_or(Vec::new(), |wedge| {
+                (0..wedge.directions).map(|k| (wedge.wedge_width() * k as f64).sin_cos()).collect()
+            }),
+            wedge,
             diffuse: LobeTable::new(order, Lobe::Diffuse, epsilon),
             tangent,
             materials,
@@ -523,8 +534,8 @@ impl<T: Real> ShadingKernel<T> {
     ) {
         let order = self.order;
         let nt = n.map(T::of);
-        let marched = match (occluders.horizons, &self.wedge) {
-            (Some(pyramid), Some(wedge)) => Some((pyramid, wedge)),
+        let marched = match (occluders.horizons, &self.wedge, &self.wedge_turn) {
+            (Some(pyramid), Some(wedge), Some(turn)) => Some((pyramid, wedge, turn)),
             _ => None,
         };
         let fold_tangent = self.tangent_occlusion && marched.is_some() && n[2] > 0.0;
@@ -536,32 +547,34 @@ impl<T: Real> ShadingKernel<T> {
         if self.ground.is_some_and(|z| above_ground(p, z)) {
             add_rotated_zonal(order, &self.tangent, T::one(), [T::zero(), T::zero(), -T::one()], acc);
         }
-        if let Some((pyramid, wedge)) = marched {
+        if let Some((pyramid, wedge, turn)) = marched {
             let directions = wedge.directions;
-            let mut sigmas = [0.0f64; MAX_DIRECTIONS];
-            pyramid.horizon_elevations(p, &mut sigmas[..directions]);
+            // The horizons and the tangent plane by the tangents of their elevations
+            // (`banded_slice_of_tangents`).
+            let mut horizons = [0.0f64; MAX_DIRECTIONS];
+            pyramid.horizon_tangents(p, &mut horizons[..directions]);
             let mut slices = [T::zero(); MAX_DIRECTIONS * crate::sh::MAX_ORDER];
             if let Some(occlusion) = occlusion.as_deref_mut() {
-                for (k, sigma) in sigmas[..directions].iter().enumerate() {
+                for (k, horizon) in horizons[..directions].iter().enumerate() {
                     let slice = &mut slices[k * order..(k + 1) * order];
-                    banded_slice(order, self.log_epsilon, &self.band_depths, T::zero(), T::of(*sigma), slice);
+                    banded_slice_of_tangents(order, self.log_epsilon, &self.band_depths, 0.0, *horizon, slice);
                 }
-                wedge.accumulate(&slices[..directions * order], occlusion);
+                turn.accumulate(&slices[..directions * order], occlusion);
             }
-            for (k, sigma) in sigmas[..directions].iter_mut().enumerate() {
+            for (k, horizon) in horizons[..directions].iter().enumerate() {
                 // The band from the horizontal (or the tangent plane, where higher) up to
                 // the horizon takes its fitted depth; below it stays at log(eps).
-                let mut base = 0.0f64;
+                let (mut base, mut sigma) = (0.0f64, *horizon);
                 if fold_tangent {
-                    let (sin, cos) = (wedge.wedge_width() * k as f64).sin_cos();
-                    let tangent_elevation = (-(n[0] * cos + n[1] * sin) / n[2]).atan();
-                    *sigma = sigma.max(tangent_elevation);
-                    base = base.max(tangent_elevation);
+                    let (sin, cos) = self.azimuths[k];
+                    let tangent_plane = -(n[0] * cos + n[1] * sin) / n[2];
+                    sigma = sigma.max(tangent_plane);
+                    base = base.max(tangent_plane);
                 }
                 let slice = &mut slices[k * order..(k + 1) * order];
-                banded_slice(order, self.log_epsilon, &self.band_depths, T::of(base), T::of(*sigma), slice);
+                banded_slice_of_tangents(order, self.log_epsilon, &self.band_depths, base, sigma, slice);
             }
-            wedge.accumulate(&slices[..directions * order], acc);
+            turn.accumulate(&slices[..directions * order], acc);
         }
         let Some(tree) = occluders.blockers else {
             return;
