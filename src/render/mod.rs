@@ -108,6 +108,12 @@ pub fn is_complete(outputs: &[PathBuf; 2]) -> bool {
 }
 
 /// Renders `options.frames` in order, reporting to `progress`; never stops early.
+///
+/// Reading, shading and writing overlap: a reader thread reads the frame after the one
+/// being shaded, and a writer thread writes the one before it (EXR and PNG), each at most
+/// one frame ahead or behind, so a sequence takes about the longest of the three stages
+/// per frame rather than their sum. Frames are still reported in order, as their outputs
+/// are complete; a frame's time runs from its read to its write.
 pub fn render_sequence(
     executor: &Executor,
     scene: &Scene,
@@ -117,35 +123,117 @@ pub fn render_sequence(
     let total = options.frames.len();
     progress.start(total);
     let mut outcomes = Vec::with_capacity(total);
-    for (index, &frame) in options.frames.iter().enumerate() {
-        progress.frame_started(frame, index);
-        let outputs = frame_outputs(&options.out, &options.name, frame);
-        let status = if options.skip_existing && is_complete(&outputs) {
-            FrameStatus::Skipped { outputs: outputs.to_vec() }
-        } else {
-            let started = Instant::now();
-            let attempt = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-                render_frame(executor, scene, frame, options, &outputs)
-            }));
-            match attempt {
-                Ok(Ok(())) => {
-                    FrameStatus::Rendered { seconds: started.elapsed().as_secs_f64(), outputs: outputs.to_vec() }
-                }
-                Ok(Err(e)) => FrameStatus::Failed { error: format!("{e:#}") },
-                Err(panic) => {
-                    FrameStatus::Failed { error: format!("internal error (please report): {}", panic_message(&panic)) }
+    std::thread::scope(|threads| {
+        let (read_tx, read_rx) = std::sync::mpsc::sync_channel::<Job<Read>>(1);
+        let (write_tx, write_rx) = std::sync::mpsc::sync_channel::<Job<Shaded>>(1);
+        let (done_tx, done_rx) = std::sync::mpsc::channel::<(usize, FrameOutcome)>();
+        threads.spawn(move || {
+            for (index, &frame) in options.frames.iter().enumerate() {
+                let outputs = frame_outputs(&options.out, &options.name, frame);
+                let started = Instant::now();
+                let work = if options.skip_existing && is_complete(&outputs) {
+                    Read::Skipped
+                } else {
+                    Read::Frame(guarded(|| Ok(Box::new(scene.frame(frame)?))))
+                };
+                if read_tx.send(Job { index, frame, outputs, started, work }).is_err() {
+                    break;
                 }
             }
+        });
+        threads.spawn(move || {
+            for job in write_rx {
+                let status = match job.work {
+                    Shaded::Skipped => FrameStatus::Skipped { outputs: job.outputs.to_vec() },
+                    Shaded::Failed(error) => FrameStatus::Failed { error },
+                    Shaded::Passes(shaded) => {
+                        match guarded(|| write_frame(scene, job.frame, options, &job.outputs, &shaded)) {
+                            Ok(()) => FrameStatus::Rendered {
+                                seconds: job.started.elapsed().as_secs_f64(),
+                                outputs: job.outputs.to_vec(),
+                            },
+                            Err(e) => FrameStatus::Failed { error: format!("{e:#}") },
+                        }
+                    }
+                };
+                if done_tx.send((job.index, FrameOutcome { frame: job.frame, status })).is_err() {
+                    break;
+                }
+            }
+        });
+        let mut report = |(index, outcome): (usize, FrameOutcome), progress: &mut dyn Progress| {
+            progress.frame_finished(&outcome, index, total);
+            outcomes.push(outcome);
         };
-        for notice in executor.take_notices() {
-            progress.notice(&notice.0);
+        for job in read_rx {
+            let work = match job.work {
+                Read::Skipped => Shaded::Skipped,
+                Read::Frame(Err(e)) => Shaded::Failed(format!("{e:#}")),
+                Read::Frame(Ok(data)) => {
+                    progress.frame_started(job.frame, job.index);
+                    let shaded = guarded(|| shade_frame(executor, scene, &data, options));
+                    for notice in executor.take_notices() {
+                        progress.notice(&notice.0);
+                    }
+                    match shaded {
+                        Ok(shaded) => Shaded::Passes(Box::new(shaded)),
+                        Err(e) => Shaded::Failed(format!("{e:#}")),
+                    }
+                }
+            };
+            let Job { index, frame, outputs, started, .. } = job;
+            if write_tx.send(Job { index, frame, outputs, started, work }).is_err() {
+                break;
+            }
+            while let Ok(done) = done_rx.try_recv() {
+                report(done, progress);
+            }
         }
-        let outcome = FrameOutcome { frame, status };
-        progress.frame_finished(&outcome, index, total);
-        outcomes.push(outcome);
-    }
+        drop(write_tx);
+        for done in done_rx {
+            report(done, progress);
+        }
+    });
     progress.finish(&outcomes);
     outcomes
+}
+
+/// One frame on its way through the stages of [`render_sequence`].
+struct Job<W> {
+    index: usize,
+    frame: i64,
+    outputs: [PathBuf; 2],
+    started: Instant,
+    work: W,
+}
+
+/// What the reader hands on: a frame whose outputs are complete (`--skip-existing`), or
+/// the frame read.
+enum Read {
+    Skipped,
+    Frame(anyhow::Result<Box<crate::scene::Frame>>),
+}
+
+/// What the shading hands on to the writer.
+enum Shaded {
+    Skipped,
+    Failed(String),
+    Passes(Box<FramePasses>),
+}
+
+/// A shaded frame's passes, and its transfer layers with `--transfer`.
+struct FramePasses {
+    passes: ShadedPasses,
+    transfer: Option<crate::transfer::TransferFrame>,
+}
+
+/// `work`, with a panic inside it caught and turned into an error naming it, so that one
+/// frame's failure costs only that frame.
+fn guarded<T>(work: impl FnOnce() -> anyhow::Result<T>) -> anyhow::Result<T> {
+    match std::panic::catch_unwind(std::panic::AssertUnwindSafe(work)) {
+        Ok(result) => result,
+        Err(panic) => Err(anyhow::anyhow!("internal error (please report): {}", panic_message(&panic))),
+    }
 }
 
 fn panic_message(panic: &Box<dyn std::any::Any + Send>) -> String {
@@ -156,25 +244,36 @@ fn panic_message(panic: &Box<dyn std::any::Any + Send>) -> String {
         .unwrap_or_else(|| "a panic without a message".into())
 }
 
-/// Reads, shades and writes one frame.
-fn render_frame(
+/// Shades one frame read from `scene`.
+fn shade_frame(
     executor: &Executor,
+    scene: &Scene,
+    data: &crate::scene::Frame,
+    options: &SequenceOptions,
+) -> anyhow::Result<FramePasses> {
+    Ok(if options.transfer {
+        let (passes, transfer) = crate::transfer::shade_with_transfer(scene, data, &options.settings)?;
+        FramePasses { passes, transfer: Some(transfer) }
+    } else {
+        let passes = executor.shade_passes_resolved(scene, data, &options.settings, options.resolving)?;
+        FramePasses { passes, transfer: None }
+    })
+}
+
+/// Writes one shaded frame: its EXR, then its PNG preview.
+fn write_frame(
     scene: &Scene,
     frame: i64,
     options: &SequenceOptions,
     outputs: &[PathBuf; 2],
+    shaded: &FramePasses,
 ) -> anyhow::Result<()> {
-    let data = scene.frame(frame)?;
     let [exr, png] = outputs;
-    let passes = if options.transfer {
-        let (passes, transfer) = crate::transfer::shade_with_transfer(scene, &data, &options.settings)?;
-        write_passes_with_transfer(exr, &passes, &transfer, options.colour)?;
-        passes
-    } else {
-        let passes = executor.shade_passes_resolved(scene, &data, &options.settings, options.resolving)?;
-        write_passes(exr, &passes, options.colour)?;
-        passes
-    };
+    let passes = &shaded.passes;
+    match &shaded.transfer {
+        Some(transfer) => write_passes_with_transfer(exr, passes, transfer, options.colour)?,
+        None => write_passes(exr, passes, options.colour)?,
+    }
     output::write_png_preview(png, passes.width, passes.height, &passes.beauty, &scene.view)
         .with_context(|| format!("frame {frame}: cannot write the preview"))?;
     Ok(())
