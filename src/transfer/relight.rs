@@ -134,19 +134,26 @@ impl RelightLight {
     }
 
     /// `transfer . L` per channel, clamped at 0, for one pixel's transfer vector.
-    #[inline]
+    #[inline(always)]
     fn dot(&self, transfer: &[f32]) -> [f32; 3] {
         let mut sum = [[0.0f32; DOT_LANES]; 3];
         for (b, chunk) in transfer.chunks(DOT_LANES).enumerate() {
             let mut t = [0.0f32; DOT_LANES];
             t[..chunk.len()].copy_from_slice(chunk);
-            for (channel, blocks) in sum.iter_mut().zip(&self.blocks) {
+            for c in 0..3 {
                 for lane in 0..DOT_LANES {
-                    channel[lane] += t[lane] * blocks[b][lane];
+                    sum[c][lane] += t[lane] * self.blocks[c][b][lane];
                 }
             }
         }
-        sum.map(|lanes| lanes.iter().sum::<f32>().max(0.0))
+        let total = |lanes: &[f32; DOT_LANES]| {
+            let mut s = 0.0f32;
+            for v in lanes {
+                s += v;
+            }
+            s.max(0.0)
+        };
+        [total(&sum[0]), total(&sum[1]), total(&sum[2])]
     }
 
     /// Whether this light serves frames of `header` relit from `source`.
@@ -281,59 +288,171 @@ pub fn relight(frame: &TransferFrame, light: &RelightLight) -> ShadedPasses {
         .into_par_iter()
         .enumerate()
         .for_each(|(chunk, (beauty, diffuse, specular, environment, visibility, heightfield, blockers))| {
-            for j in 0..beauty.len() {
-                let i = chunk * CHUNK + j;
-                let p = relit_pixel(frame, light, i);
-                let (d, s, e) = (p.diffuse, p.specular, p.environment);
-                beauty[j] = [d[0] + s[0] + e[0], d[1] + s[1] + e[1], d[2] + s[2] + e[2], frame.alpha[i]];
-                (diffuse[j], specular[j], environment[j]) = (d, s, e);
-                [visibility[j], heightfield[j], blockers[j]] = p.visibility;
+            let out = RelitChunk { beauty, diffuse, specular, environment, visibility, heightfield, blockers };
+            #[cfg(target_arch = "x86_64")]
+            if *HAS_AVX2_FMA {
+                // SAFETY: the processor has AVX2 and FMA.
+                return unsafe { relight_chunk_avx2(frame, light, chunk * CHUNK, out) };
             }
+            relight_chunk::<PortableDots>(frame, light, chunk * CHUNK, out);
         });
     passes
 }
 
-/// Pixel `i` of `frame` under `light`.
-#[inline]
-fn relit_pixel(frame: &TransferFrame, light: &RelightLight, i: usize) -> Relit {
+#[cfg(target_arch = "x86_64")]
+static HAS_AVX2_FMA: std::sync::LazyLock<bool> =
+    std::sync::LazyLock::new(|| is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma"));
+
+/// One chunk of every pass, from pixel `first` on.
+struct RelitChunk<'a> {
+    beauty: &'a mut [[f32; 4]],
+    diffuse: &'a mut [[f32; 3]],
+    specular: &'a mut [[f32; 3]],
+    environment: &'a mut [[f32; 3]],
+    visibility: &'a mut [f32],
+    heightfield: &'a mut [f32],
+    blockers: &'a mut [f32],
+}
+
+/// How a pixel's transfer vectors are dotted with the light.
+trait Dots {
+    /// `transfer . L` per channel, clamped at 0.
+    fn dot(light: &RelightLight, transfer: &[f32]) -> [f32; 3];
+}
+
+/// [`RelightLight::dot`]: eight partial sums in portable lanes.
+struct PortableDots;
+
+impl Dots for PortableDots {
+    #[inline(always)]
+    fn dot(light: &RelightLight, transfer: &[f32]) -> [f32; 3] {
+        light.dot(transfer)
+    }
+}
+
+/// The same partial sums in AVX2 registers with fused multiply-adds, the three channels
+/// reduced together.
+#[cfg(target_arch = "x86_64")]
+struct Avx2Dots;
+
+#[cfg(target_arch = "x86_64")]
+impl Dots for Avx2Dots {
+    /// Written with the intrinsics directly (no function of its own with the features),
+    /// so that it is inlined into [`relight_chunk_avx2`], which has them.
+    #[inline(always)]
+    fn dot(light: &RelightLight, transfer: &[f32]) -> [f32; 3] {
+        use std::arch::x86_64::*;
+        // SAFETY: only `relight_chunk_avx2` uses these, on a processor with AVX2 and FMA;
+        // every load reads DOT_LANES floats of a block or of `tail`.
+        unsafe {
+            let mut acc = [_mm256_setzero_ps(); 3];
+            let whole = transfer.len() / DOT_LANES;
+            for b in 0..whole {
+                let t = _mm256_loadu_ps(transfer[b * DOT_LANES..][..DOT_LANES].as_ptr());
+                for (a, blocks) in acc.iter_mut().zip(&light.blocks) {
+                    *a = _mm256_fmadd_ps(t, _mm256_loadu_ps(blocks[b].as_ptr()), *a);
+                }
+            }
+            let rest = transfer.len() - whole * DOT_LANES;
+            if rest > 0 {
+                let mut tail = [0.0f32; DOT_LANES];
+                tail[..rest].copy_from_slice(&transfer[whole * DOT_LANES..]);
+                let t = _mm256_loadu_ps(tail.as_ptr());
+                for (a, blocks) in acc.iter_mut().zip(&light.blocks) {
+                    *a = _mm256_fmadd_ps(t, _mm256_loadu_ps(blocks[whole].as_ptr()), *a);
+                }
+            }
+            // [r01 r23 g01 g23 | ...], [b01 b23 0 0 | ...], then [r g b 0] per half.
+            let rg = _mm256_hadd_ps(acc[0], acc[1]);
+            let b0 = _mm256_hadd_ps(acc[2], _mm256_setzero_ps());
+            let rgb = _mm256_hadd_ps(rg, b0);
+            let sum =
+                _mm_max_ps(_mm_add_ps(_mm256_castps256_ps128(rgb), _mm256_extractf128_ps::<1>(rgb)), _mm_setzero_ps());
+            let mut out = [0.0f32; 4];
+            _mm_storeu_ps(out.as_mut_ptr(), sum);
+            [out[0], out[1], out[2]]
+        }
+    }
+}
+
+/// [`relight_chunk`] compiled for AVX2 and FMA, its dot products in those registers.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn relight_chunk_avx2(frame: &TransferFrame, light: &RelightLight, first: usize, out: RelitChunk) {
+    relight_chunk::<Avx2Dots>(frame, light, first, out)
+}
+
+#[inline(always)]
+fn relight_chunk<D: Dots>(frame: &TransferFrame, light: &RelightLight, first: usize, out: RelitChunk) {
+    for j in 0..out.beauty.len() {
+        let i = first + j;
+        let p = relit_pixel::<D>(frame, light, i);
+        let (d, s, e) = (p.diffuse, p.specular, p.environment);
+        out.beauty[j] = [d[0] + s[0] + e[0], d[1] + s[1] + e[1], d[2] + s[2] + e[2], frame.alpha[i]];
+        (out.diffuse[j], out.specular[j], out.environment[j]) = (d, s, e);
+        [out.visibility[j], out.heightfield[j], out.blockers[j]] = p.visibility;
+    }
+}
+
+/// Pixel `i` of `frame` under `light`. Written without closures, so that all of it is
+/// inlined into [`relight_chunk_avx2`] and compiled for AVX2 there.
+#[inline(always)]
+fn relit_pixel<D: Dots>(frame: &TransferFrame, light: &RelightLight, i: usize) -> Relit {
     let (count, order) = (frame.count(), frame.order());
-    let dot = |layer: &[f32]| light.dot(&layer[i * count..(i + 1) * count]);
+    let at = i * count..(i + 1) * count;
     let (albedo, colour) = (frame.albedo[i], frame.specular_colour[i]);
-    let lit = dot(&frame.diffuse);
-    let diffuse = [0, 1, 2].map(|k| albedo[k] * lit[k] + frame.lamps_diffuse[i][k]);
-    let direction = frame.glossy_direction[i].map(f64::from);
+    let lit = D::dot(light, &frame.diffuse[at.clone()]);
+    let lamps = frame.lamps_diffuse[i];
+    let diffuse = [albedo[0] * lit[0] + lamps[0], albedo[1] * lit[1] + lamps[1], albedo[2] * lit[2] + lamps[2]];
+    let direction = [
+        f64::from(frame.glossy_direction[i][0]),
+        f64::from(frame.glossy_direction[i][1]),
+        f64::from(frame.glossy_direction[i][2]),
+    ];
     let code = frame.glossy_lobe[i];
     let glossy: [f32; 3] = if code == lobe_code::NONE {
         [0.0; 3]
     } else if code == lobe_code::MIRROR {
         light.light.radiance(direction)
     } else if code == lobe_code::SH {
-        dot(frame.specular.as_deref().expect("checked on reading"))
+        D::dot(light, &frame.specular.as_deref().expect("checked on reading")[at.clone()])
     } else {
         let j = (code - lobe_code::PREFILTERED) as usize;
-        let [cone, sh_weight] = frame.glossy_weight[i].map(f64::from);
+        let [cone, sh_weight] = frame.glossy_weight[i];
+        let (cone, sh_weight) = (f64::from(cone), f64::from(sh_weight));
         let by_sh = if sh_weight > 0.0 {
-            let shadowed = dot(frame.specular.as_deref().expect("checked on reading"));
+            let shadowed = D::dot(light, &frame.specular.as_deref().expect("checked on reading")[at.clone()]);
             occlusion_ratio(shadowed, open_lit(order, &light.open[j], direction, &light.sh))
         } else {
             0.0
         };
         let weight = cone + sh_weight * by_sh;
         match &light.prefiltered[j] {
-            Some(map) => map.lookup(direction).map(|c| (f64::from(c) * weight) as f32),
+            Some(map) => {
+                let c = map.lookup(direction);
+                [
+                    (f64::from(c[0]) * weight) as f32,
+                    (f64::from(c[1]) * weight) as f32,
+                    (f64::from(c[2]) * weight) as f32,
+                ]
+            }
             None => [0.0; 3],
         }
     };
-    let reflected = [0, 1, 2].map(|k| colour[k] * glossy[k]);
+    let lamps = frame.lamps_specular[i];
+    let reflected = [colour[0] * glossy[0], colour[1] * glossy[1], colour[2] * glossy[2]];
     let (specular, environment) = if frame.alpha[i] > 0.0 {
-        ([0, 1, 2].map(|k| reflected[k] + frame.lamps_specular[i][k]), [0.0; 3])
+        ([reflected[0] + lamps[0], reflected[1] + lamps[1], reflected[2] + lamps[2]], [0.0; 3])
     } else {
         ([0.0; 3], reflected)
     };
-    let unoccluded = dot(&frame.unoccluded);
+    let unoccluded = D::dot(light, &frame.unoccluded[at.clone()]);
     let visibility = visibility_ratio(lit, unoccluded);
     let parts = match (&frame.heightfield, &frame.blockers) {
-        (Some(h), Some(b)) => [visibility_ratio(dot(h), unoccluded), visibility_ratio(dot(b), unoccluded)],
+        (Some(h), Some(b)) => [
+            visibility_ratio(D::dot(light, &h[at.clone()]), unoccluded),
+            visibility_ratio(D::dot(light, &b[at]), unoccluded),
+        ],
         _ if frame.header.heightfield => [visibility, 1.0],
         _ if frame.header.blockers => [1.0, visibility],
         _ => [1.0, 1.0],
