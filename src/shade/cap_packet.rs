@@ -97,15 +97,21 @@ impl<'a> CapPacket<'a> {
     }
 }
 
-/// The basis factors the lanes read, in f32 ([`crate::sh::basis`]'s recurrence: `Q_m^m =
-/// (2m - 1)!!`, `Q_l^m = a z Q_{l-1}^m - b Q_{l-2}^m`, `y_l^m = k Q_l^m Re/Im (x + iy)^m`).
+/// The basis factors the lanes read, in f32: `R_l^m = c_l^m Q_l^m` by
+/// [`crate::sh::basis`]'s upward recurrence in `l` (`Q_m^m = (2m - 1)!!`, `Q_l^m = a z
+/// Q_{l-1}^m - b Q_{l-2}^m`), each `R` carrying the factor `c_l^m` of its term: the basis's
+/// `K_l^m` (times `sqrt(2)` for `m > 0`) and the cap's `1 / (2l + 1)` (not at `l = 0`).
+/// So `y_l^m V_l = R_l^m (P_{l-1} - P_{l+1}) Re/Im (x + iy)^m` times the cap's depth
+/// factor, one multiply per term.
 #[cfg(target_arch = "x86_64")]
 struct LaneBasis {
-    /// `K_l^m`, times `sqrt(2)` for `m > 0`.
-    k: [[f32; crate::sh::MAX_ORDER]; crate::sh::MAX_ORDER],
+    /// `R_m^m`.
+    first: [f32; crate::sh::MAX_ORDER],
+    /// `R_{m+1}^m / (z R_m^m)`.
+    second: [f32; crate::sh::MAX_ORDER],
+    /// `R_l^m = a z R_{l-1}^m - b R_{l-2}^m` for `l >= m + 2`.
     a: [[f32; crate::sh::MAX_ORDER]; crate::sh::MAX_ORDER],
     b: [[f32; crate::sh::MAX_ORDER]; crate::sh::MAX_ORDER],
-    q_mm: [f32; crate::sh::MAX_ORDER],
     /// Legendre's `(2l - 1) / l` and `(l - 1) / l`, to band `MAX_ORDER` (the cap's closed
     /// form reads `P_{l+1}`).
     legendre: [(f32, f32); crate::sh::MAX_ORDER + 1],
@@ -114,24 +120,35 @@ struct LaneBasis {
 #[cfg(target_arch = "x86_64")]
 static LANE_BASIS: std::sync::LazyLock<LaneBasis> = std::sync::LazyLock::new(|| {
     use crate::sh::basis::{double_factorial_odd, normalisation};
+    let c = |l: usize, m: usize| {
+        let k = normalisation(l, m) * if m > 0 { std::f64::consts::SQRT_2 } else { 1.0 };
+        if l == 0 {
+            k
+        } else {
+            k / (2 * l + 1) as f64
+        }
+    };
+    // Q_l^m = a z Q_{l-1}^m - b Q_{l-2}^m, scaled to R.
     let recurrence = |l: usize, m: usize| {
-        if l <= m + 1 {
+        if l < m + 2 || l >= crate::sh::MAX_ORDER {
             (0.0, 0.0)
         } else {
             let d = (l - m) as f64;
-            ((2 * l - 1) as f64 / d, (l + m - 1) as f64 / d)
+            let (a, b) = ((2 * l - 1) as f64 / d, (l + m - 1) as f64 / d);
+            ((a * c(l, m) / c(l - 1, m)) as f32, (b * c(l, m) / c(l - 2, m)) as f32)
         }
     };
     LaneBasis {
-        k: std::array::from_fn(|l| {
-            std::array::from_fn(|m| {
-                let k = if m <= l { normalisation(l, m) } else { 0.0 };
-                (if m > 0 { std::f64::consts::SQRT_2 * k } else { k }) as f32
-            })
+        first: std::array::from_fn(|m| (c(m, m) * double_factorial_odd(m)) as f32),
+        second: std::array::from_fn(|m| {
+            if m + 1 < crate::sh::MAX_ORDER {
+                (c(m + 1, m) * (2 * m + 1) as f64 / c(m, m)) as f32
+            } else {
+                0.0
+            }
         }),
-        a: std::array::from_fn(|l| std::array::from_fn(|m| recurrence(l, m).0 as f32)),
-        b: std::array::from_fn(|l| std::array::from_fn(|m| recurrence(l, m).1 as f32)),
-        q_mm: std::array::from_fn(|m| double_factorial_odd(m) as f32),
+        a: std::array::from_fn(|l| std::array::from_fn(|m| recurrence(l, m).0)),
+        b: std::array::from_fn(|l| std::array::from_fn(|m| recurrence(l, m).1)),
         legendre: std::array::from_fn(|l| {
             if l < 2 {
                 (0.0, 0.0)
@@ -268,9 +285,9 @@ mod lanes {
             _mm256_cmp_ps::<_CMP_GT_OQ>(distance, zero),
             _mm256_cmp_ps::<_CMP_LT_OQ>(distance, _mm256_set1_ps(f32::INFINITY)),
         );
+        let facing = _mm256_cmp_ps::<_CMP_GT_OQ>(dot(d, lanes.n), zero);
         let inverse = _mm256_div_ps(one, distance);
         let direction = d.map(|c| _mm256_mul_ps(c, inverse));
-        let facing = _mm256_cmp_ps::<_CMP_GT_OQ>(dot(direction, lanes.n), zero);
         let keep = _mm256_and_ps(_mm256_and_ps(seen, finite), facing);
         // Lanes that add nothing evaluate the basis at +Z, so no NaN reaches the sums.
         let direction = [
@@ -298,11 +315,11 @@ mod lanes {
                 _mm256_mul_ps(_mm256_set1_ps(b), p[l - 2]),
             );
         }
+        // The cap's band integrals times its depth factor; their 1 / (2l + 1) is in `R`.
         let mut band = [zero; crate::sh::MAX_ORDER];
         band[0] = _mm256_mul_ps(scale, _mm256_sub_ps(one, x));
         for l in 1..N {
-            let integral = _mm256_mul_ps(_mm256_sub_ps(p[l - 1], p[l + 1]), _mm256_set1_ps(1.0 / (2 * l + 1) as f32));
-            band[l] = _mm256_mul_ps(scale, integral);
+            band[l] = _mm256_mul_ps(scale, _mm256_sub_ps(p[l - 1], p[l + 1]));
         }
         // The basis at each lane's direction (crate::sh::basis::eval_basis_of_order), each
         // term added as it is made, one `m` at a time with (cm, sm) = Re, Im (x + iy)^m.
@@ -318,9 +335,10 @@ mod lanes {
         order_m::<N, 7>(basis, &band, z, &mut phase, [dx, dy], acc);
     }
 
-    /// The terms `band[l] y_l^{+-M}` for `l = M..N` added to `acc` (nothing for `M >= N`),
-    /// `Q_l^M` by its upward recurrence; then `phase` advanced to `(x + iy)^{M+1}`. A
-    /// function per `M`, so that every loop has constant bounds and unrolls.
+    /// The terms `band[l] R_l^M Re/Im (x + iy)^M` for `l = M..N` added to `acc` (nothing for
+    /// `M >= N`), `R_l^M` by its upward recurrence ([`LaneBasis`]); then `phase` advanced to
+    /// `(x + iy)^{M+1}`. A function per `M`, so that every loop has constant bounds and
+    /// unrolls.
     #[target_feature(enable = "avx2,fma")]
     #[inline]
     unsafe fn order_m<const N: usize, const M: usize>(
@@ -335,22 +353,22 @@ mod lanes {
             return;
         }
         let (cm, sm) = *phase;
-        let mut q_prev = _mm256_setzero_ps();
-        let mut q = _mm256_set1_ps(basis.q_mm[M]);
+        let mut r_prev = _mm256_setzero_ps();
+        let mut r = _mm256_set1_ps(basis.first[M]);
         for l in M..N {
             if l == M + 1 {
-                q_prev = q;
-                q = _mm256_mul_ps(_mm256_mul_ps(z, _mm256_set1_ps((2 * M + 1) as f32)), q_prev);
+                r_prev = r;
+                r = _mm256_mul_ps(_mm256_mul_ps(z, _mm256_set1_ps(basis.second[M])), r_prev);
             } else if l > M + 1 {
                 let next = _mm256_fmsub_ps(
                     _mm256_mul_ps(_mm256_set1_ps(basis.a[l][M]), z),
-                    q,
-                    _mm256_mul_ps(_mm256_set1_ps(basis.b[l][M]), q_prev),
+                    r,
+                    _mm256_mul_ps(_mm256_set1_ps(basis.b[l][M]), r_prev),
                 );
-                q_prev = q;
-                q = next;
+                r_prev = r;
+                r = next;
             }
-            let term = _mm256_mul_ps(_mm256_mul_ps(band[l], _mm256_set1_ps(basis.k[l][M])), q);
+            let term = _mm256_mul_ps(band[l], r);
             if M == 0 {
                 acc[index(l, 0)] = _mm256_add_ps(acc[index(l, 0)], term);
             } else {

@@ -296,6 +296,8 @@ pub struct ShadingKernel<T> {
     pub(crate) diffuse: LobeTable<T>,
     /// Log-ZH of the hemisphere behind the tangent plane, around -Z before rotation.
     pub(crate) tangent: Vec<T>,
+    /// The same hemisphere about -Z as SH: the ground plane's log visibility.
+    below_horizon: Vec<T>,
     pub(crate) materials: BTreeMap<u32, MaterialLobes<T>>,
     /// Light SH coefficients per colour channel.
     pub(crate) light: [Vec<T>; 3],
@@ -432,6 +434,11 @@ impl<T: Real> ShadingKernel<T> {
             }),
             wedge,
             diffuse: LobeTable::new(order, Lobe::Diffuse, epsilon),
+            below_horizon: {
+                let mut below = vec![T::zero(); coefficient_count(order)];
+                add_rotated_zonal(order, &tangent, T::one(), [T::zero(), T::zero(), -T::one()], &mut below);
+                below
+            },
             tangent,
             materials,
             light: [channel(0), channel(1), channel(2)],
@@ -545,7 +552,9 @@ impl<T: Real> ShadingKernel<T> {
         // The ground plane: the hemisphere below the horizontal, the tangent term's table
         // about -Z (where both overlap, the overlap floor clamps them once).
         if self.ground.is_some_and(|z| above_ground(p, z)) {
-            add_rotated_zonal(order, &self.tangent, T::one(), [T::zero(), T::zero(), -T::one()], acc);
+            for (a, b) in acc.iter_mut().zip(&self.below_horizon) {
+                *a = *a + *b;
+            }
         }
         if let Some((pyramid, wedge, turn)) = marched {
             let directions = wedge.directions;
@@ -681,7 +690,7 @@ impl<T: Real> ShadingKernel<T> {
             return [0.0; 3];
         };
         let lobes = &self.materials[&point.material];
-        let (_, diffuse, glossy) = self.environment_lit(occluders, &visibility, &occlusion, lobes, point);
+        let (diffuse, glossy) = self.environment_radiance(occluders, &visibility, &occlusion, lobes, point);
         let (sun_diffuse, sun_glossy) = self.sunlit(occluders, point, &lobes.material);
         [0, 1, 2].map(|i| (diffuse[i] + sun_diffuse[i]) + (glossy[i] + sun_glossy[i]))
     }
@@ -712,6 +721,28 @@ impl<T: Real> ShadingKernel<T> {
         lobes.map(|_| (visibility, occlusion))
     }
 
+    /// The diffuse and glossy radiance at `point` ([`Self::environment_lit`]), without the
+    /// diffuse lobe's light where the albedo is black (a metal): nothing needs it then.
+    fn environment_radiance(
+        &self,
+        occluders: Occluders,
+        visibility: &[T],
+        occlusion: &[T],
+        lobes: &MaterialLobes<T>,
+        point: &SurfacePoint,
+    ) -> ([f32; 3], [f32; 3]) {
+        match &lobes.material {
+            Material::Phong { albedo: [0.0, 0.0, 0.0], specular, .. } => {
+                let phong = lobes.phong.as_ref().expect("phong materials carry their lobe");
+                ([0.0; 3], self.glossy_lit(occluders, visibility, occlusion, phong, lobes, point, *specular))
+            }
+            _ => {
+                let (_, diffuse, glossy) = self.environment_lit(occluders, visibility, occlusion, lobes, point);
+                (diffuse, glossy)
+            }
+        }
+    }
+
     /// The environment's light through the diffuse lobe, and the diffuse and glossy
     /// radiance at `point`, each times the material's albedo or specular colour.
     pub(crate) fn environment_lit(
@@ -732,17 +763,36 @@ impl<T: Real> ShadingKernel<T> {
             Material::Phong { albedo, specular, .. } => {
                 let diffuse = scale(lit_diffuse, *albedo);
                 let phong = lobes.phong.as_ref().expect("phong materials carry their lobe");
-                let reflected = reflect_view(point.view_origin, point.position, n);
-                let glossy = match &lobes.sharp {
-                    Some(sharp) => {
-                        let g = self.prefiltered_glossy(occluders, occlusion, phong, sharp, point, reflected);
-                        [0, 1, 2].map(|i| (g[i] * f64::from(specular[i])) as f32)
-                    }
-                    None => scale(self.lit(visibility, phong, reflected), *specular),
-                };
+                let glossy = self.glossy_lit(occluders, visibility, occlusion, phong, lobes, point, *specular);
                 (lit_diffuse, diffuse, glossy)
             }
             Material::Water { .. } => ([T::zero(); 3], [0.0; 3], [0.0; 3]),
+        }
+    }
+
+    /// The glossy radiance of a Phong material at `point`, times its specular colour: the
+    /// prefiltered term, or the Phong lobe in log-SH with `--glossy sh`.
+    #[allow(clippy::too_many_arguments)]
+    fn glossy_lit(
+        &self,
+        occluders: Occluders,
+        visibility: &[T],
+        occlusion: &[T],
+        phong: &LobeTable<T>,
+        lobes: &MaterialLobes<T>,
+        point: &SurfacePoint,
+        specular: [f32; 3],
+    ) -> [f32; 3] {
+        let reflected = reflect_view(point.view_origin, point.position, point.normal);
+        match &lobes.sharp {
+            Some(sharp) => {
+                let g = self.prefiltered_glossy(occluders, occlusion, phong, sharp, point, reflected);
+                [0, 1, 2].map(|i| (g[i] * f64::from(specular[i])) as f32)
+            }
+            None => {
+                let c = self.lit(visibility, phong, reflected);
+                [0, 1, 2].map(|i| c[i].to_f32().unwrap_or(0.0) * specular[i])
+            }
         }
     }
 
