@@ -25,8 +25,18 @@ pub trait Real: Float + FloatConst + FromPrimitive + Debug + Send + Sync + Defau
     fn of(x: f64) -> Self {
         Self::from_f64(x).expect("every f64 converts to f32 or f64")
     }
+
+    /// `values` themselves where `Self` is f32, so that the f32 throughput path reads them
+    /// in place; `None` otherwise.
+    fn as_f32_slice(_values: &[Self]) -> Option<&[f32]> {
+        None
+    }
 }
-impl Real for f32 {}
+impl Real for f32 {
+    fn as_f32_slice(values: &[f32]) -> Option<&[f32]> {
+        Some(values)
+    }
+}
 impl Real for f64 {}
 
 /// Lowest and highest supported orders. The math is defined for any order; the tables

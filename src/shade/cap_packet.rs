@@ -203,6 +203,8 @@ mod lanes {
         let mut acc = [_mm256_setzero_ps(); MAX_COEFFICIENTS];
         let basis: &LaneBasis = &LANE_BASIS;
         let tolerance = _mm256_set1_ps(-(1.0 - super::BEHIND_TOLERANCE as f32));
+        let cluster_ratio2 = packet.cluster_ratio * packet.cluster_ratio;
+        let negligible2 = (super::NEGLIGIBLE_RATIO * super::NEGLIGIBLE_RATIO) as f32;
         let mut i = 0usize;
         while i < nodes.len() {
             let node = &nodes[i];
@@ -227,17 +229,19 @@ mod lanes {
                 i = skip;
                 continue;
             }
-            let distance = _mm256_sqrt_ps(dot(d, d));
+            // `|d| > r` and `r <= ratio |d|`, squared (both sides are at least 0), so the
+            // decision waits on no square root.
+            let (squared, r2) = (dot(d, d), _mm256_mul_ps(r, r));
             let cluster = _mm256_and_ps(
-                _mm256_cmp_ps::<_CMP_GT_OQ>(distance, r),
-                _mm256_cmp_ps::<_CMP_LE_OQ>(r, _mm256_mul_ps(_mm256_set1_ps(packet.cluster_ratio), distance)),
+                _mm256_cmp_ps::<_CMP_GT_OQ>(squared, r2),
+                _mm256_cmp_ps::<_CMP_LE_OQ>(r2, _mm256_mul_ps(_mm256_set1_ps(cluster_ratio2), squared)),
             );
             let far = _mm256_and_ps(front, cluster);
             if _mm256_movemask_ps(far) != 0 {
                 let e = node.equivalent;
                 let q = [0, 1, 2].map(|k| _mm256_sub_ps(_mm256_set1_ps(e[k]), lanes.p[k]));
-                let reach = _mm256_mul_ps(_mm256_set1_ps(super::NEGLIGIBLE_RATIO as f32), _mm256_sqrt_ps(dot(q, q)));
-                let seen = _mm256_and_ps(far, _mm256_cmp_ps::<_CMP_GE_OQ>(_mm256_set1_ps(e[3]), reach));
+                let reach2 = _mm256_mul_ps(_mm256_set1_ps(negligible2), dot(q, q));
+                let seen = _mm256_and_ps(far, _mm256_cmp_ps::<_CMP_GE_OQ>(_mm256_set1_ps(e[3] * e[3]), reach2));
                 if _mm256_movemask_ps(seen) != 0 {
                     add_caps::<N>(packet, basis, &lanes, e, seen, &mut acc);
                 }

@@ -620,10 +620,13 @@ impl<T: Real> ShadingKernel<T> {
         let count = coefficient_count(self.order);
         let f = self.with_lobe(visibility, lobe, axis);
         if let Some(folded) = &self.folded {
-            let (f32s, v32s) = (as_f32_array(&f[..count]), as_f32_array(&visibility[..count]));
-            let floored = self.overlap_floor.then(|| (&v32s[..count], self.log_epsilon.to_f32().unwrap_or(0.0)));
-            let ceiling = lobe.log_peak as f32;
-            return folded.lit(&f32s[..count], floored, ceiling).map(|c| T::of(f64::from(c)));
+            // The kernel is f32 where it has folded quadrature: its vectors are read in place.
+            let (f32s, v32s) = (T::as_f32_slice(&f[..count]), T::as_f32_slice(&visibility[..count]));
+            if let (Some(f32s), Some(v32s)) = (f32s, v32s) {
+                let floored = self.overlap_floor.then(|| (v32s, self.log_epsilon.to_f32().unwrap_or(0.0)));
+                let ceiling = lobe.log_peak as f32;
+                return folded.lit(f32s, floored, ceiling).map(|c| T::of(f64::from(c)));
+            }
         }
         let mut e = [T::zero(); MAX_COEFFICIENTS];
         let floored = self.overlap_floor.then(|| (&visibility[..count], self.log_epsilon.to_f64().unwrap_or(0.0)));
