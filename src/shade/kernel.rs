@@ -10,7 +10,7 @@ use super::glossy::{
     albedo_lookup, albedo_table, cone_share, cone_weights, ggx_alpha, MapLevels, Prefiltered, SharpLobe,
 };
 use super::settings::{GlossyMethod, ShadingSettings, MAX_DIRECTIONS};
-use super::sun::{DiskDirections, Planes, SunDisk, DISK_DIRECTIONS};
+use super::sun::{DiskDirections, DiskShape, Planes, SunDisk, DISK_DIRECTIONS};
 use crate::heightfield::HorizonPyramid;
 use crate::logsh::{
     cap_log_zh, lobe_log_zh_as, optimal_lobe_epsilon, view_blocker, BlockerView, Lobe, WedgeOperator, WedgeTurn,
@@ -202,6 +202,8 @@ pub(crate) struct SharpGlossy<T> {
     pub(crate) cone_share: f64,
     /// The cone's directions' weights ([`super::glossy::cone_weights`]).
     pub(crate) cone_weights: [f64; DISK_DIRECTIONS],
+    /// The cone's directions about +Z.
+    pub(crate) core: DiskShape,
 }
 
 /// The sharpest Phong lobe given to log-SH (the glossy term with `--glossy sh`, the
@@ -384,6 +386,7 @@ impl<T: Real> ShadingKernel<T> {
                                 open: open_lobe(order, &exp, &table),
                                 cone_share: cone_share(sharp_lobe, order),
                                 cone_weights: cone_weights(sharp_lobe),
+                                core: DiskShape::new(sharp_lobe.core_radius()),
                             }
                         });
                         (Some(table), sharp)
@@ -836,7 +839,7 @@ impl<T: Real> ShadingKernel<T> {
     ) -> (f64, f64) {
         let share = sharp.cone_share;
         let by_cone = if share > 0.0 {
-            let core = DiskDirections::new(reflected, sharp.lobe.core_radius());
+            let core = DiskDirections::of_shape(reflected, &sharp.core);
             let planes = Planes { tangent: false, ground: None };
             let visible = core.visibility(
                 occluders.blockers,

@@ -107,16 +107,39 @@ pub struct Planes {
     pub ground: Option<f64>,
 }
 
+/// A disk's directions about +Z, which depend on its half-angle alone: computed once per
+/// sun or glossy lobe and turned to each receiver's axis ([`DiskDirections::of_shape`]).
+#[derive(Clone, Debug)]
+pub struct DiskShape {
+    pub half_angle: f64,
+    /// `(sin theta cos phi, sin theta sin phi, cos theta)` of each direction.
+    local: [[f64; 3]; DISK_DIRECTIONS],
+}
+
+impl DiskShape {
+    /// The disk of half-angle `half_angle` (in `(0, pi/2]`) about +Z.
+    pub fn new(half_angle: f64) -> Self {
+        let one_minus_cos = 1.0 - half_angle.cos();
+        let local = DISK_PATTERN.1.map(|(r2, [cos_phi, sin_phi])| {
+            let cos_theta = 1.0 - one_minus_cos * r2;
+            let sin_theta = (1.0 - cos_theta * cos_theta).max(0.0).sqrt();
+            [sin_theta * cos_phi, sin_theta * sin_phi, cos_theta]
+        });
+        Self { half_angle, local }
+    }
+}
+
 impl DiskDirections {
     /// The disk of half-angle `half_angle` (in `(0, pi/2]`) about unit `axis`.
     pub fn new(axis: [f64; 3], half_angle: f64) -> Self {
+        Self::of_shape(axis, &DiskShape::new(half_angle))
+    }
+
+    /// The disk of `shape` about unit `axis`.
+    pub fn of_shape(axis: [f64; 3], shape: &DiskShape) -> Self {
         let (e1, e2) = frame_around(axis);
-        let one_minus_cos = 1.0 - half_angle.cos();
-        let directions = DISK_PATTERN.1.map(|(r2, [cos_phi, sin_phi])| {
-            let cos_theta = 1.0 - one_minus_cos * r2;
-            let sin_theta = (1.0 - cos_theta * cos_theta).max(0.0).sqrt();
-            [0, 1, 2].map(|k| cos_theta * axis[k] + sin_theta * (cos_phi * e1[k] + sin_phi * e2[k]))
-        });
+        let half_angle = shape.half_angle;
+        let directions = shape.local.map(|[x, y, z]| [0, 1, 2].map(|k| z * axis[k] + x * e1[k] + y * e2[k]));
         let horizontal = axis[0].hypot(axis[1]);
         Self {
             axis,
