@@ -666,6 +666,9 @@ mod lanes {
     use super::{HorizonPyramid, PaddedLevel, PyramidLevel, MAX_LEVELS};
     use std::arch::x86_64::*;
 
+    /// Most azimuths a march takes (`HorizonSettings::directions`).
+    const MAX_AZIMUTHS: usize = 1024;
+
     const SIXTH: f32 = 1.0 / 6.0;
     const TWO_THIRDS: f32 = 2.0 / 3.0;
 
@@ -691,17 +694,27 @@ mod lanes {
         let mut receiver =
             Receiver { origin: [[0.0f32; 2]; MAX_LEVELS], base: [0.0f32; MAX_LEVELS], start: [0.0f32; MAX_LEVELS] };
         let mut read = 0;
-        for (chunk, part) in out.chunks_mut(8).enumerate() {
-            let first = chunk * 8;
+        // The steps each azimuth takes: every step up to `t_far` and the first one past it,
+        // as the scalar march. Azimuths are marched eight at a time in order of their step
+        // counts, so that each group marches about as far as its lanes need.
+        let w = out.len();
+        let mut steps_of = [0u16; MAX_AZIMUTHS];
+        let mut order = [0u16; MAX_AZIMUTHS];
+        for (k, dir) in pyramid.directions[..w].iter().enumerate() {
+            let t_far = pyramid.far_distance(x, y, *dir);
+            let within = pyramid.steps.partition_point(|s| s.distance <= t_far);
+            steps_of[k] = (within + 1).min(pyramid.steps.len()) as u16;
+            order[k] = k as u16;
+        }
+        order[..w].sort_unstable_by_key(|&k| steps_of[k as usize]);
+        for group in order[..w].chunks(8) {
             let mut dx = [0.0f32; 8];
             let mut dy = [0.0f32; 8];
             let mut taken = [0i32; 8];
-            for (lane, dir) in pyramid.directions[first..first + part.len()].iter().enumerate() {
+            for (lane, &k) in group.iter().enumerate() {
+                let dir = pyramid.directions[k as usize];
                 (dx[lane], dy[lane]) = (dir[0] as f32, dir[1] as f32);
-                // The scalar march takes every step up to `t_far` and the first one past it.
-                let t_far = pyramid.far_distance(x, y, *dir);
-                let within = pyramid.steps.partition_point(|s| s.distance <= t_far);
-                taken[lane] = (within + 1).min(pyramid.steps.len()) as i32;
+                taken[lane] = i32::from(steps_of[k as usize]);
             }
             let last_step = taken.iter().copied().max().unwrap_or(0) as usize;
             let (dx, dy) = (_mm256_loadu_ps(dx.as_ptr()), _mm256_loadu_ps(dy.as_ptr()));
@@ -725,8 +738,8 @@ mod lanes {
             }
             let mut tangents = [0.0f32; 8];
             _mm256_storeu_ps(tangents.as_mut_ptr(), max_tan);
-            for (o, t) in part.iter_mut().zip(tangents) {
-                *o = f64::from(t).max(0.0);
+            for (&k, t) in group.iter().zip(tangents) {
+                out[k as usize] = f64::from(t).max(0.0);
             }
         }
     }
