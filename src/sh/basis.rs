@@ -31,9 +31,18 @@ pub trait Real: Float + FloatConst + FromPrimitive + Debug + Send + Sync + Defau
     fn as_f32_slice(_values: &[Self]) -> Option<&[f32]> {
         None
     }
+
+    /// [`Real::as_f32_slice`], to write in place.
+    fn as_f32_slice_mut(_values: &mut [Self]) -> Option<&mut [f32]> {
+        None
+    }
 }
 impl Real for f32 {
     fn as_f32_slice(values: &[f32]) -> Option<&[f32]> {
+        Some(values)
+    }
+
+    fn as_f32_slice_mut(values: &mut [f32]) -> Option<&mut [f32]> {
         Some(values)
     }
 }

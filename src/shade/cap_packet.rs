@@ -302,7 +302,7 @@ mod lanes {
         let ratio = _mm256_min_ps(_mm256_mul_ps(_mm256_set1_ps(sphere[3]), inverse), one);
         let ratio = _mm256_and_ps(keep, ratio);
         let alpha = asin(ratio);
-        let depth = depth_at(packet.cap_depths, alpha);
+        let depth = crate::shade::fitted_depth::depth_at_lanes(packet.cap_depths, alpha);
         let weight = if packet.ratio_attenuation { ratio } else { one };
         let scale =
             _mm256_and_ps(keep, _mm256_mul_ps(_mm256_mul_ps(_mm256_set1_ps(std::f32::consts::TAU), weight), depth));
@@ -401,23 +401,6 @@ mod lanes {
         let r = _mm256_fmadd_ps(_mm256_mul_ps(poly, z), s, s);
         let upper_value = _mm256_fnmadd_ps(_mm256_set1_ps(2.0), r, _mm256_set1_ps(std::f32::consts::FRAC_PI_2));
         _mm256_blendv_ps(r, upper_value, upper)
-    }
-
-    /// [`crate::shade::fitted_depth::depth_at`] in each lane.
-    #[target_feature(enable = "avx2,fma")]
-    #[inline]
-    unsafe fn depth_at(depths: &[f32], angle: __m256) -> __m256 {
-        let intervals = crate::shade::fitted_depth::DEPTH_INTERVALS as f32;
-        let unit = _mm256_min_ps(
-            _mm256_max_ps(_mm256_mul_ps(angle, _mm256_set1_ps(std::f32::consts::FRAC_2_PI)), _mm256_setzero_ps()),
-            _mm256_set1_ps(1.0),
-        );
-        let x = _mm256_mul_ps(unit, _mm256_set1_ps(intervals));
-        let k = _mm256_min_epi32(_mm256_cvttps_epi32(x), _mm256_set1_epi32(intervals as i32 - 1));
-        let t = _mm256_sub_ps(x, _mm256_cvtepi32_ps(k));
-        let below = _mm256_i32gather_ps::<4>(depths.as_ptr(), k);
-        let above = _mm256_i32gather_ps::<4>(depths.as_ptr(), _mm256_add_epi32(k, _mm256_set1_epi32(1)));
-        _mm256_fmadd_ps(t, _mm256_sub_ps(above, below), below)
     }
 
     #[target_feature(enable = "avx2,fma")]

@@ -4,7 +4,9 @@
 
 use super::blocker_tree::BlockerTree;
 use super::cap_packet::{CapPacket, Receiver, LANES};
-use super::fitted_depth::{banded_slice_of_tangents, depth_at, fitted_depths, DepthKey, DEPTH_INTERVALS};
+use super::fitted_depth::{
+    banded_slice_of_tangents, banded_slices_of_tangents, depth_at, fitted_depths, DepthKey, DEPTH_INTERVALS,
+};
 use super::frame::PixelWork;
 use super::glossy::{
     albedo_lookup, albedo_table, cone_share, cone_weights, ggx_alpha, MapLevels, Prefiltered, SharpLobe,
@@ -566,26 +568,23 @@ impl<T: Real> ShadingKernel<T> {
             let mut horizons = [0.0f64; MAX_DIRECTIONS];
             pyramid.horizon_tangents(p, &mut horizons[..directions]);
             let mut slices = [T::zero(); MAX_DIRECTIONS * crate::sh::MAX_ORDER];
+            let zeros = [0.0f64; MAX_DIRECTIONS];
             if let Some(occlusion) = occlusion.as_deref_mut() {
-                for (k, horizon) in horizons[..directions].iter().enumerate() {
-                    let slice = &mut slices[k * order..(k + 1) * order];
-                    banded_slice_of_tangents(order, self.log_epsilon, &self.band_depths, 0.0, *horizon, slice);
-                }
+                self.banded_slices(&zeros[..directions], &horizons[..directions], &mut slices);
                 turn.accumulate(&slices[..directions * order], occlusion);
             }
-            for (k, horizon) in horizons[..directions].iter().enumerate() {
-                // The band from the horizontal (or the tangent plane, where higher) up to
-                // the horizon takes its fitted depth; below it stays at log(eps).
-                let (mut base, mut sigma) = (0.0f64, *horizon);
-                if fold_tangent {
+            // The band from the horizontal (or the tangent plane, where higher) up to each
+            // horizon takes its fitted depth; below it stays at log(eps).
+            let mut bases = [0.0f64; MAX_DIRECTIONS];
+            if fold_tangent {
+                for (k, (base, sigma)) in bases.iter_mut().zip(&mut horizons[..directions]).enumerate() {
                     let (sin, cos) = self.azimuths[k];
                     let tangent_plane = -(n[0] * cos + n[1] * sin) / n[2];
-                    sigma = sigma.max(tangent_plane);
-                    base = base.max(tangent_plane);
+                    *sigma = sigma.max(tangent_plane);
+                    *base = base.max(tangent_plane);
                 }
-                let slice = &mut slices[k * order..(k + 1) * order];
-                banded_slice_of_tangents(order, self.log_epsilon, &self.band_depths, base, sigma, slice);
             }
+            self.banded_slices(&bases[..directions], &horizons[..directions], &mut slices);
             turn.accumulate(&slices[..directions * order], acc);
         }
         let Some(tree) = occluders.blockers else {
@@ -614,6 +613,22 @@ impl<T: Real> ShadingKernel<T> {
                 }
             }
         });
+    }
+
+    /// The height field's slices with bands from `bases[k]` up to `sigmas[k]` (tangents of
+    /// elevations) into `out[k * order..]`: [`banded_slices_of_tangents`] in f32 lanes for
+    /// the f32 kernel, slice by slice for the f64 oracle.
+    fn banded_slices(&self, bases: &[f64], sigmas: &[f64], out: &mut [T]) {
+        let order = self.order;
+        let (log_epsilon, bands) = (self.log_epsilon, &self.band_depths);
+        if let (Some(bands32), Some(out32)) = (T::as_f32_slice(bands), T::as_f32_slice_mut(out)) {
+            let log_epsilon = log_epsilon.to_f32().unwrap_or(0.0);
+            banded_slices_of_tangents(order, log_epsilon, bands32, bases, sigmas, out32);
+            return;
+        }
+        for (k, (base, sigma)) in bases.iter().zip(sigmas).enumerate() {
+            banded_slice_of_tangents(order, log_epsilon, bands, *base, *sigma, &mut out[k * order..(k + 1) * order]);
+        }
     }
 
     /// `exp*(visibility + lobe) . light` per colour channel, clamped at 0 (ringing of a
