@@ -698,23 +698,22 @@ mod lanes {
         // as the scalar march. Azimuths are marched eight at a time in order of their step
         // counts, so that each group marches about as far as its lanes need.
         let w = out.len();
-        let mut steps_of = [0u16; MAX_AZIMUTHS];
-        let mut order = [0u16; MAX_AZIMUTHS];
+        // Each azimuth as (steps << 16) | azimuth, sorted as plain integers.
+        let mut order = [0u32; MAX_AZIMUTHS];
         for (k, dir) in pyramid.directions[..w].iter().enumerate() {
             let t_far = pyramid.far_distance(x, y, *dir);
             let within = pyramid.steps.partition_point(|s| s.distance <= t_far);
-            steps_of[k] = (within + 1).min(pyramid.steps.len()) as u16;
-            order[k] = k as u16;
+            order[k] = ((within + 1).min(pyramid.steps.len()) as u32) << 16 | k as u32;
         }
-        order[..w].sort_unstable_by_key(|&k| steps_of[k as usize]);
+        order[..w].sort_unstable();
         for group in order[..w].chunks(8) {
             let mut dx = [0.0f32; 8];
             let mut dy = [0.0f32; 8];
             let mut taken = [0i32; 8];
-            for (lane, &k) in group.iter().enumerate() {
-                let dir = pyramid.directions[k as usize];
+            for (lane, &key) in group.iter().enumerate() {
+                let dir = pyramid.directions[(key & 0xffff) as usize];
                 (dx[lane], dy[lane]) = (dir[0] as f32, dir[1] as f32);
-                taken[lane] = i32::from(steps_of[k as usize]);
+                taken[lane] = (key >> 16) as i32;
             }
             let last_step = taken.iter().copied().max().unwrap_or(0) as usize;
             let (dx, dy) = (_mm256_loadu_ps(dx.as_ptr()), _mm256_loadu_ps(dy.as_ptr()));
@@ -738,8 +737,8 @@ mod lanes {
             }
             let mut tangents = [0.0f32; 8];
             _mm256_storeu_ps(tangents.as_mut_ptr(), max_tan);
-            for (&k, t) in group.iter().zip(tangents) {
-                out[k as usize] = f64::from(t).max(0.0);
+            for (&key, t) in group.iter().zip(tangents) {
+                out[(key & 0xffff) as usize] = f64::from(t).max(0.0);
             }
         }
     }

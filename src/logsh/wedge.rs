@@ -32,6 +32,7 @@ pub struct WedgeOperator {
 #[derive(Clone, Debug)]
 pub struct WedgeTurn<T> {
     count: usize,
+    directions: usize,
     columns: Vec<T>,
 }
 
@@ -39,9 +40,17 @@ impl<T: Real> WedgeTurn<T> {
     /// Adds the log-SH visibility of the turn to `acc` from the NLP slices
     /// `slices[k * order..(k + 1) * order]` at azimuths `phi_k = k * dphi`.
     pub fn accumulate(&self, slices: &[T], acc: &mut [T]) {
+        self.accumulate_from(0, slices, acc);
+    }
+
+    /// [`Self::accumulate`] for the slices of a run of azimuths from `first` on: the turn is
+    /// linear in its slices, so the runs of a full turn add up to it.
+    pub fn accumulate_from(&self, first: usize, slices: &[T], acc: &mut [T]) {
         let count = self.count;
         let acc = &mut acc[..count];
-        for (column, &s) in self.columns.chunks_exact(count).zip(slices) {
+        let order = self.columns.len() / count / self.directions;
+        let columns = &self.columns[first * order * count..];
+        for (column, &s) in columns.chunks_exact(count).zip(slices) {
             for (a, c) in acc.iter_mut().zip(column) {
                 *a = *a + *c * s;
             }
@@ -82,7 +91,11 @@ impl WedgeOperator {
 
     /// The full turn in `T` ([`WedgeTurn`]).
     pub fn turn<T: Real>(&self) -> WedgeTurn<T> {
-        WedgeTurn { count: coefficient_count(self.order), columns: self.turn.iter().map(|&v| T::of(v)).collect() }
+        WedgeTurn {
+            count: coefficient_count(self.order),
+            directions: self.directions,
+            columns: self.turn.iter().map(|&v| T::of(v)).collect(),
+        }
     }
 
     /// Width of one wedge in radians.

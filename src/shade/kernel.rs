@@ -567,25 +567,30 @@ impl<T: Real> ShadingKernel<T> {
             // (`banded_slice_of_tangents`).
             let mut horizons = [0.0f64; MAX_DIRECTIONS];
             pyramid.horizon_tangents(p, &mut horizons[..directions]);
-            let mut slices = [T::zero(); MAX_DIRECTIONS * crate::sh::MAX_ORDER];
-            let zeros = [0.0f64; MAX_DIRECTIONS];
+            // Eight azimuths at a time: their slices, then their part of the turn.
+            const RUN: usize = 8;
+            let mut slices = [T::zero(); RUN * crate::sh::MAX_ORDER];
             if let Some(occlusion) = occlusion.as_deref_mut() {
-                self.banded_slices(&zeros[..directions], &horizons[..directions], &mut slices);
-                turn.accumulate(&slices[..directions * order], occlusion);
+                for (run, sigmas) in horizons[..directions].chunks(RUN).enumerate() {
+                    self.banded_slices(&[0.0; RUN][..sigmas.len()], sigmas, &mut slices);
+                    turn.accumulate_from(run * RUN, &slices[..sigmas.len() * order], occlusion);
+                }
             }
             // The band from the horizontal (or the tangent plane, where higher) up to each
             // horizon takes its fitted depth; below it stays at log(eps).
-            let mut bases = [0.0f64; MAX_DIRECTIONS];
-            if fold_tangent {
-                for (k, (base, sigma)) in bases.iter_mut().zip(&mut horizons[..directions]).enumerate() {
-                    let (sin, cos) = self.azimuths[k];
-                    let tangent_plane = -(n[0] * cos + n[1] * sin) / n[2];
-                    *sigma = sigma.max(tangent_plane);
-                    *base = base.max(tangent_plane);
+            for (run, sigmas) in horizons[..directions].chunks_mut(RUN).enumerate() {
+                let mut bases = [0.0f64; RUN];
+                if fold_tangent {
+                    for (k, (base, sigma)) in bases.iter_mut().zip(sigmas.iter_mut()).enumerate() {
+                        let (sin, cos) = self.azimuths[run * RUN + k];
+                        let tangent_plane = -(n[0] * cos + n[1] * sin) / n[2];
+                        *sigma = sigma.max(tangent_plane);
+                        *base = base.max(tangent_plane);
+                    }
                 }
+                self.banded_slices(&bases[..sigmas.len()], sigmas, &mut slices);
+                turn.accumulate_from(run * RUN, &slices[..sigmas.len() * order], acc);
             }
-            self.banded_slices(&bases[..directions], &horizons[..directions], &mut slices);
-            turn.accumulate(&slices[..directions * order], acc);
         }
         let Some(tree) = occluders.blockers else {
             return;
