@@ -353,7 +353,7 @@ fn frame_params(plan: &FramePlan, program: &ShadeProgram) -> ShadeParams {
     let settings = &plan.settings;
     ShadeParams {
         point_count: 0,
-        node_count: plan.blockers.nodes.len() as u32,
+        node_count: plan.blockers.f32_nodes().len() as u32,
         log_epsilon: settings.epsilon.ln() as f32,
         hyb_threshold: settings.hyb_threshold as f32,
         heightfield_rect: rect,

@@ -672,12 +672,15 @@ mod lanes {
     const SIXTH: f32 = 1.0 / 6.0;
     const TWO_THIRDS: f32 = 2.0 / 3.0;
 
-    /// Whether a pyramid of `levels` can be marched here: AVX2 and FMA, and every padded
-    /// level's samples addressable by a 32-bit index.
+    /// Whether a pyramid of `levels` can be marched here: AVX2 and FMA, every padded
+    /// level's samples addressable by a 32-bit index, and every grid coordinate exact in
+    /// f32 (so that a coordinate clamped to the last sample truncates to it).
     pub fn available(levels: &[PyramidLevel]) -> bool {
         is_x86_feature_detected!("avx2")
             && is_x86_feature_detected!("fma")
-            && levels.iter().all(|l| (l.columns + 3) * (l.rows + 3) < i32::MAX as usize)
+            && levels.iter().all(|l| {
+                (l.columns + 3) * (l.rows + 3) < i32::MAX as usize && l.columns <= 1 << 24 && l.rows <= 1 << 24
+            })
     }
 
     /// Writes the tangents of the horizon elevations of every azimuth (at least 0) into

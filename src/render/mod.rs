@@ -110,10 +110,12 @@ pub fn is_complete(outputs: &[PathBuf; 2]) -> bool {
 /// Renders `options.frames` in order, reporting to `progress`; never stops early.
 ///
 /// Reading, shading and writing overlap: a reader thread reads the frame after the one
-/// being shaded, and a writer thread writes the one before it (EXR and PNG), each at most
-/// one frame ahead or behind, so a sequence takes about the longest of the three stages
+/// being shaded, and a writer thread writes the one before it (EXR and PNG). The stages
+/// hand frames over without a queue, so each is one frame ahead or behind and at most
+/// three frames are in memory, and a sequence takes about the longest of the three stages
 /// per frame rather than their sum. Frames are still reported in order, as their outputs
-/// are complete; a frame's time runs from its read to its write.
+/// are complete; a frame's time is the sum of its reading, shading and writing, each timed
+/// on its own thread.
 pub fn render_sequence(
     executor: &Executor,
     scene: &Scene,
@@ -124,8 +126,8 @@ pub fn render_sequence(
     progress.start(total);
     let mut outcomes = Vec::with_capacity(total);
     std::thread::scope(|threads| {
-        let (read_tx, read_rx) = std::sync::mpsc::sync_channel::<Job<Read>>(1);
-        let (write_tx, write_rx) = std::sync::mpsc::sync_channel::<Job<Shaded>>(1);
+        let (read_tx, read_rx) = std::sync::mpsc::sync_channel::<Job<Read>>(0);
+        let (write_tx, write_rx) = std::sync::mpsc::sync_channel::<Job<Shaded>>(0);
         let (done_tx, done_rx) = std::sync::mpsc::channel::<(usize, FrameOutcome)>();
         threads.spawn(move || {
             for (index, &frame) in options.frames.iter().enumerate() {
@@ -136,7 +138,8 @@ pub fn render_sequence(
                 } else {
                     Read::Frame(guarded(|| Ok(Box::new(scene.frame(frame)?))))
                 };
-                if read_tx.send(Job { index, frame, outputs, started, work }).is_err() {
+                let seconds = started.elapsed().as_secs_f64();
+                if read_tx.send(Job { index, frame, outputs, seconds, work }).is_err() {
                     break;
                 }
             }
@@ -147,9 +150,10 @@ pub fn render_sequence(
                     Shaded::Skipped => FrameStatus::Skipped { outputs: job.outputs.to_vec() },
                     Shaded::Failed(error) => FrameStatus::Failed { error },
                     Shaded::Passes(shaded) => {
+                        let started = Instant::now();
                         match guarded(|| write_frame(scene, job.frame, options, &job.outputs, &shaded)) {
                             Ok(()) => FrameStatus::Rendered {
-                                seconds: job.started.elapsed().as_secs_f64(),
+                                seconds: job.seconds + started.elapsed().as_secs_f64(),
                                 outputs: job.outputs.to_vec(),
                             },
                             Err(e) => FrameStatus::Failed { error: format!("{e:#}") },
@@ -166,11 +170,12 @@ pub fn render_sequence(
             outcomes.push(outcome);
         };
         for job in read_rx {
+            progress.frame_started(job.frame, job.index);
+            let started = Instant::now();
             let work = match job.work {
                 Read::Skipped => Shaded::Skipped,
                 Read::Frame(Err(e)) => Shaded::Failed(format!("{e:#}")),
                 Read::Frame(Ok(data)) => {
-                    progress.frame_started(job.frame, job.index);
                     let shaded = guarded(|| shade_frame(executor, scene, &data, options));
                     for notice in executor.take_notices() {
                         progress.notice(&notice.0);
@@ -181,8 +186,9 @@ pub fn render_sequence(
                     }
                 }
             };
-            let Job { index, frame, outputs, started, .. } = job;
-            if write_tx.send(Job { index, frame, outputs, started, work }).is_err() {
+            let Job { index, frame, outputs, seconds, .. } = job;
+            let seconds = seconds + started.elapsed().as_secs_f64();
+            if write_tx.send(Job { index, frame, outputs, seconds, work }).is_err() {
                 break;
             }
             while let Ok(done) = done_rx.try_recv() {
@@ -203,7 +209,8 @@ struct Job<W> {
     index: usize,
     frame: i64,
     outputs: [PathBuf; 2],
-    started: Instant,
+    /// The time its stages so far took.
+    seconds: f64,
     work: W,
 }
 

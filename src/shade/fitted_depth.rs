@@ -397,9 +397,17 @@ mod slice_lanes {
         let one = _mm256_set1_ps(1.0);
         let sine = |t: __m256| _mm256_div_ps(t, _mm256_sqrt_ps(_mm256_fmadd_ps(t, t, one)));
         let banded = _mm256_cmp_ps::<_CMP_GT_OQ>(sigma, base);
-        // The band's width, tan(sigma - base), where there is a band.
-        let tangent = _mm256_div_ps(_mm256_sub_ps(sigma, base), _mm256_fmadd_ps(sigma, base, one));
-        let width = atan(_mm256_and_ps(banded, tangent));
+        // The band's width from tan(sigma - base) where there is a band; a band wider than
+        // pi/2 (a negative base below a steep horizon) takes the widest depth, as the
+        // table's clamp gives it on the scalar path.
+        let below_product = _mm256_fmadd_ps(sigma, base, one);
+        let tangent = _mm256_div_ps(_mm256_sub_ps(sigma, base), below_product);
+        let narrow = _mm256_cmp_ps::<_CMP_GT_OQ>(below_product, _mm256_setzero_ps());
+        let width = _mm256_blendv_ps(
+            _mm256_set1_ps(std::f32::consts::FRAC_PI_2),
+            atan(_mm256_and_ps(_mm256_and_ps(banded, narrow), tangent)),
+            narrow,
+        );
         let depth = depth_at_lanes(bands, width);
         let (below, above) = (legendre(sine(base), order), legendre(sine(sigma), order));
         let log_epsilon = _mm256_set1_ps(log_epsilon);
@@ -500,6 +508,8 @@ mod tests {
             (0.01, 0.011),
             (0.0, 57.0),
             (0.3, 0.3),
+            (-3.0, 2.0),
+            (-0.5, 5.0),
         ];
         let (bases, sigmas): (Vec<f64>, Vec<f64>) = pairs.iter().copied().unzip();
         let mut worst = 0.0f64;

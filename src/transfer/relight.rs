@@ -294,7 +294,8 @@ pub fn relight(frame: &TransferFrame, light: &RelightLight) -> ShadedPasses {
                 // SAFETY: the processor has AVX2 and FMA.
                 return unsafe { relight_chunk_avx2(frame, light, chunk * CHUNK, out) };
             }
-            relight_chunk::<PortableDots>(frame, light, chunk * CHUNK, out);
+            // SAFETY: the portable dots need no processor feature.
+            unsafe { relight_chunk::<PortableDots>(frame, light, chunk * CHUNK, out) };
         });
     passes
 }
@@ -317,7 +318,11 @@ struct RelitChunk<'a> {
 /// How a pixel's transfer vectors are dotted with the light.
 trait Dots {
     /// `transfer . L` per channel, clamped at 0.
-    fn dot(light: &RelightLight, transfer: &[f32]) -> [f32; 3];
+    ///
+    /// # Safety
+    /// The processor has the features the implementation uses (AVX2 and FMA for
+    /// `Avx2Dots`).
+    unsafe fn dot(light: &RelightLight, transfer: &[f32]) -> [f32; 3];
 }
 
 /// [`RelightLight::dot`]: eight partial sums in portable lanes.
@@ -325,7 +330,7 @@ struct PortableDots;
 
 impl Dots for PortableDots {
     #[inline(always)]
-    fn dot(light: &RelightLight, transfer: &[f32]) -> [f32; 3] {
+    unsafe fn dot(light: &RelightLight, transfer: &[f32]) -> [f32; 3] {
         light.dot(transfer)
     }
 }
@@ -340,10 +345,10 @@ impl Dots for Avx2Dots {
     /// Written with the intrinsics directly (no function of its own with the features),
     /// so that it is inlined into [`relight_chunk_avx2`], which has them.
     #[inline(always)]
-    fn dot(light: &RelightLight, transfer: &[f32]) -> [f32; 3] {
+    unsafe fn dot(light: &RelightLight, transfer: &[f32]) -> [f32; 3] {
         use std::arch::x86_64::*;
-        // SAFETY: only `relight_chunk_avx2` uses these, on a processor with AVX2 and FMA;
-        // every load reads DOT_LANES floats of a block or of `tail`.
+        // SAFETY: the caller's processor has AVX2 and FMA (the trait's contract); every
+        // load reads DOT_LANES floats of a block or of `tail`.
         unsafe {
             let mut acc = [_mm256_setzero_ps(); 3];
             let whole = transfer.len() / DOT_LANES;
@@ -379,14 +384,20 @@ impl Dots for Avx2Dots {
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 unsafe fn relight_chunk_avx2(frame: &TransferFrame, light: &RelightLight, first: usize, out: RelitChunk) {
-    relight_chunk::<Avx2Dots>(frame, light, first, out)
+    // SAFETY: this function's features are what `Avx2Dots` needs.
+    unsafe { relight_chunk::<Avx2Dots>(frame, light, first, out) }
 }
 
+/// The pixels of one chunk, from pixel `first` on.
+///
+/// # Safety
+/// The processor has what `D` needs ([`Dots::dot`]).
 #[inline(always)]
-fn relight_chunk<D: Dots>(frame: &TransferFrame, light: &RelightLight, first: usize, out: RelitChunk) {
+unsafe fn relight_chunk<D: Dots>(frame: &TransferFrame, light: &RelightLight, first: usize, out: RelitChunk) {
     for j in 0..out.beauty.len() {
         let i = first + j;
-        let p = relit_pixel::<D>(frame, light, i);
+        // SAFETY: the caller holds `D`'s contract.
+        let p = unsafe { relit_pixel::<D>(frame, light, i) };
         let (d, s, e) = (p.diffuse, p.specular, p.environment);
         out.beauty[j] = [d[0] + s[0] + e[0], d[1] + s[1] + e[1], d[2] + s[2] + e[2], frame.alpha[i]];
         (out.diffuse[j], out.specular[j], out.environment[j]) = (d, s, e);
@@ -396,8 +407,11 @@ fn relight_chunk<D: Dots>(frame: &TransferFrame, light: &RelightLight, first: us
 
 /// Pixel `i` of `frame` under `light`. Written without closures, so that all of it is
 /// inlined into [`relight_chunk_avx2`] and compiled for AVX2 there.
+///
+/// # Safety
+/// The processor has what `D` needs ([`Dots::dot`]).
 #[inline(always)]
-fn relit_pixel<D: Dots>(frame: &TransferFrame, light: &RelightLight, i: usize) -> Relit {
+unsafe fn relit_pixel<D: Dots>(frame: &TransferFrame, light: &RelightLight, i: usize) -> Relit {
     let (count, order) = (frame.count(), frame.order());
     let at = i * count..(i + 1) * count;
     let (albedo, colour) = (frame.albedo[i], frame.specular_colour[i]);
