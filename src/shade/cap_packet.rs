@@ -284,13 +284,19 @@ mod lanes {
         let zero = _mm256_setzero_ps();
         let one = _mm256_set1_ps(1.0);
         let d = [0, 1, 2].map(|k| _mm256_sub_ps(_mm256_set1_ps(sphere[k]), lanes.p[k]));
-        let distance = _mm256_sqrt_ps(dot(d, d));
+        let squared = dot(d, d);
         let finite = _mm256_and_ps(
-            _mm256_cmp_ps::<_CMP_GT_OQ>(distance, zero),
-            _mm256_cmp_ps::<_CMP_LT_OQ>(distance, _mm256_set1_ps(f32::INFINITY)),
+            _mm256_cmp_ps::<_CMP_GT_OQ>(squared, zero),
+            _mm256_cmp_ps::<_CMP_LT_OQ>(squared, _mm256_set1_ps(f32::INFINITY)),
         );
         let facing = _mm256_cmp_ps::<_CMP_GT_OQ>(dot(d, lanes.n), zero);
-        let inverse = _mm256_div_ps(one, distance);
+        // 1 / |d|: the processor's estimate and one Newton step (to about 2^-22).
+        let estimate = _mm256_rsqrt_ps(squared);
+        let half_squared = _mm256_mul_ps(_mm256_set1_ps(0.5), squared);
+        let inverse = _mm256_mul_ps(
+            estimate,
+            _mm256_fnmadd_ps(half_squared, _mm256_mul_ps(estimate, estimate), _mm256_set1_ps(1.5)),
+        );
         let direction = d.map(|c| _mm256_mul_ps(c, inverse));
         let keep = _mm256_and_ps(_mm256_and_ps(seen, finite), facing);
         // Lanes that add nothing evaluate the basis at +Z, so no NaN reaches the sums.
