@@ -201,8 +201,8 @@ impl Selection {
             visibility: Vec::with_capacity(count),
             visibility_heightfield: Vec::with_capacity(count),
             visibility_blockers: Vec::with_capacity(count),
-            position: g.position.clone(),
-            normal: g.normal.clone(),
+            position: g.position.as_slice().into(),
+            normal: g.normal.as_slice().into(),
         };
         for i in 0..count {
             match self.source[i] {

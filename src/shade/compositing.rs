@@ -31,9 +31,10 @@ pub struct ShadedPasses {
     pub visibility: Vec<f32>,
     pub visibility_heightfield: Vec<f32>,
     pub visibility_blockers: Vec<f32>,
-    /// World position and normal of the G-buffer, passed through unchanged.
-    pub position: Vec<[f32; 3]>,
-    pub normal: Vec<[f32; 3]>,
+    /// World position and normal of the G-buffer, passed through unchanged (shared, so
+    /// that a relight passes a frame's through without copying them).
+    pub position: std::sync::Arc<[[f32; 3]]>,
+    pub normal: std::sync::Arc<[[f32; 3]]>,
 }
 
 /// One pixel of [`ShadedPasses`], as either executor produces it.
@@ -85,7 +86,7 @@ pub fn assemble(frame: &Frame, pixels: &[Pixel]) -> ShadedPasses {
         visibility: scalar(|q| q.visibility),
         visibility_heightfield: scalar(|q| q.visibility_heightfield),
         visibility_blockers: scalar(|q| q.visibility_blockers),
-        position: g.position.clone(),
-        normal: g.normal.clone(),
+        position: g.position.as_slice().into(),
+        normal: g.normal.as_slice().into(),
     }
 }

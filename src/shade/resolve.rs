@@ -149,8 +149,8 @@ impl Resolve {
             visibility: self.filter_scalar(&passes.visibility),
             visibility_heightfield: self.filter_scalar(&passes.visibility_heightfield),
             visibility_blockers: self.filter_scalar(&passes.visibility_blockers),
-            position: self.nearest(&passes.position),
-            normal: self.nearest(&passes.normal),
+            position: self.nearest(&passes.position).into(),
+            normal: self.nearest(&passes.normal).into(),
         }
     }
 }

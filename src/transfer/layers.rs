@@ -150,9 +150,10 @@ pub struct TransferFrame {
     pub glossy_weight: Vec<[f32; 2]>,
     /// 1 where a surface was shaded, 0 on the background (the beauty's alpha).
     pub alpha: Vec<f32>,
-    /// The G-buffer's world position and normal (`P`, `N`), passed through.
-    pub position: Vec<[f32; 3]>,
-    pub normal: Vec<[f32; 3]>,
+    /// The G-buffer's world position and normal (`P`, `N`), passed through (shared with
+    /// the passes relit from it).
+    pub position: std::sync::Arc<[[f32; 3]]>,
+    pub normal: std::sync::Arc<[[f32; 3]]>,
 }
 
 /// What one pixel's transfer is, beyond a surface point's: how it reads the light
@@ -196,8 +197,8 @@ impl TransferFrame {
             glossy_direction: Vec::new(),
             glossy_weight: Vec::new(),
             alpha: Vec::new(),
-            position: Vec::new(),
-            normal: Vec::new(),
+            position: std::sync::Arc::from([]),
+            normal: std::sync::Arc::from([]),
         }
     }
 
@@ -483,8 +484,8 @@ impl TransferFrame {
             glossy_direction,
             glossy_weight,
             alpha,
-            position,
-            normal,
+            position: position.into(),
+            normal: normal.into(),
         })
     }
 }

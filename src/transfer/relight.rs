@@ -12,6 +12,7 @@ use crate::shade::kernel::{glossy_map, occlusion_ratio, open_lit, visibility_rat
 use crate::shade::LightWindow;
 use clap::ValueEnum;
 use rayon::prelude::*;
+use std::mem::MaybeUninit;
 use std::path::{Path, PathBuf};
 
 /// How the light of a relight differs from the one the frame was rendered with.
@@ -261,29 +262,20 @@ pub fn relight(frame: &TransferFrame, light: &RelightLight) -> ShadedPasses {
     /// Pixels per parallel task.
     const CHUNK: usize = 1024;
     let n = frame.width * frame.height;
-    let mut passes = ShadedPasses {
-        width: frame.width,
-        height: frame.height,
-        beauty: vec![[0.0; 4]; n],
-        diffuse: vec![[0.0; 3]; n],
-        specular: vec![[0.0; 3]; n],
-        environment: vec![[0.0; 3]; n],
-        visibility: vec![0.0; n],
-        visibility_heightfield: vec![0.0; n],
-        visibility_blockers: vec![0.0; n],
-        position: frame.position.clone(),
-        normal: frame.normal.clone(),
-    };
-    // Every pass is written in place: the frame's outputs are tens of MB at 960x540, and
-    // gathering them per pixel first doubled the memory traffic.
+    let (mut beauty, mut diffuse, mut specular, mut environment) =
+        (unwritten(n), unwritten(n), unwritten(n), unwritten(n));
+    let (mut visibility, mut heightfield, mut blockers) = (unwritten(n), unwritten(n), unwritten(n));
+    // Every pass is written in place, once (the frame's outputs are tens of MB at 960x540:
+    // gathering them per pixel first doubled the memory traffic, and zeroing them first
+    // cost a tenth of a relight).
     (
-        passes.beauty.par_chunks_mut(CHUNK),
-        passes.diffuse.par_chunks_mut(CHUNK),
-        passes.specular.par_chunks_mut(CHUNK),
-        passes.environment.par_chunks_mut(CHUNK),
-        passes.visibility.par_chunks_mut(CHUNK),
-        passes.visibility_heightfield.par_chunks_mut(CHUNK),
-        passes.visibility_blockers.par_chunks_mut(CHUNK),
+        beauty.par_chunks_mut(CHUNK),
+        diffuse.par_chunks_mut(CHUNK),
+        specular.par_chunks_mut(CHUNK),
+        environment.par_chunks_mut(CHUNK),
+        visibility.par_chunks_mut(CHUNK),
+        heightfield.par_chunks_mut(CHUNK),
+        blockers.par_chunks_mut(CHUNK),
     )
         .into_par_iter()
         .enumerate()
@@ -297,22 +289,56 @@ pub fn relight(frame: &TransferFrame, light: &RelightLight) -> ShadedPasses {
             // SAFETY: the portable dots need no processor feature.
             unsafe { relight_chunk::<PortableDots>(frame, light, chunk * CHUNK, out) };
         });
-    passes
+    // SAFETY: the chunks cover every pixel, and `relight_chunk` writes every element of
+    // its chunk of each pass.
+    unsafe {
+        ShadedPasses {
+            width: frame.width,
+            height: frame.height,
+            beauty: written(beauty),
+            diffuse: written(diffuse),
+            specular: written(specular),
+            environment: written(environment),
+            visibility: written(visibility),
+            visibility_heightfield: written(heightfield),
+            visibility_blockers: written(blockers),
+            position: frame.position.clone(),
+            normal: frame.normal.clone(),
+        }
+    }
+}
+
+/// `n` elements to be written once each before [`written`] hands them out.
+fn unwritten<T>(n: usize) -> Vec<std::mem::MaybeUninit<T>> {
+    let mut v = Vec::with_capacity(n);
+    v.resize_with(n, std::mem::MaybeUninit::uninit);
+    v
+}
+
+/// The elements of `v`, every one written.
+///
+/// # Safety
+/// Every element of `v` has been written.
+unsafe fn written<T>(v: Vec<std::mem::MaybeUninit<T>>) -> Vec<T> {
+    let mut v = std::mem::ManuallyDrop::new(v);
+    // SAFETY: `MaybeUninit<T>` has `T`'s layout, and the caller vouches that every element
+    // is initialised; the allocation passes to the new vector unchanged.
+    unsafe { Vec::from_raw_parts(v.as_mut_ptr().cast::<T>(), v.len(), v.capacity()) }
 }
 
 #[cfg(target_arch = "x86_64")]
 static HAS_AVX2_FMA: std::sync::LazyLock<bool> =
     std::sync::LazyLock::new(|| is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma"));
 
-/// One chunk of every pass, from pixel `first` on.
+/// One chunk of every pass, from pixel `first` on, each element to be written once.
 struct RelitChunk<'a> {
-    beauty: &'a mut [[f32; 4]],
-    diffuse: &'a mut [[f32; 3]],
-    specular: &'a mut [[f32; 3]],
-    environment: &'a mut [[f32; 3]],
-    visibility: &'a mut [f32],
-    heightfield: &'a mut [f32],
-    blockers: &'a mut [f32],
+    beauty: &'a mut [MaybeUninit<[f32; 4]>],
+    diffuse: &'a mut [MaybeUninit<[f32; 3]>],
+    specular: &'a mut [MaybeUninit<[f32; 3]>],
+    environment: &'a mut [MaybeUninit<[f32; 3]>],
+    visibility: &'a mut [MaybeUninit<f32>],
+    heightfield: &'a mut [MaybeUninit<f32>],
+    blockers: &'a mut [MaybeUninit<f32>],
 }
 
 /// How a pixel's transfer vectors are dotted with the light.
@@ -399,9 +425,14 @@ unsafe fn relight_chunk<D: Dots>(frame: &TransferFrame, light: &RelightLight, fi
         // SAFETY: the caller holds `D`'s contract.
         let p = unsafe { relit_pixel::<D>(frame, light, i) };
         let (d, s, e) = (p.diffuse, p.specular, p.environment);
-        out.beauty[j] = [d[0] + s[0] + e[0], d[1] + s[1] + e[1], d[2] + s[2] + e[2], frame.alpha[i]];
-        (out.diffuse[j], out.specular[j], out.environment[j]) = (d, s, e);
-        [out.visibility[j], out.heightfield[j], out.blockers[j]] = p.visibility;
+        out.beauty[j].write([d[0] + s[0] + e[0], d[1] + s[1] + e[1], d[2] + s[2] + e[2], frame.alpha[i]]);
+        out.diffuse[j].write(d);
+        out.specular[j].write(s);
+        out.environment[j].write(e);
+        let [visibility, heightfield, blockers] = p.visibility;
+        out.visibility[j].write(visibility);
+        out.heightfield[j].write(heightfield);
+        out.blockers[j].write(blockers);
     }
 }
 

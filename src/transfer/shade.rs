@@ -112,7 +112,7 @@ fn walk<T: Real>(kernel: &ShadingKernel<T>, occluders: Occluders, plan: &FramePl
         pixels.extend(row);
         transfer.append(row_transfer);
     }
-    transfer.position = g.position.clone();
-    transfer.normal = g.normal.clone();
-    (assemble(frame, &pixels), transfer)
+    let passes = assemble(frame, &pixels);
+    (transfer.position, transfer.normal) = (passes.position.clone(), passes.normal.clone());
+    (passes, transfer)
 }
