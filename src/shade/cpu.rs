@@ -116,14 +116,7 @@ fn shade_pixels<P: PixelResult, T: Real>(kernel: &ShadingKernel<T>, occluders: O
     let mut pixels = vec![P::fixed([0.0; 4]); g.width * g.height];
     pixels.par_chunks_mut(g.width).enumerate().for_each(|(y, row)| {
         let work: Vec<PixelWork> = (0..g.width).map(|x| pixel_work(&plan.scene.materials, plan.frame, x, y)).collect();
-        let points: Vec<SurfacePoint> = work
-            .iter()
-            .filter_map(|w| match w {
-                PixelWork::Shade { point, .. } => Some(*point),
-                PixelWork::Fixed(_) => None,
-            })
-            .collect();
-        let caps = kernel.sum_caps(occluders.blockers, &points);
+        let caps = kernel.sum_caps_of_work(occluders.blockers, &work);
         let mut shaded = 0;
         for (out, work) in row.iter_mut().zip(work) {
             *out = match work {

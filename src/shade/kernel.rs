@@ -499,6 +499,19 @@ impl<T: Real> ShadingKernel<T> {
         self.add_visibility_parts(occluders, p, n, object, Caps::Walk, acc, None);
     }
 
+    /// [`Self::sum_caps`] of the points to shade among `work` (a row's pixels), in their
+    /// order: the `k`-th [`PixelWork::Shade`] takes [`CapSums::of`]`(k)`.
+    pub fn sum_caps_of_work(&self, blockers: Option<&BlockerTree>, work: &[PixelWork]) -> CapSums {
+        let points: Vec<SurfacePoint> = work
+            .iter()
+            .filter_map(|w| match w {
+                PixelWork::Shade { point, .. } => Some(*point),
+                PixelWork::Fixed(_) => None,
+            })
+            .collect();
+        self.sum_caps(blockers, &points)
+    }
+
     /// The sphere caps of each of `points` ([`Self::add_visibility`]'s blocker term), summed
     /// [`LANES`] points at a time with one walk of the tree per packet ([`CapPacket`]);
     /// empty (every point walks for itself) for the f64 kernel, without blockers, or where

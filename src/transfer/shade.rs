@@ -69,14 +69,7 @@ fn walk<T: Real>(kernel: &ShadingKernel<T>, occluders: Occluders, plan: &FramePl
             let sources: Vec<PixelSource> =
                 (0..g.width).map(|x| pixel_source(&plan.scene.materials, frame, x, y)).collect();
             let work: Vec<PixelWork> = sources.iter().map(|source| work_of(frame, *source)).collect();
-            let points: Vec<_> = work
-                .iter()
-                .filter_map(|w| match w {
-                    PixelWork::Shade { point, .. } => Some(*point),
-                    PixelWork::Fixed(_) => None,
-                })
-                .collect();
-            let caps = kernel.sum_caps(occluders.blockers, &points);
+            let caps = kernel.sum_caps_of_work(occluders.blockers, &work);
             let mut shaded = 0;
             for (work, source) in work.into_iter().zip(sources) {
                 let (pixel, pixel_transfer) = match (work, source) {
