@@ -168,6 +168,7 @@ impl Gpu {
         let PlannedKernel::F32(kernel) = plan.kernel.as_ref() else {
             return Err(GpuError::double_precision());
         };
+        kernel.prepare_glossy(&scene.materials, frame);
         let march = plan.terrain.as_ref().map(|t| MarchShape::of(&t.pyramid, &settings.horizon));
         let program = ShadeProgram::new(kernel, Features { contents: plan.contents, specialisation, passes }, march);
         plan.timings.add_wall("tables", started);

@@ -39,7 +39,6 @@
 use super::sun::{disk_pattern, DISK_DIRECTIONS};
 use crate::scene::camera::dot;
 use crate::scene::light::{BilinearTaps, EnvironmentMap};
-use rayon::prelude::*;
 use std::f64::consts::{FRAC_PI_2, PI};
 use std::sync::{Arc, OnceLock};
 
@@ -407,38 +406,27 @@ impl Prefiltered {
         BilinearTaps::new(self.width, self.height, direction).read(|column, row| self.texel(column, row))
     }
 
-    /// Computes the texels that bilinear reads along `directions` blend, and, where a
+    /// Computes the texels that a bilinear read along `direction` blends, and, where the
     /// read falls within a thousandth of a texel of the next one, that one too (an
     /// executor whose rounding differs may pick it).
-    pub fn prepare(&self, directions: impl ParallelIterator<Item = [f64; 3]>) {
+    pub fn prepare(&self, direction: [f64; 3]) {
         const MARGIN: f32 = 1e-3;
         if self.texels.is_empty() {
             return;
         }
-        directions.for_each(|d| {
-            let taps = BilinearTaps::new(self.width, self.height, d);
-            let [c0, c1] = taps.columns;
-            let [r0, r1] = taps.rows;
-            let mut columns = vec![c0, c1];
-            if taps.tx < MARGIN {
-                columns.push((c0 + self.width - 1) % self.width);
+        let taps = BilinearTaps::new(self.width, self.height, direction);
+        let [c0, c1] = taps.columns;
+        let [r0, r1] = taps.rows;
+        let column_before = (taps.tx < MARGIN).then(|| (c0 + self.width - 1) % self.width);
+        let column_after = (taps.tx > 1.0 - MARGIN).then(|| (c1 + 1) % self.width);
+        let row_before = (taps.ty < MARGIN && r0 > 0).then(|| r0 - 1);
+        let row_after = (taps.ty > 1.0 - MARGIN && r1 + 1 < self.height).then(|| r1 + 1);
+        let columns = [Some(c0), Some(c1), column_before, column_after].into_iter().flatten();
+        for column in columns {
+            for row in [Some(r0), Some(r1), row_before, row_after].into_iter().flatten() {
+                self.texel(column, row);
             }
-            if taps.tx > 1.0 - MARGIN {
-                columns.push((c1 + 1) % self.width);
-            }
-            let mut rows = vec![r0, r1];
-            if taps.ty < MARGIN && r0 > 0 {
-                rows.push(r0 - 1);
-            }
-            if taps.ty > 1.0 - MARGIN && r1 + 1 < self.height {
-                rows.push(r1 + 1);
-            }
-            for &row in &rows {
-                for &column in &columns {
-                    self.texel(column, row);
-                }
-            }
-        });
+        }
     }
 
     /// Every texel computed so far, row by row, zero where none was: what a GPU program

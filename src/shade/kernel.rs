@@ -7,7 +7,7 @@ use super::cap_packet::{CapPacket, Receiver, LANES};
 use super::fitted_depth::{
     banded_slice_of_tangents, banded_slices_of_tangents, depth_at, fitted_depths, DepthKey, DEPTH_INTERVALS,
 };
-use super::frame::PixelWork;
+use super::frame::{pixel_source, PixelSource, PixelWork};
 use super::glossy::{
     albedo_lookup, albedo_table, cone_share, cone_weights, ggx_alpha, MapLevels, Prefiltered, SharpLobe,
 };
@@ -178,8 +178,6 @@ impl<T: Real> LobeTable<T> {
 /// The BRDF lobes of one material.
 #[derive(Clone, Debug)]
 pub(crate) struct MaterialLobes<T> {
-    /// The material's index in the scene's table.
-    pub(crate) index: u32,
     pub(crate) material: Material,
     /// Phong lobe (Eq. 27) for `phong` materials: the glossy term itself with
     /// `--glossy sh`, else the lobe of the specular occlusion.
@@ -395,7 +393,7 @@ impl<T: Real> ShadingKernel<T> {
                     }
                     _ => (None, None),
                 };
-                (index, MaterialLobes { index, material: material.clone(), phong, sharp })
+                (index, MaterialLobes { material: material.clone(), phong, sharp })
             })
             .collect();
         let (cap_depths, band_depths) = if settings.fitted_depths {
@@ -458,23 +456,23 @@ impl<T: Real> ShadingKernel<T> {
         self.order
     }
 
-    /// Computes the prefiltered texels the glossy pixels of `frame` read (each once, in
-    /// parallel; [`Prefiltered::prepare`]), so that shading finds them ready and a GPU
-    /// program can upload them.
+    /// Computes the prefiltered texels the glossy pixels of `frame` read, in one parallel
+    /// walk of its pixels ([`Prefiltered::prepare`]), for an executor that uploads them
+    /// (the GPU program); the CPU path computes each texel the first time it reads it.
     pub fn prepare_glossy(&self, materials: &BTreeMap<u32, Material>, frame: &crate::scene::Frame) {
-        for lobes in self.materials.values() {
-            let Some(sharp) = &lobes.sharp else { continue };
-            let g = &frame.gbuffer;
-            let directions = (0..g.width * g.height).into_par_iter().filter_map(|i| {
-                match super::frame::pixel_work(materials, frame, i % g.width, i / g.width) {
-                    PixelWork::Shade { point, .. } if point.material == lobes.index => {
-                        Some(reflect_view(point.view_origin, point.position, point.normal))
-                    }
-                    _ => None,
-                }
-            });
-            sharp.prefiltered.prepare(directions);
+        if !self.has_prefiltered_glossy() {
+            return;
         }
+        let g = &frame.gbuffer;
+        (0..g.width * g.height).into_par_iter().for_each(|i| {
+            let PixelSource::Surface { point, .. } = pixel_source(materials, frame, i % g.width, i / g.width) else {
+                return;
+            };
+            let Some(sharp) = self.materials.get(&point.material).and_then(|lobes| lobes.sharp.as_ref()) else {
+                return;
+            };
+            sharp.prefiltered.prepare(reflect_view(point.view_origin, point.position, point.normal));
+        });
     }
 
     /// Whether a material's glossy term reads a prefiltered environment.

@@ -5,8 +5,10 @@
 //! chosen precision.
 //!
 //! What stays per executor is only what runs on it: the CPU filters the pyramid with
-//! rayon and shades rows ([`super::cpu`]); the GPU filters the same plan with the same
-//! taps and composes its program from the same kernel tables (`src/gpu/`).
+//! rayon and shades rows ([`super::cpu`]), computing each prefiltered texel the first
+//! time a pixel reads it; the GPU filters the same plan with the same taps, computes the
+//! texels its pixels will read ([`ShadingKernel::prepare_glossy`]) and composes its
+//! program from the same kernel tables (`src/gpu/`).
 
 use super::blocker_tree::BlockerTree;
 use super::frame::{check_frame, height_field, ShadeError};
@@ -98,10 +100,6 @@ impl<'a> FramePlan<'a> {
             suns: false,
         };
         let lighting = lighting(settings, scene, frame, contents.heightfield);
-        match lighting.kernel.as_ref() {
-            PlannedKernel::F32(kernel) => kernel.prepare_glossy(&scene.materials, frame),
-            PlannedKernel::F64(kernel) => kernel.prepare_glossy(&scene.materials, frame),
-        }
         let (kernel, suns, extracted_shares) =
             (lighting.kernel.clone(), lighting.suns.clone(), lighting.extracted_shares.clone());
         let contents = FrameContents {
