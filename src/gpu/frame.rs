@@ -363,7 +363,8 @@ fn frame_params(plan: &FramePlan, program: &ShadeProgram) -> ShadeParams {
             | (if contents.phong { FEATURE_PHONG } else { 0 }),
         order: settings.order as u32,
         coefficient_count: (settings.order * settings.order) as u32,
-        nodes: program.nodes as u32,
+        quad_rows: program.quadrature.rows as u32,
+        quad_azimuths: program.quadrature.azimuths as u32,
         cluster_ratio: settings.cluster_ratio as f32,
         ..Default::default()
     }

@@ -69,14 +69,15 @@ gpu_struct! {
         /// What the frame contains, [`FEATURE_HEIGHTFIELD`] | [`FEATURE_BLOCKERS`] |
         /// [`FEATURE_PHONG`]: read only by the generic (unspecialised) program.
         feature_bits: u32,
-        /// SH order, coefficient count and quadrature node count: read only by the generic
-        /// program, whose loop bounds are not constants.
+        /// SH order, coefficient count, and the quadrature's rows and azimuths per row
+        /// ([`crate::sh::SeparableQuadrature`]): read only by the generic program, whose
+        /// loop bounds are not constants.
         order: u32,
         coefficient_count: u32,
-        nodes: u32,
+        quad_rows: u32,
         /// [`crate::shade::ShadingSettings::cluster_ratio`].
         cluster_ratio: f32,
-        pad0: u32,
+        quad_azimuths: u32,
         pad1: u32,
         pad2: u32,
     }
@@ -285,9 +286,9 @@ mod tests {
             feature_bits,
             order,
             coefficient_count,
-            nodes,
+            quad_rows,
             cluster_ratio,
-            pad0,
+            quad_azimuths,
             pad1,
             pad2
         ));

@@ -16,7 +16,7 @@ use crate::logsh::cap_scale;
 use crate::scene::Material;
 use crate::sh::basis::{coefficient_count, double_factorial_odd, funk_hecke_factor, nlp_scale, real_normalisation};
 use crate::sh::exp::{ol_node_count, HYB_MAX_SQUARINGS, OL_COARSE_STEP, OL_FINE_NODES, ONE_DC, SERIES_MAX_TERMS, Y0};
-use crate::sh::ExpMethod;
+use crate::sh::{ExpMethod, SeparableQuadrature};
 use crate::shade::glossy::{Prefiltered, SharpLobe, ALBEDO_ENTRIES};
 use crate::shade::kernel::{sh_space_max_magnitude, LUMINANCE, SH_SPACE_BLEND};
 use crate::shade::sun::{disk_pattern, patch_radius, DISK_DIRECTIONS};
@@ -150,13 +150,12 @@ pub struct ShadeProgram {
     /// Material slots, and the slot of each material index the scene declares.
     pub materials: Vec<GpuMaterial>,
     pub slots: BTreeMap<u32, u32>,
-    /// Quadrature nodes of the exponentiation.
-    pub nodes: usize,
+    /// The exponentiation's quadrature grid.
+    pub quadrature: QuadratureGrid,
     order: usize,
     exp: ExpMethod,
     march: Option<MarchShape>,
     tensor_entries: usize,
-    overlap_floor: bool,
     /// Suns and point lamps: each a disk per pixel.
     suns: usize,
 }
@@ -173,9 +172,8 @@ impl ShadeProgram {
             tables: tables.builder.data,
             materials: tables.materials,
             slots: tables.slots,
-            nodes: tables.nodes,
+            quadrature: tables.quadrature,
             order: kernel.order,
-            overlap_floor: kernel.overlap_floor,
             exp: kernel.exp.method,
             march,
             tensor_entries: kernel.exp.tensor.as_ref().map_or(0, |t| t.entry_count()),
@@ -189,7 +187,14 @@ struct ProgramTables {
     builder: TableBuilder,
     materials: Vec<GpuMaterial>,
     slots: BTreeMap<u32, u32>,
-    nodes: usize,
+    quadrature: QuadratureGrid,
+}
+
+/// The shape of the exponentiation's quadrature grid ([`SeparableQuadrature`]).
+#[derive(Clone, Copy, Debug)]
+pub struct QuadratureGrid {
+    pub rows: usize,
+    pub azimuths: usize,
 }
 
 impl ProgramTables {
@@ -241,12 +246,12 @@ impl ProgramTables {
         );
 
         // The light, channel-major, and the exponentiation's tables (src/sh/exp.rs).
-        let nodes = push_exponentiation(kernel, &mut t);
+        let quadrature = push_exponentiation(kernel, &mut t);
         push_wedge(kernel, march, &mut t);
         if t.data.is_empty() {
             t.data.push(0.0);
         }
-        Self { builder: t, materials, slots, nodes }
+        Self { builder: t, materials, slots, quadrature }
     }
 }
 
@@ -337,30 +342,18 @@ const LOBE_SH: u32 = 2;
 /// Values before a lobe's cone weights: shape, width, core 1 - cos, patch, cone share.
 const LOBE_HEAD: usize = 5;
 
-/// The light and the tables of the kernel's exponentiation; returns the quadrature's node
-/// count.
-fn push_exponentiation(kernel: &ShadingKernel<f32>, t: &mut TableBuilder) -> usize {
-    let count = coefficient_count(kernel.order);
+/// The light and the tables of the kernel's exponentiation; returns the shape of the
+/// quadrature grid, which the program sums in separable form ([`SeparableQuadrature`]).
+fn push_exponentiation(kernel: &ShadingKernel<f32>, t: &mut TableBuilder) -> QuadratureGrid {
     let light = &kernel.light;
     t.push("T_LIGHT", light.iter().flat_map(|channel| channel.iter().copied()));
     let quadrature = kernel.exp.exact.as_ref().expect("every exponentiator carries its quadrature");
-    t.push("T_QUAD_WEIGHTS", quadrature.weights().iter().map(|&w| w as f32));
-    // Rows padded with zeros to a multiple of 4 (the shader reads them as vec4).
-    let padded = count.div_ceil(4) * 4;
-    t.push(
-        "T_QUAD_BASIS",
-        quadrature
-            .basis()
-            .chunks(count)
-            .flat_map(|y| y.iter().map(|&v| v as f32).chain(std::iter::repeat_n(0.0, padded - count))),
-    );
-    // L(node) = sum_i L_i y_i(node), per channel.
-    t.push(
-        "T_NODE_LIGHT",
-        quadrature.basis().chunks(count).flat_map(|y| {
-            (0..3).map(move |c| y.iter().zip(&light[c]).map(|(a, &b)| a * f64::from(b)).sum::<f64>() as f32)
-        }),
-    );
+    let light_f64 = light.clone().map(|channel| channel.iter().map(|&v| f64::from(v)).collect());
+    let separable = SeparableQuadrature::new(quadrature, &light_f64);
+    t.push("T_QUAD_ROWS", separable.row_factors.iter().copied());
+    t.push("T_QUAD_AZIMUTHS", separable.azimuth_cos_sin.iter().flatten().copied());
+    t.push("T_NODE_LIGHT", separable.node_light.iter().flatten().copied());
+    let grid = QuadratureGrid { rows: separable.rows, azimuths: separable.azimuths };
     let ol = kernel.exp.ol.as_ref();
     t.push("T_OL_A", ol.map(|table| table.a.iter().map(|&a| a as f32).collect::<Vec<_>>()).unwrap_or_default());
     t.push("T_OL_B", ol.map(|table| table.b.iter().map(|&b| b as f32).collect::<Vec<_>>()).unwrap_or_default());
@@ -381,7 +374,7 @@ fn push_exponentiation(kernel: &ShadingKernel<f32>, t: &mut TableBuilder) -> usi
     };
     t.push("T_TENSOR_ROWS", rows);
     t.push("T_TENSOR_ENTRIES", entries);
-    quadrature.weights().len()
+    grid
 }
 
 /// The height field's wedge operator, z-rotation phases and azimuths
@@ -439,7 +432,7 @@ impl Constant {
 
 /// The constants every module reads: the order and loop bounds, the march's shape, the
 /// switches, and the exponentiation's limits (each from the module that defines it).
-fn prelude(kernel: &ShadingKernel<f32>, features: Features, march: Option<MarchShape>, nodes: usize) -> String {
+fn prelude(kernel: &ShadingKernel<f32>, features: Features, march: Option<MarchShape>, grid: QuadratureGrid) -> String {
     use Constant::*;
     let order = kernel.order;
     let march = march.unwrap_or_default();
@@ -452,7 +445,8 @@ fn prelude(kernel: &ShadingKernel<f32>, features: Features, march: Option<MarchS
         ("COUNT", U32(coefficient_count(order))),
         // Coefficient arrays hold a multiple of 4 entries (the padding stays 0).
         ("COUNT_CAP", U32(coefficient_count(order_cap).div_ceil(4) * 4)),
-        ("NODES", U32(nodes)),
+        ("QUAD_ROWS", U32(grid.rows)),
+        ("QUAD_AZIMUTHS", U32(grid.azimuths)),
         ("DIRECTIONS", U32(march.directions.max(1))),
         ("LEVELS", U32(march.levels.max(1))),
         ("STEPS", U32(march.steps)),
@@ -504,7 +498,7 @@ fn compose_source(
     tables: &ProgramTables,
 ) -> String {
     let exp = kernel.exp.method;
-    let mut source = wgsl_declarations() + &prelude(kernel, features, march, tables.nodes);
+    let mut source = wgsl_declarations() + &prelude(kernel, features, march, tables.quadrature);
     for (name, offset) in &tables.builder.offsets {
         source += &Constant::U32(*offset).declare(name);
     }
@@ -544,9 +538,10 @@ impl ShadeProgram {
         let c = n * n;
         let eval_basis = n + n * (n + 1) / 2;
         let add_rotated = eval_basis + n + c;
-        // With the overlap floor, a second dot product per node for the visibility.
-        let dots = if self.overlap_floor { 2 } else { 1 };
-        let quad = self.nodes as u64 * (dots * c.div_ceil(4) + 1);
+        // Per row, C and S of f (and of the visibility, with the overlap floor, in the
+        // same loops); per node, Clenshaw's recurrence over m.
+        let QuadratureGrid { rows, azimuths } = self.quadrature;
+        let quad = rows as u64 * (n + n * (n + 1) / 2 + azimuths as u64 * n);
         let product = c + self.tensor_entries as u64;
         // SH-space methods blend into the quadrature near their range's end (both run).
         let exp = match self.exp {
@@ -618,7 +613,8 @@ fn runtime_bounds(source: &str) -> String {
         out.push_str(match word.as_str() {
             "ORDER" => "params.order",
             "COUNT" => "params.coefficient_count",
-            "NODES" => "params.nodes",
+            "QUAD_ROWS" => "params.quad_rows",
+            "QUAD_AZIMUTHS" => "params.quad_azimuths",
             other => other,
         });
         word.clear();
@@ -720,8 +716,8 @@ mod tests {
     #[test]
     fn generic_bounds_replace_whole_words_only() {
         assert_eq!(
-            runtime_bounds("for (i < COUNT) { a[ORDER_CAP] = T_ORDER + ORDER + NODES; }"),
-            "for (i < params.coefficient_count) { a[ORDER_CAP] = T_ORDER + params.order + params.nodes; }"
+            runtime_bounds("for (i < COUNT) { a[ORDER_CAP] = T_ORDER + ORDER + QUAD_ROWS; }"),
+            "for (i < params.coefficient_count) { a[ORDER_CAP] = T_ORDER + params.order + params.quad_rows; }"
         );
     }
 

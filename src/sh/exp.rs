@@ -63,6 +63,8 @@ pub const MAX_LOG_VALUE: f64 = 8.0;
 #[derive(Clone, Debug)]
 pub struct ExactExp {
     order: usize,
+    /// Gauss nodes in `cos theta`; the grid has twice as many azimuths, row by row.
+    rows: usize,
     weights: Vec<f64>,
     basis: Vec<f64>, // node-major, order^2 values per node
 }
@@ -92,11 +94,17 @@ impl ExactExp {
         for (node, d) in quadrature.directions.iter().enumerate() {
             eval_basis(order, *d, &mut basis[node * count..(node + 1) * count]);
         }
-        Self { order, weights: quadrature.weights, basis }
+        Self { order, rows: nz, weights: quadrature.weights, basis }
     }
 
     pub fn order(&self) -> usize {
         self.order
+    }
+
+    /// Gauss nodes in `cos theta` ([`SphereQuadrature::gauss`]): the nodes are these rows
+    /// of `2 * rows` azimuths each, row by row.
+    pub fn rows(&self) -> usize {
+        self.rows
     }
 
     /// Quadrature weights, one per node.
