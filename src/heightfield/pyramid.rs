@@ -331,6 +331,9 @@ struct PaddedLevel {
     stride: usize,
     /// `rows + 3` padded rows; sample `(i, j)` of the level at `(j + 1) * stride + i + 1`.
     samples: Vec<f32>,
+    /// The highest sample: no B-spline read of the level (nonnegative weights summing to
+    /// 1) rises above it.
+    peak: f32,
 }
 
 impl PaddedLevel {
@@ -341,7 +344,8 @@ impl PaddedLevel {
         let samples = (0..(rows + 3) * stride)
             .map(|at| level.heights[clamp(at / stride, rows) * columns + clamp(at % stride, columns)])
             .collect();
-        Self { stride, samples }
+        let peak = level.heights.iter().copied().fold(f32::NEG_INFINITY, f32::max);
+        Self { stride, samples, peak }
     }
 }
 
@@ -663,7 +667,7 @@ impl HorizonPyramid {
 /// positions (`tests` below).
 #[cfg(target_arch = "x86_64")]
 mod lanes {
-    use super::{HorizonPyramid, PaddedLevel, PyramidLevel, MAX_LEVELS};
+    use super::{HorizonPyramid, PaddedLevel, PyramidLevel, MAX_LEVELS, MAX_STEPS};
     use std::arch::x86_64::*;
 
     /// Most azimuths a march takes (`HorizonSettings::directions`).
@@ -692,8 +696,7 @@ mod lanes {
     pub unsafe fn horizons(pyramid: &HorizonPyramid, x: f64, y: f64, above: f64, out: &mut [f64]) {
         // Per level, the receiver's grid coordinates, the base the taps are read above
         // (`f_L(x)` in f32) and the receiver read above it plus `h`, filled eight levels at
-        // a time as the steps reach them (levels never decrease along the steps), so that
-        // levels beyond every lane's last step are never read.
+        // a time up to the last level a step reads.
         let mut receiver =
             Receiver { origin: [[0.0f32; 2]; MAX_LEVELS], base: [0.0f32; MAX_LEVELS], start: [0.0f32; MAX_LEVELS] };
         let mut read = 0;
@@ -709,6 +712,17 @@ mod lanes {
             order[k] = ((within + 1).min(pyramid.steps.len()) as u32) << 16 | k as u32;
         }
         order[..w].sort_unstable();
+        // Every level the longest march reads, then the highest tangent any step from j
+        // on can reach ([`step_ceilings`]): a group stops once each lane's horizon is
+        // above it, with the same tangents as the whole march.
+        let longest = order[w - 1] >> 16;
+        let last_level = pyramid.steps[..longest as usize].last().map_or(0, |s| s.level);
+        while read <= last_level {
+            receivers(pyramid, x, y, above as f32, read, &mut receiver);
+            read += 8;
+        }
+        let mut ceilings = [0.0f32; MAX_STEPS];
+        step_ceilings(pyramid, &receiver, &mut ceilings[..longest as usize]);
         for group in order[..w].chunks(8) {
             let mut dx = [0.0f32; 8];
             let mut dy = [0.0f32; 8];
@@ -723,12 +737,19 @@ mod lanes {
             let taken = _mm256_loadu_si256(taken.as_ptr().cast());
             let mut max_tan = _mm256_set1_ps(f32::NEG_INFINITY);
             for (j, step) in pyramid.steps[..last_step].iter().enumerate() {
+                let reached = _mm256_cmp_ps::<_CMP_GE_OQ>(
+                    _mm256_max_ps(max_tan, _mm256_setzero_ps()),
+                    _mm256_set1_ps(ceilings[j]),
+                );
+                let done = _mm256_or_si256(
+                    _mm256_castps_si256(reached),
+                    _mm256_cmpgt_epi32(_mm256_set1_epi32(j as i32 + 1), taken),
+                );
+                if _mm256_movemask_epi8(done) == -1 {
+                    break;
+                }
                 let (index, level) = (step.level, &pyramid.levels[step.level]);
                 let scale = pyramid.grid_scales[index];
-                while read <= index {
-                    receivers(pyramid, x, y, above as f32, read, &mut receiver);
-                    read += 8;
-                }
                 let [u0, v0] = receiver.origin[index].map(|g| _mm256_set1_ps(g));
                 let u = _mm256_fmadd_ps(_mm256_set1_ps((step.distance * scale[0]) as f32), dx, u0);
                 let v = _mm256_fmadd_ps(_mm256_set1_ps((step.distance * scale[1]) as f32), dy, v0);
@@ -743,6 +764,27 @@ mod lanes {
             for (&key, t) in group.iter().zip(tangents) {
                 out[(key & 0xffff) as usize] = f64::from(t).max(0.0);
             }
+        }
+    }
+
+    /// `ceilings[j]`: at least the tangent of any step from `j` on, in the arithmetic of
+    /// [`horizons`]. A step's tangent is its level's B-spline read above the receiver's
+    /// base, less the receiver's start, over the step's distance; the read is at most the
+    /// level's peak above the base, and the margin (1e-5 of the terms, far above f32's
+    /// rounding of a few operations) keeps the bound above the rounded tangent.
+    #[inline]
+    fn step_ceilings(pyramid: &HorizonPyramid, receiver: &Receiver, ceilings: &mut [f32]) {
+        const MARGIN: f64 = 1e-5;
+        let mut highest = f64::NEG_INFINITY;
+        for (j, ceiling) in ceilings.iter_mut().enumerate().rev() {
+            let step = &pyramid.steps[j];
+            let level = step.level;
+            let (peak, base, start) =
+                (pyramid.padded[level].peak as f64, receiver.base[level] as f64, receiver.start[level] as f64);
+            let slack = MARGIN * (peak.abs() + base.abs() + start.abs());
+            let tangent = (peak - base - start + slack) * step.inv_distance;
+            highest = highest.max(tangent + MARGIN * tangent.abs());
+            *ceiling = highest as f32;
         }
     }
 
