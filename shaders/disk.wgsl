@@ -153,6 +153,7 @@ fn horizon_along(p: vec3<f32>, dir: vec2<f32>, reach: f32) -> f32 {
     for (var level = 0u; level < LEVELS; level++) {
         receiver[level] = sample_level(level, p.x, p.y);
     }
-    return horizon(p.x, p.y, above, dir, reach, &receiver);
+    var ceilings = step_ceilings(above, &receiver);
+    return horizon(p.x, p.y, above, dir, reach, &receiver, &ceilings);
 }
 //#endif

@@ -129,9 +129,29 @@ fn bspline_max(omega: ptr<function, array<f32, STEP_ARRAY>>, m: u32) -> f32 {
     return best;
 }
 
+// The highest tangent any step from s on can reach (pyramid.rs, step_ceilings): a read
+// of a level never rises above the height field's peak, and the margin (1e-5 of the
+// terms) stays above f32's rounding. A march stops once its horizon is above it, with the
+// horizon the whole march gives.
+fn step_ceilings(above: f32, receiver: ptr<function, array<f32, LEVELS>>) -> array<f32, STEP_ARRAY> {
+    var ceilings: array<f32, STEP_ARRAY>;
+    var highest = -3.0e38;
+    let peak = params.heightfield_peak;
+    for (var k = 0u; k < STEPS; k++) {
+        let s = STEPS - 1u - k;
+        let step = steps[s];
+        let start = (*receiver)[step.level] + above;
+        let slack = 1e-5 * (abs(peak) + abs(start));
+        let tangent = (peak - start + slack) * step.inv_distance;
+        highest = max(highest, tangent + 1e-5 * abs(tangent));
+        ceilings[s] = highest;
+    }
+    return ceilings;
+}
+
 // Horizon elevation along azimuth k from (x, y), `above` the level-0 surface, with the
 // receiver terms f_L(x) of SN08 Eq. 2 per level (pyramid.rs, horizon_elevations).
-fn horizon(x: f32, y: f32, above: f32, dir: vec2<f32>, reach: f32, receiver: ptr<function, array<f32, LEVELS>>) -> f32 {
+fn horizon(x: f32, y: f32, above: f32, dir: vec2<f32>, reach: f32, receiver: ptr<function, array<f32, LEVELS>>, ceilings: ptr<function, array<f32, STEP_ARRAY>>) -> f32 {
     let t_far = far_distance(x, y, dir);
     var max_tan = -3.0e38;
     var omega: array<f32, STEP_ARRAY>;
@@ -139,6 +159,9 @@ fn horizon(x: f32, y: f32, above: f32, dir: vec2<f32>, reach: f32, receiver: ptr
     for (var s = 0u; s < STEPS; s++) {
         let step = steps[s];
         if step.distance > reach {
+            break;
+        }
+        if !BSPLINE_SCALE_MAX && max(max_tan, 0.0) >= (*ceilings)[s] {
             break;
         }
         let q = sample_level(step.level, x + step.distance * dir.x, y + step.distance * dir.y);
@@ -225,12 +248,14 @@ fn add_wedge(k: u32, first: ptr<function, array<f32, ORDER_CAP>>, second: ptr<fu
 fn add_heightfield(p: vec3<f32>, n: vec3<f32>, fold_tangent: bool, log_epsilon: f32, acc: ptr<function, array<f32, COUNT_CAP>>) {
     let finite = all(abs(p) < vec3<f32>(3.0e38));
     var receiver: array<f32, LEVELS>;
+    var ceilings: array<f32, STEP_ARRAY>;
     var above = 0.0;
     if STEPS > 0u && finite {
         above = max(p.z - sample_bilinear(level_table[0], p.x, p.y), 0.0);
         for (var level = 0u; level < LEVELS; level++) {
             receiver[level] = sample_level(level, p.x, p.y);
         }
+        ceilings = step_ceilings(above, &receiver);
     }
     var first: array<f32, ORDER_CAP>;
     var previous: array<f32, ORDER_CAP>;
@@ -238,7 +263,7 @@ fn add_heightfield(p: vec3<f32>, n: vec3<f32>, fold_tangent: bool, log_epsilon: 
         let dir = vec2<f32>(tables[T_AZIMUTHS + 2u * k], tables[T_AZIMUTHS + 2u * k + 1u]);
         var sigma = 0.0;
         if STEPS > 0u && finite {
-            sigma = horizon(p.x, p.y, above, dir, 3.0e38, &receiver);
+            sigma = horizon(p.x, p.y, above, dir, 3.0e38, &receiver, &ceilings);
         }
         // The band from the horizontal (or the tangent plane, where higher) up to the
         // horizon takes its fitted depth.

@@ -78,7 +78,9 @@ gpu_struct! {
         /// [`crate::shade::ShadingSettings::cluster_ratio`].
         cluster_ratio: f32,
         quad_azimuths: u32,
-        pad1: u32,
+        /// The height field's highest sample: no level of the pyramid (tent-filtered,
+        /// nonnegative weights) and no read of one rises above it.
+        heightfield_peak: f32,
         pad2: u32,
     }
 }
@@ -289,7 +291,7 @@ mod tests {
             quad_rows,
             cluster_ratio,
             quad_azimuths,
-            pad1,
+            heightfield_peak,
             pad2
         ));
         check::<GpuPoint>(&offsets!(GpuPoint, position_slot, normal, reflected));

@@ -567,7 +567,8 @@ impl ShadeProgram {
             // A banded slice: two NLP slices (Legendre and coefficients, 2n each) and
             // their combination (n).
             let slice = 5 * n;
-            m.levels as u64 * (1 + sample) + m.directions as u64 * (1 + horizon + slice + wedge) + wedge
+            // The receiver terms per level, the step ceilings, then per azimuth.
+            m.levels as u64 * (1 + sample) + steps + m.directions as u64 * (1 + horizon + slice + wedge) + wedge
         });
         let passes = if self.features.passes { 2 * tangent + 3 * lit + n } else { 0 };
         // A disk of directions (shaders/disk.wgsl): its setup and planes, one azimuth's
@@ -575,7 +576,7 @@ impl ShadeProgram {
         let quads = (DISK_DIRECTIONS / 4) as u64;
         let march_one = self.march.map_or(0, |m| {
             let sample = if m.bspline_levels { 21 } else { 1 };
-            m.levels as u64 * (1 + sample) + m.steps as u64 * (2 + sample)
+            m.levels as u64 * (1 + sample) + m.steps as u64 * (3 + sample)
         });
         let disk = 4 * quads + march_one + 2 * spheres as u64 * (1 + quads);
         // The specular occlusion: its cone, its own height-field march, the open lobe.

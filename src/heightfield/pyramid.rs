@@ -694,18 +694,35 @@ mod lanes {
     /// The processor has AVX2 and FMA, and [`available`] holds for `pyramid`'s levels.
     #[target_feature(enable = "avx2,fma")]
     pub unsafe fn horizons(pyramid: &HorizonPyramid, x: f64, y: f64, above: f64, out: &mut [f64]) {
+        // The march's scratch arrays sized for a usual pyramid where it fits, so that a
+        // point does not clear the 12 KB the largest take.
+        if pyramid.levels.len() <= 64 && out.len() <= 64 && pyramid.steps.len() <= 128 {
+            horizons_within::<64, 64, 128>(pyramid, x, y, above, out)
+        } else {
+            horizons_within::<MAX_LEVELS, MAX_AZIMUTHS, MAX_STEPS>(pyramid, x, y, above, out)
+        }
+    }
+
+    /// [`horizons`] for at most `LEVELS` levels, `AZIMUTHS` azimuths and `STEPS` steps.
+    #[target_feature(enable = "avx2,fma")]
+    unsafe fn horizons_within<const LEVELS: usize, const AZIMUTHS: usize, const STEPS: usize>(
+        pyramid: &HorizonPyramid,
+        x: f64,
+        y: f64,
+        above: f64,
+        out: &mut [f64],
+    ) {
         // Per level, the receiver's grid coordinates, the base the taps are read above
         // (`f_L(x)` in f32) and the receiver read above it plus `h`, filled eight levels at
         // a time up to the last level a step reads.
-        let mut receiver =
-            Receiver { origin: [[0.0f32; 2]; MAX_LEVELS], base: [0.0f32; MAX_LEVELS], start: [0.0f32; MAX_LEVELS] };
+        let mut receiver = Receiver { origin: [[0.0f32; 2]; LEVELS], base: [0.0f32; LEVELS], start: [0.0f32; LEVELS] };
         let mut read = 0;
         // The steps each azimuth takes: every step up to `t_far` and the first one past it,
         // as the scalar march. Azimuths are marched eight at a time in order of their step
         // counts, so that each group marches about as far as its lanes need.
         let w = out.len();
         // Each azimuth as (steps << 16) | azimuth, sorted as plain integers.
-        let mut order = [0u32; MAX_AZIMUTHS];
+        let mut order = [0u32; AZIMUTHS];
         for (k, dir) in pyramid.directions[..w].iter().enumerate() {
             let t_far = pyramid.far_distance(x, y, *dir);
             let within = pyramid.steps.partition_point(|s| s.distance <= t_far);
@@ -721,7 +738,7 @@ mod lanes {
             receivers(pyramid, x, y, above as f32, read, &mut receiver);
             read += 8;
         }
-        let mut ceilings = [0.0f32; MAX_STEPS];
+        let mut ceilings = [0.0f32; STEPS];
         step_ceilings(pyramid, &receiver, &mut ceilings[..longest as usize]);
         for group in order[..w].chunks(8) {
             let mut dx = [0.0f32; 8];
@@ -773,7 +790,7 @@ mod lanes {
     /// level's peak above the base, and the margin (1e-5 of the terms, far above f32's
     /// rounding of a few operations) keeps the bound above the rounded tangent.
     #[inline]
-    fn step_ceilings(pyramid: &HorizonPyramid, receiver: &Receiver, ceilings: &mut [f32]) {
+    fn step_ceilings<const LEVELS: usize>(pyramid: &HorizonPyramid, receiver: &Receiver<LEVELS>, ceilings: &mut [f32]) {
         const MARGIN: f64 = 1e-5;
         let mut highest = f64::NEG_INFINITY;
         for (j, ceiling) in ceilings.iter_mut().enumerate().rev() {
@@ -848,10 +865,10 @@ mod lanes {
 
     /// The receiver's terms of one level: its grid coordinates, the base the march reads
     /// the level's taps above, and its own read above that plus `h`.
-    pub struct Receiver {
-        pub origin: [[f32; 2]; MAX_LEVELS],
-        pub base: [f32; MAX_LEVELS],
-        pub start: [f32; MAX_LEVELS],
+    pub struct Receiver<const LEVELS: usize> {
+        pub origin: [[f32; 2]; LEVELS],
+        pub base: [f32; LEVELS],
+        pub start: [f32; LEVELS],
     }
 
     /// Fills `receiver` for levels `from..from + 8` (those the pyramid has), one level per
@@ -861,7 +878,14 @@ mod lanes {
     /// [`rise_lanes`]' operations in its order, so that a lane's read at the receiver
     /// itself cancels it exactly (a plane gives its own elevation).
     #[target_feature(enable = "avx2,fma")]
-    unsafe fn receivers(pyramid: &HorizonPyramid, x: f64, y: f64, above: f32, from: usize, receiver: &mut Receiver) {
+    unsafe fn receivers<const LEVELS: usize>(
+        pyramid: &HorizonPyramid,
+        x: f64,
+        y: f64,
+        above: f32,
+        from: usize,
+        receiver: &mut Receiver<LEVELS>,
+    ) {
         let count = (pyramid.levels.len() - from).min(8);
         let (mut u, mut v, mut last_u, mut last_v) = ([0.0f32; 8], [0.0f32; 8], [0.0f32; 8], [0.0f32; 8]);
         let mut strides = [0i32; 8];
