@@ -721,6 +721,9 @@ mod lanes {
         // as the scalar march. Azimuths are marched eight at a time in order of their step
         // counts, so that each group marches about as far as its lanes need.
         let w = out.len();
+        if w == 0 {
+            return;
+        }
         // Each azimuth as (steps << 16) | azimuth, sorted as plain integers.
         let mut order = [0u32; AZIMUTHS];
         for (k, dir) in pyramid.directions[..w].iter().enumerate() {
