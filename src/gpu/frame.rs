@@ -350,7 +350,6 @@ fn frame_params(plan: &FramePlan, program: &ShadeProgram) -> ShadeParams {
         let (min, max) = (t.field.min(), t.field.max());
         [min[0], min[1], max[0], max[1]].map(|v| v as f32)
     });
-    let peak = plan.terrain.as_ref().map_or(0.0, |t| t.field.heights().iter().copied().fold(f32::MIN, f32::max));
     let contents = program.features.contents;
     let settings = &plan.settings;
     ShadeParams {
@@ -359,7 +358,7 @@ fn frame_params(plan: &FramePlan, program: &ShadeProgram) -> ShadeParams {
         log_epsilon: settings.epsilon.ln() as f32,
         hyb_threshold: settings.hyb_threshold as f32,
         heightfield_rect: rect,
-        heightfield_peak: peak,
+        heightfield_peak: plan.terrain.as_ref().map_or(0.0, |t| t.field.highest() as f32),
         feature_bits: (if contents.heightfield { FEATURE_HEIGHTFIELD } else { 0 })
             | (if contents.blockers { FEATURE_BLOCKERS } else { 0 })
             | (if contents.phong { FEATURE_PHONG } else { 0 }),

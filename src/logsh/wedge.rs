@@ -31,8 +31,8 @@ pub struct WedgeOperator {
 /// Equal to the wedge-by-wedge sum up to rounding.
 #[derive(Clone, Debug)]
 pub struct WedgeTurn<T> {
+    order: usize,
     count: usize,
-    directions: usize,
     columns: Vec<T>,
 }
 
@@ -48,8 +48,7 @@ impl<T: Real> WedgeTurn<T> {
     pub fn accumulate_from(&self, first: usize, slices: &[T], acc: &mut [T]) {
         let count = self.count;
         let acc = &mut acc[..count];
-        let order = self.columns.len() / count / self.directions;
-        let columns = &self.columns[first * order * count..];
+        let columns = &self.columns[first * self.order * count..];
         for (column, &s) in columns.chunks_exact(count).zip(slices) {
             for (a, c) in acc.iter_mut().zip(column) {
                 *a = *a + *c * s;
@@ -92,8 +91,8 @@ impl WedgeOperator {
     /// The full turn in `T` ([`WedgeTurn`]).
     pub fn turn<T: Real>(&self) -> WedgeTurn<T> {
         WedgeTurn {
+            order: self.order,
             count: coefficient_count(self.order),
-            directions: self.directions,
             columns: self.turn.iter().map(|&v| T::of(v)).collect(),
         }
     }
