@@ -31,3 +31,5 @@ pub mod synth;
 pub mod timing;
 pub mod transfer;
 pub mod view;
+#[cfg(target_arch = "x86_64")]
+mod x86;

@@ -334,6 +334,8 @@ struct PaddedLevel {
     /// The highest sample: no B-spline read of the level (nonnegative weights summing to
     /// 1) rises above it.
     peak: f32,
+    /// The last grid coordinate along x and y, `columns - 1` and `rows - 1`.
+    last: [f32; 2],
 }
 
 impl PaddedLevel {
@@ -345,8 +347,19 @@ impl PaddedLevel {
             .map(|at| level.heights[clamp(at / stride, rows) * columns + clamp(at % stride, columns)])
             .collect();
         let peak = level.heights.iter().copied().fold(f32::NEG_INFINITY, f32::max);
-        Self { stride, samples, peak }
+        Self { stride, samples, peak, last: [(columns - 1) as f32, (rows - 1) as f32] }
     }
+}
+
+/// One march step in the lanes' f32 terms (`lanes`), from its [`MarchStep`].
+#[derive(Clone, Copy, Debug)]
+struct LaneStep {
+    /// The step's distance in grid units of its level along x and y.
+    reach: [f32; 2],
+    /// `1 / d_j`.
+    inv_distance: f32,
+    /// The level it reads.
+    level: usize,
 }
 
 /// One entry of the march's constant step table (SN08 Section 6 keeps `d_i`, `1/d_i`
@@ -377,6 +390,11 @@ pub struct HorizonPyramid {
     /// The levels with their edge samples replicated around them, for the lanes (empty
     /// where they do not run).
     padded: Vec<PaddedLevel>,
+    /// The step table in the lanes' terms (empty where they do not run).
+    lane_steps: Vec<LaneStep>,
+    /// `cos phi_k` and `sin phi_k` apart, zeros after the last azimuth up to a multiple of
+    /// sixteen, for the lanes (empty where they do not run).
+    lane_directions: [Vec<f64>; 2],
     steps: Vec<MarchStep>,
     /// `(cos phi_k, sin phi_k)`.
     directions: Vec<[f64; 2]>,
@@ -404,7 +422,7 @@ impl HorizonPyramid {
                 PyramidLevel { columns: size[0], rows: size[1], spacing, heights }
             })
             .collect();
-        let grid_scales = levels
+        let grid_scales: Vec<[f64; 2]> = levels
             .iter()
             .map(|l| {
                 let n = [l.columns, l.rows];
@@ -419,7 +437,36 @@ impl HorizonPyramid {
         let in_lanes = false;
         let padded = if in_lanes { levels.par_iter().map(PaddedLevel::new).collect() } else { Vec::new() };
         let (steps, directions) = (plan.steps.clone(), plan.directions.clone());
-        Self { settings, min, max, levels, grid_scales, in_lanes, padded, steps, directions }
+        let lane_steps = if in_lanes {
+            steps
+                .iter()
+                .map(|step: &MarchStep| LaneStep {
+                    reach: grid_scales[step.level].map(|scale: f64| (step.distance * scale) as f32),
+                    inv_distance: step.inv_distance as f32,
+                    level: step.level,
+                })
+                .collect()
+        } else {
+            Vec::new()
+        };
+        let lane_directions: [Vec<f64>; 2] = std::array::from_fn(|a| {
+            let mut axis: Vec<f64> = directions.iter().map(|d: &[f64; 2]| d[a]).collect();
+            axis.resize(if in_lanes { directions.len().div_ceil(16) * 16 } else { 0 }, 0.0);
+            axis
+        });
+        Self {
+            settings,
+            min,
+            max,
+            levels,
+            grid_scales,
+            in_lanes,
+            padded,
+            lane_steps,
+            lane_directions,
+            steps,
+            directions,
+        }
     }
 
     /// The settings it was built with.
@@ -668,6 +715,7 @@ impl HorizonPyramid {
 #[cfg(target_arch = "x86_64")]
 mod lanes {
     use super::{HorizonPyramid, PaddedLevel, PyramidLevel, MAX_LEVELS, MAX_STEPS};
+    use crate::x86::{with_wide_registers, WIDE_REGISTERS};
     use std::arch::x86_64::*;
 
     /// Most azimuths a march takes (`HorizonSettings::directions`).
@@ -692,24 +740,30 @@ mod lanes {
     ///
     /// # Safety
     /// The processor has AVX2 and FMA, and [`available`] holds for `pyramid`'s levels.
-    #[target_feature(enable = "avx2,fma")]
     pub unsafe fn horizons(pyramid: &HorizonPyramid, x: f64, y: f64, above: f64, out: &mut [f64]) {
         // The march's scratch arrays sized for a usual pyramid where it fits, so that a
         // point does not clear the 12 KB the largest take.
-        if pyramid.levels.len() <= 64 && out.len() <= 64 && pyramid.steps.len() <= 128 {
-            horizons_within::<64, 64, 128>(pyramid, x, y, above, out)
+        let usual = pyramid.levels.len() <= 64 && out.len() <= 64 && pyramid.steps.len() <= 128;
+        let wide = *WIDE_REGISTERS;
+        if usual {
+            horizons_within::<64, 64, 128>(pyramid, x, y, above, wide, out)
         } else {
-            horizons_within::<MAX_LEVELS, MAX_AZIMUTHS, MAX_STEPS>(pyramid, x, y, above, out)
+            horizons_within::<MAX_LEVELS, MAX_AZIMUTHS, MAX_STEPS>(pyramid, x, y, above, wide, out)
         }
     }
 
-    /// [`horizons`] for at most `LEVELS` levels, `AZIMUTHS` azimuths and `STEPS` steps.
+    /// [`horizons`] for at most `LEVELS` levels, `AZIMUTHS` azimuths and `STEPS` steps,
+    /// marched by the build with AVX-512VL's registers where `wide` (`crate::x86`).
+    ///
+    /// # Safety
+    /// As [`horizons`], and the processor has AVX-512F and AVX-512VL where `wide`.
     #[target_feature(enable = "avx2,fma")]
-    unsafe fn horizons_within<const LEVELS: usize, const AZIMUTHS: usize, const STEPS: usize>(
+    pub unsafe fn horizons_within<const LEVELS: usize, const AZIMUTHS: usize, const STEPS: usize>(
         pyramid: &HorizonPyramid,
         x: f64,
         y: f64,
         above: f64,
+        wide: bool,
         out: &mut [f64],
     ) {
         // Per level, the receiver's grid coordinates, the base the taps are read above
@@ -718,24 +772,28 @@ mod lanes {
         let mut receiver = Receiver { origin: [[0.0f32; 2]; LEVELS], base: [0.0f32; LEVELS], start: [0.0f32; LEVELS] };
         let mut read = 0;
         // The steps each azimuth takes: every step up to `t_far` and the first one past it,
-        // as the scalar march. Azimuths are marched eight at a time in order of their step
-        // counts, so that each group marches about as far as its lanes need.
+        // as the scalar march. Azimuths are marched in order of their step counts, sixteen
+        // at a time in two groups of eight lanes, so that each group marches about as far
+        // as its lanes need.
         let w = out.len();
         if w == 0 {
             return;
         }
-        // Each azimuth as (steps << 16) | azimuth, sorted as plain integers.
+        // Each azimuth as (steps << 16) | azimuth. Sixteen march together and their groups
+        // merge once eight lanes hold the marching ones, so only more than sixteen need
+        // sorting by step count (sixteen of like lengths together).
         let mut order = [0u32; AZIMUTHS];
-        for (k, dir) in pyramid.directions[..w].iter().enumerate() {
-            let t_far = pyramid.far_distance(x, y, *dir);
-            let within = pyramid.steps.partition_point(|s| s.distance <= t_far);
-            order[k] = ((within + 1).min(pyramid.steps.len()) as u32) << 16 | k as u32;
+        step_counts(pyramid, x, y, &mut order[..w]);
+        for (k, key) in order[..w].iter_mut().enumerate() {
+            *key = *key << 16 | k as u32;
         }
-        order[..w].sort_unstable();
+        if w > 16 {
+            order[..w].sort_unstable();
+        }
         // Every level the longest march reads, then the highest tangent any step from j
-        // on can reach ([`step_ceilings`]): a group stops once each lane's horizon is
-        // above it, with the same tangents as the whole march.
-        let longest = order[w - 1] >> 16;
+        // on can reach ([`step_ceilings`]): a lane stops once its horizon is above it, with
+        // the same tangent as the whole march.
+        let longest = order[..w].iter().max().map_or(0, |key| key >> 16);
         let last_level = pyramid.steps[..longest as usize].last().map_or(0, |s| s.level);
         while read <= last_level {
             receivers(pyramid, x, y, above as f32, read, &mut receiver);
@@ -743,47 +801,208 @@ mod lanes {
         }
         let mut ceilings = [0.0f32; STEPS];
         step_ceilings(pyramid, &receiver, &mut ceilings[..longest as usize]);
-        for group in order[..w].chunks(8) {
-            let mut dx = [0.0f32; 8];
-            let mut dy = [0.0f32; 8];
-            let mut taken = [0i32; 8];
-            for (lane, &key) in group.iter().enumerate() {
+        for sixteen in order[..w].chunks(16) {
+            if wide {
+                march_sixteen_wide(pyramid, &receiver, &ceilings, sixteen, out);
+            } else {
+                march_sixteen(pyramid, &receiver, &ceilings, sixteen, out);
+            }
+        }
+    }
+
+    /// The steps each azimuth takes into `taken`: every step up to `t_far` and the first
+    /// one past it, as the scalar march ([`HorizonPyramid::far_distance`]'s operations),
+    /// sixteen azimuths at a time in four registers, their steps counted in one pass.
+    #[target_feature(enable = "avx2,fma")]
+    unsafe fn step_counts(pyramid: &HorizonPyramid, x: f64, y: f64, taken: &mut [u32]) {
+        let level = &pyramid.levels[0];
+        let moving = [level.columns > 1, level.rows > 1];
+        let (point, zero) = ([x, y], _mm256_setzero_pd());
+        for (sixteen, counts) in taken.chunks_mut(16).enumerate() {
+            let t_far: [__m256d; 4] = std::array::from_fn(|quarter| {
+                let first = 16 * sixteen + 4 * quarter;
+                let mut t_far = zero;
+                for a in (0..2).filter(|&a| moving[a]) {
+                    let d = _mm256_loadu_pd(pyramid.lane_directions[a][first..][..4].as_ptr());
+                    let p = _mm256_set1_pd(point[a]);
+                    let ahead = _mm256_sub_pd(_mm256_set1_pd(pyramid.max[a]), p);
+                    let behind = _mm256_sub_pd(_mm256_set1_pd(pyramid.min[a]), p);
+                    let edge = _mm256_blendv_pd(behind, ahead, _mm256_cmp_pd::<_CMP_GT_OQ>(d, zero));
+                    let t = _mm256_blendv_pd(_mm256_div_pd(edge, d), zero, _mm256_cmp_pd::<_CMP_EQ_OQ>(d, zero));
+                    t_far = _mm256_max_pd(t_far, t);
+                }
+                t_far
+            });
+            let mut farthest = [0.0f64; 4];
+            let highest = _mm256_max_pd(_mm256_max_pd(t_far[0], t_far[1]), _mm256_max_pd(t_far[2], t_far[3]));
+            _mm256_storeu_pd(farthest.as_mut_ptr(), highest);
+            let farthest = farthest.into_iter().fold(0.0, f64::max);
+            let mut within = [_mm256_setzero_si256(); 4];
+            for step in pyramid.steps.iter().take_while(|step| step.distance <= farthest) {
+                let distance = _mm256_set1_pd(step.distance);
+                for (within, t_far) in within.iter_mut().zip(&t_far) {
+                    let inside = _mm256_cmp_pd::<_CMP_LE_OQ>(distance, *t_far);
+                    *within = _mm256_sub_epi64(*within, _mm256_castpd_si256(inside));
+                }
+            }
+            let mut lanes = [0i64; 16];
+            for (quarter, within) in within.iter().enumerate() {
+                _mm256_storeu_si256(lanes[4 * quarter..].as_mut_ptr().cast(), *within);
+            }
+            for (count, within) in counts.iter_mut().zip(lanes) {
+                *count = (within as usize + 1).min(pyramid.steps.len()) as u32;
+            }
+        }
+    }
+
+    /// Eight azimuths marched in lanes: their directions, step counts, running maximum
+    /// tangents and keys (`u32::MAX` in an unused lane).
+    #[derive(Clone, Copy)]
+    struct Group {
+        dx: __m256,
+        dy: __m256,
+        taken: __m256i,
+        max_tan: __m256,
+        keys: [u32; 8],
+    }
+
+    impl Group {
+        /// The azimuths of up to eight `keys`; unused lanes take no step.
+        #[target_feature(enable = "avx2,fma")]
+        unsafe fn new(pyramid: &HorizonPyramid, keys: &[u32]) -> Self {
+            let (mut dx, mut dy, mut taken, mut lanes) = ([0.0f32; 8], [0.0f32; 8], [0i32; 8], [u32::MAX; 8]);
+            for (lane, &key) in keys.iter().enumerate() {
                 let dir = pyramid.directions[(key & 0xffff) as usize];
                 (dx[lane], dy[lane]) = (dir[0] as f32, dir[1] as f32);
                 taken[lane] = (key >> 16) as i32;
+                lanes[lane] = key;
             }
-            let last_step = taken.iter().copied().max().unwrap_or(0) as usize;
-            let (dx, dy) = (_mm256_loadu_ps(dx.as_ptr()), _mm256_loadu_ps(dy.as_ptr()));
-            let taken = _mm256_loadu_si256(taken.as_ptr().cast());
-            let mut max_tan = _mm256_set1_ps(f32::NEG_INFINITY);
-            for (j, step) in pyramid.steps[..last_step].iter().enumerate() {
-                let reached = _mm256_cmp_ps::<_CMP_GE_OQ>(
-                    _mm256_max_ps(max_tan, _mm256_setzero_ps()),
-                    _mm256_set1_ps(ceilings[j]),
-                );
-                let done = _mm256_or_si256(
-                    _mm256_castps_si256(reached),
-                    _mm256_cmpgt_epi32(_mm256_set1_epi32(j as i32 + 1), taken),
-                );
-                if _mm256_movemask_epi8(done) == -1 {
+            Self::from_lanes(dx, dy, taken, [f32::NEG_INFINITY; 8], lanes)
+        }
+
+        #[target_feature(enable = "avx2,fma")]
+        unsafe fn from_lanes(dx: [f32; 8], dy: [f32; 8], taken: [i32; 8], max_tan: [f32; 8], keys: [u32; 8]) -> Self {
+            Self {
+                dx: _mm256_loadu_ps(dx.as_ptr()),
+                dy: _mm256_loadu_ps(dy.as_ptr()),
+                taken: _mm256_loadu_si256(taken.as_ptr().cast()),
+                max_tan: _mm256_loadu_ps(max_tan.as_ptr()),
+                keys,
+            }
+        }
+
+        /// The lanes still marching at step `j`: those whose horizon is below `ceiling` and
+        /// which take step `j`, as a mask and as a bit per lane.
+        #[inline(always)]
+        unsafe fn marching(&self, j: usize, ceiling: __m256) -> (__m256, u32) {
+            let below = _mm256_cmp_ps::<_CMP_LT_OQ>(_mm256_max_ps(self.max_tan, _mm256_setzero_ps()), ceiling);
+            let taking = _mm256_cmpgt_epi32(self.taken, _mm256_set1_epi32(j as i32));
+            let mask = _mm256_and_ps(below, _mm256_castsi256_ps(taking));
+            (mask, _mm256_movemask_ps(mask) as u32)
+        }
+
+        /// Writes each used lane's tangent (at least 0) to `out`.
+        #[target_feature(enable = "avx2,fma")]
+        unsafe fn finish(&self, out: &mut [f64]) {
+            let mut tangents = [0.0f32; 8];
+            _mm256_storeu_ps(tangents.as_mut_ptr(), self.max_tan);
+            for (&key, t) in self.keys.iter().zip(tangents) {
+                if key != u32::MAX {
+                    out[(key & 0xffff) as usize] = f64::from(t).max(0.0);
+                }
+            }
+        }
+
+        /// The lanes of `groups` still marching (`marching[g]`, at most eight in all) in one
+        /// group, after writing every lane's tangent so far to `out`.
+        #[target_feature(enable = "avx2,fma")]
+        unsafe fn merged(groups: &[Group; 2], marching: [u32; 2], out: &mut [f64]) -> Self {
+            let (mut dx, mut dy, mut taken, mut max_tan, mut keys) =
+                ([0.0f32; 8], [0.0f32; 8], [0i32; 8], [f32::NEG_INFINITY; 8], [u32::MAX; 8]);
+            let mut lane = 0;
+            for (group, bits) in groups.iter().zip(marching) {
+                group.finish(out);
+                let (mut gx, mut gy, mut gt, mut gm) = ([0.0f32; 8], [0.0f32; 8], [0i32; 8], [0.0f32; 8]);
+                _mm256_storeu_ps(gx.as_mut_ptr(), group.dx);
+                _mm256_storeu_ps(gy.as_mut_ptr(), group.dy);
+                _mm256_storeu_si256(gt.as_mut_ptr().cast(), group.taken);
+                _mm256_storeu_ps(gm.as_mut_ptr(), group.max_tan);
+                for from in (0..8).filter(|k| bits >> k & 1 == 1) {
+                    (dx[lane], dy[lane], taken[lane], max_tan[lane]) = (gx[from], gy[from], gt[from], gm[from]);
+                    keys[lane] = group.keys[from];
+                    lane += 1;
+                }
+            }
+            Self::from_lanes(dx, dy, taken, max_tan, keys)
+        }
+
+        /// Takes step `j` (`pyramid.lane_steps[j]`) in the lanes of the mask `marching`.
+        #[inline(always)]
+        unsafe fn step<const LEVELS: usize>(
+            &mut self,
+            pyramid: &HorizonPyramid,
+            receiver: &Receiver<LEVELS>,
+            j: usize,
+            marching: __m256,
+        ) {
+            let step = &pyramid.lane_steps[j];
+            let level = step.level;
+            let [u0, v0] = receiver.origin[level].map(|g| _mm256_set1_ps(g));
+            let u = _mm256_fmadd_ps(_mm256_set1_ps(step.reach[0]), self.dx, u0);
+            let v = _mm256_fmadd_ps(_mm256_set1_ps(step.reach[1]), self.dy, v0);
+            let rise = rise_lanes(&pyramid.padded[level], u, v, _mm256_set1_ps(receiver.base[level]));
+            let climb = _mm256_sub_ps(rise, _mm256_set1_ps(receiver.start[level]));
+            let tangent = _mm256_mul_ps(climb, _mm256_set1_ps(step.inv_distance));
+            self.max_tan = _mm256_blendv_ps(self.max_tan, _mm256_max_ps(self.max_tan, tangent), marching);
+        }
+    }
+
+    with_wide_registers! {
+        /// Marches up to sixteen azimuths (`keys`) in two groups of eight lanes, step by step
+        /// together; once the lanes still marching fit in eight, in one. Each lane stops after
+        /// its own last step or once its horizon is above `ceilings[j]` (later steps cannot
+        /// raise it, so its tangent is the whole march's).
+        unsafe fn march_sixteen / march_sixteen_wide<const LEVELS: usize>(
+            pyramid: &HorizonPyramid,
+            receiver: &Receiver<LEVELS>,
+            ceilings: &[f32],
+            keys: &[u32],
+            out: &mut [f64],
+        ) {
+            let (first, second) = keys.split_at(keys.len().min(8));
+            let last_step = keys.iter().max().map_or(0, |key| key >> 16) as usize;
+            let mut near = Group::new(pyramid, first);
+            let mut j = 0;
+            // Both groups, while more than eight lanes march.
+            if !second.is_empty() {
+                let mut far = Group::new(pyramid, second);
+                loop {
+                    if j == last_step {
+                        near.finish(out);
+                        far.finish(out);
+                        return;
+                    }
+                    let ceiling = _mm256_set1_ps(ceilings[j]);
+                    let (near_mask, near_bits) = near.marching(j, ceiling);
+                    let (far_mask, far_bits) = far.marching(j, ceiling);
+                    if near_bits.count_ones() + far_bits.count_ones() <= 8 {
+                        near = Group::merged(&[near, far], [near_bits, far_bits], out);
+                        break;
+                    }
+                    near.step(pyramid, receiver, j, near_mask);
+                    far.step(pyramid, receiver, j, far_mask);
+                    j += 1;
+                }
+            }
+            while j < last_step {
+                let (mask, bits) = near.marching(j, _mm256_set1_ps(ceilings[j]));
+                if bits == 0 {
                     break;
                 }
-                let (index, level) = (step.level, &pyramid.levels[step.level]);
-                let scale = pyramid.grid_scales[index];
-                let [u0, v0] = receiver.origin[index].map(|g| _mm256_set1_ps(g));
-                let u = _mm256_fmadd_ps(_mm256_set1_ps((step.distance * scale[0]) as f32), dx, u0);
-                let v = _mm256_fmadd_ps(_mm256_set1_ps((step.distance * scale[1]) as f32), dy, v0);
-                let rise = rise_lanes(level, &pyramid.padded[index], u, v, _mm256_set1_ps(receiver.base[index]));
-                let climb = _mm256_sub_ps(rise, _mm256_set1_ps(receiver.start[index]));
-                let tangent = _mm256_mul_ps(climb, _mm256_set1_ps(step.inv_distance as f32));
-                let active = _mm256_castsi256_ps(_mm256_cmpgt_epi32(taken, _mm256_set1_epi32(j as i32)));
-                max_tan = _mm256_blendv_ps(max_tan, _mm256_max_ps(max_tan, tangent), active);
+                near.step(pyramid, receiver, j, mask);
+                j += 1;
             }
-            let mut tangents = [0.0f32; 8];
-            _mm256_storeu_ps(tangents.as_mut_ptr(), max_tan);
-            for (&key, t) in group.iter().zip(tangents) {
-                out[(key & 0xffff) as usize] = f64::from(t).max(0.0);
-            }
+            near.finish(out);
         }
     }
 
@@ -795,14 +1014,17 @@ mod lanes {
     #[inline]
     fn step_ceilings<const LEVELS: usize>(pyramid: &HorizonPyramid, receiver: &Receiver<LEVELS>, ceilings: &mut [f32]) {
         const MARGIN: f64 = 1e-5;
-        let mut highest = f64::NEG_INFINITY;
-        for (j, ceiling) in ceilings.iter_mut().enumerate().rev() {
-            let step = &pyramid.steps[j];
-            let level = step.level;
+        let Some(last) = ceilings.len().checked_sub(1) else { return };
+        // Per level, the highest read above the receiver's terms, with the margin.
+        let mut rise = [0.0f64; LEVELS];
+        for (level, rise) in rise.iter_mut().enumerate().take(pyramid.steps[last].level + 1) {
             let (peak, base, start) =
                 (pyramid.padded[level].peak as f64, receiver.base[level] as f64, receiver.start[level] as f64);
-            let slack = MARGIN * (peak.abs() + base.abs() + start.abs());
-            let tangent = (peak - base - start + slack) * step.inv_distance;
+            *rise = peak - base - start + MARGIN * (peak.abs() + base.abs() + start.abs());
+        }
+        let mut highest = f64::NEG_INFINITY;
+        for (step, ceiling) in pyramid.steps.iter().zip(ceilings.iter_mut()).rev() {
+            let tangent = rise[step.level] * step.inv_distance;
             highest = highest.max(tangent + MARGIN * tangent.abs());
             *ceiling = highest as f32;
         }
@@ -813,13 +1035,10 @@ mod lanes {
     /// four contiguous samples of the padded level (edge samples replicated, as
     /// `bspline_taps` clamps them): eight 4-wide loads per row, transposed into the taps'
     /// registers, in place of four gathers.
-    #[target_feature(enable = "avx2,fma")]
-    #[inline]
-    unsafe fn rise_lanes(level: &PyramidLevel, padded: &PaddedLevel, u: __m256, v: __m256, base: __m256) -> __m256 {
-        let (columns, rows) = (level.columns as i32, level.rows as i32);
-        let clamp =
-            |g: __m256, n: i32| _mm256_min_ps(_mm256_max_ps(g, _mm256_setzero_ps()), _mm256_set1_ps((n - 1) as f32));
-        let (u, v) = (clamp(u, columns), clamp(v, rows));
+    #[inline(always)]
+    unsafe fn rise_lanes(padded: &PaddedLevel, u: __m256, v: __m256, base: __m256) -> __m256 {
+        let clamp = |g: __m256, last: f32| _mm256_min_ps(_mm256_max_ps(g, _mm256_setzero_ps()), _mm256_set1_ps(last));
+        let (u, v) = (clamp(u, padded.last[0]), clamp(v, padded.last[1]));
         let (iu, iv) = (_mm256_cvttps_epi32(u), _mm256_cvttps_epi32(v));
         let wx = weights_lanes(_mm256_sub_ps(u, _mm256_cvtepi32_ps(iu)));
         let wy = weights_lanes(_mm256_sub_ps(v, _mm256_cvtepi32_ps(iv)));
@@ -843,8 +1062,7 @@ mod lanes {
 
     /// The four samples from `row + first[k]` of each lane `k`, as four registers of
     /// eight lanes (tap `c` in register `c`): two 4x4 transposes.
-    #[target_feature(enable = "avx2,fma")]
-    #[inline]
+    #[inline(always)]
     unsafe fn row_taps(row: *const f32, first: &[i32; 8]) -> [__m256; 4] {
         let load = |k: usize| _mm_loadu_ps(row.offset(first[k] as isize));
         let pair = |k: usize| _mm256_set_m128(load(k + 4), load(k));
@@ -853,8 +1071,7 @@ mod lanes {
 
     /// Registers holding lanes `(k, k + 4)`'s four samples each, for `k = 0..4`, as four
     /// registers of sample `c` in lanes `0..8`: a 4x4 transpose in each half.
-    #[target_feature(enable = "avx2,fma")]
-    #[inline]
+    #[inline(always)]
     unsafe fn transpose(y0: __m256, y1: __m256, y2: __m256, y3: __m256) -> [__m256; 4] {
         let (t0, t1) = (_mm256_unpacklo_ps(y0, y1), _mm256_unpackhi_ps(y0, y1));
         let (t2, t3) = (_mm256_unpacklo_ps(y2, y3), _mm256_unpackhi_ps(y2, y3));
@@ -946,16 +1163,14 @@ mod lanes {
 
     /// The four samples from each lane's own address `at[k]`, as four registers of eight
     /// lanes (sample `c` in register `c`): [`row_taps`] with an address per lane.
-    #[target_feature(enable = "avx2,fma")]
-    #[inline]
+    #[inline(always)]
     unsafe fn taps_at(at: &[*const f32; 8]) -> [__m256; 4] {
         let pair = |k: usize| _mm256_set_m128(_mm_loadu_ps(at[k + 4]), _mm_loadu_ps(at[k]));
         transpose(pair(0), pair(1), pair(2), pair(3))
     }
 
     /// The uniform cubic B-spline basis at eight fractions (`super::bspline_weights`).
-    #[target_feature(enable = "avx2,fma")]
-    #[inline]
+    #[inline(always)]
     unsafe fn weights_lanes(t: __m256) -> [__m256; 4] {
         let (half, sixth) = (_mm256_set1_ps(0.5), _mm256_set1_ps(SIXTH));
         let t2 = _mm256_mul_ps(t, t);
@@ -1101,7 +1316,7 @@ mod tests {
             ),
             (&strip, vec![(1.0, 0.25, 0.0), (0.05, 0.0, 0.2), (3.0, 1.0, 0.0)]),
         ] {
-            for directions in [16, 13] {
+            for directions in [16, 13, 5, 40] {
                 let settings = HorizonSettings { directions, ..HorizonSettings::default() };
                 let pyramid = HorizonPyramid::new(field, settings).unwrap();
                 for &(x, y, lift) in &points {
@@ -1123,5 +1338,58 @@ mod tests {
         }
         assert!(worst < 1e-5, "worst horizon difference {worst} rad");
         eprintln!("worst horizon difference between the lanes and the f64 march: {worst:.1e} rad");
+    }
+
+    /// Both builds of the lanes' march (`crate::x86`), where the processor runs both, give
+    /// the same horizons bit for bit, and the scratch arrays' two sizes too.
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn both_builds_of_the_lanes_march_agree() {
+        if !(lanes::available(&[]) && *crate::x86::WIDE_REGISTERS) {
+            eprintln!("skipped: the processor lacks AVX2, FMA, AVX-512F or AVX-512VL");
+            return;
+        }
+        let (columns, rows) = (41, 33);
+        let heights: Vec<f32> = (0..columns * rows)
+            .map(|i| {
+                let (x, y) = ((i % columns) as f32, (i / columns) as f32);
+                2.0 * (0.5 * x).sin() * (0.3 * y).cos() + 0.4 * (1.3 * x + 0.7 * y).sin()
+            })
+            .collect();
+        let field = HeightField::new(heights, columns, rows, [-4.0, -3.0], [4.0, 3.0]).unwrap();
+        let mut raised = 0;
+        for directions in [16, 7, 33] {
+            let pyramid =
+                HorizonPyramid::new(&field, HorizonSettings { directions, ..HorizonSettings::default() }).unwrap();
+            for &(x, y, above) in &[(0.3, -0.2, 0.0), (3.9, 2.5, 0.05), (-3.0, 1.0, 0.4), (9.0, -7.0, 0.0)] {
+                let mut results = [[0.0f64; 40]; 4];
+                // SAFETY: AVX2, FMA, AVX-512F and AVX-512VL were checked above.
+                unsafe {
+                    lanes::horizons_within::<64, 64, 128>(&pyramid, x, y, above, false, &mut results[0][..directions]);
+                    lanes::horizons_within::<64, 64, 128>(&pyramid, x, y, above, true, &mut results[1][..directions]);
+                    lanes::horizons_within::<MAX_LEVELS, 1024, MAX_STEPS>(
+                        &pyramid,
+                        x,
+                        y,
+                        above,
+                        false,
+                        &mut results[2][..directions],
+                    );
+                    lanes::horizons_within::<MAX_LEVELS, 1024, MAX_STEPS>(
+                        &pyramid,
+                        x,
+                        y,
+                        above,
+                        true,
+                        &mut results[3][..directions],
+                    );
+                }
+                for other in &results[1..] {
+                    assert_eq!(results[0], *other, "at ({x}, {y}) with {directions} azimuths");
+                }
+                raised += results[0][..directions].iter().filter(|&&t| t > 0.0).count();
+            }
+        }
+        assert!(raised > 0, "no horizon above the plane");
     }
 }

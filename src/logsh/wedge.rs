@@ -34,7 +34,13 @@ pub struct WedgeTurn<T> {
     order: usize,
     count: usize,
     columns: Vec<T>,
+    /// For an f32 turn on x86-64: the columns again, each padded with zeros to a multiple
+    /// of eight values (`lanes`); empty elsewhere.
+    padded: Vec<f32>,
 }
+
+#[cfg(target_arch = "x86_64")]
+static HAS_AVX2: std::sync::LazyLock<bool> = std::sync::LazyLock::new(|| is_x86_feature_detected!("avx2"));
 
 impl<T: Real> WedgeTurn<T> {
     /// Adds the log-SH visibility of the turn to `acc` from the NLP slices
@@ -48,9 +54,24 @@ impl<T: Real> WedgeTurn<T> {
     pub fn accumulate_from(&self, first: usize, slices: &[T], acc: &mut [T]) {
         let count = self.count;
         let acc = &mut acc[..count];
+        #[cfg(target_arch = "x86_64")]
+        if !self.padded.is_empty() && *HAS_AVX2 {
+            if let (Some(slices), Some(acc)) = (T::as_f32_slice(slices), T::as_f32_slice_mut(acc)) {
+                // SAFETY: the processor has AVX2; `padded` holds a padded column per slice
+                // coefficient of the turn.
+                unsafe { lanes::accumulate(&self.padded, first * self.order, slices, acc) };
+                return;
+            }
+        }
+        self.accumulate_columns(first, slices, acc);
+    }
+
+    /// [`Self::accumulate_from`] column by column.
+    fn accumulate_columns(&self, first: usize, slices: &[T], acc: &mut [T]) {
+        let count = self.count;
         let columns = &self.columns[first * self.order * count..];
         for (column, &s) in columns.chunks_exact(count).zip(slices) {
-            for (a, c) in acc.iter_mut().zip(column) {
+            for (a, c) in acc[..count].iter_mut().zip(column) {
                 *a = *a + *c * s;
             }
         }
@@ -90,11 +111,20 @@ impl WedgeOperator {
 
     /// The full turn in `T` ([`WedgeTurn`]).
     pub fn turn<T: Real>(&self) -> WedgeTurn<T> {
-        WedgeTurn {
-            order: self.order,
-            count: coefficient_count(self.order),
-            columns: self.turn.iter().map(|&v| T::of(v)).collect(),
-        }
+        let count = coefficient_count(self.order);
+        let columns: Vec<T> = self.turn.iter().map(|&v| T::of(v)).collect();
+        let padded = match T::as_f32_slice(&columns) {
+            Some(values) if cfg!(target_arch = "x86_64") && count <= lanes::MAX_COUNT => {
+                let stride = count.div_ceil(8) * 8;
+                let mut padded = vec![0.0f32; values.len() / count * stride];
+                for (to, from) in padded.chunks_exact_mut(stride).zip(values.chunks_exact(count)) {
+                    to[..count].copy_from_slice(from);
+                }
+                padded
+            }
+            _ => Vec::new(),
+        };
+        WedgeTurn { order: self.order, count, columns, padded }
     }
 
     /// Width of one wedge in radians.
@@ -109,6 +139,56 @@ impl WedgeOperator {
     /// a caller that accumulates many turns keeps one [`Self::turn`].
     pub fn accumulate<T: Real>(&self, slices: &[T], acc: &mut [T]) {
         self.turn::<T>().accumulate(slices, acc);
+    }
+}
+
+/// [`WedgeTurn::accumulate_from`] in f32 AVX2 registers: the sum stays in up to eight
+/// registers over all the columns, where the plain loop stores and reloads it per column.
+/// The same products and sums in the same order, so the same result bit for bit.
+mod lanes {
+    /// Most coefficients summed (order 8).
+    pub const MAX_COUNT: usize = 64;
+
+    /// `acc += sum_c padded column (first_column + c) * slices[c]`, columns of
+    /// `acc.len()` rounded up to eight values.
+    ///
+    /// # Safety
+    /// The processor has AVX2, and `padded` holds every column read.
+    #[cfg(target_arch = "x86_64")]
+    pub unsafe fn accumulate(padded: &[f32], first_column: usize, slices: &[f32], acc: &mut [f32]) {
+        match acc.len().div_ceil(8) {
+            1 => accumulate_in::<1>(padded, first_column, slices, acc),
+            2 => accumulate_in::<2>(padded, first_column, slices, acc),
+            3 => accumulate_in::<3>(padded, first_column, slices, acc),
+            4 => accumulate_in::<4>(padded, first_column, slices, acc),
+            5 => accumulate_in::<5>(padded, first_column, slices, acc),
+            6 => accumulate_in::<6>(padded, first_column, slices, acc),
+            7 => accumulate_in::<7>(padded, first_column, slices, acc),
+            _ => accumulate_in::<8>(padded, first_column, slices, acc),
+        }
+    }
+
+    /// [`accumulate`] with `acc` in `V` registers of eight.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn accumulate_in<const V: usize>(padded: &[f32], first_column: usize, slices: &[f32], acc: &mut [f32]) {
+        use std::arch::x86_64::*;
+        let mut values = [0.0f32; MAX_COUNT];
+        values[..acc.len()].copy_from_slice(acc);
+        let mut sum: [__m256; V] = std::array::from_fn(|v| _mm256_loadu_ps(values[8 * v..].as_ptr()));
+        let stride = 8 * V;
+        let columns = &padded[first_column * stride..][..slices.len() * stride];
+        for (column, &s) in columns.chunks_exact(stride).zip(slices) {
+            let s = _mm256_set1_ps(s);
+            for (v, sum) in sum.iter_mut().enumerate() {
+                *sum = _mm256_add_ps(*sum, _mm256_mul_ps(_mm256_loadu_ps(column[8 * v..].as_ptr()), s));
+            }
+        }
+        for (v, sum) in sum.iter().enumerate() {
+            _mm256_storeu_ps(values[8 * v..].as_mut_ptr(), *sum);
+        }
+        let count = acc.len();
+        acc.copy_from_slice(&values[..count]);
     }
 }
 
@@ -134,4 +214,28 @@ fn full_turn(order: usize, directions: usize, matrix: &[f64]) -> Vec<f64> {
         }
     }
     turn
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The f32 turn in registers gives the column-by-column sum bit for bit, at every order
+    /// (counts that fill eight lanes and counts that do not) and from a run's first column.
+    #[test]
+    fn the_turn_in_registers_sums_as_the_columns_do() {
+        for order in 1..=crate::sh::MAX_ORDER {
+            let directions = 16;
+            let turn = WedgeOperator::new(order, directions).turn::<f32>();
+            let slices: Vec<f32> = (0..directions * order).map(|i| ((i * 37 % 23) as f32 - 11.0) * 0.173).collect();
+            let start: Vec<f32> = (0..order * order).map(|i| (i as f32 * 0.61).sin()).collect();
+            for (first, run) in [(0, directions), (8, 8), (3, 5)] {
+                let run_slices = &slices[first * order..(first + run) * order];
+                let (mut fast, mut plain) = (start.clone(), start.clone());
+                turn.accumulate_from(first, run_slices, &mut fast);
+                turn.accumulate_columns(first, run_slices, &mut plain);
+                assert_eq!(fast, plain, "order {order}, run of {run} from {first}");
+            }
+        }
+    }
 }

@@ -328,7 +328,13 @@ pub fn banded_slices_of_tangents(
         for ((base, sigma), out) in bases.chunks(8).zip(sigmas.chunks(8)).zip(out.chunks_mut(8 * order)) {
             // SAFETY: the processor has AVX2 and FMA; the table has its DEPTH_INTERVALS + 1
             // entries.
-            unsafe { slice_lanes::slices(order, log_epsilon, bands, base, sigma, out) };
+            unsafe {
+                if *crate::x86::WIDE_REGISTERS {
+                    slice_lanes::slices_wide(order, log_epsilon, bands, base, sigma, out)
+                } else {
+                    slice_lanes::slices(order, log_epsilon, bands, base, sigma, out)
+                }
+            };
         }
         return;
     }
@@ -343,8 +349,7 @@ pub fn banded_slices_of_tangents(
 /// # Safety
 /// The processor has AVX2 and FMA, and `depths` has `DEPTH_INTERVALS + 1` entries.
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-#[inline]
+#[inline(always)]
 pub(crate) unsafe fn depth_at_lanes(depths: &[f32], angle: std::arch::x86_64::__m256) -> std::arch::x86_64::__m256 {
     use std::arch::x86_64::*;
     let intervals = DEPTH_INTERVALS as f32;
@@ -364,6 +369,7 @@ pub(crate) unsafe fn depth_at_lanes(depths: &[f32], angle: std::arch::x86_64::__
 mod slice_lanes {
     use super::depth_at_lanes;
     use crate::sh::basis::nlp_scale;
+    use crate::x86::with_wide_registers;
     use std::arch::x86_64::*;
 
     pub static AVAILABLE: std::sync::LazyLock<bool> =
@@ -372,73 +378,73 @@ mod slice_lanes {
     /// Tangents beyond this are clamped to it (f32 squares them; the sine is 1 - 5e-37).
     const STEEPEST: f32 = 1e18;
 
-    /// Up to eight slices: `super::banded_slice_of_tangents` per lane.
-    ///
-    /// # Safety
-    /// The processor has AVX2 and FMA, and `bands` has `DEPTH_INTERVALS + 1` entries.
-    #[target_feature(enable = "avx2,fma")]
-    pub unsafe fn slices(
-        order: usize,
-        log_epsilon: f32,
-        bands: &[f32],
-        bases: &[f64],
-        sigmas: &[f64],
-        out: &mut [f32],
-    ) {
-        let count = bases.len();
-        let lanes = |values: &[f64]| {
-            let mut v = [0.0f32; 8];
-            for (o, x) in v.iter_mut().zip(values) {
-                *o = (*x as f32).clamp(-STEEPEST, STEEPEST);
-            }
-            _mm256_loadu_ps(v.as_ptr())
-        };
-        let (base, sigma) = (lanes(bases), lanes(sigmas));
-        let one = _mm256_set1_ps(1.0);
-        let sine = |t: __m256| _mm256_div_ps(t, _mm256_sqrt_ps(_mm256_fmadd_ps(t, t, one)));
-        let banded = _mm256_cmp_ps::<_CMP_GT_OQ>(sigma, base);
-        // The band's width from tan(sigma - base) where there is a band; a band wider than
-        // pi/2 (a negative base below a steep horizon) takes the widest depth, as the
-        // table's clamp gives it on the scalar path.
-        let below_product = _mm256_fmadd_ps(sigma, base, one);
-        let tangent = _mm256_div_ps(_mm256_sub_ps(sigma, base), below_product);
-        let narrow = _mm256_cmp_ps::<_CMP_GT_OQ>(below_product, _mm256_setzero_ps());
-        let width = _mm256_blendv_ps(
-            _mm256_set1_ps(std::f32::consts::FRAC_PI_2),
-            atan(_mm256_and_ps(_mm256_and_ps(banded, narrow), tangent)),
-            narrow,
-        );
-        let depth = depth_at_lanes(bands, width);
-        let (below, above) = (legendre(sine(base), order), legendre(sine(sigma), order));
-        let log_epsilon = _mm256_set1_ps(log_epsilon);
-        let mut slice = [_mm256_setzero_ps(); crate::sh::MAX_ORDER];
-        for (l, out) in slice.iter_mut().enumerate().take(order) {
-            // nlp_scale(l) times the integral of P^_l up to sin(angle) (nlp_slice).
-            let scale = _mm256_set1_ps(nlp_scale(l) as f32);
-            let integral = |p: &[__m256; crate::sh::MAX_ORDER + 2], s: __m256| {
-                let value = if l == 0 {
-                    _mm256_add_ps(s, one)
-                } else {
-                    _mm256_mul_ps(_mm256_sub_ps(p[l + 1], p[l - 1]), _mm256_set1_ps(1.0 / (2 * l + 1) as f32))
-                };
-                _mm256_mul_ps(scale, value)
+    with_wide_registers! {
+        /// Up to eight slices: `super::banded_slice_of_tangents` per lane.
+        ///
+        /// # Safety
+        /// The processor has AVX2 and FMA, and `bands` has `DEPTH_INTERVALS + 1` entries.
+        pub unsafe fn slices / slices_wide(
+            order: usize,
+            log_epsilon: f32,
+            bands: &[f32],
+            bases: &[f64],
+            sigmas: &[f64],
+            out: &mut [f32],
+        ) {
+            let count = bases.len();
+            let lanes = |values: &[f64]| {
+                let mut v = [0.0f32; 8];
+                for (o, x) in v.iter_mut().zip(values) {
+                    *o = (*x as f32).clamp(-STEEPEST, STEEPEST);
+                }
+                _mm256_loadu_ps(v.as_ptr())
             };
-            let (b, a) = (integral(&below.0, below.1), integral(&above.0, above.1));
-            let banded_value = _mm256_fmadd_ps(log_epsilon, b, _mm256_mul_ps(depth, _mm256_sub_ps(a, b)));
-            *out = _mm256_blendv_ps(_mm256_mul_ps(log_epsilon, a), banded_value, banded);
-        }
-        for (l, values) in slice.iter().enumerate().take(order) {
-            let mut v = [0.0f32; 8];
-            _mm256_storeu_ps(v.as_mut_ptr(), *values);
-            for (k, value) in v.iter().enumerate().take(count) {
-                out[k * order + l] = *value;
+            let (base, sigma) = (lanes(bases), lanes(sigmas));
+            let one = _mm256_set1_ps(1.0);
+            let sine = |t: __m256| _mm256_div_ps(t, _mm256_sqrt_ps(_mm256_fmadd_ps(t, t, one)));
+            let banded = _mm256_cmp_ps::<_CMP_GT_OQ>(sigma, base);
+            // The band's width from tan(sigma - base) where there is a band; a band wider than
+            // pi/2 (a negative base below a steep horizon) takes the widest depth, as the
+            // table's clamp gives it on the scalar path.
+            let below_product = _mm256_fmadd_ps(sigma, base, one);
+            let tangent = _mm256_div_ps(_mm256_sub_ps(sigma, base), below_product);
+            let narrow = _mm256_cmp_ps::<_CMP_GT_OQ>(below_product, _mm256_setzero_ps());
+            let width = _mm256_blendv_ps(
+                _mm256_set1_ps(std::f32::consts::FRAC_PI_2),
+                atan(_mm256_and_ps(_mm256_and_ps(banded, narrow), tangent)),
+                narrow,
+            );
+            let depth = depth_at_lanes(bands, width);
+            let (below, above) = (legendre(sine(base), order), legendre(sine(sigma), order));
+            let log_epsilon = _mm256_set1_ps(log_epsilon);
+            let mut slice = [_mm256_setzero_ps(); crate::sh::MAX_ORDER];
+            for (l, out) in slice.iter_mut().enumerate().take(order) {
+                // nlp_scale(l) times the integral of P^_l up to sin(angle) (nlp_slice).
+                let scale = _mm256_set1_ps(nlp_scale(l) as f32);
+                let integral = |p: &[__m256; crate::sh::MAX_ORDER + 2], s: __m256| {
+                    let value = if l == 0 {
+                        _mm256_add_ps(s, one)
+                    } else {
+                        _mm256_mul_ps(_mm256_sub_ps(p[l + 1], p[l - 1]), _mm256_set1_ps(1.0 / (2 * l + 1) as f32))
+                    };
+                    _mm256_mul_ps(scale, value)
+                };
+                let (b, a) = (integral(&below.0, below.1), integral(&above.0, above.1));
+                let banded_value = _mm256_fmadd_ps(log_epsilon, b, _mm256_mul_ps(depth, _mm256_sub_ps(a, b)));
+                *out = _mm256_blendv_ps(_mm256_mul_ps(log_epsilon, a), banded_value, banded);
+            }
+            for (l, values) in slice.iter().enumerate().take(order) {
+                let mut v = [0.0f32; 8];
+                _mm256_storeu_ps(v.as_mut_ptr(), *values);
+                for (k, value) in v.iter().enumerate().take(count) {
+                    out[k * order + l] = *value;
+                }
             }
         }
     }
 
     /// `P_0 ..= P_order` at `s` (clamped to `[-1, 1]`), and the clamped `s`.
-    #[target_feature(enable = "avx2,fma")]
-    #[inline]
+    #[inline(always)]
     unsafe fn legendre(s: __m256, order: usize) -> ([__m256; crate::sh::MAX_ORDER + 2], __m256) {
         let one = _mm256_set1_ps(1.0);
         let s = _mm256_min_ps(_mm256_max_ps(s, _mm256_set1_ps(-1.0)), one);
@@ -457,8 +463,7 @@ mod slice_lanes {
 
     /// `atan` of each lane `>= 0`: `a p(a^2)` on `[0, 1]` (the polynomial of
     /// `crate::scene::light::atan2_fast`), `pi/2 - atan(1/x)` above; 2e-7 rad in f32.
-    #[target_feature(enable = "avx2,fma")]
-    #[inline]
+    #[inline(always)]
     unsafe fn atan(x: __m256) -> __m256 {
         const P: [f32; 9] = [
             0.999_999_98,
