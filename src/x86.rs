@@ -7,8 +7,8 @@
 //! wider than 16 registers then spills less: the height-field march (sixteen taps, their
 //! weights and two groups of lanes) and the slices of the fitted depth (a Legendre
 //! recurrence per lane group). `dunes` at 240x135, shading stage on 2 cores of an AMD EPYC
-//! (Zen 4), medians of 15 over five alternating rounds: 37.2 ms with both kernels in AVX2,
-//! 34.8 ms with both in the wide build.
+//! (Zen 4), medians of 15 over four alternating rounds: 38.5-39.1 ms with both kernels in
+//! the AVX2 build, 33.3-33.6 ms in the wide build.
 
 /// Whether the processor has AVX-512F and AVX-512VL, besides the AVX2 and FMA every caller
 /// checks (once per process).
