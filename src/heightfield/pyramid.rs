@@ -700,11 +700,11 @@ impl HorizonPyramid {
     }
 }
 
-/// The march of [`HorizonPyramid::horizon_elevations`] over eight azimuths at once, in
-/// AVX2 and FMA registers: the default settings' bicubic B-spline levels and maximum over
-/// steps. Each lane is one azimuth; its 16 taps are four rows of four contiguous samples
-/// of the padded level, and a lane stops counting after its own last step (the scalar
-/// march's `t_far` and step table).
+/// The march of [`HorizonPyramid::horizon_elevations`] over sixteen azimuths at once, in
+/// two groups of eight AVX2 and FMA lanes: the default settings' bicubic B-spline levels
+/// and maximum over steps. Each lane is one azimuth; its 16 taps are four rows of four
+/// contiguous samples of the padded level, and a lane stops after its own last step (the
+/// scalar march's `t_far` and step table) or once no later step can raise its horizon.
 ///
 /// Positions are f32 grid units, and a level read is the weighted sum of its taps'
 /// heights above the receiver term `f_L(x)` (read in f32, eight levels per pass), so no
@@ -712,6 +712,10 @@ impl HorizonPyramid {
 /// with the same operations, so a plane still gives exactly its own elevation and a flat
 /// surface exactly 0. Against the f64 march the horizons differ by the f32 rounding of the
 /// positions (`tests` below).
+///
+/// The per-step helpers are `#[inline(always)]` without target features of their own, so
+/// that each build of `march_sixteen` (`crate::x86`) inlines them with its own registers;
+/// like every function here, they run only where the processor has AVX2 and FMA.
 #[cfg(target_arch = "x86_64")]
 mod lanes {
     use super::{HorizonPyramid, PaddedLevel, PyramidLevel, MAX_LEVELS, MAX_STEPS};
@@ -772,9 +776,8 @@ mod lanes {
         let mut receiver = Receiver { origin: [[0.0f32; 2]; LEVELS], base: [0.0f32; LEVELS], start: [0.0f32; LEVELS] };
         let mut read = 0;
         // The steps each azimuth takes: every step up to `t_far` and the first one past it,
-        // as the scalar march. Azimuths are marched in order of their step counts, sixteen
-        // at a time in two groups of eight lanes, so that each group marches about as far
-        // as its lanes need.
+        // as the scalar march. Azimuths are marched sixteen at a time in two groups of
+        // eight lanes (`march_sixteen`).
         let w = out.len();
         if w == 0 {
             return;
@@ -969,40 +972,40 @@ mod lanes {
             keys: &[u32],
             out: &mut [f64],
         ) {
-            let (first, second) = keys.split_at(keys.len().min(8));
+            let (first_keys, second_keys) = keys.split_at(keys.len().min(8));
             let last_step = keys.iter().max().map_or(0, |key| key >> 16) as usize;
-            let mut near = Group::new(pyramid, first);
+            let mut first = Group::new(pyramid, first_keys);
             let mut j = 0;
             // Both groups, while more than eight lanes march.
-            if !second.is_empty() {
-                let mut far = Group::new(pyramid, second);
+            if !second_keys.is_empty() {
+                let mut second = Group::new(pyramid, second_keys);
                 loop {
                     if j == last_step {
-                        near.finish(out);
-                        far.finish(out);
+                        first.finish(out);
+                        second.finish(out);
                         return;
                     }
                     let ceiling = _mm256_set1_ps(ceilings[j]);
-                    let (near_mask, near_bits) = near.marching(j, ceiling);
-                    let (far_mask, far_bits) = far.marching(j, ceiling);
-                    if near_bits.count_ones() + far_bits.count_ones() <= 8 {
-                        near = Group::merged(&[near, far], [near_bits, far_bits], out);
+                    let (first_mask, first_bits) = first.marching(j, ceiling);
+                    let (second_mask, second_bits) = second.marching(j, ceiling);
+                    if first_bits.count_ones() + second_bits.count_ones() <= 8 {
+                        first = Group::merged(&[first, second], [first_bits, second_bits], out);
                         break;
                     }
-                    near.step(pyramid, receiver, j, near_mask);
-                    far.step(pyramid, receiver, j, far_mask);
+                    first.step(pyramid, receiver, j, first_mask);
+                    second.step(pyramid, receiver, j, second_mask);
                     j += 1;
                 }
             }
             while j < last_step {
-                let (mask, bits) = near.marching(j, _mm256_set1_ps(ceilings[j]));
+                let (mask, bits) = first.marching(j, _mm256_set1_ps(ceilings[j]));
                 if bits == 0 {
                     break;
                 }
-                near.step(pyramid, receiver, j, mask);
+                first.step(pyramid, receiver, j, mask);
                 j += 1;
             }
-            near.finish(out);
+            first.finish(out);
         }
     }
 

@@ -326,8 +326,8 @@ pub fn banded_slices_of_tangents(
     #[cfg(target_arch = "x86_64")]
     if *slice_lanes::AVAILABLE && bands.len() == DEPTH_INTERVALS + 1 && (1..=crate::sh::MAX_ORDER).contains(&order) {
         for ((base, sigma), out) in bases.chunks(8).zip(sigmas.chunks(8)).zip(out.chunks_mut(8 * order)) {
-            // SAFETY: the processor has AVX2 and FMA; the table has its DEPTH_INTERVALS + 1
-            // entries.
+            // SAFETY: the processor has AVX2 and FMA, and AVX-512F and AVX-512VL for the wide
+            // build; the table has its DEPTH_INTERVALS + 1 entries.
             unsafe {
                 if *crate::x86::WIDE_REGISTERS {
                     slice_lanes::slices_wide(order, log_epsilon, bands, base, sigma, out)
@@ -382,7 +382,8 @@ mod slice_lanes {
         /// Up to eight slices: `super::banded_slice_of_tangents` per lane.
         ///
         /// # Safety
-        /// The processor has AVX2 and FMA, and `bands` has `DEPTH_INTERVALS + 1` entries.
+        /// The processor has AVX2 and FMA (and AVX-512F and AVX-512VL for `slices_wide`),
+        /// and `bands` has `DEPTH_INTERVALS + 1` entries.
         pub unsafe fn slices / slices_wide(
             order: usize,
             log_epsilon: f32,
