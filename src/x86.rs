@@ -1,4 +1,5 @@
-//! The two x86-64 builds of the widest hand-vectorised kernels.
+//! What the hand-vectorised kernels ask of an x86-64 processor, checked once per process,
+//! and the two builds of the widest of them.
 //!
 //! The kernels are written once, in eight-lane AVX2 and FMA intrinsics. Where the
 //! processor also has AVX-512F and AVX-512VL, [`with_wide_registers`] runs the same code
@@ -9,6 +10,14 @@
 //! recurrence per lane group). `dunes` at 240x135, shading stage on 2 cores of an AMD EPYC
 //! (Zen 4), medians of 15 over four alternating rounds: 38.5-39.1 ms with both kernels in
 //! the AVX2 build, 33.3-33.6 ms in the wide build.
+
+/// Whether the processor has AVX2 (once per process): the lanes that need no FMA.
+pub static AVX2: std::sync::LazyLock<bool> = std::sync::LazyLock::new(|| is_x86_feature_detected!("avx2"));
+
+/// Whether the processor has AVX2 and FMA (once per process): what every hand-vectorised
+/// kernel but [`AVX2`]'s needs.
+pub static AVX2_FMA: std::sync::LazyLock<bool> =
+    std::sync::LazyLock::new(|| is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma"));
 
 /// Whether the processor has AVX-512F and AVX-512VL, besides the AVX2 and FMA every caller
 /// checks (once per process).

@@ -732,8 +732,7 @@ mod lanes {
     /// level's samples addressable by a 32-bit index, and every grid coordinate exact in
     /// f32 (so that a coordinate clamped to the last sample truncates to it).
     pub fn available(levels: &[PyramidLevel]) -> bool {
-        is_x86_feature_detected!("avx2")
-            && is_x86_feature_detected!("fma")
+        *crate::x86::AVX2_FMA
             && levels.iter().all(|l| {
                 (l.columns + 3) * (l.rows + 3) < i32::MAX as usize && l.columns <= 1 << 24 && l.rows <= 1 << 24
             })

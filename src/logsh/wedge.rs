@@ -39,9 +39,6 @@ pub struct WedgeTurn<T> {
     padded: Vec<f32>,
 }
 
-#[cfg(target_arch = "x86_64")]
-static HAS_AVX2: std::sync::LazyLock<bool> = std::sync::LazyLock::new(|| is_x86_feature_detected!("avx2"));
-
 impl<T: Real> WedgeTurn<T> {
     /// Adds the log-SH visibility of the turn to `acc` from the NLP slices
     /// `slices[k * order..(k + 1) * order]` at azimuths `phi_k = k * dphi`.
@@ -55,7 +52,7 @@ impl<T: Real> WedgeTurn<T> {
         let count = self.count;
         let acc = &mut acc[..count];
         #[cfg(target_arch = "x86_64")]
-        if !self.padded.is_empty() && *HAS_AVX2 {
+        if !self.padded.is_empty() && *crate::x86::AVX2 {
             if let (Some(slices), Some(acc)) = (T::as_f32_slice(slices), T::as_f32_slice_mut(acc)) {
                 // SAFETY: the processor has AVX2; `padded` holds a padded column per slice
                 // coefficient of the turn.

@@ -24,10 +24,6 @@ use super::exp::ExactExp;
 /// Nodes evaluated together.
 pub const LANES: usize = 8;
 
-#[cfg(target_arch = "x86_64")]
-static HAS_AVX2_FMA: std::sync::LazyLock<bool> =
-    std::sync::LazyLock::new(|| is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma"));
-
 /// `w_i L(x_i)` and the basis at the nodes of one [`ExactExp`] grid, in f32.
 #[derive(Clone, Debug)]
 pub struct FoldedQuadrature {
@@ -73,7 +69,7 @@ impl FoldedQuadrature {
     /// per process), the same code compiled for them: eight lanes per instruction.
     pub fn lit(&self, f: &[f32], floored: Option<(&[f32], f32)>, ceiling: f32) -> [f32; 3] {
         #[cfg(target_arch = "x86_64")]
-        if *HAS_AVX2_FMA {
+        if *crate::x86::AVX2_FMA {
             // SAFETY: the processor supports the features the function is compiled for.
             return unsafe { self.lit_avx2(f, floored, ceiling) };
         }
@@ -99,7 +95,7 @@ impl FoldedQuadrature {
     /// [`crate::transfer`]).
     pub fn project(&self, f: &[f32], floored: Option<(&[f32], f32)>, ceiling: f32, out: &mut [f32]) {
         #[cfg(target_arch = "x86_64")]
-        if *HAS_AVX2_FMA {
+        if *crate::x86::AVX2_FMA {
             // SAFETY: the processor supports the features the function is compiled for.
             return unsafe { self.project_avx2(f, floored, ceiling, out) };
         }
@@ -348,7 +344,7 @@ mod tests {
             let exact = (x as f32 as f64).exp();
             worst = worst.max((got - exact).abs() / exact);
             #[cfg(target_arch = "x86_64")]
-            if *HAS_AVX2_FMA {
+            if *crate::x86::AVX2_FMA {
                 // SAFETY: the processor has AVX2 and FMA.
                 let got = unsafe {
                     use std::arch::x86_64::*;
@@ -368,7 +364,7 @@ mod tests {
     #[test]
     fn the_avx2_path_equals_the_portable_lanes() {
         #[cfg(target_arch = "x86_64")]
-        if *HAS_AVX2_FMA {
+        if *crate::x86::AVX2_FMA {
             for order in 2..=8 {
                 let count = coefficient_count(order);
                 let light: [Vec<f64>; 3] =

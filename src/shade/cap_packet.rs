@@ -54,10 +54,6 @@ pub struct CapPacket<'a> {
     pub ratio_attenuation: bool,
 }
 
-#[cfg(target_arch = "x86_64")]
-static HAS_AVX2_FMA: std::sync::LazyLock<bool> =
-    std::sync::LazyLock::new(|| is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma"));
-
 impl<'a> CapPacket<'a> {
     pub fn new(tree: &'a BlockerTree, order: usize, cap_depths: &'a [f32], ratio_attenuation: bool) -> Self {
         Self { nodes: tree.f32_nodes(), cluster_ratio: tree.cluster_ratio as f32, order, cap_depths, ratio_attenuation }
@@ -66,7 +62,7 @@ impl<'a> CapPacket<'a> {
     /// Whether [`Self::sum`] runs here: the processor has AVX2 and FMA.
     pub fn available() -> bool {
         #[cfg(target_arch = "x86_64")]
-        return *HAS_AVX2_FMA;
+        return *crate::x86::AVX2_FMA;
         #[cfg(not(target_arch = "x86_64"))]
         false
     }

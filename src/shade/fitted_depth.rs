@@ -324,7 +324,7 @@ pub fn banded_slices_of_tangents(
     out: &mut [f32],
 ) {
     #[cfg(target_arch = "x86_64")]
-    if *slice_lanes::AVAILABLE && bands.len() == DEPTH_INTERVALS + 1 && (1..=crate::sh::MAX_ORDER).contains(&order) {
+    if *crate::x86::AVX2_FMA && bands.len() == DEPTH_INTERVALS + 1 && (1..=crate::sh::MAX_ORDER).contains(&order) {
         for ((base, sigma), out) in bases.chunks(8).zip(sigmas.chunks(8)).zip(out.chunks_mut(8 * order)) {
             // SAFETY: the processor has AVX2 and FMA, and AVX-512F and AVX-512VL for the wide
             // build; the table has its DEPTH_INTERVALS + 1 entries.
@@ -371,9 +371,6 @@ mod slice_lanes {
     use crate::sh::basis::nlp_scale;
     use crate::x86::with_wide_registers;
     use std::arch::x86_64::*;
-
-    pub static AVAILABLE: std::sync::LazyLock<bool> =
-        std::sync::LazyLock::new(|| is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma"));
 
     /// Tangents beyond this are clamped to it (f32 squares them; the sine is 1 - 5e-37).
     const STEEPEST: f32 = 1e18;

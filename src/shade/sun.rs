@@ -242,7 +242,7 @@ fn cover_by_cap(
         }
     }
     #[cfg(target_arch = "x86_64")]
-    if *HAS_AVX2 {
+    if *crate::x86::AVX2 {
         #[target_feature(enable = "avx2")]
         unsafe fn avx2(
             by_axis: &[[f64; DISK_DIRECTIONS]; 3],
@@ -258,9 +258,6 @@ fn cover_by_cap(
     }
     each(by_axis, axis, cap, two_patches, blocked)
 }
-
-#[cfg(target_arch = "x86_64")]
-static HAS_AVX2: std::sync::LazyLock<bool> = std::sync::LazyLock::new(|| is_x86_feature_detected!("avx2"));
 
 /// A sun prepared for shading: its disk's directions and what they integrate to.
 #[derive(Clone, Debug)]

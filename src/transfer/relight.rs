@@ -282,7 +282,7 @@ pub fn relight(frame: &TransferFrame, light: &RelightLight) -> ShadedPasses {
         .for_each(|(chunk, (beauty, diffuse, specular, environment, visibility, heightfield, blockers))| {
             let out = RelitChunk { beauty, diffuse, specular, environment, visibility, heightfield, blockers };
             #[cfg(target_arch = "x86_64")]
-            if *HAS_AVX2_FMA {
+            if *crate::x86::AVX2_FMA {
                 // SAFETY: the processor has AVX2 and FMA.
                 return unsafe { relight_chunk_avx2(frame, light, chunk * CHUNK, out) };
             }
@@ -325,10 +325,6 @@ unsafe fn written<T>(v: Vec<std::mem::MaybeUninit<T>>) -> Vec<T> {
     // is initialised; the allocation passes to the new vector unchanged.
     unsafe { Vec::from_raw_parts(v.as_mut_ptr().cast::<T>(), v.len(), v.capacity()) }
 }
-
-#[cfg(target_arch = "x86_64")]
-static HAS_AVX2_FMA: std::sync::LazyLock<bool> =
-    std::sync::LazyLock::new(|| is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma"));
 
 /// One chunk of every pass, from pixel `first` on, each element to be written once.
 struct RelitChunk<'a> {
