@@ -882,6 +882,7 @@ mod lanes {
             Self::from_lanes(dx, dy, taken, [f32::NEG_INFINITY; 8], lanes)
         }
 
+        /// The group whose lanes hold these values.
         #[target_feature(enable = "avx2,fma")]
         unsafe fn from_lanes(dx: [f32; 8], dy: [f32; 8], taken: [i32; 8], max_tan: [f32; 8], keys: [u32; 8]) -> Self {
             Self {

@@ -26,17 +26,17 @@ pub struct WedgeOperator {
 /// A full turn of `W` wedges as one `order^2 x (W order)` matrix: wedge `k`'s operator
 /// rotated about z by `phi_k` (Eq. 20 and the z-rotation of Section 4.1), its first half
 /// applied to slice `k` and its second half to slice `k + 1 (mod W)`, summed per slice.
-/// Stored column by column (`order^2` values per slice coefficient), so that a turn is a
-/// sum of columns scaled by the slices' values, which vectorises over the coefficients.
-/// Equal to the wedge-by-wedge sum up to rounding.
+/// Stored column by column (`order^2` values per slice coefficient, padded with zeros to a
+/// multiple of eight so that `lanes` reads whole registers), so that a turn is a sum of
+/// columns scaled by the slices' values, which vectorises over the coefficients. Equal to
+/// the wedge-by-wedge sum up to rounding.
 #[derive(Clone, Debug)]
 pub struct WedgeTurn<T> {
     order: usize,
     count: usize,
+    /// Values per stored column: `count` rounded up to a multiple of eight.
+    stride: usize,
     columns: Vec<T>,
-    /// For an f32 turn on x86-64: the columns again, each padded with zeros to a multiple
-    /// of eight values (`lanes`); empty elsewhere.
-    padded: Vec<f32>,
 }
 
 impl<T: Real> WedgeTurn<T> {
@@ -52,11 +52,14 @@ impl<T: Real> WedgeTurn<T> {
         let count = self.count;
         let acc = &mut acc[..count];
         #[cfg(target_arch = "x86_64")]
-        if !self.padded.is_empty() && *crate::x86::AVX2 {
-            if let (Some(slices), Some(acc)) = (T::as_f32_slice(slices), T::as_f32_slice_mut(acc)) {
-                // SAFETY: the processor has AVX2; `padded` holds a padded column per slice
-                // coefficient of the turn.
-                unsafe { lanes::accumulate(&self.padded, first * self.order, slices, acc) };
+        if count <= lanes::MAX_COUNT && *crate::x86::AVX2 {
+            let columns = T::as_f32_slice(&self.columns);
+            if let (Some(columns), Some(slices), Some(acc)) =
+                (columns, T::as_f32_slice(slices), T::as_f32_slice_mut(acc))
+            {
+                // SAFETY: the processor has AVX2; `columns` holds a column of `stride`
+                // values per slice coefficient of the turn.
+                unsafe { lanes::accumulate(columns, first * self.order, slices, acc) };
                 return;
             }
         }
@@ -66,9 +69,9 @@ impl<T: Real> WedgeTurn<T> {
     /// [`Self::accumulate_from`] column by column.
     fn accumulate_columns(&self, first: usize, slices: &[T], acc: &mut [T]) {
         let count = self.count;
-        let columns = &self.columns[first * self.order * count..];
-        for (column, &s) in columns.chunks_exact(count).zip(slices) {
-            for (a, c) in acc[..count].iter_mut().zip(column) {
+        let columns = &self.columns[first * self.order * self.stride..];
+        for (column, &s) in columns.chunks_exact(self.stride).zip(slices) {
+            for (a, c) in acc[..count].iter_mut().zip(&column[..count]) {
                 *a = *a + *c * s;
             }
         }
@@ -109,19 +112,14 @@ impl WedgeOperator {
     /// The full turn in `T` ([`WedgeTurn`]).
     pub fn turn<T: Real>(&self) -> WedgeTurn<T> {
         let count = coefficient_count(self.order);
-        let columns: Vec<T> = self.turn.iter().map(|&v| T::of(v)).collect();
-        let padded = match T::as_f32_slice(&columns) {
-            Some(values) if cfg!(target_arch = "x86_64") && count <= lanes::MAX_COUNT => {
-                let stride = count.div_ceil(8) * 8;
-                let mut padded = vec![0.0f32; values.len() / count * stride];
-                for (to, from) in padded.chunks_exact_mut(stride).zip(values.chunks_exact(count)) {
-                    to[..count].copy_from_slice(from);
-                }
-                padded
+        let stride = count.div_ceil(8) * 8;
+        let mut columns = vec![T::zero(); self.turn.len() / count * stride];
+        for (to, from) in columns.chunks_exact_mut(stride).zip(self.turn.chunks_exact(count)) {
+            for (t, &v) in to.iter_mut().zip(from) {
+                *t = T::of(v);
             }
-            _ => Vec::new(),
-        };
-        WedgeTurn { order: self.order, count, columns, padded }
+        }
+        WedgeTurn { order: self.order, count, stride, columns }
     }
 
     /// Width of one wedge in radians.
@@ -142,39 +140,38 @@ impl WedgeOperator {
 /// [`WedgeTurn::accumulate_from`] in f32 AVX2 registers: the sum stays in up to eight
 /// registers over all the columns, where the plain loop stores and reloads it per column.
 /// The same products and sums in the same order, so the same result bit for bit.
+#[cfg(target_arch = "x86_64")]
 mod lanes {
     /// Most coefficients summed (order 8).
     pub const MAX_COUNT: usize = 64;
 
-    /// `acc += sum_c padded column (first_column + c) * slices[c]`, columns of
-    /// `acc.len()` rounded up to eight values.
+    /// `acc += sum_c column (first_column + c) * slices[c]`, the columns of `acc.len()`
+    /// values padded to a multiple of eight ([`super::WedgeTurn`]).
     ///
     /// # Safety
-    /// The processor has AVX2, and `padded` holds every column read.
-    #[cfg(target_arch = "x86_64")]
-    pub unsafe fn accumulate(padded: &[f32], first_column: usize, slices: &[f32], acc: &mut [f32]) {
+    /// The processor has AVX2, and `columns` holds every column read.
+    pub unsafe fn accumulate(columns: &[f32], first_column: usize, slices: &[f32], acc: &mut [f32]) {
         match acc.len().div_ceil(8) {
-            1 => accumulate_in::<1>(padded, first_column, slices, acc),
-            2 => accumulate_in::<2>(padded, first_column, slices, acc),
-            3 => accumulate_in::<3>(padded, first_column, slices, acc),
-            4 => accumulate_in::<4>(padded, first_column, slices, acc),
-            5 => accumulate_in::<5>(padded, first_column, slices, acc),
-            6 => accumulate_in::<6>(padded, first_column, slices, acc),
-            7 => accumulate_in::<7>(padded, first_column, slices, acc),
-            _ => accumulate_in::<8>(padded, first_column, slices, acc),
+            1 => accumulate_in::<1>(columns, first_column, slices, acc),
+            2 => accumulate_in::<2>(columns, first_column, slices, acc),
+            3 => accumulate_in::<3>(columns, first_column, slices, acc),
+            4 => accumulate_in::<4>(columns, first_column, slices, acc),
+            5 => accumulate_in::<5>(columns, first_column, slices, acc),
+            6 => accumulate_in::<6>(columns, first_column, slices, acc),
+            7 => accumulate_in::<7>(columns, first_column, slices, acc),
+            _ => accumulate_in::<8>(columns, first_column, slices, acc),
         }
     }
 
     /// [`accumulate`] with `acc` in `V` registers of eight.
-    #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
-    unsafe fn accumulate_in<const V: usize>(padded: &[f32], first_column: usize, slices: &[f32], acc: &mut [f32]) {
+    unsafe fn accumulate_in<const V: usize>(columns: &[f32], first_column: usize, slices: &[f32], acc: &mut [f32]) {
         use std::arch::x86_64::*;
         let mut values = [0.0f32; MAX_COUNT];
         values[..acc.len()].copy_from_slice(acc);
         let mut sum: [__m256; V] = std::array::from_fn(|v| _mm256_loadu_ps(values[8 * v..].as_ptr()));
         let stride = 8 * V;
-        let columns = &padded[first_column * stride..][..slices.len() * stride];
+        let columns = &columns[first_column * stride..][..slices.len() * stride];
         for (column, &s) in columns.chunks_exact(stride).zip(slices) {
             let s = _mm256_set1_ps(s);
             for (v, sum) in sum.iter_mut().enumerate() {
