@@ -1,5 +1,6 @@
 //! CPU kernel costs: each SH exponentiation on a typical per-pixel log vector, the
-//! per-pixel blocker accumulation and the height-field march. Compare methods as ratios
+//! per-pixel blocker accumulation, the height-field march and the glossy lobes'
+//! prefiltered maps. Compare methods as ratios
 //! within one run: `cargo bench --bench kernels`.
 use criterion::{criterion_group, criterion_main, Criterion};
 use logsh::logsh::training_log_vectors;
@@ -190,9 +191,42 @@ fn horizons(c: &mut Criterion) {
     });
 }
 
+/// A glossy lobe's prefiltered map from nothing, as a relight's or a shade's first frame
+/// computes it: every texel of a 256 x 128 sky's map for the lobes of the sample scenes
+/// (`cones`: Phong 61, read through GGX; a lacquer, GGX of Phong 300).
+fn prefiltered_maps(c: &mut Criterion) {
+    use logsh::scene::EnvironmentMap;
+    use logsh::shade::glossy::{ggx_alpha, MapLevels, SharpLobe};
+    let (width, height) = (256, 128);
+    let texels = (0..width * height)
+        .map(|i| {
+            let (u, v) = ((i % width) as f32 / width as f32, 1.0 - (i / width) as f32 / height as f32);
+            let window = if (0.5..0.55).contains(&u) && (0.6..0.75).contains(&v) { 20.0 } else { 0.0 };
+            [0.3 + 0.4 * v + window, 0.4 + 0.3 * v + window, 0.6 + 0.3 * v + window]
+        })
+        .collect();
+    let map = EnvironmentMap { file: "sky".into(), width, height, texels };
+    let levels = MapLevels::new(&map, 1.0, true);
+    for (name, exponent) in [("phong61", 61.0), ("phong300", 300.0)] {
+        let lobe = SharpLobe::Ggx { alpha: ggx_alpha(exponent) };
+        c.bench_function(&format!("prefiltered map/{name}/256x128 sky"), |b| {
+            b.iter(|| {
+                let prefiltered = levels.prefilter(black_box(lobe));
+                let mut sum = 0.0f32;
+                for row in 0..prefiltered.height {
+                    for column in 0..prefiltered.width {
+                        sum += prefiltered.texel(column, row)[1];
+                    }
+                }
+                black_box(sum)
+            })
+        });
+    }
+}
+
 criterion_group! {
     name = benches;
     config = Criterion::default().sample_size(20).measurement_time(std::time::Duration::from_secs(1)).warm_up_time(std::time::Duration::from_millis(300));
-    targets = exponentiation, lighting, blockers, blocker_packets, horizons
+    targets = exponentiation, lighting, blockers, blocker_packets, horizons, prefiltered_maps
 }
 criterion_main!(benches);

@@ -13,15 +13,16 @@
 //! `logsh::compare`'s: mean absolute over non-background pixels, RGB, over the open white
 //! floor; "worst" is the largest pixel's. Times are the medians of `N` runs of the
 //! shading call and of the relight call, as the frames of a sequence run them (the light
-//! and the kernel built once), and the first run of each, cold: the relight with its
-//! light read, projected and prefiltered, the shade with its tables; reading the
-//! transfer file is not counted. Where the scene directory holds a converged Cycles render of
+//! and the kernel built once), and the first run of each, cold, both reading their light:
+//! the relight with its light read, turned, projected and prefiltered, the shade with its
+//! map read and turned as a scene's loading does, then its tables; reading the transfer
+//! file and the G-buffer is not counted. Where the scene directory holds a converged Cycles render of
 //! the frame (`cycles.NNNN.exr`, `blender_scripts/render_cycles.py`) and the light is not
 //! turned, the relit frame and the default shade are also compared with it.
 
 use logsh::compare::{frame_error, unoccluded_value};
 use logsh::scene::output::SampleType;
-use logsh::scene::Scene;
+use logsh::scene::{EnvironmentMap, LightSource, Scene};
 use logsh::shade::{shade_frame_passes, ShadingSettings};
 use logsh::transfer::{relight, shade_with_transfer, RelightLight, RelightOptions, TransferFrame};
 use std::path::PathBuf;
@@ -58,6 +59,12 @@ fn main() -> anyhow::Result<()> {
         let mut turned = Scene::load(dir)?;
         turned.turn_light(rotation)?;
         let turned_frame = turned.frame(number)?;
+        // What the scene's loading spent on the light the cold shade uses.
+        let started = Instant::now();
+        if let LightSource::Environment { file, rotation, turn, .. } = turned.light_source(number) {
+            std::hint::black_box(EnvironmentMap::read(&file)?.oriented(rotation, turn));
+        }
+        let shade_light = started.elapsed().as_secs_f64();
         let unoccluded = unoccluded_value(&turned_frame).expect("a map or constant light");
         let mut shade_times = Vec::new();
         let mut truth = None;
@@ -95,7 +102,7 @@ fn main() -> anyhow::Result<()> {
             ),
             _ => "-".into(),
         };
-        let (cold_relight, cold_shade) = (building + relight_times[0], shade_times[0]);
+        let (cold_relight, cold_shade) = (building + relight_times[0], shade_light + shade_times[0]);
         let (r, s) = (median(relight_times), median(shade_times));
         println!(
             "| {} | {}x{} | {:.5} / {:.4} | {:.4} | {against_cycles} | {:.1} ms | {:.1} ms | {:.0}x | {:.1} / {:.1} ms | {:.0}x |",

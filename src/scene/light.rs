@@ -201,6 +201,7 @@ impl EnvironmentMap {
     pub fn rotated(&self, m: &[[f64; 3]; 3]) -> EnvironmentMap {
         let (width, height) = (self.width, self.height);
         let texels = (0..width * height)
+            .into_par_iter()
             .map(|i| {
                 let (c, r) = (i % width, i / width);
                 let d = equirectangular_to_direction(
@@ -220,10 +221,36 @@ impl EnvironmentMap {
         if rotation == [0.0; 3] && turn == 0.0 {
             return self;
         }
+        if rotation[0] == 0.0 && rotation[1] == 0.0 {
+            return self.turned_about_z(rotation[2] - turn);
+        }
         let mapping = euler_xyz(rotation.map(f64::to_radians));
         let turned = euler_xyz([0.0, 0.0, -turn.to_radians()]);
         let m = [0, 1, 2].map(|i| [0, 1, 2].map(|j| (0..3).map(|k| mapping[i][k] * turned[k][j]).sum::<f64>()));
         self.rotated(&m)
+    }
+
+    /// [`Self::rotated`] for a rotation by `degrees` about Z: every texel centre keeps its
+    /// row, so the bilinear lookup is a linear one along the row, at one shift for every
+    /// texel (the same reads and weights, without a direction per texel).
+    fn turned_about_z(&self, degrees: f64) -> EnvironmentMap {
+        let width = self.width;
+        // The lookup of column c's centre turned by `degrees` falls at x = c - shift.
+        let shift = (degrees / 360.0 * width as f64).rem_euclid(width as f64);
+        let back = shift.ceil();
+        let t = (back - shift) as f32;
+        let back = back as usize % width;
+        let texels = self
+            .texels
+            .par_chunks_exact(width)
+            .flat_map_iter(|row| {
+                (0..width).map(move |c| {
+                    let (a, b) = (row[(c + width - back) % width], row[(c + width - back + 1) % width]);
+                    [0, 1, 2].map(|k| a[k] * (1.0 - t) + b[k] * t)
+                })
+            })
+            .collect();
+        EnvironmentMap { file: self.file.clone(), width, height: self.height, texels }
     }
 
     /// Bilinear lookup in direction `dir` (need not be unit).
@@ -608,6 +635,32 @@ mod tests {
         }
         assert!(worst < 1.2e-8, "worst {worst:e} rad");
         assert_eq!(atan2_fast(0.0, 0.0), 0.0);
+    }
+
+    /// A turn about Z (a Mapping rotation about Z, `--light-rotation`) shifts the rows as
+    /// the general resampling does: within 1e-5 of the map's range (the lookup's angles
+    /// are good to 1e-8 rad), for turns that fall between columns, on them, negative and
+    /// past a whole turn, on maps of even and odd width.
+    #[test]
+    fn a_turn_about_z_resamples_as_the_rotation_does() {
+        for (width, height) in [(64, 32), (45, 20)] {
+            let texels = (0..width * height)
+                .map(|i| {
+                    let (c, r) = ((i % width) as f32, (i / width) as f32);
+                    [(0.37 * c).sin() + 1.5, (0.11 * c * r).cos() + 1.0, 0.02 * (c + 3.0 * r)]
+                })
+                .collect();
+            let map = EnvironmentMap { file: "turned".into(), width, height, texels };
+            for (z, turn) in [(0.0, 37.3), (0.0, -90.0), (12.5, 360.0), (0.0, 360.0 / width as f64), (-20.0, 0.1)] {
+                let general = map.rotated(&euler_xyz([0.0, 0.0, (z - turn).to_radians()]));
+                let shifted = map.clone().oriented([0.0, 0.0, z], turn);
+                for (a, b) in general.texels.iter().zip(&shifted.texels) {
+                    for k in 0..3 {
+                        assert!((a[k] - b[k]).abs() < 1e-5, "{width}x{height}, turn {turn}: {a:?} against {b:?}");
+                    }
+                }
+            }
+        }
     }
 
     /// The lookup coordinates are Blender's mapping to 2e-9 in `u` and 4e-9 in `v`.
