@@ -19,17 +19,20 @@
 
 use super::error::{check_image_size, exr_error, SceneError};
 use exr::prelude::{read, FlatSamples, ReadChannels, ReadLayers};
+use half::slice::HalfFloatSliceExt;
 use std::collections::HashMap;
 use std::path::Path;
 
-/// The channels of one EXR file as f32, all of the same size.
+/// The channels of one EXR file, all of the same size, kept as stored and converted to
+/// f32 when taken (a frame with transfer layers holds about 90 channels, of which a
+/// reader takes some: converting all of them first doubled the memory a read touched).
 pub(crate) struct ExrChannels {
     pub width: usize,
     pub height: usize,
     /// Full dotted names in file order (without aliases), for error messages.
     pub names: Vec<String>,
     channels: HashMap<String, usize>,
-    data: Vec<Vec<f32>>,
+    data: Vec<FlatSamples>,
     sizes: Vec<[usize; 2]>,
 }
 
@@ -68,22 +71,17 @@ impl ExrChannels {
             sizes: Vec::new(),
         };
         let mut aliases: Vec<(String, usize)> = Vec::new();
-        for layer in image.layer_data.iter() {
+        for layer in image.layer_data {
             let part = layer.attributes.layer_name.as_ref().map(|t| t.to_string());
             let size = [layer.size.0, layer.size.1];
-            for channel in layer.channel_data.list.iter() {
+            for channel in layer.channel_data.list {
                 let stored = channel.name.to_string();
                 let full = match &part {
                     Some(p) if !p.is_empty() && !stored.starts_with(&format!("{p}.")) => format!("{p}.{stored}"),
                     _ => stored.clone(),
                 };
-                let values: Vec<f32> = match &channel.sample_data {
-                    FlatSamples::F16(v) => v.iter().map(|h| h.to_f32()).collect(),
-                    FlatSamples::F32(v) => v.clone(),
-                    FlatSamples::U32(v) => v.iter().map(|&u| u as f32).collect(),
-                };
                 let index = out.data.len();
-                out.data.push(values);
+                out.data.push(channel.sample_data);
                 out.sizes.push(size);
                 if !out.channels.contains_key(&full) {
                     out.channels.insert(full.clone(), index);
@@ -112,6 +110,15 @@ impl ExrChannels {
     /// taken from one file must have the size of the first one taken, which becomes
     /// `width` x `height`.
     pub fn take(&mut self, file: &Path, name: &str) -> Result<Vec<f32>, SceneError> {
+        let index = self.checked_index(file, name)?;
+        Ok(match &self.data[index] {
+            FlatSamples::F32(v) => v.clone(),
+            samples => to_f32(samples),
+        })
+    }
+
+    /// The index of channel `name`, checked to exist and to have the reference size.
+    fn checked_index(&self, file: &Path, name: &str) -> Result<usize, SceneError> {
         let Some(&index) = self.channels.get(name) else {
             return Err(SceneError::MissingChannel {
                 file: file.to_path_buf(),
@@ -129,24 +136,29 @@ impl ExrChannels {
                 ),
             ));
         }
-        Ok(self.data[index].clone())
+        Ok(index)
     }
 
     /// [`take`](Self::take) without the copy, for a reader that takes each channel once:
     /// the channel is moved out, and taking it again is an error.
     pub fn take_once(&mut self, file: &Path, name: &str) -> Result<Vec<f32>, SceneError> {
-        let Some(&index) = self.channels.get(name) else {
-            return self.take(file, name);
-        };
-        if self.sizes[index] != [self.width, self.height] || self.data[index].is_empty() {
-            return self.take(file, name).and_then(|_| {
-                Err(SceneError::invalid(
-                    file,
-                    format!("channel \"{name}\" is read twice (it appears twice in the file)"),
-                ))
-            });
+        Ok(match self.take_samples(file, name)? {
+            FlatSamples::F32(v) => v,
+            samples => to_f32(&samples),
+        })
+    }
+
+    /// [`take_once`](Self::take_once) as stored, for a reader that converts as it
+    /// rearranges.
+    pub fn take_samples(&mut self, file: &Path, name: &str) -> Result<FlatSamples, SceneError> {
+        let index = self.checked_index(file, name)?;
+        if sample_count(&self.data[index]) == 0 {
+            return Err(SceneError::invalid(
+                file,
+                format!("channel \"{name}\" is read twice (it appears twice in the file)"),
+            ));
         }
-        Ok(std::mem::take(&mut self.data[index]))
+        Ok(std::mem::replace(&mut self.data[index], FlatSamples::F32(Vec::new())))
     }
 
     /// Makes the size of `name`'s part the reference size for later `take` calls.
@@ -155,5 +167,27 @@ impl ExrChannels {
             self.width = self.sizes[index][0];
             self.height = self.sizes[index][1];
         }
+    }
+}
+
+fn sample_count(samples: &FlatSamples) -> usize {
+    match samples {
+        FlatSamples::F16(v) => v.len(),
+        FlatSamples::F32(v) => v.len(),
+        FlatSamples::U32(v) => v.len(),
+    }
+}
+
+/// Samples as f32: half floats exactly (through F16C where the processor has it), 32-bit
+/// unsigned integers to the nearest f32.
+pub(crate) fn to_f32(samples: &FlatSamples) -> Vec<f32> {
+    match samples {
+        FlatSamples::F16(v) => {
+            let mut out = vec![0.0f32; v.len()];
+            v.convert_to_f32_slice(&mut out);
+            out
+        }
+        FlatSamples::F32(v) => v.clone(),
+        FlatSamples::U32(v) => v.iter().map(|&u| u as f32).collect(),
     }
 }

@@ -23,6 +23,7 @@ use exr::prelude::{
     f16, AnyChannel, AnyChannels, Blocks, Compression, Encoding, FlatSamples, Image, Layer, LayerAttributes, LineOrder,
     WritableImage,
 };
+use half::slice::HalfFloatSliceExt;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
 
@@ -129,7 +130,11 @@ pub fn write_exr_layers(
         .iter()
         .map(|c| {
             let samples = match c.sample_type {
-                SampleType::Half => FlatSamples::F16(c.values.iter().map(|&v| f16::from_f32(v)).collect()),
+                SampleType::Half => {
+                    let mut half = vec![f16::ZERO; c.values.len()];
+                    half.convert_from_f32_slice(c.values);
+                    FlatSamples::F16(half)
+                }
                 SampleType::Float => FlatSamples::F32(c.values.to_vec()),
             };
             AnyChannel::new(c.name.as_str(), samples)

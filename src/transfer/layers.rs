@@ -8,6 +8,7 @@ use crate::scene::{LightSource, SceneError};
 use crate::sh::{coefficient_count, MAX_ORDER, MIN_ORDER};
 use crate::shade::glossy::SharpLobe;
 use crate::shade::kernel::{GlossyTransfer, PointTransfer};
+use half::slice::HalfFloatSliceExt;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -394,15 +395,9 @@ impl TransferFrame {
         let count = coefficient_count(order);
         let sh = |exr: &mut ExrChannels, name: &str| -> Result<Vec<f32>, SceneError> {
             let channels = (0..count)
-                .map(|k| exr.take_once(file, &format!("{name}_{}.{}", k - k % 4, ["R", "G", "B", "A"][k % 4])))
+                .map(|k| exr.take_samples(file, &format!("{name}_{}.{}", k - k % 4, ["R", "G", "B", "A"][k % 4])))
                 .collect::<Result<Vec<_>, _>>()?;
-            // Pixel-major, written in order (a channel at a time strode across the whole
-            // buffer once per coefficient).
-            let mut values = Vec::with_capacity(width * height * count);
-            for i in 0..width * height {
-                values.extend(channels.iter().map(|channel| channel[i]));
-            }
-            Ok(values)
+            Ok(pixel_major(&channels, width * height))
         };
         let diffuse = sh(&mut exr, "sh_diffuse")?;
         let unoccluded = sh(&mut exr, "sh_unoccluded")?;
@@ -488,4 +483,33 @@ impl TransferFrame {
             normal: normal.into(),
         })
     }
+}
+
+/// `channels` (one value per pixel each) as f32, pixel by pixel: a block of pixels at a
+/// time, each channel's block converted at once (half floats through F16C where the
+/// processor has it), then written in order.
+fn pixel_major(channels: &[exr::prelude::FlatSamples], pixels: usize) -> Vec<f32> {
+    const BLOCK: usize = 256;
+    let count = channels.len();
+    let mut values = Vec::with_capacity(pixels * count);
+    let mut block = vec![[0.0f32; BLOCK]; count];
+    for first in (0..pixels).step_by(BLOCK) {
+        let n = BLOCK.min(pixels - first);
+        for (converted, channel) in block.iter_mut().zip(channels) {
+            let converted = &mut converted[..n];
+            match channel {
+                exr::prelude::FlatSamples::F16(v) => v[first..first + n].convert_to_f32_slice(converted),
+                exr::prelude::FlatSamples::F32(v) => converted.copy_from_slice(&v[first..first + n]),
+                exr::prelude::FlatSamples::U32(v) => {
+                    for (c, &u) in converted.iter_mut().zip(&v[first..first + n]) {
+                        *c = u as f32;
+                    }
+                }
+            }
+        }
+        for i in 0..n {
+            values.extend(block.iter().map(|channel| channel[i]));
+        }
+    }
+    values
 }
