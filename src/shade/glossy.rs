@@ -242,6 +242,9 @@ const WINDOW_HALF_WIDTHS: f64 = 12.0;
 /// needs.
 pub struct MapLevels {
     levels: Vec<Arc<EnvironmentMap>>,
+    /// Each level's colour channels apart, made when a convolution first reads the level
+    /// and shared by every lobe's.
+    planes: Vec<Arc<OnceLock<Planes>>>,
 }
 
 impl MapLevels {
@@ -263,7 +266,8 @@ impl MapLevels {
             let next = reduce(last);
             levels.push(Arc::new(next));
         }
-        Self { levels }
+        let planes = levels.iter().map(|_| Arc::new(OnceLock::new())).collect();
+        Self { levels, planes }
     }
 
     /// The map prefiltered with `lobe`, its texels computed when first read
@@ -272,18 +276,20 @@ impl MapLevels {
         let s = lobe.half_width();
         let texel = |m: &EnvironmentMap| PI / m.height as f64;
         let coarsest_within = |texels_per_half_width: f64| {
-            self.levels.iter().rev().find(|m| texel(m) * texels_per_half_width <= s).unwrap_or(&self.levels[0])
+            (0..self.levels.len()).rev().find(|&l| texel(&self.levels[l]) * texels_per_half_width <= s).unwrap_or(0)
         };
         let finest = &self.levels[0];
         if texel(finest) * MIRROR_TEXELS > s {
             return Prefiltered::new(finest.width, finest.height, Source::Map(finest.clone()));
         }
-        let output = coarsest_within(OUTPUT_TEXELS_PER_HALF_WIDTH);
+        let output = &self.levels[coarsest_within(OUTPUT_TEXELS_PER_HALF_WIDTH)];
         let parts = [
             (coarsest_within(INPUT_TEXELS_PER_HALF_WIDTH), CORE_HALF_WIDTHS * s, Fade::Out),
             (coarsest_within(TAIL_TEXELS_PER_HALF_WIDTH), WINDOW_HALF_WIDTHS * s, Fade::In),
         ]
-        .map(|(map, reach, fade)| Part::new(map.clone(), reach.min(PI), fade));
+        .map(|(level, reach, fade)| {
+            Part::new(self.levels[level].clone(), self.planes[level].clone(), reach.min(PI), fade)
+        });
         let handover = [2.0 / 3.0 * CORE_HALF_WIDTHS * s, CORE_HALF_WIDTHS * s].map(|a| a.min(PI).cos());
         let convolution = Convolution::new(parts, handover, lobe, output.width, output.height);
         Prefiltered::new(output.width, output.height, Source::Convolution(Box::new(convolution)))
@@ -312,13 +318,13 @@ fn reduce(map: &EnvironmentMap) -> EnvironmentMap {
     EnvironmentMap { file: map.file.clone(), width, height, texels }
 }
 
-/// One part of a convolution: the map it reads (and its colour channels apart, each row
-/// written twice over and padded, [`WrappedRows`]), with its texel centres' (sin, cos)
-/// of polar angle and azimuth (`equirectangular_to_direction`) and solid angles, how far
-/// from the axis it reaches, and whether it fades out or in across the hand-over.
+/// One part of a convolution: the map it reads (and its colour channels apart, made when
+/// first read), with its texel centres' (sin, cos) of polar angle and azimuth
+/// (`equirectangular_to_direction`) and solid angles, how far from the axis it reaches,
+/// and whether it fades out or in across the hand-over.
 struct Part {
     map: Arc<EnvironmentMap>,
-    planes: WrappedRows,
+    planes: Arc<OnceLock<Planes>>,
     rows: Vec<(f64, f64)>,
     columns: Vec<(f64, f64)>,
     solid_angles: Vec<f64>,
@@ -345,9 +351,9 @@ fn direction((sin_t, cos_t): (f64, f64), (sin_p, cos_p): (f64, f64)) -> [f64; 3]
 }
 
 impl Part {
-    fn new(map: Arc<EnvironmentMap>, reach: f64, fade: Fade) -> Self {
+    fn new(map: Arc<EnvironmentMap>, planes: Arc<OnceLock<Planes>>, reach: f64, fade: Fade) -> Self {
         Self {
-            planes: WrappedRows::new(&map),
+            planes,
             rows: (0..map.height).map(|r| polar(r, map.height).sin_cos()).collect(),
             columns: (0..map.width).map(|c| azimuth(c, map.width).sin_cos()).collect(),
             solid_angles: (0..map.height).map(|r| map.texel_solid_angle(r)).collect(),
@@ -358,33 +364,31 @@ impl Part {
     }
 }
 
-/// A map's colour channels apart, each row followed by itself and [`SUM_LANES`] zeros:
-/// any run of at most a row's width, padded to whole lanes, reads them in one piece
-/// from any starting column, wrapping around the map without a second piece.
-struct WrappedRows {
-    planes: [Vec<f32>; 3],
-    stride: usize,
+impl Part {
+    fn planes(&self) -> &Planes {
+        self.planes.get_or_init(|| Planes::new(&self.map))
+    }
 }
 
-impl WrappedRows {
+/// A map's colour channels apart, row-major, each followed by [`SUM_LANES`] zeros: the
+/// tables' weighted sums read a run of each channel's row as one slice, in whole lanes
+/// (the weights padded with zeros) even where the run ends at the map's last texel.
+struct Planes {
+    channels: [Vec<f32>; 3],
+    width: usize,
+}
+
+impl Planes {
     fn new(map: &EnvironmentMap) -> Self {
-        let stride = 2 * map.width + SUM_LANES;
-        let planes = [0, 1, 2].map(|k| {
-            let mut plane = vec![0.0f32; stride * map.height];
-            for (row, texels) in plane.chunks_exact_mut(stride).zip(map.texels.chunks_exact(map.width)) {
-                for (column, t) in texels.iter().enumerate() {
-                    row[column] = t[k];
-                    row[map.width + column] = t[k];
-                }
-            }
-            plane
-        });
-        Self { planes, stride }
+        let padding = std::iter::repeat_n(0.0, SUM_LANES);
+        let channels = [0, 1, 2].map(|k| map.texels.iter().map(|t| t[k]).chain(padding.clone()).collect());
+        Self { channels, width: map.width }
     }
 
-    /// The three channels of row `row` from column `start` (less than the width) on.
-    fn from(&self, row: usize, start: usize) -> [&[f32]; 3] {
-        self.planes.each_ref().map(|plane| &plane[row * self.stride + start..(row + 1) * self.stride])
+    /// Columns `start..start + len` of row `row`, each channel; `len` may reach
+    /// [`SUM_LANES`] - 1 past the row's end (into the next row, or the padding).
+    fn run(&self, row: usize, start: usize, len: usize) -> [&[f32]; 3] {
+        self.channels.each_ref().map(|channel| &channel[row * self.width + start..][..len])
     }
 }
 
@@ -429,8 +433,8 @@ struct WeightTable {
 }
 
 /// `weights[first..first + len]` apply to the part's row `row`, at columns `start..start
-/// + len` from the one under the texel's centre, wrapping around the map; `len` is a
-/// whole number of [`SUM_LANES`], the weights padded with zeros.
+/// + len` from the one under the texel's centre, wrapping around the map (never more
+/// than once: a run is at most a row); zeros follow them up to whole [`SUM_LANES`].
 struct Run {
     part: usize,
     row: usize,
@@ -439,71 +443,36 @@ struct Run {
     len: usize,
 }
 
+/// Partial sums per channel in [`Convolution::weighted_sum`].
+const SUM_LANES: usize = 8;
+
+/// Adds `sum of weights[i] rows[k][i]` to channel `k`: whole lanes to `lanes`, the rest
+/// to `rest`. A function rather than a closure, so that it is inlined into each build of
+/// its caller, with that build's registers.
+#[inline(always)]
+fn add_run(lanes: &mut [[f32; SUM_LANES]; 3], rest: &mut [f32; 3], weights: &[f32], rows: [&[f32]; 3]) {
+    let whole = weights.len() / SUM_LANES * SUM_LANES;
+    for (b, w) in weights[..whole].chunks_exact(SUM_LANES).enumerate() {
+        for (k, row) in rows.iter().enumerate() {
+            let v = &row[b * SUM_LANES..][..SUM_LANES];
+            for i in 0..SUM_LANES {
+                lanes[k][i] += w[i] * v[i];
+            }
+        }
+    }
+    for (k, row) in rows.iter().enumerate() {
+        for i in whole..weights.len() {
+            rest[k] += weights[i] * row[i];
+        }
+    }
+}
+
 fn gcd(a: usize, b: usize) -> usize {
     if b == 0 {
         a
     } else {
         gcd(b, a % b)
     }
-}
-
-/// The weighted sums of a texel's runs, per colour channel: `sum of weights[i] rows[k][i]`
-/// over every run's weights (each a whole number of [`SUM_LANES`]) and the channels `k`
-/// of its rows, in eight f32 partial sums per channel (about 150 terms each for the
-/// cones sample's lobe, so f32 keeps the sum to about 1e-7 of it), in AVX2 registers
-/// with fused multiply-adds where the processor has them.
-fn sum_of_runs<'a>(runs: impl Iterator<Item = (&'a [f32], [&'a [f32]; 3])>) -> [f32; 3] {
-    #[cfg(target_arch = "x86_64")]
-    if *crate::x86::AVX2_FMA {
-        // SAFETY: the processor has AVX2 and FMA.
-        return unsafe { sum_of_runs_avx2(runs) };
-    }
-    let mut lanes = [[0.0f32; SUM_LANES]; 3];
-    for (weights, rows) in runs {
-        for (b, w) in weights.chunks_exact(SUM_LANES).enumerate() {
-            for (k, row) in rows.iter().enumerate() {
-                let v = &row[b * SUM_LANES..][..SUM_LANES];
-                for i in 0..SUM_LANES {
-                    lanes[k][i] += w[i] * v[i];
-                }
-            }
-        }
-    }
-    lanes.map(|channel| channel.iter().sum())
-}
-
-/// Partial sums per channel in [`sum_of_runs`], and the padding of its runs.
-const SUM_LANES: usize = 8;
-
-/// [`sum_of_runs`] in AVX2 registers.
-///
-/// # Safety
-/// The processor has AVX2 and FMA.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-unsafe fn sum_of_runs_avx2<'a>(runs: impl Iterator<Item = (&'a [f32], [&'a [f32]; 3])>) -> [f32; 3] {
-    use std::arch::x86_64::*;
-    let mut lanes = [_mm256_setzero_ps(); 3];
-    for (weights, rows) in runs {
-        let n = weights.len();
-        let rows = rows.map(|row| &row[..n]);
-        for start in (0..n).step_by(SUM_LANES) {
-            // SAFETY: `n` is a whole number of SUM_LANES, so `start + SUM_LANES <= n`, the
-            // length of the weights and of every row.
-            unsafe {
-                let w = _mm256_loadu_ps(weights.as_ptr().add(start));
-                for (sum, row) in lanes.iter_mut().zip(&rows) {
-                    *sum = _mm256_fmadd_ps(w, _mm256_loadu_ps(row.as_ptr().add(start)), *sum);
-                }
-            }
-        }
-    }
-    lanes.map(|channel| {
-        let mut partial = [0.0f32; SUM_LANES];
-        // SAFETY: `partial` holds SUM_LANES floats.
-        unsafe { _mm256_storeu_ps(partial.as_mut_ptr(), channel) };
-        partial.iter().sum()
-    })
 }
 
 /// The column of a `map_width` map under the centre of column `column` of a `width`
@@ -531,20 +500,62 @@ impl Convolution {
             let axis = direction(polar(row, height).sin_cos(), azimuth(column, width).sin_cos());
             return self.parts[0].map.lookup(axis);
         }
+        #[cfg(target_arch = "x86_64")]
+        if *crate::x86::AVX2 {
+            // SAFETY: the processor has AVX2.
+            return unsafe { self.weighted_sum_avx2(table, width, column) };
+        }
+        self.weighted_sum(table, width, column)
+    }
+
+    /// [`Self::weighted_sum`] compiled for AVX2, its lanes in those registers: the same
+    /// operations in the same order, so the same bits.
+    ///
+    /// # Safety
+    /// The processor has AVX2.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn weighted_sum_avx2(&self, table: &WeightTable, width: usize, column: usize) -> [f32; 3] {
+        self.weighted_sum(table, width, column)
+    }
+
+    /// `sum of weights[i] texel[i]` over the runs of `table` placed for column `column`
+    /// of a `width`-wide map, per colour channel, in eight f32 partial sums per channel
+    /// (about 150 terms each for the cones sample's lobe, so f32 keeps the sum to about
+    /// 1e-7 of it). Each run is read in one piece, or two where it wraps: up to its row's
+    /// end, then from its start. Plain multiplies and adds (a fused multiply-add gained
+    /// nothing here), so every build gives the same bits.
+    #[inline(always)]
+    fn weighted_sum(&self, table: &WeightTable, width: usize, column: usize) -> [f32; 3] {
         let under = self.parts.each_ref().map(|part| column_under(column, width, part.map.width) as isize);
-        sum_of_runs(table.runs.iter().map(|run| {
-            let part = &self.parts[run.part];
+        let planes = self.parts.each_ref().map(Part::planes);
+        let mut lanes = [[0.0f32; SUM_LANES]; 3];
+        let mut rest = [0.0f32; 3];
+        for run in &table.runs {
+            let part_width = self.parts[run.part].map.width;
             // In (-width, 2 width): a run starts within a map's width of the centre.
-            let (start, width) = (under[run.part] + run.start, part.map.width as isize);
+            let start = under[run.part] + run.start;
             let start = if start < 0 {
-                start + width
-            } else if start >= width {
-                start - width
+                start + part_width as isize
+            } else if start >= part_width as isize {
+                start - part_width as isize
             } else {
                 start
-            };
-            (&table.weights[run.first..][..run.len], part.planes.from(run.row, start as usize))
-        }))
+            } as usize;
+            let planes = planes[run.part];
+            if start + run.len <= part_width {
+                // In whole lanes: the padding's weights are zero.
+                let padded = run.len.next_multiple_of(SUM_LANES);
+                let weights = &table.weights[run.first..][..padded];
+                add_run(&mut lanes, &mut rest, weights, planes.run(run.row, start, padded));
+            } else {
+                let weights = &table.weights[run.first..][..run.len];
+                let before_wrap = part_width - start;
+                add_run(&mut lanes, &mut rest, &weights[..before_wrap], planes.run(run.row, start, before_wrap));
+                add_run(&mut lanes, &mut rest, &weights[before_wrap..], planes.run(run.row, 0, run.len - before_wrap));
+            }
+        }
+        [0, 1, 2].map(|k| lanes[k].iter().sum::<f32>() + rest[k])
     }
 
     /// The table of output row `row` and phase `phase`: the weights of the texel at
@@ -593,10 +604,10 @@ impl Convolution {
                 let last = row_weights.iter().rposition(|&w| w > 0.0).expect("a first one");
                 let used = &row_weights[first..=last];
                 total += used.iter().sum::<f64>();
-                let len = used.len().div_ceil(SUM_LANES) * SUM_LANES;
-                runs.push(Run { part: p, row: r, start: offsets.start + first as isize, first: weights.len(), len });
+                let (start, len) = (offsets.start + first as isize, used.len());
+                runs.push(Run { part: p, row: r, start, first: weights.len(), len });
                 weights.extend_from_slice(used);
-                weights.resize(weights.len() + len - used.len(), 0.0);
+                weights.resize(weights.len() + len.next_multiple_of(SUM_LANES) - len, 0.0);
             }
         }
         if !(total > 0.0) {
@@ -640,6 +651,7 @@ impl Prefiltered {
                 .get_or_init(|| convolution.texel(self.width, self.height, column, row)),
         }
     }
+
     /// `P(R)`, bilinearly.
     pub fn lookup(&self, direction: [f64; 3]) -> [f32; 3] {
         BilinearTaps::new(self.width, self.height, direction).read(|column, row| self.texel(column, row))
@@ -834,6 +846,31 @@ mod tests {
                     convolution.phases
                 );
                 assert!(worst < 5e-5, "{lobe:?}: {worst}");
+            }
+        }
+    }
+
+    /// The AVX2 build of the weighted sums gives the portable build's bits, on runs that
+    /// wrap and runs that do not.
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn both_builds_of_the_weighted_sums_agree() {
+        if !*crate::x86::AVX2 {
+            eprintln!("this processor has no AVX2: one build only");
+            return;
+        }
+        let levels = MapLevels::new(&featured_sky(), 1.0, false);
+        let prefiltered = levels.prefilter(SharpLobe::Phong { exponent: 61.0 });
+        let Source::Convolution(convolution) = &prefiltered.source else { panic!("Phong 61 convolves") };
+        let (width, height) = (prefiltered.width, prefiltered.height);
+        for row in [0, height / 3, height / 2] {
+            for column in [0, 1, width / 2, width - 1] {
+                let phase = column % convolution.phases;
+                let table = convolution.table(width, height, phase, row);
+                let portable = convolution.weighted_sum(&table, width, column);
+                // SAFETY: the processor has AVX2 (checked above).
+                let avx2 = unsafe { convolution.weighted_sum_avx2(&table, width, column) };
+                assert_eq!(portable.map(f32::to_bits), avx2.map(f32::to_bits), "row {row}, column {column}");
             }
         }
     }
