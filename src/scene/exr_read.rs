@@ -180,7 +180,7 @@ fn sample_count(samples: &FlatSamples) -> usize {
 
 /// Samples as f32: half floats exactly (through F16C where the processor has it), 32-bit
 /// unsigned integers to the nearest f32.
-pub(crate) fn to_f32(samples: &FlatSamples) -> Vec<f32> {
+fn to_f32(samples: &FlatSamples) -> Vec<f32> {
     match samples {
         FlatSamples::F16(v) => {
             let mut out = vec![0.0f32; v.len()];

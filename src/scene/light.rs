@@ -222,7 +222,7 @@ impl EnvironmentMap {
             return self;
         }
         if rotation[0] == 0.0 && rotation[1] == 0.0 {
-            return self.turned_about_z(rotation[2] - turn);
+            return self.turned_about_z(rotation[2].rem_euclid(360.0) - turn.rem_euclid(360.0));
         }
         let mapping = euler_xyz(rotation.map(f64::to_radians));
         let turned = euler_xyz([0.0, 0.0, -turn.to_radians()]);
@@ -236,7 +236,7 @@ impl EnvironmentMap {
     fn turned_about_z(&self, degrees: f64) -> EnvironmentMap {
         let width = self.width;
         // The lookup of column c's centre turned by `degrees` falls at x = c - shift.
-        let shift = (degrees / 360.0 * width as f64).rem_euclid(width as f64);
+        let shift = (degrees.rem_euclid(360.0) / 360.0 * width as f64).rem_euclid(width as f64);
         let back = shift.ceil();
         let t = (back - shift) as f32;
         let back = back as usize % width;
@@ -660,6 +660,9 @@ mod tests {
                     }
                 }
             }
+            // Angles far beyond a turn are taken modulo 360 degrees, and stay finite.
+            let far = map.clone().oriented([0.0, 0.0, 1e300], -3e300);
+            assert!(far.texels.iter().all(|t| t.iter().all(|v| v.is_finite())));
         }
     }
 
