@@ -111,10 +111,7 @@ impl ExrChannels {
     /// `width` x `height`.
     pub fn take(&mut self, file: &Path, name: &str) -> Result<Vec<f32>, SceneError> {
         let index = self.checked_index(file, name)?;
-        Ok(match &self.data[index] {
-            FlatSamples::F32(v) => v.clone(),
-            samples => to_f32(samples),
-        })
+        Ok(to_f32(&self.data[index]))
     }
 
     /// The index of channel `name`, checked to exist and to have the reference size.
@@ -152,7 +149,7 @@ impl ExrChannels {
     /// rearranges.
     pub fn take_samples(&mut self, file: &Path, name: &str) -> Result<FlatSamples, SceneError> {
         let index = self.checked_index(file, name)?;
-        if sample_count(&self.data[index]) == 0 {
+        if self.data[index].len() == 0 {
             return Err(SceneError::invalid(
                 file,
                 format!("channel \"{name}\" is read twice (it appears twice in the file)"),
@@ -170,24 +167,24 @@ impl ExrChannels {
     }
 }
 
-fn sample_count(samples: &FlatSamples) -> usize {
-    match samples {
-        FlatSamples::F16(v) => v.len(),
-        FlatSamples::F32(v) => v.len(),
-        FlatSamples::U32(v) => v.len(),
-    }
+/// Samples as f32 ([`samples_to_f32`]).
+fn to_f32(samples: &FlatSamples) -> Vec<f32> {
+    let mut out = vec![0.0f32; samples.len()];
+    samples_to_f32(samples, 0, &mut out);
+    out
 }
 
-/// Samples as f32: half floats exactly (through F16C where the processor has it), 32-bit
-/// unsigned integers to the nearest f32.
-fn to_f32(samples: &FlatSamples) -> Vec<f32> {
+/// Samples `first..first + out.len()` as f32: half floats exactly (through F16C where the
+/// processor has it), 32-bit unsigned integers to the nearest f32.
+pub(crate) fn samples_to_f32(samples: &FlatSamples, first: usize, out: &mut [f32]) {
+    let range = first..first + out.len();
     match samples {
-        FlatSamples::F16(v) => {
-            let mut out = vec![0.0f32; v.len()];
-            v.convert_to_f32_slice(&mut out);
-            out
+        FlatSamples::F16(v) => v[range].convert_to_f32_slice(out),
+        FlatSamples::F32(v) => out.copy_from_slice(&v[range]),
+        FlatSamples::U32(v) => {
+            for (o, &u) in out.iter_mut().zip(&v[range]) {
+                *o = u as f32;
+            }
         }
-        FlatSamples::F32(v) => v.clone(),
-        FlatSamples::U32(v) => v.iter().map(|&u| u as f32).collect(),
     }
 }

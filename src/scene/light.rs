@@ -232,11 +232,12 @@ impl EnvironmentMap {
 
     /// [`Self::rotated`] for a rotation by `degrees` about Z: every texel centre keeps its
     /// row, so the bilinear lookup is a linear one along the row, at one shift for every
-    /// texel (the same reads and weights, without a direction per texel).
+    /// texel (the same reads and weights, without a direction per texel). `degrees` is
+    /// within a turn or two of 0 (the caller reduces its angles), so the shift is exact.
     fn turned_about_z(&self, degrees: f64) -> EnvironmentMap {
         let width = self.width;
         // The lookup of column c's centre turned by `degrees` falls at x = c - shift.
-        let shift = (degrees.rem_euclid(360.0) / 360.0 * width as f64).rem_euclid(width as f64);
+        let shift = (degrees / 360.0 * width as f64).rem_euclid(width as f64);
         let back = shift.ceil();
         let t = (back - shift) as f32;
         let back = back as usize % width;

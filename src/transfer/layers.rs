@@ -2,13 +2,12 @@
 //! them back (the table in the [module doc](super)).
 
 use super::lobe_code;
-use crate::scene::exr_read::ExrChannels;
+use crate::scene::exr_read::{samples_to_f32, ExrChannels};
 use crate::scene::output::SampleType;
 use crate::scene::{LightSource, SceneError};
 use crate::sh::{coefficient_count, MAX_ORDER, MIN_ORDER};
 use crate::shade::glossy::SharpLobe;
 use crate::shade::kernel::{GlossyTransfer, PointTransfer};
-use half::slice::HalfFloatSliceExt;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -496,16 +495,7 @@ fn pixel_major(channels: &[exr::prelude::FlatSamples], pixels: usize) -> Vec<f32
     for first in (0..pixels).step_by(BLOCK) {
         let n = BLOCK.min(pixels - first);
         for (converted, channel) in block.iter_mut().zip(channels) {
-            let converted = &mut converted[..n];
-            match channel {
-                exr::prelude::FlatSamples::F16(v) => v[first..first + n].convert_to_f32_slice(converted),
-                exr::prelude::FlatSamples::F32(v) => converted.copy_from_slice(&v[first..first + n]),
-                exr::prelude::FlatSamples::U32(v) => {
-                    for (c, &u) in converted.iter_mut().zip(&v[first..first + n]) {
-                        *c = u as f32;
-                    }
-                }
-            }
+            samples_to_f32(channel, first, &mut converted[..n]);
         }
         for i in 0..n {
             values.extend(block.iter().map(|channel| channel[i]));
