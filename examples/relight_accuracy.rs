@@ -12,12 +12,13 @@
 //! default `auto` (what relighting does to the suns taken out of a map). Errors are
 //! `logsh::compare`'s: mean absolute over non-background pixels, RGB, over the open white
 //! floor; "worst" is the largest pixel's. Times are the medians of `N` runs of the
-//! shading call and of the relight call, as the frames of a sequence run them (the light
-//! and the kernel built once), and the first run of each, cold, both reading their light:
-//! the relight with its light read, turned, projected and prefiltered, the shade with its
-//! map read and turned as a scene's loading does, then its tables; reading the transfer
-//! file and the G-buffer is not counted. Where the scene directory holds a converged Cycles render of
-//! the frame (`cycles.NNNN.exr`, `blender_scripts/render_cycles.py`) and the light is not
+//! shading call and of the relight call, taking turns (each after an untimed run of
+//! itself), as the frames of a sequence run them (the light and the kernel built once),
+//! and the first run of each, cold, both reading their light: the relight with its light
+//! read, turned, projected and prefiltered, the shade with its map read and turned as a
+//! scene's loading does, then its tables; reading the transfer file and the G-buffer is
+//! not counted. Where the scene directory holds a converged Cycles render of the frame
+//! (`cycles.NNNN.exr`, `blender_scripts/render_cycles.py`) and the light is not
 //! turned, the relit frame and the default shade are also compared with it.
 
 use logsh::compare::{frame_error, unoccluded_value};
@@ -66,28 +67,41 @@ fn main() -> anyhow::Result<()> {
         }
         let shade_light = started.elapsed().as_secs_f64();
         let unoccluded = unoccluded_value(&turned_frame).expect("a map or constant light");
-        let mut shade_times = Vec::new();
-        let mut truth = None;
-        for _ in 0..repeats {
-            let started = Instant::now();
-            truth = Some(shade_frame_passes(&turned, &turned_frame, &settings)?);
-            shade_times.push(started.elapsed().as_secs_f64());
-        }
-        let truth = truth.expect("one repeat at least");
-        let auto = shade_frame_passes(&turned, &turned_frame, &ShadingSettings::default())?;
-
         let options = RelightOptions { rotation, ..RelightOptions::default() };
         let started = Instant::now();
         let light = RelightLight::new(options.source(&transfer.header), &transfer.header, &file)?;
         let building = started.elapsed().as_secs_f64();
-        let mut relight_times = Vec::new();
-        let mut relit = None;
-        for _ in 0..repeats {
-            let started = Instant::now();
-            relit = Some(relight(&transfer, &light));
-            relight_times.push(started.elapsed().as_secs_f64());
+        // The shade and the relight take turns, so that a slower spell of a shared
+        // machine falls on both. Each timed run follows an untimed one of its own, which
+        // leaves its data in the caches as reading its frame does in a sequence (a
+        // relight straight after a shade found the transfer evicted, and took up to twice
+        // as long at 240x135).
+        let (mut shade_times, mut relight_times) = (Vec::new(), Vec::new());
+        let (mut truth, mut relit) = (None, None);
+        let (mut cold_shade, mut cold_relight) = (0.0, 0.0);
+        for round in 0..repeats {
+            for timed in [false, true] {
+                let started = Instant::now();
+                truth = Some(shade_frame_passes(&turned, &turned_frame, &settings)?);
+                match (round, timed) {
+                    (0, false) => cold_shade = started.elapsed().as_secs_f64(),
+                    (_, true) => shade_times.push(started.elapsed().as_secs_f64()),
+                    _ => {}
+                }
+            }
+            for timed in [false, true] {
+                let started = Instant::now();
+                relit = Some(relight(&transfer, &light));
+                match (round, timed) {
+                    (0, false) => cold_relight = started.elapsed().as_secs_f64(),
+                    (_, true) => relight_times.push(started.elapsed().as_secs_f64()),
+                    _ => {}
+                }
+            }
         }
+        let truth = truth.expect("one repeat at least");
         let relit = relit.expect("one repeat at least");
+        let auto = shade_frame_passes(&turned, &turned_frame, &ShadingSettings::default())?;
         let rgb = |p: &logsh::shade::ShadedPasses| p.beauty.iter().map(|c| [c[0], c[1], c[2]]).collect::<Vec<_>>();
         let material = &frame.gbuffer.material;
         let off = frame_error(material, &rgb(&relit), &rgb(&truth), unoccluded);
@@ -102,7 +116,7 @@ fn main() -> anyhow::Result<()> {
             ),
             _ => "-".into(),
         };
-        let (cold_relight, cold_shade) = (building + relight_times[0], shade_light + shade_times[0]);
+        let (cold_relight, cold_shade) = (building + cold_relight, shade_light + cold_shade);
         let (r, s) = (median(relight_times), median(shade_times));
         println!(
             "| {} | {}x{} | {:.5} / {:.4} | {:.4} | {against_cycles} | {:.1} ms | {:.1} ms | {:.0}x | {:.1} / {:.1} ms | {:.0}x |",

@@ -49,6 +49,7 @@ pub fn direction_to_equirectangular(dir: [f64; 3]) -> [f64; 2] {
 /// texel: the polar angle `acos(d.z / |d|)` as `atan2(|d.xy|, d.z)` (the same angle
 /// without the division) and both angles by [`atan2_fast`], to 1e-8 rad (1.3e-5 of a
 /// texel of a 8192-wide map). Every map lookup of a frame, per pixel, goes through here.
+#[inline(always)]
 pub fn lookup_coordinates(dir: [f64; 3]) -> [f64; 2] {
     let horizontal = (dir[0] * dir[0] + dir[1] * dir[1]).sqrt();
     if horizontal == 0.0 && dir[2] == 0.0 {
@@ -256,7 +257,15 @@ impl EnvironmentMap {
 
     /// Bilinear lookup in direction `dir` (need not be unit).
     pub fn lookup(&self, dir: [f64; 3]) -> [f32; 3] {
-        BilinearTaps::new(self.width, self.height, dir).read(|column, row| self.texels[row * self.width + column])
+        self.lookup_at(lookup_coordinates(dir))
+    }
+
+    /// Bilinear lookup at the lookup coordinates `[u, v]` of a direction
+    /// ([`lookup_coordinates`]).
+    #[inline(always)]
+    pub fn lookup_at(&self, coordinates: [f64; 2]) -> [f32; 3] {
+        BilinearTaps::at(self.width, self.height, coordinates)
+            .read(|column, row| self.texels[row * self.width + column])
     }
 }
 
@@ -272,8 +281,14 @@ pub struct BilinearTaps {
 
 impl BilinearTaps {
     /// The taps in direction `dir` (need not be unit).
+    #[inline(always)]
     pub fn new(width: usize, height: usize, dir: [f64; 3]) -> Self {
-        let [u, v] = lookup_coordinates(dir);
+        Self::at(width, height, lookup_coordinates(dir))
+    }
+
+    /// The taps at lookup coordinates `[u, v]` ([`lookup_coordinates`]).
+    #[inline(always)]
+    pub fn at(width: usize, height: usize, [u, v]: [f64; 2]) -> Self {
         let x = u * width as f64 - 0.5;
         let y = ((1.0 - v) * height as f64 - 0.5).clamp(0.0, (height - 1) as f64);
         // Floors by truncation (x >= -1/2, y >= 0), and columns wrapped by a comparison:
@@ -305,6 +320,7 @@ impl BilinearTaps {
     }
 
     /// The blend of `texel(column, row)` over the taps.
+    #[inline(always)]
     pub fn read(&self, texel: impl Fn(usize, usize) -> [f32; 3]) -> [f32; 3] {
         let ([c0, c1], [r0, r1], tx, ty) = (self.columns, self.rows, self.tx, self.ty);
         let (a, b, c, d) = (texel(c0, r0), texel(c1, r0), texel(c0, r1), texel(c1, r1));
@@ -508,10 +524,7 @@ impl Light {
     pub fn radiance(&self, dir: [f64; 3]) -> [f32; 3] {
         match self {
             Light::Constant(c) => *c,
-            Light::Environment { map, strength } => {
-                let l = map.lookup(dir);
-                [l[0] * strength, l[1] * strength, l[2] * strength]
-            }
+            Light::Environment { .. } => self.radiance_at(dir, lookup_coordinates(dir)),
             Light::Sh(v) => {
                 let order = (v.len() as f64).sqrt().round() as usize;
                 let len = (dir[0] * dir[0] + dir[1] * dir[1] + dir[2] * dir[2]).sqrt();
@@ -525,6 +538,19 @@ impl Light {
                 }
                 out
             }
+        }
+    }
+
+    /// [`Self::radiance`] from direction `dir`, whose lookup coordinates
+    /// ([`lookup_coordinates`]) are `coordinates`, for a caller that has them.
+    #[inline(always)]
+    pub fn radiance_at(&self, dir: [f64; 3], coordinates: [f64; 2]) -> [f32; 3] {
+        match self {
+            Light::Environment { map, strength } => {
+                let l = map.lookup_at(coordinates);
+                [l[0] * strength, l[1] * strength, l[2] * strength]
+            }
+            _ => self.radiance(dir),
         }
     }
 }

@@ -38,7 +38,7 @@
 
 use super::sun::{disk_pattern, DISK_DIRECTIONS};
 use crate::scene::camera::dot;
-use crate::scene::light::{BilinearTaps, EnvironmentMap};
+use crate::scene::light::{lookup_coordinates, BilinearTaps, EnvironmentMap};
 use std::f64::consts::{FRAC_PI_2, PI};
 use std::sync::{Arc, OnceLock};
 
@@ -644,6 +644,7 @@ impl Prefiltered {
     }
 
     /// Texel (column, row).
+    #[inline(always)]
     pub fn texel(&self, column: usize, row: usize) -> [f32; 3] {
         match &self.source {
             Source::Map(map) => map.texels[row * map.width + column],
@@ -653,8 +654,23 @@ impl Prefiltered {
     }
 
     /// `P(R)`, bilinearly.
+    #[inline(always)]
     pub fn lookup(&self, direction: [f64; 3]) -> [f32; 3] {
-        BilinearTaps::new(self.width, self.height, direction).read(|column, row| self.texel(column, row))
+        self.lookup_at(lookup_coordinates(direction))
+    }
+
+    /// `P` at the lookup coordinates of `R` ([`lookup_coordinates`]), bilinearly.
+    #[inline(always)]
+    pub fn lookup_at(&self, coordinates: [f64; 2]) -> [f32; 3] {
+        let taps = BilinearTaps::at(self.width, self.height, coordinates);
+        // The source is matched once for the four taps, not per texel.
+        match &self.source {
+            Source::Map(map) => taps.read(|column, row| map.texels[row * map.width + column]),
+            Source::Convolution(convolution) => taps.read(|column, row| {
+                *self.texels[row * self.width + column]
+                    .get_or_init(|| convolution.texel(self.width, self.height, column, row))
+            }),
+        }
     }
 
     /// Computes the texels that a bilinear read along `direction` blends, and, where the

@@ -8,6 +8,7 @@ use crate::scene::{LightSource, SceneError};
 use crate::sh::{coefficient_count, MAX_ORDER, MIN_ORDER};
 use crate::shade::glossy::SharpLobe;
 use crate::shade::kernel::{GlossyTransfer, PointTransfer};
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -416,7 +417,7 @@ impl TransferFrame {
         let triple = |exr: &mut ExrChannels, layer: &str, names: [&str; 3]| -> Result<Vec<[f32; 3]>, SceneError> {
             let [a, b, c] = names.map(|n| exr.take_once(file, &format!("{layer}.{n}")));
             let (a, b, c) = (a?, b?, c?);
-            Ok((0..a.len()).map(|i| [a[i], b[i], c[i]]).collect())
+            Ok(a.into_par_iter().zip(b).zip(c).map(|((a, b), c)| [a, b, c]).collect())
         };
         let rgb = ["R", "G", "B"];
         let xyz = ["X", "Y", "Z"];
@@ -449,14 +450,14 @@ impl TransferFrame {
         if specular.is_none() && glossy_lobe.iter().any(|&c| c >= lobe_code::SH) {
             return Err(SceneError::invalid(file, "its pixels read sh_specular, which it does not hold"));
         }
-        let finite = |v: &[f32]| v.iter().all(|x| x.is_finite());
+        let finite = |v: &[f32]| v.par_iter().all(|x| x.is_finite());
         let all_finite = finite(&diffuse)
             && finite(&unoccluded)
             && [&heightfield, &blockers, &specular].iter().all(|l| l.as_ref().is_none_or(|v| finite(v)))
             && [&albedo, &specular_colour, &lamps_diffuse, &lamps_specular, &glossy_direction]
                 .iter()
-                .all(|l| l.iter().all(|v| finite(v)))
-            && glossy_weight.iter().all(|w| finite(w))
+                .all(|l| finite(l.as_flattened()))
+            && finite(glossy_weight.as_flattened())
             && finite(&alpha);
         if !all_finite {
             return Err(SceneError::NonFinite { file: file.to_path_buf(), what: "a transfer layer".into() });
@@ -485,21 +486,24 @@ impl TransferFrame {
 }
 
 /// `channels` (one value per pixel each) as f32, pixel by pixel: a block of pixels at a
-/// time, each channel's block converted at once (half floats through F16C where the
-/// processor has it), then written in order.
+/// time, in parallel, each channel's block converted at once (half floats through F16C
+/// where the processor has it), then written in order.
 fn pixel_major(channels: &[exr::prelude::FlatSamples], pixels: usize) -> Vec<f32> {
     const BLOCK: usize = 256;
     let count = channels.len();
-    let mut values = Vec::with_capacity(pixels * count);
-    let mut block = vec![[0.0f32; BLOCK]; count];
-    for first in (0..pixels).step_by(BLOCK) {
-        let n = BLOCK.min(pixels - first);
+    // Zeroed by the allocator (fresh pages), then each value written once.
+    let mut values = vec![0.0f32; pixels * count];
+    values.par_chunks_mut(BLOCK * count.max(1)).enumerate().for_each(|(b, out)| {
+        let (first, n) = (b * BLOCK, out.len() / count);
+        let mut block = vec![[0.0f32; BLOCK]; count];
         for (converted, channel) in block.iter_mut().zip(channels) {
             samples_to_f32(channel, first, &mut converted[..n]);
         }
-        for i in 0..n {
-            values.extend(block.iter().map(|channel| channel[i]));
+        for (i, pixel) in out.chunks_exact_mut(count).enumerate() {
+            for (v, channel) in pixel.iter_mut().zip(&block) {
+                *v = channel[i];
+            }
         }
-    }
+    });
     values
 }
