@@ -46,6 +46,21 @@ fn dunes(dir: &Path) -> PathBuf {
     out
 }
 
+/// A copy of the scene `from` under a constant light, in `dir`.
+fn constant_light(from: &Path, dir: &Path) -> PathBuf {
+    let out = dir.join("constant");
+    std::fs::create_dir_all(&out).unwrap();
+    for entry in std::fs::read_dir(from).unwrap() {
+        let entry = entry.unwrap();
+        std::fs::copy(entry.path(), out.join(entry.file_name())).unwrap();
+    }
+    let file = out.join("scene.json");
+    let mut scene: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&file).unwrap()).unwrap();
+    scene["light"] = serde_json::json!({ "constant": [0.8, 0.9, 1.0] });
+    std::fs::write(&file, scene.to_string()).unwrap();
+    out
+}
+
 fn path(p: &Path) -> &str {
     p.to_str().unwrap()
 }
@@ -93,13 +108,15 @@ const RELIT_TOLERANCE: f64 = 0.002;
 fn relit_equals_a_fresh_shade_under_the_same_turned_light() {
     let dir = tempfile::tempdir().unwrap();
     let cones = Path::new(env!("CARGO_MANIFEST_DIR")).join("gbuffers/cones");
-    let cases: [(PathBuf, f64, &[&str]); 5] = [
+    let cases: [(PathBuf, f64, &[&str]); 6] = [
         (dunes(dir.path()), 0.0, &[]),
         (dunes(dir.path()), 120.0, &[]),
         (cones.clone(), -90.0, &[]),
         // The glossy term in log-SH, and the f64 kernel.
         (cones.clone(), 30.0, &["--glossy", "sh"]),
-        (cones, 30.0, &["--precision", "f64"]),
+        (cones.clone(), 30.0, &["--precision", "f64"]),
+        // A constant light, prefiltered for the Phong sphere over the ground's half.
+        (constant_light(&cones, dir.path()), 30.0, &[]),
     ];
     for (case, (scene, turn, extra)) in cases.iter().enumerate() {
         let turn = *turn;
