@@ -662,15 +662,7 @@ impl Prefiltered {
     /// `P` at the lookup coordinates of `R` ([`lookup_coordinates`]), bilinearly.
     #[inline(always)]
     pub fn lookup_at(&self, coordinates: [f64; 2]) -> [f32; 3] {
-        let taps = BilinearTaps::at(self.width, self.height, coordinates);
-        // The source is matched once for the four taps, not per texel.
-        match &self.source {
-            Source::Map(map) => taps.read(|column, row| map.texels[row * map.width + column]),
-            Source::Convolution(convolution) => taps.read(|column, row| {
-                *self.texels[row * self.width + column]
-                    .get_or_init(|| convolution.texel(self.width, self.height, column, row))
-            }),
-        }
+        BilinearTaps::at(self.width, self.height, coordinates).read(|column, row| self.texel(column, row))
     }
 
     /// Computes the texels that a bilinear read along `direction` blends, and, where the

@@ -450,12 +450,9 @@ unsafe fn relight_chunk_avx2(frame: &TransferFrame, light: &RelightLight, first:
 #[inline(always)]
 unsafe fn relight_chunk<D: Dots>(frame: &TransferFrame, light: &RelightLight, first: usize, out: RelitChunk) {
     let mut coordinates = [[0.0f64; 2]; CHUNK];
-    // Read by the prefiltered lobes (a constant light's too) and by a map's mirrors.
-    if !light.prefiltered.is_empty() || matches!(light.light, Light::Environment { .. }) {
-        let directions = &frame.glossy_direction[first..first + out.beauty.len()];
-        for (uv, d) in coordinates.iter_mut().zip(directions) {
-            *uv = lookup_coordinates(d.map(f64::from));
-        }
+    let directions = &frame.glossy_direction[first..first + out.beauty.len()];
+    for (uv, d) in coordinates.iter_mut().zip(directions) {
+        *uv = lookup_coordinates(d.map(f64::from));
     }
     for j in 0..out.beauty.len() {
         let i = first + j;
