@@ -313,6 +313,14 @@ fn bad_relight_inputs_are_refused_with_the_file_named() {
     let broken = dir.path().join("broken.exr");
     write_frame(&broken, &cut, &text);
     assert_fails_naming(&["relight", path(&broken), "--out", o], &["broken.exr", "sh_unoccluded_0.R"]);
+    // A NaN in a transfer vector, or in a layer of three channels: refused, the file named.
+    for layer in ["sh_diffuse_0.R", "glossy_direction.Y"] {
+        let mut poisoned = channels(&frame);
+        poisoned.get_mut(layer).unwrap_or_else(|| panic!("{layer} in the frame"))[100] = f32::NAN;
+        let file = dir.path().join("poisoned.exr");
+        write_frame(&file, &poisoned, &text);
+        assert_fails_naming(&["relight", path(&file), "--out", o], &["poisoned.exr", "not a finite number"]);
+    }
     // Headers a relight cannot use: each refused with the file and what is wrong.
     let all = channels(&frame);
     let header: serde_json::Value = serde_json::from_str(&text).unwrap();
