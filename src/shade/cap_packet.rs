@@ -155,6 +155,10 @@ static LANE_BASIS: std::sync::LazyLock<LaneBasis> = std::sync::LazyLock::new(|| 
     }
 });
 
+/// The real SH basis at eight directions at once ([`lanes::basis`]).
+#[cfg(target_arch = "x86_64")]
+pub use lanes::basis as basis_lanes;
+
 #[cfg(target_arch = "x86_64")]
 mod lanes {
     use super::{CapPacket, LaneBasis, Receiver, LANES, LANE_BASIS};
@@ -327,18 +331,45 @@ mod lanes {
         for l in 1..N {
             band[l] = _mm256_mul_ps(scale, _mm256_sub_ps(p[l - 1], p[l + 1]));
         }
-        // The basis at each lane's direction (crate::sh::basis::eval_basis_of_order), each
-        // term added as it is made, one `m` at a time with (cm, sm) = Re, Im (x + iy)^m.
-        let [dx, dy, z] = direction;
-        let mut phase = (one, zero);
-        order_m::<N, 0>(basis, &band, z, &mut phase, [dx, dy], acc);
-        order_m::<N, 1>(basis, &band, z, &mut phase, [dx, dy], acc);
-        order_m::<N, 2>(basis, &band, z, &mut phase, [dx, dy], acc);
-        order_m::<N, 3>(basis, &band, z, &mut phase, [dx, dy], acc);
-        order_m::<N, 4>(basis, &band, z, &mut phase, [dx, dy], acc);
-        order_m::<N, 5>(basis, &band, z, &mut phase, [dx, dy], acc);
-        order_m::<N, 6>(basis, &band, z, &mut phase, [dx, dy], acc);
-        order_m::<N, 7>(basis, &band, z, &mut phase, [dx, dy], acc);
+        add_basis_terms::<N>(basis, &band, direction, acc);
+    }
+
+    /// The real SH basis to order `N` at each lane's direction: `y_k` in lane `j` of entry
+    /// `k` ([`crate::sh::eval_basis`] to f32 rounding, tested), by the lanes' recurrence
+    /// with the cap's `1 / (2l + 1)` taken back out.
+    ///
+    /// # Safety
+    /// The processor has AVX2 and FMA.
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    pub unsafe fn basis<const N: usize>(direction: [__m256; 3]) -> [__m256; MAX_COEFFICIENTS] {
+        let band: [__m256; crate::sh::MAX_ORDER] =
+            std::array::from_fn(|l| _mm256_set1_ps(if l == 0 { 1.0 } else { (2 * l + 1) as f32 }));
+        let mut acc = [_mm256_setzero_ps(); MAX_COEFFICIENTS];
+        add_basis_terms::<N>(&LANE_BASIS, &band, direction, &mut acc);
+        acc
+    }
+
+    /// The terms `band[l] R_l^m Re/Im (x + iy)^m` of the basis at each lane's direction
+    /// (crate::sh::basis::eval_basis_of_order) added to `acc`, each as it is made, one `m`
+    /// at a time with (cm, sm) = Re, Im (x + iy)^m.
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    unsafe fn add_basis_terms<const N: usize>(
+        basis: &LaneBasis,
+        band: &[__m256; crate::sh::MAX_ORDER],
+        [dx, dy, z]: [__m256; 3],
+        acc: &mut [__m256; MAX_COEFFICIENTS],
+    ) {
+        let mut phase = (_mm256_set1_ps(1.0), _mm256_setzero_ps());
+        order_m::<N, 0>(basis, band, z, &mut phase, [dx, dy], acc);
+        order_m::<N, 1>(basis, band, z, &mut phase, [dx, dy], acc);
+        order_m::<N, 2>(basis, band, z, &mut phase, [dx, dy], acc);
+        order_m::<N, 3>(basis, band, z, &mut phase, [dx, dy], acc);
+        order_m::<N, 4>(basis, band, z, &mut phase, [dx, dy], acc);
+        order_m::<N, 5>(basis, band, z, &mut phase, [dx, dy], acc);
+        order_m::<N, 6>(basis, band, z, &mut phase, [dx, dy], acc);
+        order_m::<N, 7>(basis, band, z, &mut phase, [dx, dy], acc);
     }
 
     /// The terms `band[l] R_l^M Re/Im (x + iy)^M` for `l = M..N` added to `acc` (nothing for
@@ -521,5 +552,65 @@ mod tests {
         assert!(out.iter().flatten().all(|v| v.is_finite()), "{out:?}");
         assert!(out[0].iter().all(|&v| v == 0.0), "a receiver at the centre is culled");
         assert!(out[1][0] < -1.0, "a receiver on the surface sees a hemisphere");
+    }
+
+    /// The lanes' basis is [`crate::sh::eval_basis`]'s, to f32 rounding (4e-6 of the
+    /// largest value), at every order, along 400 directions spread over the sphere, the
+    /// poles and the equator included.
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn the_lanes_basis_is_the_scalar_basis() {
+        use std::arch::x86_64::*;
+        if !CapPacket::available() {
+            eprintln!("no AVX2 and FMA here: the lanes do not run");
+            return;
+        }
+        let mut directions: Vec<[f32; 3]> = (0..400)
+            .map(|i| {
+                let z = 1.0 - 2.0 * (i as f32 + 0.5) / 400.0;
+                let (r, phi) = ((1.0 - z * z).sqrt(), 2.399_963 * i as f32);
+                [r * phi.cos(), r * phi.sin(), z]
+            })
+            .collect();
+        directions.extend([[0.0, 0.0, 1.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0], [0.0, -1.0, 0.0]]);
+        for order in crate::sh::MIN_ORDER..=crate::sh::MAX_ORDER {
+            for group in directions.chunks(LANES) {
+                let axis = |k: usize| {
+                    let values: [f32; LANES] = std::array::from_fn(|lane| group.get(lane).map_or(0.0, |d| d[k]));
+                    // SAFETY: `values` holds LANES floats; the processor has AVX2.
+                    unsafe { _mm256_loadu_ps(values.as_ptr()) }
+                };
+                let direction = [axis(0), axis(1), axis(2)];
+                // SAFETY: the processor has AVX2 and FMA.
+                let lanes = unsafe {
+                    match order {
+                        3 => basis_lanes::<3>(direction),
+                        4 => basis_lanes::<4>(direction),
+                        5 => basis_lanes::<5>(direction),
+                        6 => basis_lanes::<6>(direction),
+                        7 => basis_lanes::<7>(direction),
+                        _ => basis_lanes::<8>(direction),
+                    }
+                };
+                let mut values = [[0.0f32; LANES]; MAX_COEFFICIENTS];
+                for (v, l) in values.iter_mut().zip(lanes) {
+                    // SAFETY: `v` holds LANES floats.
+                    unsafe { _mm256_storeu_ps(v.as_mut_ptr(), l) };
+                }
+                for (lane, d) in group.iter().enumerate() {
+                    let mut expected = [0.0f32; MAX_COEFFICIENTS];
+                    crate::sh::eval_basis(order, *d, &mut expected);
+                    let largest = expected.iter().fold(0.0f32, |a, v| a.max(v.abs()));
+                    for k in 0..order * order {
+                        assert!(
+                            (values[k][lane] - expected[k]).abs() <= 4e-6 * largest,
+                            "order {order}, direction {d:?}, coefficient {k}: {} against {}",
+                            values[k][lane],
+                            expected[k]
+                        );
+                    }
+                }
+            }
+        }
     }
 }
