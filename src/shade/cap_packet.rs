@@ -343,8 +343,11 @@ mod lanes {
     #[target_feature(enable = "avx2,fma")]
     #[inline]
     pub unsafe fn basis<const N: usize>(direction: [__m256; 3]) -> [__m256; MAX_COEFFICIENTS] {
-        let band: [__m256; crate::sh::MAX_ORDER] =
-            std::array::from_fn(|l| _mm256_set1_ps(if l == 0 { 1.0 } else { (2 * l + 1) as f32 }));
+        // No closure: it would not inherit this function's features.
+        let mut band = [_mm256_set1_ps(1.0); crate::sh::MAX_ORDER];
+        for (l, b) in band.iter_mut().enumerate().skip(1) {
+            *b = _mm256_set1_ps((2 * l + 1) as f32);
+        }
         let mut acc = [_mm256_setzero_ps(); MAX_COEFFICIENTS];
         add_basis_terms::<N>(&LANE_BASIS, &band, direction, &mut acc);
         acc
