@@ -108,10 +108,13 @@ const RELIT_TOLERANCE: f64 = 0.002;
 fn relit_equals_a_fresh_shade_under_the_same_turned_light() {
     let dir = tempfile::tempdir().unwrap();
     let cones = Path::new(env!("CARGO_MANIFEST_DIR")).join("gbuffers/cones");
-    let cases: [(PathBuf, f64, &[&str]); 6] = [
+    let cases: [(PathBuf, f64, &[&str]); 8] = [
         (dunes(dir.path()), 0.0, &[]),
         (dunes(dir.path()), 120.0, &[]),
         (cones.clone(), -90.0, &[]),
+        // The lowest and highest orders: the relight's lanes are compiled per order.
+        (cones.clone(), 45.0, &["--order", "3"]),
+        (dunes(dir.path()), 45.0, &["--order", "8"]),
         // The glossy term in log-SH, and the f64 kernel.
         (cones.clone(), 30.0, &["--glossy", "sh"]),
         (cones.clone(), 30.0, &["--precision", "f64"]),
