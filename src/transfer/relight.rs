@@ -374,14 +374,8 @@ trait Dots: Sized {
     /// # Safety
     /// As [`Dots::dot`].
     unsafe fn open_lights(frame: &TransferFrame, light: &RelightLight, first: usize, open: &mut [[f32; 3]]) {
-        for (j, o) in open.iter_mut().enumerate() {
-            let i = first + j;
-            if let Some(lobe) = sh_weighted_lobe(frame, i) {
-                let direction = frame.glossy_direction[i].map(f64::from);
-                // SAFETY: the caller holds `Self`'s contract.
-                *o = unsafe { open_light::<Self>(&light.open[lobe], frame.order(), direction) };
-            }
-        }
+        // SAFETY: the caller holds `Self`'s contract.
+        unsafe { open_lights_one_by_one::<Self>(frame, light, first, open) }
     }
 }
 
@@ -432,26 +426,9 @@ impl Dots for Avx2Dots {
     #[inline(always)]
     unsafe fn dot(blocks: &Blocks, transfer: &[f32]) -> [f32; 3] {
         use std::arch::x86_64::*;
-        // SAFETY: the caller's processor has AVX2 and FMA (the trait's contract); every
-        // load reads DOT_LANES floats of a block or of `tail`.
+        // SAFETY: the caller's processor has AVX2 and FMA (the trait's contract).
         unsafe {
-            let mut acc = [_mm256_setzero_ps(); 3];
-            let whole = transfer.len() / DOT_LANES;
-            for b in 0..whole {
-                let t = _mm256_loadu_ps(transfer[b * DOT_LANES..][..DOT_LANES].as_ptr());
-                for (a, channel) in acc.iter_mut().zip(blocks) {
-                    *a = _mm256_fmadd_ps(t, _mm256_loadu_ps(channel[b].as_ptr()), *a);
-                }
-            }
-            let rest = transfer.len() - whole * DOT_LANES;
-            if rest > 0 {
-                let mut tail = [0.0f32; DOT_LANES];
-                tail[..rest].copy_from_slice(&transfer[whole * DOT_LANES..]);
-                let t = _mm256_loadu_ps(tail.as_ptr());
-                for (a, channel) in acc.iter_mut().zip(blocks) {
-                    *a = _mm256_fmadd_ps(t, _mm256_loadu_ps(channel[whole].as_ptr()), *a);
-                }
-            }
+            let [acc] = avx2_products(blocks, [transfer]);
             // [r01 r23 g01 g23 | ...], [b01 b23 0 0 | ...], then [r g b 0] per half.
             let rg = _mm256_hadd_ps(acc[0], acc[1]);
             let b0 = _mm256_hadd_ps(acc[2], _mm256_setzero_ps());
@@ -464,48 +441,16 @@ impl Dots for Avx2Dots {
         }
     }
 
-    /// The products of every transfer accumulated as in [`Dots::dot`], then reduced eight
-    /// sums at a time in one transposition, each sum added in [`Dots::dot`]'s order (so
-    /// with the same bits) in fewer instructions. No closures: they would not inherit
+    /// The products of every transfer accumulated as for [`Dots::dot`]
+    /// ([`avx2_products`]), then reduced eight sums at a time in one transposition, each
+    /// sum added in [`Dots::dot`]'s order (so with the same bits) in fewer instructions. No closures: they would not inherit
     /// [`relight_chunk_avx2`]'s features, and each intrinsic in them would be a call.
     #[inline(always)]
     unsafe fn dots<const K: usize>(blocks: &Blocks, transfers: [&[f32]; K]) -> [[f32; 3]; K] {
         use std::arch::x86_64::*;
-        // SAFETY: the caller's processor has AVX2 and FMA (the trait's contract); every
-        // load reads DOT_LANES floats of a block, of a transfer or of `tail`.
+        // SAFETY: the caller's processor has AVX2 and FMA (the trait's contract).
         unsafe {
-            let mut acc = [[_mm256_setzero_ps(); 3]; K];
-            let length = transfers.first().map_or(0, |t| t.len());
-            let whole = length / DOT_LANES;
-            for b in 0..whole {
-                let light = [
-                    _mm256_loadu_ps(blocks[0][b].as_ptr()),
-                    _mm256_loadu_ps(blocks[1][b].as_ptr()),
-                    _mm256_loadu_ps(blocks[2][b].as_ptr()),
-                ];
-                for (a, transfer) in acc.iter_mut().zip(&transfers) {
-                    let t = _mm256_loadu_ps(transfer[b * DOT_LANES..][..DOT_LANES].as_ptr());
-                    for (a, l) in a.iter_mut().zip(light) {
-                        *a = _mm256_fmadd_ps(t, l, *a);
-                    }
-                }
-            }
-            let rest = length - whole * DOT_LANES;
-            if rest > 0 {
-                let light = [
-                    _mm256_loadu_ps(blocks[0][whole].as_ptr()),
-                    _mm256_loadu_ps(blocks[1][whole].as_ptr()),
-                    _mm256_loadu_ps(blocks[2][whole].as_ptr()),
-                ];
-                for (a, transfer) in acc.iter_mut().zip(&transfers) {
-                    let mut tail = [0.0f32; DOT_LANES];
-                    tail[..rest].copy_from_slice(&transfer[whole * DOT_LANES..]);
-                    let t = _mm256_loadu_ps(tail.as_ptr());
-                    for (a, l) in a.iter_mut().zip(light) {
-                        *a = _mm256_fmadd_ps(t, l, *a);
-                    }
-                }
-            }
+            let acc = avx2_products(blocks, transfers);
             let mut sums = [[0.0f32; 3]; K];
             for (group, out) in acc.as_flattened().chunks(8).zip(sums.as_flattened_mut().chunks_mut(8)) {
                 let mut eight = [_mm256_setzero_ps(); 8];
@@ -546,16 +491,83 @@ impl Dots for Avx2Dots {
                 6 => open_lights_in_lanes::<6>(frame, light, first, open),
                 7 => open_lights_in_lanes::<7>(frame, light, first, open),
                 8 => open_lights_in_lanes::<8>(frame, light, first, open),
-                _ => {
-                    for (j, o) in open.iter_mut().enumerate() {
-                        let i = first + j;
-                        if let Some(lobe) = sh_weighted_lobe(frame, i) {
-                            let direction = frame.glossy_direction[i].map(f64::from);
-                            *o = open_light::<Self>(&light.open[lobe], frame.order(), direction);
-                        }
-                    }
+                _ => open_lights_one_by_one::<Self>(frame, light, first, open),
+            }
+        }
+    }
+}
+
+/// Each of `transfers` (of one length) times the light `blocks`, per colour channel in
+/// eight partial sums (AVX2 lanes, fused multiply-adds), the last block zero-padded: what
+/// [`Avx2Dots::dot`] and [`Avx2Dots::dots`] reduce.
+///
+/// # Safety
+/// The processor has AVX2 and FMA.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+unsafe fn avx2_products<const K: usize>(
+    blocks: &Blocks,
+    transfers: [&[f32]; K],
+) -> [[std::arch::x86_64::__m256; 3]; K] {
+    use std::arch::x86_64::*;
+    // SAFETY: the caller's processor has AVX2 and FMA; every load reads DOT_LANES floats
+    // of a block, of a transfer or of `tail`. No closures: they would not inherit the
+    // caller's features.
+    unsafe {
+        let mut acc = [[_mm256_setzero_ps(); 3]; K];
+        let length = transfers.first().map_or(0, |t| t.len());
+        let whole = length / DOT_LANES;
+        for b in 0..whole {
+            let light = [
+                _mm256_loadu_ps(blocks[0][b].as_ptr()),
+                _mm256_loadu_ps(blocks[1][b].as_ptr()),
+                _mm256_loadu_ps(blocks[2][b].as_ptr()),
+            ];
+            for (a, transfer) in acc.iter_mut().zip(&transfers) {
+                let t = _mm256_loadu_ps(transfer[b * DOT_LANES..][..DOT_LANES].as_ptr());
+                for (a, l) in a.iter_mut().zip(light) {
+                    *a = _mm256_fmadd_ps(t, l, *a);
                 }
             }
+        }
+        let rest = length - whole * DOT_LANES;
+        if rest > 0 {
+            let light = [
+                _mm256_loadu_ps(blocks[0][whole].as_ptr()),
+                _mm256_loadu_ps(blocks[1][whole].as_ptr()),
+                _mm256_loadu_ps(blocks[2][whole].as_ptr()),
+            ];
+            for (a, transfer) in acc.iter_mut().zip(&transfers) {
+                let mut tail = [0.0f32; DOT_LANES];
+                tail[..rest].copy_from_slice(&transfer[whole * DOT_LANES..]);
+                let t = _mm256_loadu_ps(tail.as_ptr());
+                for (a, l) in a.iter_mut().zip(light) {
+                    *a = _mm256_fmadd_ps(t, l, *a);
+                }
+            }
+        }
+        acc
+    }
+}
+
+/// The open lobes' light of the pixels of a chunk, one pixel at a time
+/// ([`Dots::open_lights`]).
+///
+/// # Safety
+/// The processor has what `D` needs ([`Dots::dot`]).
+#[inline(always)]
+unsafe fn open_lights_one_by_one<D: Dots>(
+    frame: &TransferFrame,
+    light: &RelightLight,
+    first: usize,
+    open: &mut [[f32; 3]],
+) {
+    for (j, o) in open.iter_mut().enumerate() {
+        let i = first + j;
+        if let Some(lobe) = sh_weighted_lobe(frame, i) {
+            let direction = frame.glossy_direction[i].map(f64::from);
+            // SAFETY: the caller holds `D`'s contract.
+            *o = unsafe { open_light::<D>(&light.open[lobe], frame.order(), direction) };
         }
     }
 }
@@ -712,13 +724,8 @@ unsafe fn glossy_term<D: Dots>(
     }
     let count = frame.count();
     let at = i * count..(i + 1) * count;
-    let direction = [
-        f64::from(frame.glossy_direction[i][0]),
-        f64::from(frame.glossy_direction[i][1]),
-        f64::from(frame.glossy_direction[i][2]),
-    ];
     if code == lobe_code::MIRROR {
-        light.light.radiance_at(direction, coordinates)
+        light.light.radiance_at(frame.glossy_direction[i].map(f64::from), coordinates)
     } else if code == lobe_code::SH {
         D::dot(&light.blocks, &frame.specular.as_deref().expect("checked on reading")[at])
     } else {
