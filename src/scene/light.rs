@@ -322,8 +322,15 @@ impl BilinearTaps {
     /// The blend of `texel(column, row)` over the taps.
     #[inline(always)]
     pub fn read(&self, texel: impl Fn(usize, usize) -> [f32; 3]) -> [f32; 3] {
-        let ([c0, c1], [r0, r1], tx, ty) = (self.columns, self.rows, self.tx, self.ty);
-        let (a, b, c, d) = (texel(c0, r0), texel(c1, r0), texel(c0, r1), texel(c1, r1));
+        let ([c0, c1], [r0, r1]) = (self.columns, self.rows);
+        self.blend([texel(c0, r0), texel(c1, r0), texel(c0, r1), texel(c1, r1)])
+    }
+
+    /// The blend of the texels at the taps, in the order (column 0, row 0), (column 1,
+    /// row 0), (column 0, row 1), (column 1, row 1).
+    #[inline(always)]
+    pub fn blend(&self, [a, b, c, d]: [[f32; 3]; 4]) -> [f32; 3] {
+        let (tx, ty) = (self.tx, self.ty);
         let mut out = [0.0f32; 3];
         for (k, o) in out.iter_mut().enumerate() {
             let top = a[k] * (1.0 - tx) + b[k] * tx;

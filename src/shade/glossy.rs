@@ -660,9 +660,34 @@ impl Prefiltered {
     }
 
     /// `P` at the lookup coordinates of `R` ([`lookup_coordinates`]), bilinearly.
+    ///
+    /// Once a frame has computed the texels it reads, each lookup checks its four texels
+    /// together and blends them, the computing path out of line: where each texel was
+    /// read through its own `get_or_init`, a lookup of the Phong-floor `glossy` frame's
+    /// lobe cost 17 ns on its own and 12 ns so (one thread, AMD EPYC); the frame's relight
+    /// took 7 to 8 % less time (one thread, minimum of 1000) and its shade about a tenth
+    /// less.
     #[inline(always)]
     pub fn lookup_at(&self, coordinates: [f64; 2]) -> [f32; 3] {
-        BilinearTaps::at(self.width, self.height, coordinates).read(|column, row| self.texel(column, row))
+        let taps = BilinearTaps::at(self.width, self.height, coordinates);
+        match &self.source {
+            Source::Map(map) => taps.read(|column, row| map.texels[row * map.width + column]),
+            Source::Convolution(_) => {
+                let ([c0, c1], [r0, r1]) = (taps.columns, taps.rows);
+                let at = |column: usize, row: usize| self.texels[row * self.width + column].get();
+                match [at(c0, r0), at(c1, r0), at(c0, r1), at(c1, r1)] {
+                    [Some(a), Some(b), Some(c), Some(d)] => taps.blend([*a, *b, *c, *d]),
+                    _ => self.lookup_computing(taps),
+                }
+            }
+        }
+    }
+
+    /// [`Self::lookup_at`] where a texel it blends is still to be computed.
+    #[cold]
+    #[inline(never)]
+    fn lookup_computing(&self, taps: BilinearTaps) -> [f32; 3] {
+        taps.read(|column, row| self.texel(column, row))
     }
 
     /// Computes the texels that a bilinear read along `direction` blends, and, where the
@@ -947,6 +972,28 @@ mod tests {
                 total / 600.0
             );
             assert!(worst < tolerance, "{lobe:?}: worst {worst}");
+        }
+    }
+
+    /// A lookup whose texels are already computed (one check for the four) reads the same
+    /// bits as the lookup that computed them and as a blend of [`Prefiltered::texel`],
+    /// including where two of the four are computed and two are not.
+    #[test]
+    fn a_lookup_reads_the_same_whether_or_not_its_texels_were_computed() {
+        let map = featured_sky();
+        let levels = MapLevels::new(&map, 1.0, false);
+        let lobe = SharpLobe::Ggx { alpha: ggx_alpha(60.0) };
+        let (computing, computed) = (levels.prefilter(lobe), levels.prefilter(lobe));
+        for axis in directions(300) {
+            let coordinates = crate::scene::light::lookup_coordinates(axis);
+            let taps = BilinearTaps::at(computed.width, computed.height, coordinates);
+            computed.texel(taps.columns[0], taps.rows[0]);
+            computed.texel(taps.columns[1], taps.rows[1]);
+            let first = computed.lookup_at(coordinates);
+            let by_texels = taps.read(|column, row| computed.texel(column, row));
+            assert_eq!(first, by_texels, "{axis:?}");
+            assert_eq!(computed.lookup_at(coordinates), by_texels, "{axis:?}");
+            assert_eq!(computing.lookup_at(coordinates), by_texels, "{axis:?}");
         }
     }
 
