@@ -2,7 +2,7 @@
 //! in accuracy and in time, one run per scene:
 //!
 //! ```text
-//! cargo run --release --example relight_accuracy -- [--rotation DEG] [--repeats N] SCENE...
+//! cargo run --release --example relight_accuracy -- [--rotation DEG] [--repeats N] [--device cpu|gpu|auto] SCENE...
 //! ```
 //!
 //! Per scene (its first frame): the transfer is rendered with `--sharp-lights off`,
@@ -17,14 +17,17 @@
 //! and the first run of each, cold, both reading their light: the relight with its light
 //! read, turned, projected and prefiltered, the shade with its map read and turned as a
 //! scene's loading does, then its tables; reading the transfer file and the G-buffer is
-//! not counted. Where the scene directory holds a converged Cycles render of the frame
+//! not counted. The shade runs where `--device` puts it (`cpu` by default; `logsh render`
+//! takes `auto`, a hardware GPU where there is one); the relight runs on the CPU, as `logsh
+//! relight` does. Where the scene directory holds a converged Cycles render of the frame
 //! (`cycles.NNNN.exr`, `blender_scripts/render_cycles.py`) and the light is not
 //! turned, the relit frame and the default shade are also compared with it.
 
 use logsh::compare::{frame_error, unoccluded_value};
+use logsh::executor::{DeviceChoice, Executor};
 use logsh::scene::output::SampleType;
 use logsh::scene::{EnvironmentMap, LightSource, Scene};
-use logsh::shade::{shade_frame_passes, ShadingSettings};
+use logsh::shade::ShadingSettings;
 use logsh::transfer::{relight, shade_with_transfer, RelightLight, RelightOptions, TransferFrame};
 use std::path::PathBuf;
 use std::time::Instant;
@@ -37,14 +40,22 @@ fn median(mut times: Vec<f64>) -> f64 {
 fn main() -> anyhow::Result<()> {
     let mut args = std::env::args().skip(1);
     let (mut rotation, mut repeats, mut scenes) = (0.0f64, 3usize, Vec::new());
+    let mut device = DeviceChoice::Cpu;
     while let Some(a) = args.next() {
         match a.as_str() {
             "--rotation" => rotation = args.next().expect("--rotation DEG").parse()?,
             "--repeats" => repeats = args.next().expect("--repeats N").parse()?,
+            "--device" => {
+                device = clap::ValueEnum::from_str(&args.next().expect("--device cpu|gpu|auto"), true)
+                    .map_err(|e| anyhow::anyhow!("--device: {e}"))?
+            }
             _ => scenes.push(PathBuf::from(a)),
         }
     }
     let temp = tempfile::tempdir()?;
+    let sharp_lights_off = ShadingSettings { sharp_lights: false, ..ShadingSettings::default() };
+    let executor = Executor::select(device, &sharp_lights_off)?;
+    println!("shading on {}; relighting on cpu ({} threads)\n", executor.describe(), rayon::current_num_threads());
     println!("| scene | size | vs shade, sharp lights off (mean / worst) | vs shade, sharp lights auto | vs Cycles: relit / shade auto | relight | shade | ratio | cold: relight / shade | ratio |");
     println!("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |");
     for dir in &scenes {
@@ -82,7 +93,7 @@ fn main() -> anyhow::Result<()> {
         for round in 0..repeats {
             for timed in [false, true] {
                 let started = Instant::now();
-                truth = Some(shade_frame_passes(&turned, &turned_frame, &settings)?);
+                truth = Some(executor.shade_passes(&turned, &turned_frame, &settings)?);
                 match (round, timed) {
                     (0, false) => cold_shade = started.elapsed().as_secs_f64(),
                     (_, true) => shade_times.push(started.elapsed().as_secs_f64()),
@@ -101,7 +112,7 @@ fn main() -> anyhow::Result<()> {
         }
         let truth = truth.expect("one repeat at least");
         let relit = relit.expect("one repeat at least");
-        let auto = shade_frame_passes(&turned, &turned_frame, &ShadingSettings::default())?;
+        let auto = executor.shade_passes(&turned, &turned_frame, &ShadingSettings::default())?;
         let rgb = |p: &logsh::shade::ShadedPasses| p.beauty.iter().map(|c| [c[0], c[1], c[2]]).collect::<Vec<_>>();
         let material = &frame.gbuffer.material;
         let off = frame_error(material, &rgb(&relit), &rgb(&truth), unoccluded);
