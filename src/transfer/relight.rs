@@ -700,7 +700,7 @@ crate::x86::with_wide_registers! {
     }
 }
 
-/// The pixels of one chunk, from pixel `first` on.
+/// The pixels of one chunk, from pixel `first` on, at most [`CHUNK`] of them.
 ///
 /// The lookup coordinates of the glossy directions (in the map and the prefiltered maps)
 /// come first, in a loop of their own: free of branches, it runs in vector lanes, four
