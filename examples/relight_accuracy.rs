@@ -53,13 +53,12 @@ fn main() -> anyhow::Result<()> {
         }
     }
     let temp = tempfile::tempdir()?;
-    let sharp_lights_off = ShadingSettings { sharp_lights: false, ..ShadingSettings::default() };
-    let executor = Executor::select(device, &sharp_lights_off)?;
+    let settings = ShadingSettings { sharp_lights: false, ..ShadingSettings::default() };
+    let executor = Executor::select(device, &settings)?;
     println!("shading on {}; relighting on cpu ({} threads)\n", executor.describe(), rayon::current_num_threads());
     println!("| scene | size | vs shade, sharp lights off (mean / worst) | vs shade, sharp lights auto | vs Cycles: relit / shade auto | relight | shade | ratio | cold: relight / shade | ratio |");
     println!("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |");
     for dir in &scenes {
-        let settings = ShadingSettings { sharp_lights: false, ..ShadingSettings::default() };
         let scene = Scene::load(dir)?;
         let number = scene.default_frame();
         let frame = scene.frame(number)?;
