@@ -57,16 +57,24 @@ fn print_sharp_lights(light: &crate::scene::Light, settings: &crate::shade::Shad
     }
     let split = crate::shade::sharp_lights::extract_suns(map, *strength);
     for (sun, share) in split.suns.iter().zip(&split.shares) {
-        let [x, y, z] = sun.direction;
         eprintln!(
-            "sharp lights: took a sun out of {}: azimuth {:.1} deg, elevation {:.1} deg, {:.2} deg wide, {:.0}% of its light (--sharp-lights off keeps it in SH)",
+            "sharp lights: took a sun out of {}: {} (--sharp-lights off keeps it in SH)",
             map.file.display(),
-            y.atan2(x).to_degrees(),
-            z.clamp(-1.0, 1.0).asin().to_degrees(),
-            2.0 * sun.half_angle.to_degrees(),
-            100.0 * share
+            describe_sun(sun, *share)
         );
     }
+}
+
+/// Where a sun taken out of a map is, its width and its share of the map's light.
+fn describe_sun(sun: &crate::scene::SunLight, share: f64) -> String {
+    let [x, y, z] = sun.direction;
+    format!(
+        "azimuth {:.1} deg, elevation {:.1} deg, {:.2} deg wide, {:.0}% of its light",
+        y.atan2(x).to_degrees(),
+        z.clamp(-1.0, 1.0).asin().to_degrees(),
+        2.0 * sun.half_angle.to_degrees(),
+        100.0 * share
+    )
 }
 
 /// Prints what the executor has to say about where frames are shaded.
@@ -429,7 +437,9 @@ pub fn relight(args: &crate::cli::RelightArgs) -> Result<()> {
         let t = Instant::now();
         let source = options.source(&frame.header);
         if !light.as_ref().is_some_and(|l| l.serves(&source, &frame.header)) {
-            light = Some(RelightLight::new(source, &frame.header, file)?);
+            let built = RelightLight::new(source, &frame.header, file)?;
+            warn_of_suns_in_sh(&built);
+            light = Some(built);
         }
         building += t.elapsed().as_secs_f64();
         let t = Instant::now();
@@ -454,6 +464,23 @@ pub fn relight(args: &crate::cli::RelightArgs) -> Result<()> {
         args.out.display()
     );
     Ok(())
+}
+
+/// Says which suns of a relight's light its render would have shaded sharp
+/// ([`crate::transfer::RelightLight::suns_in_sh`]), and what to run for sharp shadows.
+fn warn_of_suns_in_sh(light: &crate::transfer::RelightLight) {
+    let crate::scene::LightSource::Environment { file, .. } = &light.source else {
+        return;
+    };
+    for (sun, share) in light.suns_in_sh() {
+        eprintln!(
+            "relight: {} holds a sun ({}), which a relight keeps in SH with the rest of the map: its shadows \
+             come out soft, where `logsh render` (--sharp-lights auto) shades them sharp; for sharp shadows, \
+             render the frame again (`logsh render --light-rotation DEG` turns its light)",
+            file.display(),
+            describe_sun(&sun, share)
+        );
+    }
 }
 
 /// `logsh view`.

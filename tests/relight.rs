@@ -333,6 +333,7 @@ fn bad_relight_inputs_are_refused_with_the_file_named() {
         ("/light", serde_json::json!({"sh": vec![[1.0, 1.0, 1.0]; 100]}), "100 coefficients"),
         ("/lobes/0/lobe", serde_json::json!({"ggx": {"alpha": -1.0}}), "lobe of material"),
         ("/light", environment(-1.0), "strength"),
+        ("/blockers", serde_json::json!(false), "sh_heightfield and sh_blockers"),
     ];
     for (pointer, value, needle) in edits {
         let mut edited = header.clone();
@@ -342,4 +343,60 @@ fn bad_relight_inputs_are_refused_with_the_file_named() {
         write_frame(&file, &all, &text);
         assert_fails_naming(&["relight", path(&file), "--out", o], &["edited.exr", needle]);
     }
+}
+
+/// A 128x64 sky gradient with a sun one texel wide at azimuth 40 deg, elevation 30 deg,
+/// carrying most of the map's light.
+fn write_sunny_map(file: &Path) {
+    let (width, height) = (128usize, 64usize);
+    let mut rgb = [vec![0.0f32; width * height], vec![0.0f32; width * height], vec![0.0f32; width * height]];
+    for row in 0..height {
+        let sky = 1.0 - row as f32 / height as f32;
+        for column in 0..width {
+            for (k, value) in [0.3 * sky, 0.45 * sky, 0.9 * sky].into_iter().enumerate() {
+                rgb[k][row * width + column] = value;
+            }
+        }
+    }
+    let (azimuth, elevation) = (40f64.to_radians(), 30f64.to_radians());
+    let direction = [elevation.cos() * azimuth.cos(), elevation.cos() * azimuth.sin(), elevation.sin()];
+    let [u, v] = logsh::scene::light::direction_to_equirectangular(direction);
+    let (column, row) = ((u * width as f64) as usize, ((1.0 - v) * height as f64) as usize);
+    for channel in &mut rgb {
+        channel[row * width + column] = 5e4;
+    }
+    write_exr_channels(file, width, height, &[("R", &rgb[0]), ("G", &rgb[1]), ("B", &rgb[2])]).unwrap();
+}
+
+/// A relight whose light holds a sun that a render would shade with sharp shadows says
+/// so, with where the sun is, since the relight keeps it in SH; the sample's sky, which
+/// holds none, draws no such word.
+#[test]
+fn a_sun_kept_in_sh_is_reported() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = dunes(dir.path());
+    let transfer = dir.path().join("transfer");
+    run(&["render", path(&scene), "--out", path(&transfer), "--frames", "1", "--progress", "none", "--transfer"]);
+    let frame = transfer.join("render.0001.exr");
+    let sunny = dir.path().join("sunny.exr");
+    write_sunny_map(&sunny);
+    let stderr = |extra: &[&str], out: &str| {
+        let out = dir.path().join(out);
+        let output = logsh().args([&["relight", path(&frame), "--out", path(&out)], extra].concat()).output().unwrap();
+        assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+        String::from_utf8_lossy(&output.stderr).into_owned()
+    };
+    let said = stderr(&["--light", path(&sunny)], "sunny");
+    assert!(said.contains("sunny.exr holds a sun") && said.contains("a relight keeps in SH"), "{said}");
+    let degrees = |after: &str| -> f64 {
+        let rest = &said[said.find(after).unwrap_or_else(|| panic!("{after} in {said}")) + after.len()..];
+        rest.split_whitespace().next().unwrap().parse().unwrap()
+    };
+    let (azimuth, elevation) = (degrees("azimuth "), degrees("elevation "));
+    assert!((azimuth - 40.0).abs() < 3.0 && (elevation - 30.0).abs() < 3.0, "{said}");
+    // Turned with the light: 40 + 90 deg.
+    let turned = stderr(&["--light", path(&sunny), "--light-rotation", "90"], "turned");
+    assert!(turned.contains("azimuth 13"), "{turned}");
+    let quiet = stderr(&[], "quiet");
+    assert!(!quiet.contains("holds a sun"), "{quiet}");
 }

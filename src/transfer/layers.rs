@@ -414,6 +414,13 @@ impl TransferFrame {
         if heightfield.is_some() != blockers.is_some() {
             return Err(SceneError::invalid(file, "has one of sh_heightfield and sh_blockers without the other"));
         }
+        if heightfield.is_some() != (header.heightfield && header.blockers) {
+            return Err(SceneError::invalid(
+                file,
+                "holds sh_heightfield and sh_blockers where its header does not name both a height field and \
+                 blockers, or lacks them where it does",
+            ));
+        }
         let triple = |exr: &mut ExrChannels, layer: &str, names: [&str; 3]| -> Result<Vec<[f32; 3]>, SceneError> {
             let [a, b, c] = names.map(|n| exr.take_once(file, &format!("{layer}.{n}")));
             let (a, b, c) = (a?, b?, c?);

@@ -4,7 +4,7 @@
 use super::layers::{TransferFrame, TransferHeader};
 use super::lobe_code;
 use crate::scene::light::{equirectangular_to_direction, lookup_coordinates};
-use crate::scene::{EnvironmentMap, Light, LightSource, SceneError};
+use crate::scene::{EnvironmentMap, Light, LightSource, SceneError, SunLight};
 use crate::sh::basis::funk_hecke_factor;
 use crate::sh::{coefficient_count, eval_basis, rotate_z, MAX_COEFFICIENTS};
 use crate::shade::compositing::ShadedPasses;
@@ -139,6 +139,23 @@ impl RelightLight {
         let open = header.lobes.iter().map(|lobe| open_light_blocks(&sh, &lobe.open)).collect();
         let key = (order, header.light_window.clone(), header.sky_only, header.lobes.clone());
         Ok(Self { source, light, sh, blocks, prefiltered, open, key })
+    }
+
+    /// The suns a render's `--sharp-lights auto` would take out of this light's map and
+    /// shade with their own sharp shadows ([`crate::shade::sharp_lights`]), each with its
+    /// share of the map's power; empty for a light without a map. A relight holds them in
+    /// SH with the rest of the map, so their shadows come out soft: on the HDRI-sun scene
+    /// of the README the relit frame is 0.086 from Cycles against the render's 0.014.
+    /// The decomposition is the render's, so it costs what the render's first frame pays
+    /// for it: 9 ms for that scene's 1024x512 map.
+    pub fn suns_in_sh(&self) -> Vec<(SunLight, f64)> {
+        match &self.light {
+            Light::Environment { map, strength } => {
+                let split = crate::shade::sharp_lights::extract_suns(map, *strength);
+                split.suns.into_iter().zip(split.shares).collect()
+            }
+            _ => Vec::new(),
+        }
     }
 
     /// Whether this light serves frames of `header` relit from `source`.
