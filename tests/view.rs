@@ -260,10 +260,19 @@ fn the_page_relights_in_a_headless_browser() {
     // The wipe shows Cycles' render on the right.
     let wiped = screenshot(&browser, &url("rotation=75&wipe=0"), 480, 400, &dir.path().join("wiped.png"));
     assert!(difference(&wiped, &preview("75")) > to_turned + 1.0, "the wipe must show the Cycles render");
-    // Interactive rates, timed by the server's clock (reported, not asserted).
-    let _ = screenshot(&browser, &url("bench=5"), 480, 400, &dir.path().join("bench.png"));
+    // Interactive rates, timed by the server's clock (reported, not asserted): turns in
+    // full, turns while dragged (at half resolution here), strength changes.
+    let benched = screenshot(&browser, &url("bench=5&proxy=2"), 480, 400, &dir.path().join("bench.png"));
+    // The drags over, the frame is lit in full at the last turn and strength (109 deg, 1.3).
+    let settled = screenshot(&browser, &url("rotation=109&strength=1.3"), 480, 400, &dir.path().join("settled.png"));
+    let frame_size = preview("0");
+    let settled = image::imageops::crop_imm(&settled, 0, 0, frame_size.width(), frame_size.height()).to_image();
+    assert_eq!(difference(&benched, &settled), 0.0, "after a drag the page lights the frame in full");
     let log = server.stop();
-    let timing = log.lines().find(|l| l.contains("relights in the browser")).unwrap_or("no timing reported");
-    println!("{timing}");
-    let _ = std::io::stderr().write_all(format!("tests/view.rs: {timing}\n").as_bytes());
+    let timings: Vec<&str> = log.lines().filter(|l| l.contains("in the browser took")).collect();
+    assert_eq!(timings.len(), 3, "three timings reported: {log}");
+    for timing in timings {
+        println!("{timing}");
+        let _ = std::io::stderr().write_all(format!("tests/view.rs: {timing}\n").as_bytes());
+    }
 }

@@ -11,12 +11,14 @@
 //! | `/frame/<i>/pixels.bin` | the transfer layers, little-endian f32, one array after another |
 //! | `/frame/<i>/maps.bin` | the maps the glossy lookups read ([`RelightLight::sampled_maps`]), then the scene's view transform LUT ([`crate::scene::view`]) |
 //! | `/frame/<i>/cycles.bin` | the Cycles render of the frame as RGB f32, where one is found |
-//! | `/bench/start`, `/bench/end?runs=N` | the page's `?bench=N` mode: the server prints the time between the two |
+//! | `/bench/start`, `/bench/end?runs=N&what=W` | the page's `?bench=N` mode: the server prints the time between the two |
 //!
 //! The page turns the light about Z by rotating its SH vector (exact, [`crate::sh::rotate_z`])
 //! and reading the maps along `Rz(-turn) R`; strength scales the environment, exposure
 //! adds to the scene's, and the image is shown through the scene's view transform as the
-//! PNG previews are. It is the relight of [`crate::transfer::relight`] but for the maps, read
+//! PNG previews are. It lights a frame once per turn and recombines it for the other
+//! sliders; while one is dragged, at one pixel in 2 x 2 or 4 x 4 (`?proxy=N` fixes the
+//! step), in full once it is let go. It is the relight of [`crate::transfer::relight`] but for the maps, read
 //! from grids at most [`crate::transfer::SAMPLED_MAP_WIDTH`] wide and the open lobes'
 //! light from a 64 x 32 grid: a preview, for which `logsh relight` gives the frame.
 
@@ -118,9 +120,15 @@ impl Viewer {
         match (path, started.take()) {
             ("/bench/start", _) => *started = Some(std::time::Instant::now()),
             ("/bench/end", Some(start)) => {
-                let runs: f64 = query.strip_prefix("runs=").and_then(|n| n.parse().ok()).unwrap_or(1.0);
                 let ms = 1e3 * start.elapsed().as_secs_f64();
-                eprintln!("view: {runs} relights in the browser took {ms:.0} ms, {:.1} ms each", ms / runs);
+                let value = |key: &str| query.split('&').find_map(|pair| pair.strip_prefix(key)?.strip_prefix('='));
+                let runs: f64 = value("runs").and_then(|n| n.parse().ok()).unwrap_or(1.0);
+                let what = match value("what") {
+                    Some("dragged") => "relights while the rotation is dragged",
+                    Some("strength") => "strength changes (no relight)",
+                    _ => "relights",
+                };
+                eprintln!("view: {runs} {what} in the browser took {ms:.0} ms, {:.1} ms each", ms / runs);
             }
             _ => return Response::error(404, "no benchmark started"),
         }
