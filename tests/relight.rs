@@ -142,23 +142,32 @@ fn relit_equals_a_fresh_shade_under_the_same_turned_light() {
     }
 }
 
-/// A map with a warm patch low in the south-east and a blue zenith: nothing like the
-/// sample's sky, so a relight that kept any of the old light would show.
-fn write_swapped_map(file: &Path) {
-    let (width, height) = (64usize, 32usize);
+/// Writes a `width` x `height` environment map whose texel at (row, column) is `texel`.
+fn write_map(file: &Path, width: usize, height: usize, texel: impl Fn(usize, usize) -> [f32; 3]) {
     let mut rgb = [vec![0.0f32; width * height], vec![0.0f32; width * height], vec![0.0f32; width * height]];
     for row in 0..height {
         for column in 0..width {
-            let i = row * width + column;
-            let patch = (20..26).contains(&column) && (10..14).contains(&row);
-            let sky = 1.0 - row as f32 / height as f32;
-            let texel = if patch { [30.0, 18.0, 6.0] } else { [0.2 * sky, 0.35 * sky, 0.9 * sky] };
-            for k in 0..3 {
-                rgb[k][i] = texel[k];
+            for (k, value) in texel(row, column).into_iter().enumerate() {
+                rgb[k][row * width + column] = value;
             }
         }
     }
     write_exr_channels(file, width, height, &[("R", &rgb[0]), ("G", &rgb[1]), ("B", &rgb[2])]).unwrap();
+}
+
+/// A map with a warm patch low in the south-east and a blue zenith: nothing like the
+/// sample's sky, so a relight that kept any of the old light would show.
+fn write_swapped_map(file: &Path) {
+    let (width, height) = (64usize, 32usize);
+    write_map(file, width, height, |row, column| {
+        let patch = (20..26).contains(&column) && (10..14).contains(&row);
+        let sky = 1.0 - row as f32 / height as f32;
+        if patch {
+            [30.0, 18.0, 6.0]
+        } else {
+            [0.2 * sky, 0.35 * sky, 0.9 * sky]
+        }
+    });
 }
 
 #[test]
@@ -349,23 +358,18 @@ fn bad_relight_inputs_are_refused_with_the_file_named() {
 /// carrying most of the map's light.
 fn write_sunny_map(file: &Path) {
     let (width, height) = (128usize, 64usize);
-    let mut rgb = [vec![0.0f32; width * height], vec![0.0f32; width * height], vec![0.0f32; width * height]];
-    for row in 0..height {
-        let sky = 1.0 - row as f32 / height as f32;
-        for column in 0..width {
-            for (k, value) in [0.3 * sky, 0.45 * sky, 0.9 * sky].into_iter().enumerate() {
-                rgb[k][row * width + column] = value;
-            }
-        }
-    }
     let (azimuth, elevation) = (40f64.to_radians(), 30f64.to_radians());
     let direction = [elevation.cos() * azimuth.cos(), elevation.cos() * azimuth.sin(), elevation.sin()];
     let [u, v] = logsh::scene::light::direction_to_equirectangular(direction);
-    let (column, row) = ((u * width as f64) as usize, ((1.0 - v) * height as f64) as usize);
-    for channel in &mut rgb {
-        channel[row * width + column] = 5e4;
-    }
-    write_exr_channels(file, width, height, &[("R", &rgb[0]), ("G", &rgb[1]), ("B", &rgb[2])]).unwrap();
+    let sun = (((1.0 - v) * height as f64) as usize, (u * width as f64) as usize);
+    write_map(file, width, height, |row, column| {
+        let sky = 1.0 - row as f32 / height as f32;
+        if (row, column) == sun {
+            [5e4; 3]
+        } else {
+            [0.3 * sky, 0.45 * sky, 0.9 * sky]
+        }
+    });
 }
 
 /// A relight whose light holds a sun that a render would shade with sharp shadows says

@@ -18,9 +18,10 @@
 //! adds to the scene's, and the image is shown through the scene's view transform as the
 //! PNG previews are. It lights a frame once per turn and recombines it for the other
 //! sliders; while one is dragged, at one pixel in 2 x 2 or 4 x 4 (`?proxy=N` fixes the
-//! step), in full once it is let go. It is the relight of [`crate::transfer::relight`] but for the maps, read
-//! from grids at most [`crate::transfer::SAMPLED_MAP_WIDTH`] wide and the open lobes'
-//! light from a 64 x 32 grid: a preview, for which `logsh relight` gives the frame.
+//! step), in full once it is let go. It is the relight of [`crate::transfer::relight`]
+//! but for the maps, read from grids at most [`crate::transfer::SAMPLED_MAP_WIDTH`] wide,
+//! and the open lobes' light, from a 64 x 32 grid: a preview, for which `logsh relight`
+//! gives the frame.
 
 use crate::scene::ViewTransform;
 use crate::transfer::{RelightLight, RelightOptions, TransferFrame};
