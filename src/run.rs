@@ -429,6 +429,7 @@ pub fn relight(args: &crate::cli::RelightArgs) -> Result<()> {
         .with_context(|| format!("cannot create output directory {}", args.out.display()))?;
     let started = Instant::now();
     let mut light: Option<RelightLight> = None;
+    let mut warned = std::collections::HashSet::new();
     let (mut reading, mut building, mut relighting) = (0.0, 0.0, 0.0);
     for (file, (exr, png, json)) in args.frames.iter().zip(&outputs) {
         let t = Instant::now();
@@ -438,7 +439,7 @@ pub fn relight(args: &crate::cli::RelightArgs) -> Result<()> {
         let source = options.source(&frame.header);
         if !light.as_ref().is_some_and(|l| l.serves(&source, &frame.header)) {
             let built = RelightLight::new(source, &frame.header, file)?;
-            warn_of_suns_in_sh(&built);
+            warn_of_suns_in_sh(&built, &mut warned);
             light = Some(built);
         }
         building += t.elapsed().as_secs_f64();
@@ -467,11 +468,18 @@ pub fn relight(args: &crate::cli::RelightArgs) -> Result<()> {
 }
 
 /// Says which suns of a relight's light its render would have shaded sharp
-/// ([`crate::transfer::RelightLight::suns_in_sh`]), and what to run for sharp shadows.
-fn warn_of_suns_in_sh(light: &crate::transfer::RelightLight) {
+/// ([`crate::transfer::RelightLight::suns_in_sh`]), and what to run for sharp shadows;
+/// once per map of a sequence (`warned` holds the maps already named).
+fn warn_of_suns_in_sh(
+    light: &crate::transfer::RelightLight,
+    warned: &mut std::collections::HashSet<std::path::PathBuf>,
+) {
     let crate::scene::LightSource::Environment { file, .. } = &light.source else {
         return;
     };
+    if !warned.insert(file.clone()) {
+        return;
+    }
     for (sun, share) in light.suns_in_sh() {
         eprintln!(
             "relight: {} holds a sun ({}), which a relight keeps in SH with the rest of the map: its shadows \
