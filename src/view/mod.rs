@@ -7,7 +7,7 @@
 //! |---|---|
 //! | `/` | the page (`page.html`: canvas, sliders, the relight in JavaScript) |
 //! | `/frames.json` | the frames of the directory: file names |
-//! | `/frame/<i>/meta.json` | size, order, the light's SH vector, the lobes, the layout of the next two |
+//! | `/frame/<i>/meta.json` | size (of a preview at most 1920x1080: [`PREVIEW_SIZE`]), order, the light's SH vector, the lobes, the layout of the next two |
 //! | `/frame/<i>/pixels.bin` | the transfer layers, little-endian f32, one array after another |
 //! | `/frame/<i>/maps.bin` | the maps the glossy lookups read ([`RelightLight::sampled_maps`]), then the scene's view transform LUT ([`crate::scene::view`]) |
 //! | `/frame/<i>/cycles.bin` | the Cycles render of the frame as RGB f32, where one is found |
@@ -189,7 +189,7 @@ impl Viewer {
             Some(spec) => ViewTransform::load(spec, Path::new("/"), file)?,
             None => ViewTransform::default(),
         };
-        let bodies = Arc::new(frame_bodies(file, &frame, &light, &view));
+        let bodies = Arc::new(frame_bodies(file, &frame, &light, &view, PREVIEW_SIZE));
         let mut kept = built();
         kept.retain(|(i, _)| *i != index);
         kept.push((index, bodies.clone()));
@@ -225,7 +225,35 @@ fn cycles_render(file: &Path, frame: &TransferFrame) -> Option<Vec<[f32; 3]>> {
     })
 }
 
-fn frame_bodies(file: &Path, frame: &TransferFrame, light: &RelightLight, view: &ViewTransform) -> FrameBodies {
+/// The largest frame the page is sent whole: a larger one is sent as every `stride`-th
+/// pixel of every `stride`-th row, `stride` the smallest that fits (a 3840x2160 frame's
+/// layers are about 1.7 GB in full, 0.4 GB so).
+const PREVIEW_SIZE: [usize; 2] = [1920, 1080];
+
+/// The pixels of a `width` x `height` frame a preview within `size` shows, row by row; its
+/// size; its stride.
+fn preview_pixels(width: usize, height: usize, size: [usize; 2]) -> (Vec<usize>, [usize; 2], usize) {
+    let stride = width.div_ceil(size[0]).max(height.div_ceil(size[1])).max(1);
+    let shown = [width.div_ceil(stride), height.div_ceil(stride)];
+    let pixels = (0..shown[1]).flat_map(|y| (0..shown[0]).map(move |x| y * stride * width + x * stride)).collect();
+    (pixels, shown, stride)
+}
+
+/// `values` (`components` per pixel) at `pixels`.
+fn at_pixels<'a>(pixels: &'a [usize], values: &'a [f32], components: usize) -> impl Iterator<Item = f32> + 'a {
+    pixels.iter().flat_map(move |&i| values[i * components..(i + 1) * components].iter().copied())
+}
+
+/// The page's bodies of `frame`, within `size` ([`PREVIEW_SIZE`]).
+fn frame_bodies(
+    file: &Path,
+    frame: &TransferFrame,
+    light: &RelightLight,
+    view: &ViewTransform,
+    size: [usize; 2],
+) -> FrameBodies {
+    let (shown, [width, height], stride) = preview_pixels(frame.width, frame.height, size);
+    let sampled = |values, components| at_pixels(&shown, values, components);
     let mut pixels = Vec::new();
     let mut layout = Vec::new();
     let mut put = |name: &str, components: usize, values: &mut dyn Iterator<Item = f32>| {
@@ -236,10 +264,10 @@ fn frame_bodies(file: &Path, frame: &TransferFrame, light: &RelightLight, view: 
         layout.push(serde_json::json!({"name": name, "components": components, "offset": start}));
     };
     let count = frame.count();
-    put("diffuse", count, &mut frame.diffuse.iter().copied());
-    put("unoccluded", count, &mut frame.unoccluded.iter().copied());
+    put("diffuse", count, &mut sampled(&frame.diffuse, count));
+    put("unoccluded", count, &mut sampled(&frame.unoccluded, count));
     if let Some(specular) = &frame.specular {
-        put("specular", count, &mut specular.iter().copied());
+        put("specular", count, &mut sampled(specular, count));
     }
     for (name, values) in [
         ("albedo", &frame.albedo),
@@ -248,11 +276,11 @@ fn frame_bodies(file: &Path, frame: &TransferFrame, light: &RelightLight, view: 
         ("lamps_specular", &frame.lamps_specular),
         ("glossy_direction", &frame.glossy_direction),
     ] {
-        put(name, 3, &mut values.iter().flatten().copied());
+        put(name, 3, &mut sampled(values.as_flattened(), 3));
     }
-    put("glossy_lobe", 1, &mut frame.glossy_lobe.iter().copied());
-    put("glossy_weight", 2, &mut frame.glossy_weight.iter().flatten().copied());
-    put("alpha", 1, &mut frame.alpha.iter().copied());
+    put("glossy_lobe", 1, &mut sampled(&frame.glossy_lobe, 1));
+    put("glossy_weight", 2, &mut sampled(frame.glossy_weight.as_flattened(), 2));
+    put("alpha", 1, &mut sampled(&frame.alpha, 1));
     let mut maps = Vec::new();
     let mut map_layout = Vec::new();
     for map in light.sampled_maps(frame.order()) {
@@ -269,11 +297,13 @@ fn frame_bodies(file: &Path, frame: &TransferFrame, light: &RelightLight, view: 
         }
         serde_json::json!({"size": lut.size, "log2_range": lut.log2_range, "offset": offset})
     });
-    let cycles = cycles_render(file, frame).map(|rgb| rgb.iter().flatten().flat_map(|v| v.to_le_bytes()).collect());
+    let cycles = cycles_render(file, frame)
+        .map(|rgb| at_pixels(&shown, rgb.as_flattened(), 3).flat_map(|v| v.to_le_bytes()).collect());
     let meta = serde_json::json!({
         "file": file.file_name().unwrap_or_default().to_string_lossy(),
-        "width": frame.width,
-        "height": frame.height,
+        "width": width,
+        "height": height,
+        "source": {"width": frame.width, "height": frame.height, "stride": stride},
         "order": frame.order(),
         "light": light.sh(),
         "lobes": frame.header.lobes.len(),
@@ -327,5 +357,63 @@ impl Response {
         stream.write_all(&self.body)?;
         stream.flush()?;
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A frame larger than the preview's size is sent as every `stride`-th pixel of every
+    /// `stride`-th row, each layer's values those of its pixel; one within it, whole.
+    #[test]
+    fn a_large_frame_is_sent_as_a_preview_of_its_pixels() {
+        let dir = tempfile::tempdir().unwrap();
+        let options = crate::synth::ExampleOptions { width: 96, height: 54, ..Default::default() };
+        let scene = crate::synth::example("dunes", options).unwrap();
+        crate::synth::write_scene(dir.path(), &scene).unwrap();
+        let scene = crate::scene::Scene::load(dir.path()).unwrap();
+        let frame = scene.frame(1).unwrap();
+        let settings = crate::shade::ShadingSettings::default();
+        let (_, transfer) = crate::transfer::shade_with_transfer(&scene, &frame, &settings).unwrap();
+        let file = dir.path().join("render.0001.exr");
+        let light =
+            RelightLight::new(RelightOptions::default().source(&transfer.header), &transfer.header, &file).unwrap();
+        let view = ViewTransform::default();
+        let floats = |bodies: &FrameBodies| -> Vec<f32> {
+            bodies.pixels.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect()
+        };
+        let layer = |bodies: &FrameBodies, name: &str| -> (usize, usize) {
+            let meta: serde_json::Value = serde_json::from_str(&bodies.meta).unwrap();
+            let entry = meta["pixels"].as_array().unwrap().iter().find(|l| l["name"] == name).unwrap().clone();
+            (entry["offset"].as_u64().unwrap() as usize, entry["components"].as_u64().unwrap() as usize)
+        };
+        // 96x54 within 40x30: every third pixel (54 / 30 needs 2, 96 / 40 needs 3), 32x18.
+        let preview = frame_bodies(&file, &transfer, &light, &view, [40, 30]);
+        let meta: serde_json::Value = serde_json::from_str(&preview.meta).unwrap();
+        assert_eq!((meta["width"].as_u64(), meta["height"].as_u64()), (Some(32), Some(18)));
+        assert_eq!(meta["source"], serde_json::json!({"width": 96, "height": 54, "stride": 3}));
+        let values = floats(&preview);
+        let (offset, count) = layer(&preview, "diffuse");
+        let mut distinct = std::collections::HashSet::new();
+        for (y, x) in (0..18).flat_map(|y| (0..32).map(move |x| (y, x))) {
+            let shown = &values[offset + (y * 32 + x) * count..][..count];
+            let source = (3 * y) * 96 + 3 * x;
+            assert_eq!(
+                shown,
+                &transfer.diffuse[source * count..][..count],
+                "preview ({x}, {y}) is ({}, {})",
+                3 * x,
+                3 * y
+            );
+            distinct.insert(shown[0].to_bits());
+        }
+        assert!(distinct.len() > 100, "the frame varies from pixel to pixel: {} values", distinct.len());
+        let (offset, _) = layer(&preview, "alpha");
+        assert_eq!(values.len(), offset + 32 * 18, "alpha, the last layer, ends the body");
+        // Within the preview's size: whole.
+        let whole = frame_bodies(&file, &transfer, &light, &view, PREVIEW_SIZE);
+        let (offset, count) = layer(&whole, "diffuse");
+        assert_eq!(&floats(&whole)[offset..offset + 96 * 54 * count], &transfer.diffuse[..]);
     }
 }
