@@ -66,6 +66,8 @@ mod relight;
 mod shade;
 
 pub use layers::{PixelTransfer, PrefilteredLobe, ShConvention, TransferFrame, TransferHeader, TRANSFER_ATTRIBUTE};
+#[cfg(test)]
+pub(crate) use relight::relit_dunes;
 pub use relight::{relight, RelightLight, RelightOptions, SampledMap, SAMPLED_MAP_WIDTH};
 pub use shade::shade_with_transfer;
 

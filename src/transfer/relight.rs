@@ -845,32 +845,33 @@ unsafe fn relit_pixel<D: Dots>(frame: &TransferFrame, light: &RelightLight, i: u
     Relit { diffuse, specular, environment, visibility: [visibility, parts[0], parts[1]] }
 }
 
+/// The synthetic dunes (height field, blockers, a Phong sphere, water and a sky),
+/// frame 1 shaded with its transfer, written and read back, and its light turned 30
+/// deg; the directory holds the frame (`transfer.exr`).
+#[cfg(test)]
+pub(crate) fn relit_dunes() -> (tempfile::TempDir, TransferFrame, RelightLight) {
+    let dir = tempfile::tempdir().unwrap();
+    let options = crate::synth::ExampleOptions { width: 96, height: 54, ..Default::default() };
+    let scene = crate::synth::example("dunes", options).unwrap();
+    crate::synth::write_scene(dir.path(), &scene).unwrap();
+    let scene = crate::scene::Scene::load(dir.path()).unwrap();
+    let frame = scene.frame(1).unwrap();
+    let settings = crate::shade::ShadingSettings { sharp_lights: false, ..Default::default() };
+    let (passes, transfer) = super::shade_with_transfer(&scene, &frame, &settings).unwrap();
+    let file = dir.path().join("transfer.exr");
+    let half = crate::scene::output::SampleType::Half;
+    crate::render::write_passes_with_transfer(&file, &passes, &transfer, half).unwrap();
+    let transfer = TransferFrame::read(&file).unwrap();
+    let options = super::RelightOptions { rotation: 30.0, ..Default::default() };
+    let light = RelightLight::new(options.source(&transfer.header), &transfer.header, &file).unwrap();
+    assert!(light.prefiltered.iter().any(Option::is_some), "a prefiltered lobe is read");
+    (dir, transfer, light)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::shade::kernel::open_lit;
-
-    /// The synthetic dunes (height field, blockers, a Phong sphere, water and a sky),
-    /// frame 1 shaded with its transfer, written and read back, and its light turned 30
-    /// deg; the directory holds the frame.
-    fn relit_dunes() -> (tempfile::TempDir, TransferFrame, RelightLight) {
-        let dir = tempfile::tempdir().unwrap();
-        let options = crate::synth::ExampleOptions { width: 96, height: 54, ..Default::default() };
-        let scene = crate::synth::example("dunes", options).unwrap();
-        crate::synth::write_scene(dir.path(), &scene).unwrap();
-        let scene = crate::scene::Scene::load(dir.path()).unwrap();
-        let frame = scene.frame(1).unwrap();
-        let settings = crate::shade::ShadingSettings { sharp_lights: false, ..Default::default() };
-        let (passes, transfer) = super::super::shade_with_transfer(&scene, &frame, &settings).unwrap();
-        let file = dir.path().join("transfer.exr");
-        let half = crate::scene::output::SampleType::Half;
-        crate::render::write_passes_with_transfer(&file, &passes, &transfer, half).unwrap();
-        let transfer = TransferFrame::read(&file).unwrap();
-        let options = super::super::RelightOptions { rotation: 30.0, ..Default::default() };
-        let light = RelightLight::new(options.source(&transfer.header), &transfer.header, &file).unwrap();
-        assert!(light.prefiltered.iter().any(Option::is_some), "a prefiltered lobe is read");
-        (dir, transfer, light)
-    }
 
     /// Every pass of `p`, as bits.
     fn bits(p: &ShadedPasses) -> Vec<u32> {

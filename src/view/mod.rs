@@ -368,17 +368,8 @@ mod tests {
     /// `stride`-th row, each layer's values those of its pixel; one within it, whole.
     #[test]
     fn a_large_frame_is_sent_as_a_preview_of_its_pixels() {
-        let dir = tempfile::tempdir().unwrap();
-        let options = crate::synth::ExampleOptions { width: 96, height: 54, ..Default::default() };
-        let scene = crate::synth::example("dunes", options).unwrap();
-        crate::synth::write_scene(dir.path(), &scene).unwrap();
-        let scene = crate::scene::Scene::load(dir.path()).unwrap();
-        let frame = scene.frame(1).unwrap();
-        let settings = crate::shade::ShadingSettings::default();
-        let (_, transfer) = crate::transfer::shade_with_transfer(&scene, &frame, &settings).unwrap();
-        let file = dir.path().join("render.0001.exr");
-        let light =
-            RelightLight::new(RelightOptions::default().source(&transfer.header), &transfer.header, &file).unwrap();
+        let (dir, transfer, light) = crate::transfer::relit_dunes();
+        let file = dir.path().join("transfer.exr");
         let view = ViewTransform::default();
         let floats = |bodies: &FrameBodies| -> Vec<f32> {
             bodies.pixels.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect()
