@@ -67,11 +67,9 @@ fn print_sharp_lights(light: &crate::scene::Light, settings: &crate::shade::Shad
 
 /// Where a sun taken out of a map is, its width and its share of the map's light.
 fn describe_sun(sun: &crate::scene::SunLight, share: f64) -> String {
-    let [x, y, z] = sun.direction;
+    let [azimuth, elevation] = sun.azimuth_elevation();
     format!(
-        "azimuth {:.1} deg, elevation {:.1} deg, {:.2} deg wide, {:.0}% of its light",
-        y.atan2(x).to_degrees(),
-        z.clamp(-1.0, 1.0).asin().to_degrees(),
+        "azimuth {azimuth:.1} deg, elevation {elevation:.1} deg, {:.2} deg wide, {:.0}% of its light",
         2.0 * sun.half_angle.to_degrees(),
         100.0 * share
     )

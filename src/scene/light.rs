@@ -386,6 +386,13 @@ impl SunLight {
         let k = 2.0 / (1.0 + self.half_angle.cos()) * f64::from(self.strength);
         self.color.map(|c| k * f64::from(c))
     }
+
+    /// Where the sun is, in degrees: its azimuth from +X towards +Y, and its elevation
+    /// above the XY plane (Blender's world is Z-up).
+    pub fn azimuth_elevation(&self) -> [f64; 2] {
+        let [x, y, z] = self.direction;
+        [y.atan2(x).to_degrees(), z.clamp(-1.0, 1.0).asin().to_degrees()]
+    }
 }
 
 /// A Blender Point lamp: a sphere of radius `radius` about `position` that emits `power`

@@ -669,10 +669,10 @@ impl Prefiltered {
     /// less.
     #[inline(always)]
     pub fn lookup_at(&self, coordinates: [f64; 2]) -> [f32; 3] {
-        let taps = BilinearTaps::at(self.width, self.height, coordinates);
         match &self.source {
-            Source::Map(map) => taps.read(|column, row| map.texels[row * map.width + column]),
+            Source::Map(map) => map.lookup_at(coordinates),
             Source::Convolution(_) => {
+                let taps = BilinearTaps::at(self.width, self.height, coordinates);
                 let ([c0, c1], [r0, r1]) = (taps.columns, taps.rows);
                 let at = |column: usize, row: usize| self.texels[row * self.width + column].get();
                 match [at(c0, r0), at(c1, r0), at(c0, r1), at(c1, r1)] {

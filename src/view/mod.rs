@@ -313,12 +313,8 @@ fn frame_bodies(
         "view": {"exposure": view.exposure, "transparent": view.transparent, "lut": lut},
         // The suns a render would shade sharp, which the page, as a relight, holds in SH.
         "suns_in_sh": light.suns_in_sh().iter().map(|(sun, share)| {
-            let [x, y, z] = sun.direction;
-            serde_json::json!({
-                "azimuth": y.atan2(x).to_degrees(),
-                "elevation": z.clamp(-1.0, 1.0).asin().to_degrees(),
-                "share": share,
-            })
+            let [azimuth, elevation] = sun.azimuth_elevation();
+            serde_json::json!({"azimuth": azimuth, "elevation": elevation, "share": share})
         }).collect::<Vec<_>>(),
     });
     FrameBodies { meta: meta.to_string(), pixels, maps, cycles }
