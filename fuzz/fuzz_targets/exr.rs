@@ -1,5 +1,6 @@
-//! Image loading: the G-buffer, height map and environment readers (EXR, and Radiance
-//! HDR for the environment), and the header listing of `logsh info`, on the same bytes.
+//! Image loading: the G-buffer, height map, environment and transfer-frame readers (EXR,
+//! and Radiance HDR for the environment), and the header listing of `logsh info`, on the
+//! same bytes.
 //! Each must return an error, never panic, and never allocate for a size the header
 //! claims before checking it.
 #![no_main]
@@ -15,6 +16,7 @@ fuzz_target!(|data: &[u8]| {
     let _ = HeightMap::read(&path, None, [-1.0, -1.0], [1.0, 1.0]);
     let _ = EnvironmentMap::read(&path);
     let _ = logsh::info::describe(&path);
+    let _ = logsh::transfer::TransferFrame::read(&path);
     let hdr = common::file("image.hdr", data);
     let _ = EnvironmentMap::read(&hdr);
 });

@@ -286,38 +286,31 @@ fn write_frame(
     Ok(())
 }
 
-/// The channels of the table in the module doc, in that order.
-pub fn pass_channels(passes: &ShadedPasses, colour: SampleType) -> Vec<(String, SampleType, Vec<f32>)> {
-    let mut channels = Vec::new();
-    let mut rgb = |layer: &str, names: &[&str], values: &[[f32; 3]], kind: SampleType| {
-        for (k, channel) in names.iter().enumerate() {
-            let name = if layer.is_empty() { channel.to_string() } else { format!("{layer}.{channel}") };
-            channels.push((name, kind, values.iter().map(|v| v[k]).collect()));
-        }
-    };
-    let beauty: Vec<[f32; 3]> = passes.beauty.iter().map(|p| [p[0], p[1], p[2]]).collect();
-    rgb("", &["R", "G", "B"], &beauty, colour);
+/// The channels of the table in the module doc, in that order, read in place from the
+/// passes.
+pub fn pass_channels(passes: &ShadedPasses, colour: SampleType) -> Vec<OutputChannel<'_>> {
+    let (rgb, xyz) = (["R", "G", "B"], ["X", "Y", "Z"]);
+    let mut channels = OutputChannel::layer("", &["R", "G", "B", "A"], passes.beauty.as_flattened(), colour);
     for (layer, values) in
         [("diffuse", &passes.diffuse), ("specular", &passes.specular), ("environment", &passes.environment)]
     {
-        rgb(layer, &["R", "G", "B"], values, colour);
+        channels.extend(OutputChannel::layer(layer, &rgb, values.as_flattened(), colour));
     }
-    rgb("P", &["X", "Y", "Z"], &passes.position, SampleType::Float);
-    rgb("N", &["X", "Y", "Z"], &passes.normal, SampleType::Float);
-    channels.insert(3, ("A".into(), colour, passes.beauty.iter().map(|p| p[3]).collect()));
+    channels.extend(OutputChannel::layer("P", &xyz, passes.position.as_flattened(), SampleType::Float));
+    channels.extend(OutputChannel::layer("N", &xyz, passes.normal.as_flattened(), SampleType::Float));
     for (layer, values) in [
         ("visibility", &passes.visibility),
         ("visibility_heightfield", &passes.visibility_heightfield),
         ("visibility_blockers", &passes.visibility_blockers),
     ] {
-        channels.push((format!("{layer}.Y"), colour, values.clone()));
+        channels.extend(OutputChannel::layer(layer, &["Y"], values, colour));
     }
     channels
 }
 
 /// Writes the multi-layer EXR of one frame.
 pub fn write_passes(path: &Path, passes: &ShadedPasses, colour: SampleType) -> Result<(), output::OutputError> {
-    write_channels(path, passes.width, passes.height, &pass_channels(passes, colour), &[])
+    write_exr_layers(path, passes.width, passes.height, &pass_channels(passes, colour), &[])
 }
 
 /// Writes the multi-layer EXR of one frame with its transfer layers and their header
@@ -331,20 +324,5 @@ pub fn write_passes_with_transfer(
     let mut channels = pass_channels(passes, colour);
     channels.extend(transfer.channels(colour));
     let attributes = [(crate::transfer::TRANSFER_ATTRIBUTE, transfer.header_text())];
-    write_channels(path, passes.width, passes.height, &channels, &attributes)
-}
-
-/// Writes named channels and text attributes as one multi-layer EXR.
-fn write_channels(
-    path: &Path,
-    width: usize,
-    height: usize,
-    channels: &[(String, SampleType, Vec<f32>)],
-    attributes: &[(&str, String)],
-) -> Result<(), output::OutputError> {
-    let refs: Vec<OutputChannel> = channels
-        .iter()
-        .map(|(name, kind, values)| OutputChannel { name: name.clone(), sample_type: *kind, values })
-        .collect();
-    write_exr_layers(path, width, height, &refs, attributes)
+    write_exr_layers(path, passes.width, passes.height, &channels, &attributes)
 }

@@ -18,8 +18,10 @@
 //! any layout.
 
 use super::error::{check_image_size, exr_error, SceneError};
+use super::exr_zip;
 use exr::prelude::{read, FlatSamples, ReadChannels, ReadLayers};
 use half::slice::HalfFloatSliceExt;
+use rayon::prelude::*;
 use std::collections::HashMap;
 use std::path::Path;
 
@@ -136,17 +138,8 @@ impl ExrChannels {
         Ok(index)
     }
 
-    /// [`take`](Self::take) without the copy, for a reader that takes each channel once:
-    /// the channel is moved out, and taking it again is an error.
-    pub fn take_once(&mut self, file: &Path, name: &str) -> Result<Vec<f32>, SceneError> {
-        Ok(match self.take_samples(file, name)? {
-            FlatSamples::F32(v) => v,
-            samples => to_f32(&samples),
-        })
-    }
-
-    /// [`take_once`](Self::take_once) as stored, for a reader that converts as it
-    /// rearranges.
+    /// The channel as stored, moved out, for a reader that converts as it rearranges;
+    /// taking it again is an error.
     pub fn take_samples(&mut self, file: &Path, name: &str) -> Result<FlatSamples, SceneError> {
         let index = self.checked_index(file, name)?;
         if self.data[index].len() == 0 {
@@ -184,6 +177,91 @@ pub(crate) fn samples_to_f32(samples: &FlatSamples, first: usize, out: &mut [f32
         FlatSamples::U32(v) => {
             for (o, &u) in out.iter_mut().zip(&v[range]) {
                 *o = u as f32;
+            }
+        }
+    }
+}
+
+/// An EXR file's channels, to be decoded into place ([`ChannelFile::fill`]): straight
+/// from its blocks where [`exr_zip::decodes`] its one part (what `logsh render` writes),
+/// through [`ExrChannels`] otherwise (more parts, tiles, other compressions).
+pub(crate) enum ChannelFile {
+    Blocks { bytes: Vec<u8>, header: Box<exr::meta::header::Header> },
+    Decoded(ExrChannels),
+}
+
+impl ChannelFile {
+    /// `file` as `bytes`, its header already read as `meta`; `size_of` names the channel
+    /// whose part gives the size every channel taken must have.
+    pub fn new(
+        file: &Path,
+        what: &str,
+        bytes: Vec<u8>,
+        meta: &exr::meta::MetaData,
+        size_of: &str,
+    ) -> Result<Self, SceneError> {
+        if let [header] = meta.headers.as_slice() {
+            if exr_zip::decodes(header) {
+                let (width, height) = (header.layer_size.0, header.layer_size.1);
+                check_image_size(file, width, height)?;
+                // Deflate packs at most 1032 bytes into one, so a file whose pixels could
+                // not fit in it is refused before they are allocated.
+                let raw = (width * height).saturating_mul(header.channels.bytes_per_pixel);
+                if raw / exr_zip::MOST_DEFLATED > bytes.len() {
+                    return Err(SceneError::Image {
+                        file: file.to_path_buf(),
+                        message: format!(
+                            "its {width} x {height} pixels of {} bytes cannot fit in its {} bytes; write or copy it \
+                             again",
+                            header.channels.bytes_per_pixel,
+                            bytes.len()
+                        ),
+                    });
+                }
+                return Ok(Self::Blocks { bytes, header: Box::new(header.clone()) });
+            }
+        }
+        drop(bytes);
+        let mut exr = ExrChannels::read(file, what)?;
+        exr.use_size_of(size_of);
+        Ok(Self::Decoded(exr))
+    }
+
+    pub fn size(&self) -> (usize, usize) {
+        match self {
+            Self::Blocks { header, .. } => (header.layer_size.0, header.layer_size.1),
+            Self::Decoded(exr) => (exr.width, exr.height),
+        }
+    }
+
+    pub fn has(&self, name: &str) -> bool {
+        match self {
+            Self::Blocks { header, .. } => header.channels.list.iter().any(|c| c.name.to_string() == name),
+            Self::Decoded(exr) => exr.has(name),
+        }
+    }
+
+    /// Fills every target with its channels ([`exr_zip::Target`]); each target holds
+    /// `stride` values for each of the [`size`](Self::size)'s pixels.
+    pub fn fill(self, file: &Path, what: &str, targets: &mut [exr_zip::Target]) -> Result<(), SceneError> {
+        match self {
+            Self::Blocks { bytes, .. } => exr_zip::read_into(file, what, &bytes, targets),
+            Self::Decoded(mut exr) => {
+                for target in targets {
+                    for (name, offset) in &target.channels {
+                        let samples = exr.take_samples(file, name)?;
+                        let stride = target.stride;
+                        target.values.par_chunks_mut(stride * 256).enumerate().for_each(|(block, out)| {
+                            let mut values = [0.0f32; 256];
+                            let values = &mut values[..out.len() / stride];
+                            samples_to_f32(&samples, block * 256, values);
+                            for (pixel, &value) in out.chunks_exact_mut(stride).zip(values.iter()) {
+                                pixel[*offset] = value;
+                            }
+                        });
+                    }
+                }
+                Ok(())
             }
         }
     }

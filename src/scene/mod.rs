@@ -73,6 +73,7 @@
 pub mod camera;
 pub mod error;
 pub(crate) mod exr_read;
+pub(crate) mod exr_zip;
 pub mod gbuffer;
 pub mod heightmap;
 pub mod light;

@@ -19,11 +19,7 @@
 //! Compression ZIP (16 scan lines per block), lossless.
 
 use exr::meta::attribute::{AttributeValue, Text};
-use exr::prelude::{
-    f16, AnyChannel, AnyChannels, Blocks, Compression, Encoding, FlatSamples, Image, Layer, LayerAttributes, LineOrder,
-    WritableImage,
-};
-use half::slice::HalfFloatSliceExt;
+use exr::prelude::LayerAttributes;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
 
@@ -90,10 +86,8 @@ pub fn write_exr_channels(
     for (_, data) in channels {
         check_len(path, width, height, data.len())?;
     }
-    let list: Vec<OutputChannel> = channels
-        .iter()
-        .map(|(name, values)| OutputChannel { name: name.to_string(), sample_type: SampleType::Float, values })
-        .collect();
+    let list: Vec<OutputChannel> =
+        channels.iter().map(|(name, values)| OutputChannel::new(name, SampleType::Float, values)).collect();
     write_exr_layers(path, width, height, &list, &[])
 }
 
@@ -106,11 +100,40 @@ pub enum SampleType {
     Float,
 }
 
-/// One output channel: full name, storage type, values row-major from the top row.
+/// One output channel: full name, storage type, values row-major from the top row,
+/// pixel `i`'s at `values[i * stride]` (a channel of pixel-major data is written from it
+/// without a copy).
 pub struct OutputChannel<'a> {
     pub name: String,
     pub sample_type: SampleType,
     pub values: &'a [f32],
+    pub stride: usize,
+}
+
+impl<'a> OutputChannel<'a> {
+    /// A channel of one value per pixel.
+    pub fn new(name: &str, sample_type: SampleType, values: &'a [f32]) -> Self {
+        Self { name: name.to_string(), sample_type, values, stride: 1 }
+    }
+
+    /// Value `offset` of each pixel's `stride` values in `values`.
+    pub fn interleaved(name: String, sample_type: SampleType, values: &'a [f32], stride: usize, offset: usize) -> Self {
+        Self { name, sample_type, values: values.get(offset..).unwrap_or_default(), stride }
+    }
+
+    /// The channels `layer.<name>` (plain `<name>` for an empty layer) of pixel-major
+    /// `values`, each pixel's values in the order of `names`.
+    pub fn layer(layer: &str, names: &[&str], values: &'a [f32], sample_type: SampleType) -> Vec<Self> {
+        let name = |channel: &str| if layer.is_empty() { channel.to_string() } else { format!("{layer}.{channel}") };
+        (names.iter().enumerate())
+            .map(|(k, channel)| Self::interleaved(name(channel), sample_type, values, names.len(), k))
+            .collect()
+    }
+
+    /// The number of pixels `values` holds.
+    fn pixels(&self) -> usize {
+        self.values.len().div_ceil(self.stride.max(1))
+    }
 }
 
 /// Writes `channels` as one ZIP-compressed part, atomically (see the module doc), with
@@ -124,22 +147,8 @@ pub fn write_exr_layers(
     attributes: &[(&str, String)],
 ) -> Result<(), OutputError> {
     for c in channels {
-        check_len(path, width, height, c.values.len())?;
+        check_len(path, width, height, c.pixels())?;
     }
-    let list: Vec<AnyChannel<FlatSamples>> = channels
-        .iter()
-        .map(|c| {
-            let samples = match c.sample_type {
-                SampleType::Half => {
-                    let mut half = vec![f16::ZERO; c.values.len()];
-                    half.convert_from_f32_slice(c.values);
-                    FlatSamples::F16(half)
-                }
-                SampleType::Float => FlatSamples::F32(c.values.to_vec()),
-            };
-            AnyChannel::new(c.name.as_str(), samples)
-        })
-        .collect();
     let mut layer_attributes = LayerAttributes::default();
     for (name, value) in attributes {
         let text = |s: &str| {
@@ -150,16 +159,12 @@ pub fn write_exr_layers(
         };
         layer_attributes.other.insert(text(name)?, AttributeValue::Text(text(value)?));
     }
-    let layer = Layer::new(
-        (width, height),
-        layer_attributes,
-        Encoding { compression: Compression::ZIP16, blocks: Blocks::ScanLines, line_order: LineOrder::Increasing },
-        AnyChannels::sort(list.into_iter().collect()),
-    );
-    let image = Image::from_layer(layer);
     write_atomically(
         path,
-        |temp| image.write().to_file(temp),
+        |temp| {
+            let file = std::fs::File::create(temp).map_err(exr::error::Error::from)?;
+            super::exr_zip::write(std::io::BufWriter::new(file), width, height, channels, layer_attributes)
+        },
         |e| OutputError::Encode { file: path.to_path_buf(), message: e.to_string() },
     )
 }

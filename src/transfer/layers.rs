@@ -2,8 +2,9 @@
 //! them back (the table in the [module doc](super)).
 
 use super::lobe_code;
-use crate::scene::exr_read::{samples_to_f32, ExrChannels};
-use crate::scene::output::SampleType;
+use crate::scene::exr_read::ChannelFile;
+use crate::scene::exr_zip::Target;
+use crate::scene::output::{OutputChannel, SampleType};
 use crate::scene::{LightSource, SceneError};
 use crate::sh::{coefficient_count, MAX_ORDER, MIN_ORDER};
 use crate::shade::glossy::SharpLobe;
@@ -314,33 +315,26 @@ impl TransferFrame {
 
     /// The EXR channels of the layers (module doc), SH and colour layers as `colour`; the
     /// frame's `P`, `N` and alpha are the passes' own and not repeated.
-    pub fn channels(&self, colour: SampleType) -> Vec<(String, SampleType, Vec<f32>)> {
+    pub fn channels(&self, colour: SampleType) -> Vec<OutputChannel<'_>> {
         let count = self.count();
         let mut channels = Vec::new();
         for (name, values) in self.sh_layers() {
             for k in 0..count {
                 let channel = format!("{name}_{}.{}", k - k % 4, ["R", "G", "B", "A"][k % 4]);
-                channels.push((channel, colour, values.iter().skip(k).step_by(count).copied().collect()));
+                channels.push(OutputChannel::interleaved(channel, colour, values, count, k));
             }
         }
-        let mut triple = |layer: &str, names: [&str; 3], values: &[[f32; 3]], kind: SampleType| {
-            for (k, channel) in names.iter().enumerate() {
-                channels.push((format!("{layer}.{channel}"), kind, values.iter().map(|v| v[k]).collect()));
-            }
-        };
-        let rgb = ["R", "G", "B"];
-        triple("albedo", rgb, &self.albedo, colour);
-        triple("specular_colour", rgb, &self.specular_colour, colour);
-        triple("lamps_diffuse", rgb, &self.lamps_diffuse, colour);
-        triple("lamps_specular", rgb, &self.lamps_specular, colour);
-        triple("glossy_direction", ["X", "Y", "Z"], &self.glossy_direction, SampleType::Float);
-        channels.push(("glossy_lobe.V".into(), SampleType::Float, self.glossy_lobe.clone()));
-        for (k, channel) in ["X", "Y"].iter().enumerate() {
-            channels.push((
-                format!("glossy_weight.{channel}"),
-                colour,
-                self.glossy_weight.iter().map(|w| w[k]).collect(),
-            ));
+        let (rgb, xyz) = (["R", "G", "B"], ["X", "Y", "Z"]);
+        for (layer, names, values, kind) in [
+            ("albedo", &rgb[..], self.albedo.as_flattened(), colour),
+            ("specular_colour", &rgb, self.specular_colour.as_flattened(), colour),
+            ("lamps_diffuse", &rgb, self.lamps_diffuse.as_flattened(), colour),
+            ("lamps_specular", &rgb, self.lamps_specular.as_flattened(), colour),
+            ("glossy_direction", &xyz, self.glossy_direction.as_flattened(), SampleType::Float),
+            ("glossy_lobe", &["V"], &self.glossy_lobe, SampleType::Float),
+            ("glossy_weight", &["X", "Y"], self.glossy_weight.as_flattened(), colour),
+        ] {
+            channels.extend(OutputChannel::layer(layer, names, values, kind));
         }
         channels
     }
@@ -365,8 +359,10 @@ impl TransferFrame {
 
     /// Reads the transfer layers of a frame that `logsh render --transfer` wrote.
     pub fn read(file: &Path) -> Result<TransferFrame, SceneError> {
-        let meta = exr::meta::MetaData::read_from_file(file, false)
-            .map_err(|e| crate::scene::error::exr_error(file, "a frame with transfer layers", e))?;
+        const WHAT: &str = "a frame with transfer layers";
+        let bytes = std::fs::read(file).map_err(|e| SceneError::io(file, WHAT, e))?;
+        let meta = exr::meta::MetaData::read_from_buffered(std::io::Cursor::new(&bytes), false)
+            .map_err(|e| crate::scene::error::exr_error(file, WHAT, e))?;
         let text = meta.headers.iter().find_map(|h| {
             h.own_attributes
                 .other
@@ -388,57 +384,74 @@ impl TransferFrame {
             }
         };
         header.check(file)?;
-        let order = header.sh.order;
-        let mut exr = ExrChannels::read(file, "a frame with transfer layers")?;
-        exr.use_size_of("sh_diffuse_0.R");
-        let (width, height) = (exr.width, exr.height);
-        let count = coefficient_count(order);
-        let sh = |exr: &mut ExrChannels, name: &str| -> Result<Vec<f32>, SceneError> {
-            let channels = (0..count)
-                .map(|k| exr.take_samples(file, &format!("{name}_{}.{}", k - k % 4, ["R", "G", "B", "A"][k % 4])))
-                .collect::<Result<Vec<_>, _>>()?;
-            Ok(pixel_major(&channels, width * height))
+        let channels = ChannelFile::new(file, WHAT, bytes, &meta, "sh_diffuse_0.R")?;
+        let (width, height) = channels.size();
+        let n = width * height;
+        let count = coefficient_count(header.sh.order);
+        let sh_names = |name: &str| -> Vec<(String, usize)> {
+            (0..count).map(|k| (format!("{name}_{}.{}", k - k % 4, ["R", "G", "B", "A"][k % 4]), k)).collect()
         };
-        let diffuse = sh(&mut exr, "sh_diffuse")?;
-        let unoccluded = sh(&mut exr, "sh_unoccluded")?;
-        let optional = |exr: &mut ExrChannels, name: &str| -> Result<Option<Vec<f32>>, SceneError> {
-            if exr.has(&format!("{name}_0.R")) {
-                sh(exr, name).map(Some)
-            } else {
-                Ok(None)
-            }
-        };
-        let heightfield = optional(&mut exr, "sh_heightfield")?;
-        let blockers = optional(&mut exr, "sh_blockers")?;
-        let specular = optional(&mut exr, "sh_specular")?;
-        if heightfield.is_some() != blockers.is_some() {
+        let has_sh = |name: &str| channels.has(&format!("{name}_0.R"));
+        let (has_heightfield, has_blockers) = (has_sh("sh_heightfield"), has_sh("sh_blockers"));
+        if has_heightfield != has_blockers {
             return Err(SceneError::invalid(file, "has one of sh_heightfield and sh_blockers without the other"));
         }
-        if heightfield.is_some() != (header.heightfield && header.blockers) {
+        if has_heightfield != (header.heightfield && header.blockers) {
             return Err(SceneError::invalid(
                 file,
                 "holds sh_heightfield and sh_blockers where its header does not name both a height field and \
                  blockers, or lacks them where it does",
             ));
         }
-        let triple = |exr: &mut ExrChannels, layer: &str, names: [&str; 3]| -> Result<Vec<[f32; 3]>, SceneError> {
-            let [a, b, c] = names.map(|n| exr.take_once(file, &format!("{layer}.{n}")));
-            let (a, b, c) = (a?, b?, c?);
-            Ok(a.into_par_iter().zip(b).zip(c).map(|((a, b), c)| [a, b, c]).collect())
+        let sh_layer = |present: bool| present.then(|| vec![0.0f32; n * count]);
+        let (mut diffuse, mut unoccluded) = (vec![0.0f32; n * count], vec![0.0f32; n * count]);
+        let (mut heightfield, mut blockers) = (sh_layer(has_heightfield), sh_layer(has_blockers));
+        let mut specular = sh_layer(has_sh("sh_specular"));
+        let mut albedo = vec![[0.0f32; 3]; n];
+        let mut specular_colour = vec![[0.0f32; 3]; n];
+        let mut lamps_diffuse = vec![[0.0f32; 3]; n];
+        let mut lamps_specular = vec![[0.0f32; 3]; n];
+        let mut glossy_direction = vec![[0.0f32; 3]; n];
+        let mut position = vec![[0.0f32; 3]; n];
+        let mut normal = vec![[0.0f32; 3]; n];
+        let mut glossy_lobe = vec![0.0f32; n];
+        let mut glossy_weight = vec![[0.0f32; 2]; n];
+        let mut alpha = vec![0.0f32; n];
+        let named = |layer: &str, names: &[&str]| -> Vec<(String, usize)> {
+            names.iter().enumerate().map(|(k, c)| (format!("{layer}{c}"), k)).collect()
         };
-        let rgb = ["R", "G", "B"];
-        let xyz = ["X", "Y", "Z"];
-        let albedo = triple(&mut exr, "albedo", rgb)?;
-        let specular_colour = triple(&mut exr, "specular_colour", rgb)?;
-        let lamps_diffuse = triple(&mut exr, "lamps_diffuse", rgb)?;
-        let lamps_specular = triple(&mut exr, "lamps_specular", rgb)?;
-        let glossy_direction = triple(&mut exr, "glossy_direction", xyz)?;
-        let position = triple(&mut exr, "P", xyz)?;
-        let normal = triple(&mut exr, "N", xyz)?;
-        let glossy_lobe = exr.take_once(file, "glossy_lobe.V")?;
-        let (x, y) = (exr.take_once(file, "glossy_weight.X")?, exr.take_once(file, "glossy_weight.Y")?);
-        let glossy_weight: Vec<[f32; 2]> = x.into_iter().zip(y).map(|(x, y)| [x, y]).collect();
-        let alpha = exr.take_once(file, "A")?;
+        let (rgb, xyz) = (["R", "G", "B"], ["X", "Y", "Z"]);
+        let mut targets = vec![
+            Target { values: &mut diffuse, stride: count, channels: sh_names("sh_diffuse") },
+            Target { values: &mut unoccluded, stride: count, channels: sh_names("sh_unoccluded") },
+            Target { values: albedo.as_flattened_mut(), stride: 3, channels: named("albedo.", &rgb) },
+            Target { values: specular_colour.as_flattened_mut(), stride: 3, channels: named("specular_colour.", &rgb) },
+            Target { values: lamps_diffuse.as_flattened_mut(), stride: 3, channels: named("lamps_diffuse.", &rgb) },
+            Target { values: lamps_specular.as_flattened_mut(), stride: 3, channels: named("lamps_specular.", &rgb) },
+            Target {
+                values: glossy_direction.as_flattened_mut(),
+                stride: 3,
+                channels: named("glossy_direction.", &xyz),
+            },
+            Target { values: position.as_flattened_mut(), stride: 3, channels: named("P.", &xyz) },
+            Target { values: normal.as_flattened_mut(), stride: 3, channels: named("N.", &xyz) },
+            Target { values: &mut glossy_lobe, stride: 1, channels: named("glossy_lobe.", &["V"]) },
+            Target {
+                values: glossy_weight.as_flattened_mut(),
+                stride: 2,
+                channels: named("glossy_weight.", &["X", "Y"]),
+            },
+            Target { values: &mut alpha, stride: 1, channels: named("", &["A"]) },
+        ];
+        for (layer, name) in
+            [(&mut heightfield, "sh_heightfield"), (&mut blockers, "sh_blockers"), (&mut specular, "sh_specular")]
+        {
+            if let Some(values) = layer {
+                targets.push(Target { values, stride: count, channels: sh_names(name) });
+            }
+        }
+        channels.fill(file, WHAT, &mut targets)?;
+        drop(targets);
         let lobes = header.lobes.len();
         let last = lobe_code::PREFILTERED + lobes as f32 - 1.0;
         if let Some(i) =
@@ -490,27 +503,4 @@ impl TransferFrame {
             normal: normal.into(),
         })
     }
-}
-
-/// `channels` (one value per pixel each) as f32, pixel by pixel: a block of pixels at a
-/// time, in parallel, each channel's block converted at once (half floats through F16C
-/// where the processor has it), then written in order.
-fn pixel_major(channels: &[exr::prelude::FlatSamples], pixels: usize) -> Vec<f32> {
-    const BLOCK: usize = 256;
-    let count = channels.len();
-    // Zeroed by the allocator (fresh pages), then each value written once.
-    let mut values = vec![0.0f32; pixels * count];
-    values.par_chunks_mut(BLOCK * count.max(1)).enumerate().for_each(|(b, out)| {
-        let (first, n) = (b * BLOCK, out.len() / count);
-        let mut block = vec![[0.0f32; BLOCK]; count];
-        for (converted, channel) in block.iter_mut().zip(channels) {
-            samples_to_f32(channel, first, &mut converted[..n]);
-        }
-        for (i, pixel) in out.chunks_exact_mut(count).enumerate() {
-            for (v, channel) in pixel.iter_mut().zip(&block) {
-                *v = channel[i];
-            }
-        }
-    });
-    values
 }
