@@ -46,16 +46,16 @@ pub fn shade(args: &ShadeArgs) -> Result<()> {
     Ok(())
 }
 
-/// Says which suns `--sharp-lights auto` takes out of an environment map (the same
-/// decomposition each frame's plan makes).
-fn print_sharp_lights(light: &crate::scene::Light, settings: &crate::shade::ShadingSettings) {
-    let crate::scene::Light::Environment { map, strength } = light else {
+/// Says which suns `--sharp-lights auto` takes out of an environment map: the
+/// decomposition the first frame's plan then takes them from
+/// ([`crate::shade::sharp_lights::decomposition`]).
+fn print_sharp_lights(light: &std::sync::Arc<crate::scene::Light>, settings: &crate::shade::ShadingSettings) {
+    let crate::scene::Light::Environment { map, .. } = light.as_ref() else {
         return;
     };
-    if !settings.sharp_lights {
+    let Some(split) = settings.sharp_lights.then(|| crate::shade::sharp_lights::decomposition(light)).flatten() else {
         return;
-    }
-    let split = crate::shade::sharp_lights::extract_suns(map, *strength);
+    };
     for (sun, share) in split.suns.iter().zip(&split.shares) {
         eprintln!(
             "sharp lights: took a sun out of {}: {} (--sharp-lights off keeps it in SH)",

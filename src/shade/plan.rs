@@ -218,11 +218,11 @@ fn lighting(settings: &ShadingSettings, scene: &Scene, frame: &Frame, heightfiel
     let mut extracted_shares = Vec::new();
     let extracted;
     let residual = match frame.light.as_ref() {
-        Light::Environment { map, strength } if settings.sharp_lights => {
-            let split = super::sharp_lights::extract_suns(map, *strength);
+        Light::Environment { strength, .. } if settings.sharp_lights => {
+            let split = super::sharp_lights::decomposition(&frame.light).expect("the light is a map");
             suns.extend(&split.suns);
-            extracted_shares = split.shares;
-            extracted = Light::Environment { map: split.residual, strength: *strength };
+            extracted_shares = split.shares.clone();
+            extracted = Light::Environment { map: split.residual.clone(), strength: *strength };
             &extracted
         }
         other => other,
