@@ -247,14 +247,15 @@ impl ChannelFile {
         match self {
             Self::Blocks { bytes, .. } => exr_zip::read_into(file, what, &bytes, targets),
             Self::Decoded(mut exr) => {
+                const PIXELS: usize = 256;
                 for target in targets {
                     for (name, offset) in &target.channels {
                         let samples = exr.take_samples(file, name)?;
                         let stride = target.stride;
-                        target.values.par_chunks_mut(stride * 256).enumerate().for_each(|(block, out)| {
-                            let mut values = [0.0f32; 256];
+                        target.values.par_chunks_mut(stride * PIXELS).enumerate().for_each(|(block, out)| {
+                            let mut values = [0.0f32; PIXELS];
                             let values = &mut values[..out.len() / stride];
-                            samples_to_f32(&samples, block * 256, values);
+                            samples_to_f32(&samples, block * PIXELS, values);
                             for (pixel, &value) in out.chunks_exact_mut(stride).zip(values.iter()) {
                                 pixel[*offset] = value;
                             }

@@ -130,9 +130,13 @@ impl<'a> OutputChannel<'a> {
             .collect()
     }
 
-    /// The number of pixels `values` holds.
+    /// The number of pixels `values` holds (none at a stride of 0, which is refused).
     fn pixels(&self) -> usize {
-        self.values.len().div_ceil(self.stride.max(1))
+        if self.stride == 0 {
+            0
+        } else {
+            self.values.len().div_ceil(self.stride)
+        }
     }
 }
 
@@ -228,4 +232,31 @@ pub fn write_text(path: &Path, text: &str) -> Result<(), OutputError> {
         |temp| std::fs::write(temp, text),
         |source| OutputError::Io { file: path.to_path_buf(), cause: source },
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A channel that does not hold one value per pixel, at its stride, is refused and
+    /// nothing is written; an interleaved one is written from its pixels' values.
+    #[test]
+    fn channels_are_checked_against_the_size_at_their_stride() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("out.exr");
+        let pixels: Vec<f32> = (0..3 * 6).map(|i| i as f32).collect();
+        let refused = |channel: OutputChannel| {
+            let error = write_exr_layers(&path, 3, 2, &[channel], &[]).unwrap_err();
+            assert!(matches!(error, OutputError::SizeMismatch { .. }), "{error}");
+            assert!(!path.exists());
+        };
+        refused(OutputChannel::interleaved("Y".into(), SampleType::Float, &pixels, 0, 0));
+        refused(OutputChannel::interleaved("Y".into(), SampleType::Float, &pixels, 2, 0));
+        refused(OutputChannel::interleaved("Y".into(), SampleType::Float, &pixels, 3, 3));
+        refused(OutputChannel::new("Y", SampleType::Float, &pixels[..5]));
+        let green = OutputChannel::interleaved("G".into(), SampleType::Float, &pixels, 3, 1);
+        write_exr_layers(&path, 3, 2, &[green], &[]).unwrap();
+        let mut read = super::super::exr_read::ExrChannels::read(&path, "a test image").unwrap();
+        assert_eq!(read.take(&path, "G").unwrap(), [1.0, 4.0, 7.0, 10.0, 13.0, 16.0]);
+    }
 }
