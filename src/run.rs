@@ -391,6 +391,7 @@ pub fn info(args: &crate::cli::InfoArgs) -> Result<()> {
 /// `logsh relight`.
 pub fn relight(args: &crate::cli::RelightArgs) -> Result<()> {
     use crate::scene::ViewTransform;
+    use crate::shade::ShadedPasses;
     use crate::transfer::{relight, RelightLight, RelightOptions, TransferFrame};
     if args.out.exists() && !args.out.is_dir() {
         return Err(anyhow!("--out {}: exists and is not a directory", args.out.display()));
@@ -428,35 +429,72 @@ pub fn relight(args: &crate::cli::RelightArgs) -> Result<()> {
     let started = Instant::now();
     let mut light: Option<RelightLight> = None;
     let mut warned = std::collections::HashSet::new();
-    let (mut reading, mut building, mut relighting) = (0.0, 0.0, 0.0);
-    for (file, (exr, png, json)) in args.frames.iter().zip(&outputs) {
-        let t = Instant::now();
-        let frame = TransferFrame::read(file)?;
-        reading += t.elapsed().as_secs_f64();
-        let t = Instant::now();
-        let source = options.source(&frame.header);
-        if !light.as_ref().is_some_and(|l| l.serves(&source, &frame.header)) {
-            let built = RelightLight::new(source, &frame.header, file)?;
-            warn_of_suns_in_sh(&built, &mut warned);
-            light = Some(built);
-        }
-        building += t.elapsed().as_secs_f64();
-        let t = Instant::now();
-        let passes = relight(&frame, light.as_ref().expect("built above"));
-        relighting += t.elapsed().as_secs_f64();
-        crate::render::write_passes(exr, &passes, args.colour_type)?;
-        let view = match &frame.header.view {
-            Some(spec) => ViewTransform::load(spec, Path::new("/"), file)?,
-            None => ViewTransform::default(),
+    let (mut building, mut relighting) = (0.0, 0.0);
+    // The next frame is read and the last one written while a frame is relit (one each:
+    // at most two frames' transfer layers in memory). A frame that fails stops the
+    // sequence once the frames before it are written; the first failure is reported.
+    let reading = std::thread::scope(|threads| -> Result<f64> {
+        let (read_tx, read_rx) = std::sync::mpsc::sync_channel(0);
+        let (write_tx, write_rx) = std::sync::mpsc::sync_channel::<(usize, ShadedPasses, ViewTransform, String)>(0);
+        let reader = threads.spawn(move || {
+            let mut reading = 0.0;
+            for file in &args.frames {
+                let t = Instant::now();
+                let frame = TransferFrame::read(file);
+                reading += t.elapsed().as_secs_f64();
+                if read_tx.send(frame).is_err() {
+                    break;
+                }
+            }
+            reading
+        });
+        let writer = threads.spawn(move || -> Result<()> {
+            for (k, passes, view, description) in write_rx {
+                let (exr, png, json) = &outputs[k];
+                crate::render::write_passes(exr, &passes, args.colour_type)?;
+                output::write_png_preview(png, passes.width, passes.height, &passes.beauty, &view)?;
+                output::write_text(json, &description)?;
+            }
+            Ok(())
+        });
+        let relit = || -> Result<()> {
+            for (k, (file, frame)) in args.frames.iter().zip(read_rx).enumerate() {
+                let frame = frame?;
+                let t = Instant::now();
+                let source = options.source(&frame.header);
+                if !light.as_ref().is_some_and(|l| l.serves(&source, &frame.header)) {
+                    let built = RelightLight::new(source, &frame.header, file)?;
+                    warn_of_suns_in_sh(&built, &mut warned);
+                    light = Some(built);
+                }
+                building += t.elapsed().as_secs_f64();
+                let light = light.as_ref().expect("built above");
+                let t = Instant::now();
+                let passes = relight(&frame, light);
+                relighting += t.elapsed().as_secs_f64();
+                let view = match &frame.header.view {
+                    Some(spec) => ViewTransform::load(spec, Path::new("/"), file)?,
+                    None => ViewTransform::default(),
+                };
+                let description = serde_json::to_string_pretty(&light.description())? + "\n";
+                if write_tx.send((k, passes, view, description)).is_err() {
+                    break;
+                }
+            }
+            Ok(())
         };
-        output::write_png_preview(png, passes.width, passes.height, &passes.beauty, &view)?;
-        let light = light.as_ref().expect("built above");
-        output::write_text(json, &(serde_json::to_string_pretty(&light.description())? + "\n"))?;
-    }
-    let count = args.frames.len();
+        let relit = relit();
+        drop(write_tx);
+        let written = writer.join().expect("the writer does not panic");
+        let reading = reader.join().expect("the reader does not panic");
+        // The writer's failure is of an earlier frame than the relight's.
+        written.and(relit).map(|()| reading)
+    })?;
+    let (count, elapsed) = (args.frames.len(), started.elapsed().as_secs_f64());
     eprintln!(
-        "relit {count} frame(s) in {:.3} s: reading {:.1} ms, light {:.1} ms, relighting {:.1} ms per frame: {}",
-        started.elapsed().as_secs_f64(),
+        "relit {count} frame(s) in {elapsed:.3} s, {:.3} s a frame (reading, relighting and writing overlap: \
+         reading {:.1} ms, light {:.1} ms, relighting {:.1} ms per frame): {}",
+        elapsed / count as f64,
         1e3 * reading / count as f64,
         1e3 * building / count as f64,
         1e3 * relighting / count as f64,

@@ -323,6 +323,17 @@ fn bad_relight_inputs_are_refused_with_the_file_named() {
     let broken = dir.path().join("broken.exr");
     write_frame(&broken, &cut, &text);
     assert_fails_naming(&["relight", path(&broken), "--out", o], &["broken.exr", "sh_unoccluded_0.R"]);
+    // In a sequence, the frames before the one that fails are written (the next frame is
+    // read while one is relit and the last one written).
+    let sequence = dir.path().join("sequence");
+    let (first, second) = (sequence.join("a.exr"), sequence.join("b.exr"));
+    std::fs::create_dir_all(&sequence).unwrap();
+    std::fs::copy(&frame, &first).unwrap();
+    std::fs::copy(&broken, &second).unwrap();
+    let relit = dir.path().join("relit");
+    assert_fails_naming(&["relight", path(&first), path(&second), "--out", path(&relit)], &["b.exr"]);
+    assert!(relit.join("a.exr").is_file() && relit.join("a.png").is_file() && relit.join("a.light.json").is_file());
+    assert!(!relit.join("b.exr").exists());
     // A NaN in a transfer vector, or in a layer of three channels: refused, the file named.
     for layer in ["sh_diffuse_0.R", "glossy_direction.Y"] {
         let mut poisoned = channels(&frame);
