@@ -201,6 +201,7 @@ pub fn read_into(file: &Path, what: &str, bytes: &[u8], targets: &mut [Target]) 
         debug_assert_eq!(target.values.len(), width * height * target.stride);
         let mut to_target = Vec::new();
         for (name, offset) in &target.channels {
+            debug_assert!(*offset < target.stride, "{name} at {offset} of a pixel's {}", target.stride);
             let Some(k) = header.channels.list.iter().position(|c| c.name.to_string() == *name) else {
                 return Err(SceneError::MissingChannel {
                     file: file.to_path_buf(),
