@@ -216,14 +216,13 @@ fn lighting(settings: &ShadingSettings, scene: &Scene, frame: &Frame, heightfiel
     }
     let mut suns = frame.suns.clone();
     let mut extracted_shares = Vec::new();
-    let extracted;
+    let split;
     let residual = match frame.light.as_ref() {
-        Light::Environment { strength, .. } if settings.sharp_lights => {
-            let split = super::sharp_lights::decomposition(&frame.light).expect("the light is a map");
+        Light::Environment { .. } if settings.sharp_lights => {
+            split = super::sharp_lights::decomposition(&frame.light).expect("the light is a map");
             suns.extend(&split.suns);
             extracted_shares = split.shares.clone();
-            extracted = Light::Environment { map: split.residual.clone(), strength: *strength };
-            &extracted
+            &split.residual
         }
         other => other,
     };

@@ -50,23 +50,33 @@ pub struct Decomposition {
     pub shares: Vec<f64>,
 }
 
-/// The last light's decomposition, per process, with the light it was made of (held, so
-/// that its address cannot be reused by another).
-static LAST_DECOMPOSITION: Mutex<Option<(Arc<Light>, Arc<Decomposition>)>> = Mutex::new(None);
+/// A light's [`Decomposition`], its residual as the light the SH holds (the residual map
+/// at the light's strength), which a plan reads in place.
+pub struct LightSplit {
+    pub suns: Vec<SunLight>,
+    pub shares: Vec<f64>,
+    pub residual: Light,
+}
+
+/// The last light's split, per process, with the light it was made of (held, so that its
+/// address cannot be reused by another).
+static LAST_SPLIT: Mutex<Option<(Arc<Light>, Arc<LightSplit>)>> = Mutex::new(None);
 
 /// [`extract_suns`] of `light`'s map, or `None` for a light without one; made once for
 /// consecutive calls on the same light, so `logsh render` and `logsh shade` print the
 /// suns and their first frame's plan takes them out of one decomposition (9 ms for the
 /// HDRI-sun scene's 1024x512 map, 22 ms for `glossy`'s, which the first frame paid twice).
-pub fn decomposition(light: &Arc<Light>) -> Option<Arc<Decomposition>> {
+pub fn decomposition(light: &Arc<Light>) -> Option<Arc<LightSplit>> {
     let Light::Environment { map, strength } = light.as_ref() else {
         return None;
     };
-    let last = || LAST_DECOMPOSITION.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
+    let last = || LAST_SPLIT.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
     if let Some((_, split)) = last().as_ref().filter(|(previous, _)| Arc::ptr_eq(previous, light)) {
         return Some(split.clone());
     }
-    let split = Arc::new(extract_suns(map, *strength));
+    let Decomposition { residual, suns, shares } = extract_suns(map, *strength);
+    let split =
+        Arc::new(LightSplit { suns, shares, residual: Light::Environment { map: residual, strength: *strength } });
     *last() = Some((light.clone(), split.clone()));
     Some(split)
 }
@@ -361,7 +371,7 @@ mod tests {
         let direct = extract_suns(map, 2.0);
         let split = decomposition(&light).expect("a map");
         assert_eq!((split.suns.len(), &split.suns, &split.shares), (1, &direct.suns, &direct.shares));
-        assert_eq!(split.residual.texels, direct.residual.texels);
+        assert_eq!(split.residual, Light::Environment { map: direct.residual, strength: 2.0 });
         // The same decomposition again, unless another thread's light came between (the
         // cache holds one light; the plans of other tests use it too).
         let again = (0..100).any(|_| {
