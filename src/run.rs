@@ -392,7 +392,7 @@ pub fn info(args: &crate::cli::InfoArgs) -> Result<()> {
 pub fn relight(args: &crate::cli::RelightArgs) -> Result<()> {
     use crate::scene::ViewTransform;
     use crate::shade::ShadedPasses;
-    use crate::transfer::{relight, RelightLight, RelightOptions, TransferFrame};
+    use crate::transfer::{relight_reusing, RelightLight, RelightOptions, TransferFrame};
     if args.out.exists() && !args.out.is_dir() {
         return Err(anyhow!("--out {}: exists and is not a directory", args.out.display()));
     }
@@ -433,14 +433,18 @@ pub fn relight(args: &crate::cli::RelightArgs) -> Result<()> {
     // The next frame is read and the last one written while a frame is relit (one each:
     // at most two frames' transfer layers in memory). A frame that fails stops the
     // sequence once the frames before it are written; the first failure is reported.
+    // Each frame is read into the memory of the one relit before it, and relit into that
+    // of the passes written before it (`read_reusing`, `relight_reusing`).
     let reading = std::thread::scope(|threads| -> Result<f64> {
         let (read_tx, read_rx) = std::sync::mpsc::sync_channel(0);
         let (write_tx, write_rx) = std::sync::mpsc::sync_channel::<(usize, ShadedPasses, ViewTransform, String)>(0);
+        let (spare_frame_tx, spare_frame_rx) = std::sync::mpsc::channel::<TransferFrame>();
+        let (spare_passes_tx, spare_passes_rx) = std::sync::mpsc::channel::<ShadedPasses>();
         let reader = threads.spawn(move || {
             let mut reading = 0.0;
             for file in &args.frames {
                 let t = Instant::now();
-                let frame = TransferFrame::read(file);
+                let frame = TransferFrame::read_reusing(file, spare_frame_rx.try_recv().ok());
                 reading += t.elapsed().as_secs_f64();
                 if read_tx.send(frame).is_err() {
                     break;
@@ -454,6 +458,8 @@ pub fn relight(args: &crate::cli::RelightArgs) -> Result<()> {
                 crate::render::write_passes(exr, &passes, args.colour_type)?;
                 output::write_png_preview(png, passes.width, passes.height, &passes.beauty, &view)?;
                 output::write_text(json, &description)?;
+                // The relight may have finished: then the passes are dropped here.
+                spare_passes_tx.send(passes).ok();
             }
             Ok(())
         });
@@ -470,7 +476,7 @@ pub fn relight(args: &crate::cli::RelightArgs) -> Result<()> {
                 building += t.elapsed().as_secs_f64();
                 let light = light.as_ref().expect("built above");
                 let t = Instant::now();
-                let passes = relight(&frame, light);
+                let passes = relight_reusing(&frame, light, spare_passes_rx.try_recv().ok());
                 relighting += t.elapsed().as_secs_f64();
                 let view = match &frame.header.view {
                     Some(spec) => ViewTransform::load(spec, Path::new("/"), file)?,
@@ -480,6 +486,8 @@ pub fn relight(args: &crate::cli::RelightArgs) -> Result<()> {
                 if write_tx.send((k, passes, view, description)).is_err() {
                     break;
                 }
+                // The reader may have finished: then the frame is dropped here.
+                spare_frame_tx.send(frame).ok();
             }
             Ok(())
         };

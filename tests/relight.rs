@@ -140,6 +140,50 @@ fn relit_equals_a_fresh_shade_under_the_same_turned_light() {
     }
 }
 
+/// A sequence relit in one run, each frame read into the memory of an earlier one and
+/// relit into that of earlier passes, writes what each frame relit on its own writes,
+/// byte for byte, with frames of different sizes, orders and layers in turn.
+#[test]
+fn a_sequence_relights_as_its_frames_do_one_by_one() {
+    let dir = tempfile::tempdir().unwrap();
+    let cones = Path::new(env!("CARGO_MANIFEST_DIR")).join("gbuffers/cones");
+    let dunes = dunes(dir.path());
+    let kinds: [(&Path, &[&str]); 3] =
+        [(&dunes, &[]), (&cones, &["--order", "3"]), (&cones, &["--glossy", "sh", "--order", "5"])];
+    let sequence = dir.path().join("sequence");
+    std::fs::create_dir_all(&sequence).unwrap();
+    let mut frames = Vec::new();
+    for (k, (scene, extra)) in kinds.iter().enumerate() {
+        let out = dir.path().join(format!("transfer{k}"));
+        let common = ["--frames", "1", "--progress", "none", "--transfer"];
+        run(&[&["render", path(scene), "--out", path(&out)], &common[..], extra].concat());
+        frames.push(out.join("render.0001.exr"));
+    }
+    let order = [0, 1, 2, 0, 2, 1, 0];
+    let files: Vec<PathBuf> = order
+        .iter()
+        .enumerate()
+        .map(|(k, &kind)| {
+            let file = sequence.join(format!("f{k}.exr"));
+            std::fs::copy(&frames[kind], &file).unwrap();
+            file
+        })
+        .collect();
+    let together = dir.path().join("together");
+    let args: Vec<&str> = files.iter().map(|f| path(f)).collect();
+    run(&[&["relight"], &args[..], &["--light-rotation", "30", "--out", path(&together)]].concat());
+    for file in &files {
+        let alone = dir.path().join("alone");
+        run(&["relight", path(file), "--light-rotation", "30", "--out", path(&alone)]);
+        let stem = file.file_stem().unwrap().to_str().unwrap();
+        for output in [format!("{stem}.exr"), format!("{stem}.png"), format!("{stem}.light.json")] {
+            let [a, b] = [&together, &alone].map(|d| std::fs::read(d.join(&output)).unwrap());
+            assert!(a == b, "{output} relit in the sequence differs from {output} relit alone");
+        }
+        std::fs::remove_dir_all(&alone).unwrap();
+    }
+}
+
 /// Writes a `width` x `height` environment map whose texel at (row, column) is `texel`.
 fn write_map(file: &Path, width: usize, height: usize, texel: impl Fn(usize, usize) -> [f32; 3]) {
     let mut rgb = [vec![0.0f32; width * height], vec![0.0f32; width * height], vec![0.0f32; width * height]];
@@ -441,11 +485,44 @@ fn assert_same_frame(a: &TransferFrame, b: &TransferFrame, what: &str) {
     assert_eq!(bits(&a.alpha), bits(&b.alpha), "{what}: A");
 }
 
+/// `frame`'s memory as a spare for [`TransferFrame::read_reusing`], every value NaN and
+/// every layer `scale` times as long (`scale` 0: its SH layers missing).
+fn poisoned(mut frame: TransferFrame, scale: f64) -> TransferFrame {
+    fn poison<T: Copy>(v: &mut Vec<T>, scale: f64, nan: T) {
+        v.resize((v.len() as f64 * scale) as usize, nan);
+        v.fill(nan);
+    }
+    let nan = f32::NAN;
+    for layer in [&mut frame.diffuse, &mut frame.unoccluded, &mut frame.glossy_lobe, &mut frame.alpha] {
+        poison(layer, scale, nan);
+    }
+    for layer in [&mut frame.heightfield, &mut frame.blockers, &mut frame.specular] {
+        match layer.as_mut() {
+            Some(values) if scale > 0.0 => poison(values, scale, nan),
+            _ => *layer = None,
+        }
+    }
+    for layer in [
+        &mut frame.albedo,
+        &mut frame.specular_colour,
+        &mut frame.lamps_diffuse,
+        &mut frame.lamps_specular,
+        &mut frame.glossy_direction,
+    ] {
+        poison(layer, scale, [nan; 3]);
+    }
+    poison(&mut frame.glossy_weight, scale, [nan; 2]);
+    frame.position = vec![[nan; 3]; frame.position.len()].into();
+    frame
+}
+
 /// `logsh render` writes one ZIP part, which is decoded straight from its blocks; the
 /// same frame saved by the `exr` crate's own encoder (ZIP of one line a block,
 /// uncompressed) takes that path too, and saved as RLE, PIZ or in tiles it is read
-/// through the crate's decoder. All read the same. A damaged block is an error naming
-/// the file.
+/// through the crate's decoder. All read the same, afresh or into the memory of the frame
+/// read before (as `logsh relight` reads a sequence), whatever that held: NaN, fewer or
+/// more pixels, layers missing; passes that still share that frame's `P` keep it. A
+/// damaged block is an error naming the file.
 #[test]
 fn a_transfer_frame_reads_the_same_in_any_exr_layout() {
     use exr::prelude::{Blocks, Compression, ReadChannels, ReadLayers, WritableImage};
@@ -478,7 +555,15 @@ fn a_transfer_frame_reads_the_same_in_any_exr_layout() {
         let again = dir.path().join(format!("{compression:?}-{blocks:?}.exr"));
         saved.write().to_file(&again).unwrap();
         let read = TransferFrame::read(&again).unwrap();
-        assert_same_frame(&written, &read, &format!("{compression:?}, {blocks:?}"));
+        let what = format!("{compression:?}, {blocks:?}");
+        assert_same_frame(&written, &read, &what);
+        for scale in [0.0, 0.5, 1.0, 2.0] {
+            let spare = poisoned(read.clone(), scale);
+            let shared = spare.position.clone();
+            let reused = TransferFrame::read_reusing(&again, Some(spare)).unwrap();
+            assert_same_frame(&written, &reused, &format!("{what}, read into a spare scaled {scale}"));
+            assert!(shared.iter().flatten().all(|v| v.is_nan()), "{what}: a shared P was written over");
+        }
     }
 
     let mut bytes = std::fs::read(&file).unwrap();

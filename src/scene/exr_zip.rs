@@ -237,7 +237,13 @@ pub fn read_into(file: &Path, what: &str, bytes: &[u8], targets: &mut [Target]) 
             slot.push(rows);
         }
     }
-    compressed.into_par_iter().zip(per_block).enumerate().try_for_each(|(index, (block, mut outputs))| {
+    // Each thread inflates its blocks into one buffer (a block is 3 MB at 960x540 with
+    // transfer layers): a fresh buffer per block faulted in every page of the frame's
+    // 100 MB once more.
+    let scratch: Vec<std::sync::Mutex<Inflater>> =
+        (0..rayon::current_num_threads()).map(|_| Default::default()).collect();
+    type Block<'a> = (usize, (Option<Vec<u8>>, Vec<&'a mut [f32]>));
+    let decode = |(index, (block, mut outputs)): Block| {
         let Some(block) = block else {
             return Err(SceneError::Image {
                 file: file.to_path_buf(),
@@ -246,19 +252,19 @@ pub fn read_into(file: &Path, what: &str, bytes: &[u8], targets: &mut [Target]) 
         };
         let rows = lines.min(height - index * lines);
         let expected = rows * line_bytes;
+        let mut inflater = scratch[rayon::current_thread_index().unwrap_or(0) % scratch.len()]
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
         let split = if block.len() == expected {
-            Split::Raw(block)
+            Split::Raw(&block)
         } else {
-            let options = zune_inflate::DeflateOptions::default().set_limit(expected).set_size_hint(expected);
-            let mut inflated = zune_inflate::DeflateDecoder::new_with_options(&block, options)
-                .decode_zlib()
-                .ok()
-                .filter(|v| v.len() == expected)
-                .ok_or_else(|| SceneError::Image {
+            let Some(inflated) = inflater.inflate(&block, expected) else {
+                return Err(SceneError::Image {
                     file: file.to_path_buf(),
                     message: format!("the block at line {} does not decompress; write or copy it again", index * lines),
-                })?;
-            unpredict(&mut inflated);
+                });
+            };
+            unpredict(inflated);
             Split::Halves(inflated)
         };
         // A tile of a line at a time: each channel's samples converted, then written
@@ -283,8 +289,32 @@ pub fn read_into(file: &Path, what: &str, bytes: &[u8], targets: &mut [Target]) 
             }
         }
         Ok(())
-    })?;
-    Ok(())
+    };
+    compressed.into_par_iter().zip(per_block).enumerate().try_for_each(decode)
+}
+
+/// A zlib decoder and the buffer it inflates blocks into, kept from block to block.
+struct Inflater {
+    zlib: flate2::Decompress,
+    inflated: Vec<u8>,
+}
+
+impl Default for Inflater {
+    fn default() -> Self {
+        Self { zlib: flate2::Decompress::new(true), inflated: Vec::new() }
+    }
+}
+
+impl Inflater {
+    /// The zlib stream `block` inflated, where it holds exactly `expected` bytes.
+    fn inflate(&mut self, block: &[u8], expected: usize) -> Option<&mut [u8]> {
+        self.zlib.reset(true);
+        self.inflated.clear();
+        self.inflated.reserve_exact(expected);
+        let status = self.zlib.decompress_vec(block, &mut self.inflated, flate2::FlushDecompress::Finish);
+        (matches!(status, Ok(flate2::Status::StreamEnd)) && self.inflated.len() == expected)
+            .then_some(&mut self.inflated[..])
+    }
 }
 
 /// Where one channel's line lies in a block, and where in its target's pixels it goes.
@@ -299,12 +329,12 @@ const TILE: usize = 128;
 
 /// A block's bytes: as stored, or decoded but still split into its even and odd bytes
 /// (the byte at `2i` is `even[i]`, at `2i + 1` `odd[i]`), which saves interleaving them.
-enum Split {
-    Raw(Vec<u8>),
-    Halves(Vec<u8>),
+enum Split<'a> {
+    Raw(&'a [u8]),
+    Halves(&'a [u8]),
 }
 
-impl Split {
+impl Split<'_> {
     /// The samples of a line from byte `at` (even), as f32: halves exactly (through F16C
     /// where the processor has it), 32-bit integers to the nearest f32. `halves` is
     /// scratch of the line's length.

@@ -359,6 +359,14 @@ impl TransferFrame {
 
     /// Reads the transfer layers of a frame that `logsh render --transfer` wrote.
     pub fn read(file: &Path) -> Result<TransferFrame, SceneError> {
+        Self::read_reusing(file, None)
+    }
+
+    /// [`read`](Self::read) into the memory of `spare`, a frame read before (of any
+    /// size), where there is one; its `P` and `N` where no passes share them any longer.
+    /// A frame's layers are 151 MB at 960x540 (`cones`: three transfer layers at order
+    /// 4), and freshly allocated each of their 37,000 pages faults as it is first written.
+    pub fn read_reusing(file: &Path, spare: Option<TransferFrame>) -> Result<TransferFrame, SceneError> {
         const WHAT: &str = "a frame with transfer layers";
         let bytes = std::fs::read(file).map_err(|e| SceneError::io(file, WHAT, e))?;
         let meta = exr::meta::MetaData::read_from_buffered(std::io::Cursor::new(&bytes), false)
@@ -403,20 +411,30 @@ impl TransferFrame {
                  blockers, or lacks them where it does",
             ));
         }
-        let sh_layer = |present: bool| present.then(|| vec![0.0f32; n * count]);
-        let (mut diffuse, mut unoccluded) = (vec![0.0f32; n * count], vec![0.0f32; n * count]);
-        let (mut heightfield, mut blockers) = (sh_layer(has_heightfield), sh_layer(has_blockers));
-        let mut specular = sh_layer(has_sh("sh_specular"));
-        let mut albedo = vec![[0.0f32; 3]; n];
-        let mut specular_colour = vec![[0.0f32; 3]; n];
-        let mut lamps_diffuse = vec![[0.0f32; 3]; n];
-        let mut lamps_specular = vec![[0.0f32; 3]; n];
-        let mut glossy_direction = vec![[0.0f32; 3]; n];
-        let mut position = vec![[0.0f32; 3]; n];
-        let mut normal = vec![[0.0f32; 3]; n];
-        let mut glossy_lobe = vec![0.0f32; n];
-        let mut glossy_weight = vec![[0.0f32; 2]; n];
-        let mut alpha = vec![0.0f32; n];
+        // Every value is written by `fill` below, so a spare's old values are left in place.
+        let mut spare = spare.unwrap_or_else(|| TransferFrame::new(0, 0, header.clone(), false, false));
+        let sh_layer = |layer: &mut Option<Vec<f32>>, present: bool| {
+            present.then(|| sized(layer.take().unwrap_or_default(), n * count))
+        };
+        let mut diffuse = sized(std::mem::take(&mut spare.diffuse), n * count);
+        let mut unoccluded = sized(std::mem::take(&mut spare.unoccluded), n * count);
+        let mut heightfield = sh_layer(&mut spare.heightfield, has_heightfield);
+        let mut blockers = sh_layer(&mut spare.blockers, has_blockers);
+        let mut specular = sh_layer(&mut spare.specular, has_sh("sh_specular"));
+        let mut albedo = sized(spare.albedo, n);
+        let mut specular_colour = sized(spare.specular_colour, n);
+        let mut lamps_diffuse = sized(spare.lamps_diffuse, n);
+        let mut lamps_specular = sized(spare.lamps_specular, n);
+        let mut glossy_direction = sized(spare.glossy_direction, n);
+        let mut position = unshared(spare.position, n);
+        let mut normal = unshared(spare.normal, n);
+        let mut glossy_lobe = sized(spare.glossy_lobe, n);
+        let mut glossy_weight = sized(spare.glossy_weight, n);
+        let mut alpha = sized(spare.alpha, n);
+        let (position_values, normal_values) = (
+            std::sync::Arc::get_mut(&mut position).expect("unshared"),
+            std::sync::Arc::get_mut(&mut normal).expect("unshared"),
+        );
         let named = |layer: &str, names: &[&str]| -> Vec<(String, usize)> {
             names.iter().enumerate().map(|(k, c)| (format!("{layer}{c}"), k)).collect()
         };
@@ -433,8 +451,8 @@ impl TransferFrame {
                 stride: 3,
                 channels: named("glossy_direction.", &xyz),
             },
-            Target { values: position.as_flattened_mut(), stride: 3, channels: named("P.", &xyz) },
-            Target { values: normal.as_flattened_mut(), stride: 3, channels: named("N.", &xyz) },
+            Target { values: position_values.as_flattened_mut(), stride: 3, channels: named("P.", &xyz) },
+            Target { values: normal_values.as_flattened_mut(), stride: 3, channels: named("N.", &xyz) },
             Target { values: &mut glossy_lobe, stride: 1, channels: named("glossy_lobe.", &["V"]) },
             Target {
                 values: glossy_weight.as_flattened_mut(),
@@ -470,7 +488,9 @@ impl TransferFrame {
         if specular.is_none() && glossy_lobe.iter().any(|&c| c >= lobe_code::SH) {
             return Err(SceneError::invalid(file, "its pixels read sh_specular, which it does not hold"));
         }
-        let finite = |v: &[f32]| v.par_iter().all(|x| x.is_finite());
+        // Each chunk checked whole, which runs in vector lanes (one value at a time, this
+        // check was a tenth of a sequence's relight).
+        let finite = |v: &[f32]| v.par_chunks(1 << 14).all(|c| c.iter().fold(true, |all, x| all & x.is_finite()));
         let all_finite = finite(&diffuse)
             && finite(&unoccluded)
             && [&heightfield, &blockers, &specular].iter().all(|l| l.as_ref().is_none_or(|v| finite(v)))
@@ -499,8 +519,27 @@ impl TransferFrame {
             glossy_direction,
             glossy_weight,
             alpha,
-            position: position.into(),
-            normal: normal.into(),
+            position,
+            normal,
         })
     }
+}
+
+/// `v` at length `n`, its values left as they are, or `n` zeros where it holds fewer
+/// (from the allocator's zeroed pages, which the decoder then writes once).
+fn sized<T: Copy + Default>(mut v: Vec<T>, n: usize) -> Vec<T> {
+    if v.capacity() < n {
+        return vec![T::default(); n];
+    }
+    v.truncate(n);
+    v.resize(n, T::default());
+    v
+}
+
+/// `shared` where nothing else holds it and it has `n` values, else `n` new ones.
+fn unshared(mut shared: std::sync::Arc<[[f32; 3]]>, n: usize) -> std::sync::Arc<[[f32; 3]]> {
+    if shared.len() != n || std::sync::Arc::get_mut(&mut shared).is_none() {
+        shared = std::iter::repeat_n([0.0f32; 3], n).collect();
+    }
+    shared
 }

@@ -68,7 +68,7 @@ mod shade;
 pub use layers::{PixelTransfer, PrefilteredLobe, ShConvention, TransferFrame, TransferHeader, TRANSFER_ATTRIBUTE};
 #[cfg(test)]
 pub(crate) use relight::relit_dunes;
-pub use relight::{relight, RelightLight, RelightOptions, SampledMap, SAMPLED_MAP_WIDTH};
+pub use relight::{relight, relight_reusing, RelightLight, RelightOptions, SampledMap, SAMPLED_MAP_WIDTH};
 pub use shade::shade_with_transfer;
 
 /// `glossy_lobe` codes (module doc).
