@@ -454,6 +454,19 @@ fn outputs_round_trip_atomically() {
     write_png_preview(&png_path, 3, 2, &rgba, &view).unwrap();
     let png = image::open(&png_path).unwrap().to_rgba8();
     assert_eq!(png.get_pixel(1, 0).0, [170, 255, 255, 128]);
+    // A larger frame (converted in parallel, in chunks of pixels): every pixel as the view
+    // transform gives it, one at a time.
+    let (width, height) = (97, 61);
+    let ramp: Vec<[f32; 4]> =
+        (0..width * height).map(|i| [i as f32 / 5000.0, (i % 97) as f32 / 40.0, 0.25, (i % 7) as f32 / 6.0]).collect();
+    write_png_preview(&png_path, width, height, &ramp, &view).unwrap();
+    let png = image::open(&png_path).unwrap().to_rgba8();
+    let q = |v: f32| (v * 255.0 + 0.5).clamp(0.0, 255.0) as u8;
+    for (i, p) in ramp.iter().enumerate() {
+        let [r, g, b] = view.display([p[0], p[1], p[2]], 0.0);
+        let pixel = png.get_pixel((i % width) as u32, (i / width) as u32).0;
+        assert_eq!(pixel, [q(r), q(g), q(b), q(p[3])], "pixel {i}");
+    }
     let leftovers: Vec<_> = std::fs::read_dir(dir.path()).unwrap().map(|e| e.unwrap().file_name()).collect();
     assert_eq!(leftovers.len(), 2, "no temporary files left: {leftovers:?}");
 

@@ -20,6 +20,7 @@
 
 use exr::meta::attribute::{AttributeValue, Text};
 use exr::prelude::LayerAttributes;
+use rayon::prelude::*;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
 
@@ -195,20 +196,25 @@ pub fn write_png_preview(
 ) -> Result<(), OutputError> {
     check_len(path, width, height, rgba.len())?;
     let q = |v: f32| (v * 255.0 + 0.5).clamp(0.0, 255.0) as u8;
-    let mut bytes = Vec::with_capacity(rgba.len() * 4);
-    for p in rgba {
-        let [r, g, b] = view.display([p[0], p[1], p[2]], 0.0);
-        let alpha = if view.transparent {
-            if p[3].is_nan() {
-                0.0
+    // In parallel: through the view transform, a 960x540 frame took 17 ms on one thread,
+    // three times the PNG's encoding, and held up a sequence's writing stage.
+    const PIXELS: usize = 4096;
+    let mut bytes = vec![0u8; rgba.len() * 4];
+    bytes.par_chunks_mut(4 * PIXELS).zip(rgba.par_chunks(PIXELS)).for_each(|(out, pixels)| {
+        for (out, p) in out.chunks_exact_mut(4).zip(pixels) {
+            let [r, g, b] = view.display([p[0], p[1], p[2]], 0.0);
+            let alpha = if view.transparent {
+                if p[3].is_nan() {
+                    0.0
+                } else {
+                    p[3].clamp(0.0, 1.0)
+                }
             } else {
-                p[3].clamp(0.0, 1.0)
-            }
-        } else {
-            1.0
-        };
-        bytes.extend_from_slice(&[q(r), q(g), q(b), q(alpha)]);
-    }
+                1.0
+            };
+            out.copy_from_slice(&[q(r), q(g), q(b), q(alpha)]);
+        }
+    });
     write_atomically(
         path,
         |temp| {
