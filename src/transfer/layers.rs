@@ -277,27 +277,29 @@ impl TransferFrame {
         self.alpha.push(alpha);
     }
 
-    /// Appends the pixels of `rows` (frames of the same layers, pushed in order).
-    pub fn append(&mut self, rows: TransferFrame) {
-        self.diffuse.extend(rows.diffuse);
-        self.unoccluded.extend(rows.unoccluded);
-        for (layer, values) in [
-            (&mut self.heightfield, rows.heightfield),
-            (&mut self.blockers, rows.blockers),
-            (&mut self.specular, rows.specular),
-        ] {
-            if let (Some(layer), Some(values)) = (layer, values) {
-                layer.extend(values);
-            }
+    /// The frame of `rows`, frames of `empty`'s layers holding one row of pixels each
+    /// (pushed in order), copied into place in parallel: appended one after the other, a
+    /// 960x540 frame's 151 MB took 120 ms on one thread, a tenth of `render --transfer`.
+    pub fn from_rows(empty: TransferFrame, rows: &[TransferFrame]) -> TransferFrame {
+        let optional = |layer: fn(&TransferFrame) -> Option<&Vec<f32>>| {
+            layer(&empty).is_some().then(|| joined(rows, |row| layer(row).map_or(&[][..], Vec::as_slice)))
+        };
+        TransferFrame {
+            diffuse: joined(rows, |row| &row.diffuse),
+            unoccluded: joined(rows, |row| &row.unoccluded),
+            heightfield: optional(|row| row.heightfield.as_ref()),
+            blockers: optional(|row| row.blockers.as_ref()),
+            specular: optional(|row| row.specular.as_ref()),
+            albedo: joined(rows, |row| &row.albedo),
+            specular_colour: joined(rows, |row| &row.specular_colour),
+            lamps_diffuse: joined(rows, |row| &row.lamps_diffuse),
+            lamps_specular: joined(rows, |row| &row.lamps_specular),
+            glossy_lobe: joined(rows, |row| &row.glossy_lobe),
+            glossy_direction: joined(rows, |row| &row.glossy_direction),
+            glossy_weight: joined(rows, |row| &row.glossy_weight),
+            alpha: joined(rows, |row| &row.alpha),
+            ..empty
         }
-        self.albedo.extend(rows.albedo);
-        self.specular_colour.extend(rows.specular_colour);
-        self.lamps_diffuse.extend(rows.lamps_diffuse);
-        self.lamps_specular.extend(rows.lamps_specular);
-        self.glossy_lobe.extend(rows.glossy_lobe);
-        self.glossy_direction.extend(rows.glossy_direction);
-        self.glossy_weight.extend(rows.glossy_weight);
-        self.alpha.extend(rows.alpha);
     }
 
     /// The SH layers present, by name.
@@ -523,6 +525,21 @@ impl TransferFrame {
             normal,
         })
     }
+}
+
+/// `layer` of each of `parts`, one after the other, each copied into place in parallel
+/// (into the allocator's zeroed pages).
+fn joined<P: Sync, T: Copy + Default + Send + Sync>(parts: &[P], layer: impl Fn(&P) -> &[T] + Sync) -> Vec<T> {
+    let mut out = vec![T::default(); parts.iter().map(|part| layer(part).len()).sum()];
+    let mut pieces = Vec::with_capacity(parts.len());
+    let mut rest = out.as_mut_slice();
+    for part in parts {
+        let (piece, tail) = rest.split_at_mut(layer(part).len());
+        pieces.push(piece);
+        rest = tail;
+    }
+    pieces.into_par_iter().zip(parts).for_each(|(piece, part)| piece.copy_from_slice(layer(part)));
+    out
 }
 
 /// `v` at length `n`, its values left as they are, or `n` zeros where it holds fewer

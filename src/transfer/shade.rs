@@ -99,11 +99,12 @@ fn walk<T: Real>(kernel: &ShadingKernel<T>, occluders: Occluders, plan: &FramePl
             (pixels, transfer)
         })
         .collect();
-    let mut transfer = empty;
+    let (rows, row_transfers): (Vec<Vec<Pixel>>, Vec<TransferFrame>) = rows.into_iter().unzip();
+    let mut transfer = TransferFrame::from_rows(empty, &row_transfers);
+    drop(row_transfers);
     let mut pixels = Vec::with_capacity(g.width * g.height);
-    for (row, row_transfer) in rows {
+    for row in rows {
         pixels.extend(row);
-        transfer.append(row_transfer);
     }
     let passes = assemble(frame, &pixels);
     (transfer.position, transfer.normal) = (passes.position.clone(), passes.normal.clone());
