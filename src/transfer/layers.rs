@@ -171,55 +171,86 @@ pub enum PixelTransfer<'a> {
     Surface { point: &'a PointTransfer, tint: [f32; 3] },
 }
 
-impl TransferFrame {
-    /// An empty frame of `width` x `height` to [`push`](Self::push) pixels into, with the
-    /// optional layers the frame has.
-    pub fn new(
-        width: usize,
-        height: usize,
-        header: TransferHeader,
-        heightfield_and_blockers: bool,
-        phong: bool,
-    ) -> Self {
-        let layer = |present: bool| present.then(Vec::new);
-        Self {
-            width,
-            height,
-            header,
-            diffuse: Vec::new(),
-            unoccluded: Vec::new(),
-            heightfield: layer(heightfield_and_blockers),
-            blockers: layer(heightfield_and_blockers),
-            specular: layer(phong),
-            albedo: Vec::new(),
-            specular_colour: Vec::new(),
-            lamps_diffuse: Vec::new(),
-            lamps_specular: Vec::new(),
-            glossy_lobe: Vec::new(),
-            glossy_direction: Vec::new(),
-            glossy_weight: Vec::new(),
-            alpha: Vec::new(),
-            position: std::sync::Arc::from([]),
-            normal: std::sync::Arc::from([]),
-        }
+/// One row of a frame's layers ([`TransferFrame::rows_mut`]), its pixels to be written
+/// with [`set`](Self::set).
+pub struct TransferRow<'a> {
+    count: usize,
+    diffuse: &'a mut [f32],
+    unoccluded: &'a mut [f32],
+    heightfield: Option<&'a mut [f32]>,
+    blockers: Option<&'a mut [f32]>,
+    specular: Option<&'a mut [f32]>,
+    albedo: &'a mut [[f32; 3]],
+    specular_colour: &'a mut [[f32; 3]],
+    lamps_diffuse: &'a mut [[f32; 3]],
+    lamps_specular: &'a mut [[f32; 3]],
+    glossy_lobe: &'a mut [f32],
+    glossy_direction: &'a mut [[f32; 3]],
+    glossy_weight: &'a mut [[f32; 2]],
+    alpha: &'a mut [f32],
+}
+
+impl<'a> TransferRow<'a> {
+    /// Its first `pixels` pixels, and the rest.
+    fn split_at(self, pixels: usize) -> (Self, Self) {
+        let sh = pixels * self.count;
+        let optional = |layer: Option<&'a mut [f32]>| match layer.map(|l| l.split_at_mut(sh)) {
+            Some((head, tail)) => (Some(head), Some(tail)),
+            None => (None, None),
+        };
+        let (diffuse, diffuse_rest) = self.diffuse.split_at_mut(sh);
+        let (unoccluded, unoccluded_rest) = self.unoccluded.split_at_mut(sh);
+        let (heightfield, heightfield_rest) = optional(self.heightfield);
+        let (blockers, blockers_rest) = optional(self.blockers);
+        let (specular, specular_rest) = optional(self.specular);
+        let (albedo, albedo_rest) = self.albedo.split_at_mut(pixels);
+        let (specular_colour, specular_colour_rest) = self.specular_colour.split_at_mut(pixels);
+        let (lamps_diffuse, lamps_diffuse_rest) = self.lamps_diffuse.split_at_mut(pixels);
+        let (lamps_specular, lamps_specular_rest) = self.lamps_specular.split_at_mut(pixels);
+        let (glossy_lobe, glossy_lobe_rest) = self.glossy_lobe.split_at_mut(pixels);
+        let (glossy_direction, glossy_direction_rest) = self.glossy_direction.split_at_mut(pixels);
+        let (glossy_weight, glossy_weight_rest) = self.glossy_weight.split_at_mut(pixels);
+        let (alpha, alpha_rest) = self.alpha.split_at_mut(pixels);
+        let count = self.count;
+        (
+            Self {
+                count,
+                diffuse,
+                unoccluded,
+                heightfield,
+                blockers,
+                specular,
+                albedo,
+                specular_colour,
+                lamps_diffuse,
+                lamps_specular,
+                glossy_lobe,
+                glossy_direction,
+                glossy_weight,
+                alpha,
+            },
+            Self {
+                count,
+                diffuse: diffuse_rest,
+                unoccluded: unoccluded_rest,
+                heightfield: heightfield_rest,
+                blockers: blockers_rest,
+                specular: specular_rest,
+                albedo: albedo_rest,
+                specular_colour: specular_colour_rest,
+                lamps_diffuse: lamps_diffuse_rest,
+                lamps_specular: lamps_specular_rest,
+                glossy_lobe: glossy_lobe_rest,
+                glossy_direction: glossy_direction_rest,
+                glossy_weight: glossy_weight_rest,
+                alpha: alpha_rest,
+            },
+        )
     }
 
-    pub fn order(&self) -> usize {
-        self.header.sh.order
-    }
-
-    pub fn count(&self) -> usize {
-        coefficient_count(self.order())
-    }
-
-    /// The index of each prefiltered lobe's material in [`TransferHeader::lobes`].
-    pub fn lobe_indices(&self) -> BTreeMap<u32, usize> {
-        self.header.lobes.iter().enumerate().map(|(j, lobe)| (lobe.material, j)).collect()
-    }
-
-    /// Appends one pixel (row-major order); `lobes` from [`Self::lobe_indices`].
-    pub fn push(&mut self, pixel: PixelTransfer, lobes: &BTreeMap<u32, usize>) {
-        let count = self.count();
+    /// Writes pixel `x` of the row; `lobes` from [`TransferFrame::lobe_indices`].
+    pub fn set(&mut self, x: usize, pixel: PixelTransfer, lobes: &BTreeMap<u32, usize>) {
+        let count = self.count;
         let dark = PointTransfer::DARK;
         let tinted = |tint: [f32; 3], c: [f32; 3]| [0, 1, 2].map(|k| tint[k] * c[k]);
         let to_f32 = |d: [f64; 3]| d.map(|c| c as f32);
@@ -253,53 +284,106 @@ impl TransferFrame {
                 )
             }
         };
-        self.diffuse.extend_from_slice(&point.diffuse[..count]);
-        self.unoccluded.extend_from_slice(&point.unoccluded[..count]);
+        let at = x * count..(x + 1) * count;
+        self.diffuse[at.clone()].copy_from_slice(&point.diffuse[..count]);
+        self.unoccluded[at.clone()].copy_from_slice(&point.unoccluded[..count]);
         for (layer, values) in [
             (&mut self.heightfield, &point.heightfield),
             (&mut self.blockers, &point.blockers),
             (&mut self.specular, &point.specular),
         ] {
             if let Some(layer) = layer {
-                layer.extend_from_slice(&values[..count]);
+                layer[at.clone()].copy_from_slice(&values[..count]);
             }
         }
-        self.albedo.push(tinted(tint, point.albedo));
-        self.specular_colour.push(colour);
-        self.lamps_diffuse.push(tinted(tint, point.lamps_diffuse));
-        self.lamps_specular.push(lamps_specular);
-        self.glossy_lobe.push(lobe);
-        self.glossy_direction.push(direction);
-        self.glossy_weight.push(match point.glossy {
+        self.albedo[x] = tinted(tint, point.albedo);
+        self.specular_colour[x] = colour;
+        self.lamps_diffuse[x] = tinted(tint, point.lamps_diffuse);
+        self.lamps_specular[x] = lamps_specular;
+        self.glossy_lobe[x] = lobe;
+        self.glossy_direction[x] = direction;
+        self.glossy_weight[x] = match point.glossy {
             GlossyTransfer::Prefiltered { cone, sh_weight, .. } => [cone as f32, sh_weight as f32],
             _ => [0.0; 2],
-        });
-        self.alpha.push(alpha);
+        };
+        self.alpha[x] = alpha;
+    }
+}
+
+impl TransferFrame {
+    /// A frame of `width` x `height` with the optional layers the frame has, every value
+    /// zero, to write pixels into row by row ([`rows_mut`](Self::rows_mut)).
+    pub fn new(
+        width: usize,
+        height: usize,
+        header: TransferHeader,
+        heightfield_and_blockers: bool,
+        phong: bool,
+    ) -> Self {
+        let n = width * height;
+        let coefficients = n * coefficient_count(header.sh.order);
+        let layer = |present: bool| present.then(|| vec![0.0; coefficients]);
+        Self {
+            width,
+            height,
+            header,
+            diffuse: vec![0.0; coefficients],
+            unoccluded: vec![0.0; coefficients],
+            heightfield: layer(heightfield_and_blockers),
+            blockers: layer(heightfield_and_blockers),
+            specular: layer(phong),
+            albedo: vec![[0.0; 3]; n],
+            specular_colour: vec![[0.0; 3]; n],
+            lamps_diffuse: vec![[0.0; 3]; n],
+            lamps_specular: vec![[0.0; 3]; n],
+            glossy_lobe: vec![0.0; n],
+            glossy_direction: vec![[0.0; 3]; n],
+            glossy_weight: vec![[0.0; 2]; n],
+            alpha: vec![0.0; n],
+            position: std::sync::Arc::from([]),
+            normal: std::sync::Arc::from([]),
+        }
     }
 
-    /// The frame of `rows`, frames of `empty`'s layers holding one row of pixels each
-    /// (pushed in order), copied into place in parallel: appended one after the other, a
-    /// 960x540 frame's 151 MB took 120 ms on one thread, a tenth of `render --transfer`.
-    pub fn from_rows(empty: TransferFrame, rows: &[TransferFrame]) -> TransferFrame {
-        let optional = |layer: fn(&TransferFrame) -> Option<&Vec<f32>>| {
-            layer(&empty).is_some().then(|| joined(rows, |row| layer(row).map_or(&[][..], Vec::as_slice)))
+    pub fn order(&self) -> usize {
+        self.header.sh.order
+    }
+
+    pub fn count(&self) -> usize {
+        coefficient_count(self.order())
+    }
+
+    /// The index of each prefiltered lobe's material in [`TransferHeader::lobes`].
+    pub fn lobe_indices(&self) -> BTreeMap<u32, usize> {
+        self.header.lobes.iter().enumerate().map(|(j, lobe)| (lobe.material, j)).collect()
+    }
+
+    /// The frame's rows, each to write its pixels into (in parallel).
+    pub fn rows_mut(&mut self) -> Vec<TransferRow<'_>> {
+        let width = self.width;
+        let mut rest = TransferRow {
+            count: self.count(),
+            diffuse: &mut self.diffuse,
+            unoccluded: &mut self.unoccluded,
+            heightfield: self.heightfield.as_deref_mut(),
+            blockers: self.blockers.as_deref_mut(),
+            specular: self.specular.as_deref_mut(),
+            albedo: &mut self.albedo,
+            specular_colour: &mut self.specular_colour,
+            lamps_diffuse: &mut self.lamps_diffuse,
+            lamps_specular: &mut self.lamps_specular,
+            glossy_lobe: &mut self.glossy_lobe,
+            glossy_direction: &mut self.glossy_direction,
+            glossy_weight: &mut self.glossy_weight,
+            alpha: &mut self.alpha,
         };
-        TransferFrame {
-            diffuse: joined(rows, |row| &row.diffuse),
-            unoccluded: joined(rows, |row| &row.unoccluded),
-            heightfield: optional(|row| row.heightfield.as_ref()),
-            blockers: optional(|row| row.blockers.as_ref()),
-            specular: optional(|row| row.specular.as_ref()),
-            albedo: joined(rows, |row| &row.albedo),
-            specular_colour: joined(rows, |row| &row.specular_colour),
-            lamps_diffuse: joined(rows, |row| &row.lamps_diffuse),
-            lamps_specular: joined(rows, |row| &row.lamps_specular),
-            glossy_lobe: joined(rows, |row| &row.glossy_lobe),
-            glossy_direction: joined(rows, |row| &row.glossy_direction),
-            glossy_weight: joined(rows, |row| &row.glossy_weight),
-            alpha: joined(rows, |row| &row.alpha),
-            ..empty
+        let mut rows = Vec::with_capacity(self.height);
+        for _ in 0..self.height {
+            let (row, tail) = rest.split_at(width);
+            rows.push(row);
+            rest = tail;
         }
+        rows
     }
 
     /// The SH layers present, by name.
@@ -525,21 +609,6 @@ impl TransferFrame {
             normal,
         })
     }
-}
-
-/// `layer` of each of `parts`, one after the other, each copied into place in parallel
-/// (into the allocator's zeroed pages).
-fn joined<P: Sync, T: Copy + Default + Send + Sync>(parts: &[P], layer: impl Fn(&P) -> &[T] + Sync) -> Vec<T> {
-    let mut out = vec![T::default(); parts.iter().map(|part| layer(part).len()).sum()];
-    let mut pieces = Vec::with_capacity(parts.len());
-    let mut rest = out.as_mut_slice();
-    for part in parts {
-        let (piece, tail) = rest.split_at_mut(layer(part).len());
-        pieces.push(piece);
-        rest = tail;
-    }
-    pieces.into_par_iter().zip(parts).for_each(|(piece, part)| piece.copy_from_slice(layer(part)));
-    out
 }
 
 /// `v` at length `n`, its values left as they are, or `n` zeros where it holds fewer

@@ -59,25 +59,27 @@ fn walk<T: Real>(kernel: &ShadingKernel<T>, occluders: Occluders, plan: &FramePl
     let both = header.heightfield && header.blockers;
     let phong = plan.contents.phong;
     let scene_suns = frame.suns.len();
-    let empty = TransferFrame::new(g.width, g.height, header, both, phong);
-    let lobes = empty.lobe_indices();
-    let rows: Vec<(Vec<Pixel>, TransferFrame)> = (0..g.height)
+    // Each row's transfer is written in place, into layers allocated once.
+    let mut transfer = TransferFrame::new(g.width, g.height, header, both, phong);
+    let lobes = transfer.lobe_indices();
+    let rows: Vec<Vec<Pixel>> = transfer
+        .rows_mut()
         .into_par_iter()
-        .map(|y| {
+        .enumerate()
+        .map(|(y, mut row)| {
             let mut pixels = Vec::with_capacity(g.width);
-            let mut transfer = empty.clone();
             let sources: Vec<PixelSource> =
                 (0..g.width).map(|x| pixel_source(&plan.scene.materials, frame, x, y)).collect();
             let work: Vec<PixelWork> = sources.iter().map(|source| work_of(frame, *source)).collect();
             let caps = kernel.sum_caps_of_work(occluders.blockers, &work);
             let mut shaded = 0;
-            for (work, source) in work.into_iter().zip(sources) {
+            for (x, (work, source)) in work.into_iter().zip(sources).enumerate() {
                 let (pixel, pixel_transfer) = match (work, source) {
                     (PixelWork::Shade { point, tint }, _) => {
                         shaded += 1;
                         let caps = caps.of(shaded - 1);
                         let (passes, point_transfer) = kernel.shade_transfer(occluders, &point, caps, scene_suns);
-                        transfer.push(PixelTransfer::Surface { point: &point_transfer, tint }, &lobes);
+                        row.set(x, PixelTransfer::Surface { point: &point_transfer, tint }, &lobes);
                         pixels.push(Pixel::shaded(passes, tint));
                         continue;
                     }
@@ -93,15 +95,12 @@ fn walk<T: Real>(kernel: &ShadingKernel<T>, occluders: Occluders, plan: &FramePl
                     }
                     (PixelWork::Fixed(_), PixelSource::Surface { .. }) => unreachable!("a surface is always shaded"),
                 };
-                transfer.push(pixel_transfer, &lobes);
+                row.set(x, pixel_transfer, &lobes);
                 pixels.push(pixel);
             }
-            (pixels, transfer)
+            pixels
         })
         .collect();
-    let (rows, row_transfers): (Vec<Vec<Pixel>>, Vec<TransferFrame>) = rows.into_iter().unzip();
-    let mut transfer = TransferFrame::from_rows(empty, &row_transfers);
-    drop(row_transfers);
     let mut pixels = Vec::with_capacity(g.width * g.height);
     for row in rows {
         pixels.extend(row);
