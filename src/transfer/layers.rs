@@ -190,64 +190,7 @@ pub struct TransferRow<'a> {
     alpha: &'a mut [f32],
 }
 
-impl<'a> TransferRow<'a> {
-    /// Its first `pixels` pixels, and the rest.
-    fn split_at(self, pixels: usize) -> (Self, Self) {
-        let sh = pixels * self.count;
-        let optional = |layer: Option<&'a mut [f32]>| match layer.map(|l| l.split_at_mut(sh)) {
-            Some((head, tail)) => (Some(head), Some(tail)),
-            None => (None, None),
-        };
-        let (diffuse, diffuse_rest) = self.diffuse.split_at_mut(sh);
-        let (unoccluded, unoccluded_rest) = self.unoccluded.split_at_mut(sh);
-        let (heightfield, heightfield_rest) = optional(self.heightfield);
-        let (blockers, blockers_rest) = optional(self.blockers);
-        let (specular, specular_rest) = optional(self.specular);
-        let (albedo, albedo_rest) = self.albedo.split_at_mut(pixels);
-        let (specular_colour, specular_colour_rest) = self.specular_colour.split_at_mut(pixels);
-        let (lamps_diffuse, lamps_diffuse_rest) = self.lamps_diffuse.split_at_mut(pixels);
-        let (lamps_specular, lamps_specular_rest) = self.lamps_specular.split_at_mut(pixels);
-        let (glossy_lobe, glossy_lobe_rest) = self.glossy_lobe.split_at_mut(pixels);
-        let (glossy_direction, glossy_direction_rest) = self.glossy_direction.split_at_mut(pixels);
-        let (glossy_weight, glossy_weight_rest) = self.glossy_weight.split_at_mut(pixels);
-        let (alpha, alpha_rest) = self.alpha.split_at_mut(pixels);
-        let count = self.count;
-        (
-            Self {
-                count,
-                diffuse,
-                unoccluded,
-                heightfield,
-                blockers,
-                specular,
-                albedo,
-                specular_colour,
-                lamps_diffuse,
-                lamps_specular,
-                glossy_lobe,
-                glossy_direction,
-                glossy_weight,
-                alpha,
-            },
-            Self {
-                count,
-                diffuse: diffuse_rest,
-                unoccluded: unoccluded_rest,
-                heightfield: heightfield_rest,
-                blockers: blockers_rest,
-                specular: specular_rest,
-                albedo: albedo_rest,
-                specular_colour: specular_colour_rest,
-                lamps_diffuse: lamps_diffuse_rest,
-                lamps_specular: lamps_specular_rest,
-                glossy_lobe: glossy_lobe_rest,
-                glossy_direction: glossy_direction_rest,
-                glossy_weight: glossy_weight_rest,
-                alpha: alpha_rest,
-            },
-        )
-    }
-
+impl TransferRow<'_> {
     /// Writes pixel `x` of the row; `lobes` from [`TransferFrame::lobe_indices`].
     pub fn set(&mut self, x: usize, pixel: PixelTransfer, lobes: &BTreeMap<u32, usize>) {
         let count = self.count;
@@ -360,30 +303,39 @@ impl TransferFrame {
 
     /// The frame's rows, each to write its pixels into (in parallel).
     pub fn rows_mut(&mut self) -> Vec<TransferRow<'_>> {
-        let width = self.width;
-        let mut rest = TransferRow {
-            count: self.count(),
-            diffuse: &mut self.diffuse,
-            unoccluded: &mut self.unoccluded,
-            heightfield: self.heightfield.as_deref_mut(),
-            blockers: self.blockers.as_deref_mut(),
-            specular: self.specular.as_deref_mut(),
-            albedo: &mut self.albedo,
-            specular_colour: &mut self.specular_colour,
-            lamps_diffuse: &mut self.lamps_diffuse,
-            lamps_specular: &mut self.lamps_specular,
-            glossy_lobe: &mut self.glossy_lobe,
-            glossy_direction: &mut self.glossy_direction,
-            glossy_weight: &mut self.glossy_weight,
-            alpha: &mut self.alpha,
-        };
-        let mut rows = Vec::with_capacity(self.height);
-        for _ in 0..self.height {
-            let (row, tail) = rest.split_at(width);
-            rows.push(row);
-            rest = tail;
-        }
-        rows
+        let (width, count) = (self.width.max(1), self.count());
+        let sh = width * count;
+        let (mut diffuse, mut unoccluded) = (self.diffuse.chunks_mut(sh), self.unoccluded.chunks_mut(sh));
+        let mut heightfield = self.heightfield.as_deref_mut().map(|layer| layer.chunks_mut(sh));
+        let mut blockers = self.blockers.as_deref_mut().map(|layer| layer.chunks_mut(sh));
+        let mut specular = self.specular.as_deref_mut().map(|layer| layer.chunks_mut(sh));
+        let mut albedo = self.albedo.chunks_mut(width);
+        let mut specular_colour = self.specular_colour.chunks_mut(width);
+        let mut lamps_diffuse = self.lamps_diffuse.chunks_mut(width);
+        let mut lamps_specular = self.lamps_specular.chunks_mut(width);
+        let mut glossy_lobe = self.glossy_lobe.chunks_mut(width);
+        let mut glossy_direction = self.glossy_direction.chunks_mut(width);
+        let mut glossy_weight = self.glossy_weight.chunks_mut(width);
+        let mut alpha = self.alpha.chunks_mut(width);
+        let row = "every layer has a row per row of the frame";
+        (0..self.height)
+            .map(|_| TransferRow {
+                count,
+                diffuse: diffuse.next().expect(row),
+                unoccluded: unoccluded.next().expect(row),
+                heightfield: heightfield.as_mut().map(|rows| rows.next().expect(row)),
+                blockers: blockers.as_mut().map(|rows| rows.next().expect(row)),
+                specular: specular.as_mut().map(|rows| rows.next().expect(row)),
+                albedo: albedo.next().expect(row),
+                specular_colour: specular_colour.next().expect(row),
+                lamps_diffuse: lamps_diffuse.next().expect(row),
+                lamps_specular: lamps_specular.next().expect(row),
+                glossy_lobe: glossy_lobe.next().expect(row),
+                glossy_direction: glossy_direction.next().expect(row),
+                glossy_weight: glossy_weight.next().expect(row),
+                alpha: alpha.next().expect(row),
+            })
+            .collect()
     }
 
     /// The SH layers present, by name.
