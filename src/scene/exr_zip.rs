@@ -292,9 +292,9 @@ pub fn read_into(file: &Path, what: &str, bytes: &[u8], targets: &mut [Target]) 
 /// Writes a tile's samples (route `k`'s run from `samples[k * TILE]`) into its pixels of
 /// `stride` values each, every route's at its offset. Four routes at consecutive offsets
 /// (a transfer vector's coefficients) are written four pixels at a time, transposed in
-/// SSE2 registers (part of x86-64): one 16-byte store per pixel where there were four
-/// stores of a value, which were most of a transfer frame's decoding. The same values
-/// either way.
+/// SSE2 registers (part of x86-64): one 16-byte store where there were four stores of a
+/// value, the hottest instruction of a transfer frame's decoding. The same values either
+/// way.
 fn scatter(routes: &[Route], samples: &[f32], pixels: &mut [f32], stride: usize) {
     let n = pixels.len() / stride;
     let run = |k: usize| &samples[k * TILE..k * TILE + n];
