@@ -361,7 +361,9 @@ mod tests {
         }
     }
 
-    /// A smooth sky, and a bright but wide region, stay in SH.
+    /// A light's decomposition is `extract_suns` of its map, with the residual at the
+    /// light's strength; made once for consecutive calls on the same light, and anew for
+    /// another; none for a light without a map.
     #[test]
     fn a_light_is_decomposed_once_for_consecutive_calls() {
         let d: [f64; 3] = [0.5, -0.4, 0.6];
@@ -384,6 +386,7 @@ mod tests {
         assert!(decomposition(&Arc::new(Light::Constant([1.0; 3]))).is_none());
     }
 
+    /// A smooth sky, and a bright but wide region, stay in SH.
     #[test]
     fn smooth_skies_keep_their_light() {
         assert!(extract_suns(&sky(256, None), 1.0).suns.is_empty());
