@@ -2,7 +2,8 @@
 //! in accuracy and in time, one run per scene:
 //!
 //! ```text
-//! cargo run --release --example relight_accuracy -- [--rotation DEG] [--repeats N] [--device cpu|gpu|auto] SCENE...
+//! cargo run --release --example relight_accuracy -- [--rotation DEG] [--repeats N] [--device cpu|gpu|auto]
+//!     [--relight-threads T] [--fresh-passes] SCENE...
 //! ```
 //!
 //! Per scene (its first frame): the transfer is rendered with `--sharp-lights off`,
@@ -17,7 +18,13 @@
 //! and the first run of each, cold, both reading their light: the relight with its light
 //! read, turned, projected and prefiltered, the shade with its map read and turned as a
 //! scene's loading does, then its tables; reading the transfer file and the G-buffer is
-//! not counted. The shade runs where `--device` puts it (`cpu` by default; `logsh render`
+//! not counted. Each relight writes into the passes of the one before, as `logsh relight`
+//! does from a sequence's second frame on; `--fresh-passes` gives each relight new memory
+//! instead (a first frame's, or the relights of this harness before `logsh relight`
+//! reused passes). `--relight-threads T` relights on a pool of its own of `T` threads
+//! (rayon's global pool, one thread per core, by default).
+//!
+//! The shade runs where `--device` puts it (`cpu` by default; `logsh render`
 //! takes `auto`, a hardware GPU where there is one); the relight runs on the CPU, as `logsh
 //! relight` does. Where the scene directory holds a converged Cycles render of the frame
 //! (`cycles.NNNN.exr`, `blender_scripts/render_cycles.py`) and the light is not
@@ -28,7 +35,7 @@ use logsh::executor::{DeviceChoice, Executor};
 use logsh::scene::output::SampleType;
 use logsh::scene::{EnvironmentMap, LightSource, Scene};
 use logsh::shade::ShadingSettings;
-use logsh::transfer::{relight, shade_with_transfer, RelightLight, RelightOptions, TransferFrame};
+use logsh::transfer::{relight_reusing, shade_with_transfer, RelightLight, RelightOptions, TransferFrame};
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -37,10 +44,19 @@ fn median(mut times: Vec<f64>) -> f64 {
     times[times.len() / 2]
 }
 
+/// `work` on `pool`, or on rayon's global pool where there is none.
+fn on_pool<R: Send>(pool: Option<&rayon::ThreadPool>, work: impl FnOnce() -> R + Send) -> R {
+    match pool {
+        Some(pool) => pool.install(work),
+        None => work(),
+    }
+}
+
 fn main() -> anyhow::Result<()> {
     let mut args = std::env::args().skip(1);
     let (mut rotation, mut repeats, mut scenes) = (0.0f64, 3usize, Vec::new());
     let mut device = DeviceChoice::Cpu;
+    let (mut relight_threads, mut fresh_passes) = (None, false);
     while let Some(a) = args.next() {
         match a.as_str() {
             "--rotation" => rotation = args.next().expect("--rotation DEG").parse()?,
@@ -49,13 +65,24 @@ fn main() -> anyhow::Result<()> {
                 device = clap::ValueEnum::from_str(&args.next().expect("--device cpu|gpu|auto"), true)
                     .map_err(|e| anyhow::anyhow!("--device: {e}"))?
             }
+            "--relight-threads" => relight_threads = Some(args.next().expect("--relight-threads T").parse()?),
+            "--fresh-passes" => fresh_passes = true,
             _ => scenes.push(PathBuf::from(a)),
         }
     }
     let temp = tempfile::tempdir()?;
     let settings = ShadingSettings { sharp_lights: false, ..ShadingSettings::default() };
     let executor = Executor::select(device, &settings)?;
-    println!("shading on {}; relighting on cpu ({} threads)\n", executor.describe(), rayon::current_num_threads());
+    let pool = match relight_threads {
+        Some(threads) => Some(rayon::ThreadPoolBuilder::new().num_threads(threads).build()?),
+        None => None,
+    };
+    println!(
+        "shading on {}; relighting on cpu ({} threads, into {} passes)\n",
+        executor.describe(),
+        pool.as_ref().map_or_else(rayon::current_num_threads, |p| p.current_num_threads()),
+        if fresh_passes { "fresh" } else { "the previous relight's" }
+    );
     println!("| scene | size | vs shade, sharp lights off (mean / worst) | vs shade, sharp lights auto | vs Cycles: relit / shade auto | relight | shade | ratio | cold: relight / shade | ratio |");
     println!("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |");
     for dir in &scenes {
@@ -100,8 +127,10 @@ fn main() -> anyhow::Result<()> {
                 }
             }
             for timed in [false, true] {
+                let spare = if fresh_passes { None } else { relit.take() };
+                drop(relit.take());
                 let started = Instant::now();
-                relit = Some(relight(&transfer, &light));
+                relit = Some(on_pool(pool.as_ref(), || relight_reusing(&transfer, &light, spare)));
                 match (round, timed) {
                     (0, false) => cold_relight = started.elapsed().as_secs_f64(),
                     (_, true) => relight_times.push(started.elapsed().as_secs_f64()),
@@ -129,7 +158,7 @@ fn main() -> anyhow::Result<()> {
         let (cold_relight, cold_shade) = (building + cold_relight, shade_light + cold_shade);
         let (r, s) = (median(relight_times), median(shade_times));
         println!(
-            "| {} | {}x{} | {:.5} / {:.4} | {:.4} | {against_cycles} | {:.1} ms | {:.1} ms | {:.0}x | {:.1} / {:.1} ms | {:.0}x |",
+            "| {} | {}x{} | {:.5} / {:.4} | {:.4} | {against_cycles} | {:.2} ms | {:.1} ms | {:.0}x | {:.2} / {:.1} ms | {:.0}x |",
             dir.display(),
             frame.gbuffer.width,
             frame.gbuffer.height,
