@@ -753,18 +753,25 @@ crate::x86::with_wide_registers! {
 /// The lookup coordinates of the glossy directions (in the map and the prefiltered maps)
 /// come first, in a loop of their own: free of branches, it runs in vector lanes, four
 /// pixels at a time, with the same operations, so the same bits, as one pixel at a time (a
-/// frame all glossy relit about 15 % faster). Then the open lobes' light of the pixels
-/// that need it ([`Dots::open_lights`]), eight at a time where the processor has AVX2,
-/// then the pixels.
+/// frame all glossy relit about 15 % faster). A chunk in which no pixel looks a map up
+/// skips that loop and its reads: on 16 threads of an Intel Xeon, the all-diffuse
+/// `spheres` was relit 20x to 24x faster than the GPU shaded it, where it was 16x to 21x
+/// (`relight_accuracy --device gpu`, three alternating runs each). Then the open lobes'
+/// light of the pixels that need it ([`Dots::open_lights`]), eight at a time where the
+/// processor has AVX2, then the pixels.
 ///
 /// # Safety
 /// The processor has what `D` needs ([`Dots::dot`]).
 #[inline(always)]
 unsafe fn relight_chunk<D: Dots>(frame: &TransferFrame, light: &RelightLight, first: usize, out: RelitChunk) {
     let mut coordinates = [[0.0f64; 2]; CHUNK];
-    let directions = &frame.glossy_direction[first..first + out.beauty.len()];
-    for (uv, d) in coordinates.iter_mut().zip(directions) {
-        *uv = lookup_coordinates(d.map(f64::from));
+    let codes = &frame.glossy_lobe[first..first + out.beauty.len()];
+    // What `glossy_term` reads a map for: the mirror and the prefiltered lobes.
+    if codes.iter().any(|&code| code != lobe_code::NONE && code != lobe_code::SH) {
+        let directions = &frame.glossy_direction[first..first + out.beauty.len()];
+        for (uv, d) in coordinates.iter_mut().zip(directions) {
+            *uv = lookup_coordinates(d.map(f64::from));
+        }
     }
     let mut open = [[0.0f32; 3]; CHUNK];
     // SAFETY: the caller holds `D`'s contract.
