@@ -510,8 +510,9 @@ impl TransferFrame {
         drop(targets);
         let lobes = header.lobes.len();
         let last = lobe_code::PREFILTERED + lobes as f32 - 1.0;
-        if let Some(i) =
-            glossy_lobe.iter().position(|&c| !(c == c.round() && (0.0..=last.max(lobe_code::SH)).contains(&c)))
+        if let Some(i) = glossy_lobe
+            .par_iter()
+            .position_first(|&c| !(c == c.round() && (0.0..=last.max(lobe_code::SH)).contains(&c)))
         {
             return Err(SceneError::invalid(
                 file,
@@ -523,7 +524,7 @@ impl TransferFrame {
                 ),
             ));
         }
-        if specular.is_none() && glossy_lobe.iter().any(|&c| c >= lobe_code::SH) {
+        if specular.is_none() && glossy_lobe.par_iter().any(|&c| c >= lobe_code::SH) {
             return Err(SceneError::invalid(file, "its pixels read sh_specular, which it does not hold"));
         }
         // Each chunk checked whole, which runs in vector lanes (one value at a time, this
