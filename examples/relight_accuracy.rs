@@ -19,9 +19,9 @@
 //! read, turned, projected and prefiltered, the shade with its map read and turned as a
 //! scene's loading does, then its tables; reading the transfer file and the G-buffer is
 //! not counted. Each relight writes into the passes of the one before, as `logsh relight`
-//! does from a sequence's second frame on; `--fresh-passes` gives each relight new memory
-//! instead (a first frame's, or the relights of this harness before `logsh relight`
-//! reused passes). `--relight-threads T` relights on a pool of its own of `T` threads
+//! does in a sequence once its first frames are written; `--fresh-passes` allocates each
+//! relight's passes anew, as a first frame's are (the allocator may hand back the memory
+//! just freed). `--relight-threads T` relights on a pool of its own of `T` threads
 //! (rayon's global pool, one thread per core, by default).
 //!
 //! The shade runs where `--device` puts it (`cpu` by default; `logsh render`
