@@ -277,10 +277,11 @@ pub fn read_into(file: &Path, what: &str, bytes: &[u8], targets: &mut [Target]) 
                 slot.push(line);
             }
         }
-        per_line.into_par_iter().enumerate().for_each(|(row, mut outputs)| {
-            // A tile of the line at a time: each channel's samples converted, then written
-            // into the tile's pixels ([`scatter`]).
-            let (mut samples, mut halves) = (vec![0.0f32; most * TILE], [f16::ZERO; TILE]);
+        // A tile of the line at a time: each channel's samples converted, then written into
+        // the tile's pixels ([`scatter`]); the scratch made once per task rayon splits off,
+        // not per line.
+        let scratch = || (vec![0.0f32; most * TILE], [f16::ZERO; TILE]);
+        per_line.into_par_iter().enumerate().for_each_init(scratch, |(samples, halves), (row, mut outputs)| {
             for x in (0..width).step_by(TILE) {
                 let n = TILE.min(width - x);
                 for ((to_target, out), &stride) in routes.iter().zip(outputs.iter_mut()).zip(&strides) {
@@ -288,7 +289,7 @@ pub fn read_into(file: &Path, what: &str, bytes: &[u8], targets: &mut [Target]) 
                         let at = row * line_bytes + route.at + x * route.kind.bytes_per_sample();
                         split.samples(at, route.kind, &mut halves[..n], &mut samples[..n]);
                     }
-                    scatter(to_target, &samples, &mut out[x * stride..(x + n) * stride], stride);
+                    scatter(to_target, samples, &mut out[x * stride..(x + n) * stride], stride);
                 }
             }
         });
