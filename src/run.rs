@@ -429,6 +429,7 @@ pub fn relight(args: &crate::cli::RelightArgs) -> Result<()> {
     let started = Instant::now();
     let mut light: Option<RelightLight> = None;
     let mut warned = std::collections::HashSet::new();
+    let mut warned_of_lamps = false;
     let (mut building, mut relighting) = (0.0, 0.0);
     // The next frame is read and the last one written while a frame is relit (one each:
     // at most two frames' transfer layers in memory). A frame that fails stops the
@@ -472,6 +473,10 @@ pub fn relight(args: &crate::cli::RelightArgs) -> Result<()> {
                     let built = RelightLight::new(source, &frame.header, file)?;
                     warn_of_suns_in_sh(&built, &mut warned);
                     light = Some(built);
+                }
+                if options.rotation != 0.0 && !frame.header.sun_lamps.is_empty() && !warned_of_lamps {
+                    warned_of_lamps = true;
+                    warn_of_sun_lamps(file, &frame.header.sun_lamps, options.rotation);
                 }
                 building += t.elapsed().as_secs_f64();
                 let light = light.as_ref().expect("built above");
@@ -533,6 +538,25 @@ fn warn_of_suns_in_sh(
             describe_sun(&sun, share)
         );
     }
+}
+
+/// Says that a relight turning the map by `degrees` keeps the Sun lamps `sun_lamps`
+/// (azimuth and elevation, as rendered in `file`) where `logsh render --light-rotation`
+/// would turn them; once per sequence.
+fn warn_of_sun_lamps(file: &Path, sun_lamps: &[[f64; 2]], degrees: f64) {
+    let lamps: Vec<String> = sun_lamps
+        .iter()
+        .map(|[azimuth, elevation]| format!("azimuth {azimuth:.1} deg, elevation {elevation:.1} deg"))
+        .collect();
+    let (lamp, stays) = if lamps.len() > 1 { ("Sun lamps", "stay") } else { ("Sun lamp", "stays") };
+    eprintln!(
+        "relight: {}: the scene's {lamp} ({}) {stays} as rendered, with {} shadows, in the lamps_* layers: a \
+         relight turns the map alone, where `logsh render --light-rotation {degrees}` turns Sun lamps with it \
+         and moves their shadows; for that, render the frames again",
+        file.display(),
+        lamps.join("; "),
+        if lamps.len() > 1 { "their" } else { "its" }
+    );
 }
 
 /// `logsh view`.

@@ -286,6 +286,51 @@ fn lamps_stay_as_rendered_while_the_environment_turns() {
     }
 }
 
+/// A Sun lamp is shaded sharp into the `lamps_*` layers, which a relight keeps: turning
+/// the map leaves it where it was rendered, where `logsh render --light-rotation` turns it
+/// with the map. The header records it as rendered (after the render's own turn), and a
+/// relight that turns the map says that it stays; one that does not turn says nothing.
+#[test]
+fn a_sun_lamp_kept_while_the_map_turns_is_reported() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = dunes(dir.path());
+    // Towards azimuth 30 deg, elevation 45 deg.
+    let (azimuth, elevation) = (30f64.to_radians(), 45f64.to_radians());
+    let direction = [elevation.cos() * azimuth.cos(), elevation.cos() * azimuth.sin(), elevation.sin()];
+    let lights = serde_json::json!([
+        {"type": "sun", "direction": direction, "angle": 1.0, "strength": 3.0, "color": [1.0, 0.9, 0.8]},
+    ]);
+    support::sharp::load_with_lights(&scene, lights).unwrap();
+    let transfer = dir.path().join("transfer");
+    let common = ["--frames", "1", "--sharp-lights", "off", "--progress", "none", "--device", "cpu"];
+    run(&[&["render", path(&scene), "--out", path(&transfer), "--transfer", "--light-rotation", "20"], &common[..]]
+        .concat());
+    let frame = transfer.join("render.0001.exr");
+    let header = TransferFrame::read(&frame).unwrap().header;
+    assert_eq!(header.sun_lamps.len(), 1, "{:?}", header.sun_lamps);
+    let [a, e] = header.sun_lamps[0];
+    assert!((a - 50.0).abs() < 1e-6 && (e - 45.0).abs() < 1e-6, "turned 20 deg with the map: {a}, {e}");
+
+    let relight = |extra: &[&str], out: &str| {
+        let out = dir.path().join(out);
+        let output = logsh().args([&["relight", path(&frame), "--out", path(&out)], extra].concat()).output().unwrap();
+        assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+        (out.join("render.0001.exr"), String::from_utf8_lossy(&output.stderr).into_owned())
+    };
+    let (relit, said) = relight(&["--light-rotation", "60"], "turned");
+    assert!(said.contains("Sun lamp (azimuth 50.0 deg, elevation 45.0 deg) stays as rendered"), "{said}");
+    assert!(said.contains("logsh render --light-rotation 60"), "{said}");
+    let (_, quiet) = relight(&["--strength", "2"], "scaled");
+    assert!(!quiet.contains("Sun lamp"), "{quiet}");
+
+    // What the message warns of: the render turns the lamp and moves its shadows, the
+    // relight does not.
+    let shaded = dir.path().join("shaded");
+    run(&[&["render", path(&scene), "--out", path(&shaded), "--light-rotation", "80"], &common[..]].concat());
+    let worst = compare(&scene, 80.0, &relit, &shaded.join("render.0001.exr"), "Sun lamp, map turned 60 more");
+    assert!(worst > 10.0 * RELIT_TOLERANCE, "the render's turned Sun lamp must differ: {worst}");
+}
+
 #[test]
 fn the_header_records_the_sh_convention_and_the_light() {
     let dir = tempfile::tempdir().unwrap();
@@ -396,6 +441,7 @@ fn bad_relight_inputs_are_refused_with_the_file_named() {
         ("/lobes/0/lobe", serde_json::json!({"ggx": {"alpha": -1.0}}), "lobe of material"),
         ("/light", environment(-1.0), "strength"),
         ("/blockers", serde_json::json!(false), "sh_heightfield and sh_blockers"),
+        ("/sun_lamps", serde_json::json!(vec![[30.0, 45.0]; 17]), "its Sun lamps: give at most 16"),
     ];
     for (pointer, value, needle) in edits {
         let mut edited = header.clone();

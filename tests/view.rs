@@ -69,8 +69,9 @@ fn run(args: &[&str]) {
 
 /// `gbuffers/cones` (whose directory holds a Cycles render) rendered with its transfer,
 /// under a map whose light comes mostly from a warm patch low in the south-east, so that
-/// turning it moves the shadows and reflections, and shown through a view transform's LUT.
-fn rendered_cones(dir: &Path) -> PathBuf {
+/// turning it moves the shadows and reflections, and shown through a view transform's LUT;
+/// with the scene.json's `lights` set to `lights`.
+fn rendered_cones(dir: &Path, lights: serde_json::Value) -> PathBuf {
     let sample = Path::new(env!("CARGO_MANIFEST_DIR")).join("gbuffers/cones");
     let scene = dir.join("cones");
     std::fs::create_dir_all(&scene).unwrap();
@@ -121,6 +122,7 @@ fn rendered_cones(dir: &Path) -> PathBuf {
     json["light"] = serde_json::json!({"environment": "patch.exr"});
     json["view"] = serde_json::json!({"transform": "Filmic", "exposure": 0.5,
         "lut": {"file": "view_lut.exr", "size": n, "log2_range": range}});
+    json["lights"] = lights;
     std::fs::write(&file, serde_json::to_string_pretty(&json).unwrap()).unwrap();
     let out = dir.join("frames");
     run(&[
@@ -140,7 +142,7 @@ fn rendered_cones(dir: &Path) -> PathBuf {
 #[test]
 fn the_server_answers_the_page_and_a_frames_data() {
     let dir = tempfile::tempdir().unwrap();
-    let frames = rendered_cones(dir.path());
+    let frames = rendered_cones(dir.path(), serde_json::json!([]));
     let server = Server::start(&frames);
     let (status, page) = server.request("GET", "/");
     assert_eq!(status, 200);
@@ -157,6 +159,7 @@ fn the_server_answers_the_page_and_a_frames_data() {
     assert_eq!(meta["cycles"], true, "the scene directory's cycles.0001.exr is found");
     assert_eq!(meta["light"].as_array().unwrap().len(), 3);
     assert_eq!(meta["suns_in_sh"], serde_json::json!([]), "the patch is too wide to be a sun");
+    assert_eq!(meta["sun_lamps"], 0, "the cones have no Sun lamp for the page to say stays as rendered");
     let floats: u64 = meta["pixels"].as_array().unwrap().iter().map(|l| l["components"].as_u64().unwrap()).sum();
     let (_, pixels) = server.request("GET", "/frame/0/pixels.bin");
     assert_eq!(pixels.len() as u64, 4 * floats * 240 * 135, "every layer of the layout");
@@ -224,20 +227,68 @@ fn difference(shot: &image::RgbaImage, preview: &image::RgbaImage) -> f64 {
     sum / count as f64
 }
 
-#[test]
-fn the_page_relights_in_a_headless_browser() {
-    let Some(browser) = browser() else {
+/// The browser, or `None` after saying, past the test harness's capture, that the test
+/// `test` did not run (a skipped browser test is never silent); with
+/// `LOGSH_REQUIRE_BROWSER=1`, a browser or a failure.
+fn required_browser(test: &str) -> Option<PathBuf> {
+    let found = browser();
+    if found.is_none() {
         if std::env::var("LOGSH_REQUIRE_BROWSER").is_ok_and(|v| v == "1") {
             panic!("LOGSH_REQUIRE_BROWSER=1 but no Chromium is installed");
         }
-        // Past the test harness's capture: a skipped browser test is never silent.
         let _ = std::io::stderr().write_all(
-            b"tests/view.rs: the headless browser test DID NOT RUN: no chromium (apt-get install chromium)\n",
+            format!(
+                "tests/view.rs: the headless browser test {test} DID NOT RUN: no chromium (apt-get install chromium)\n"
+            )
+            .as_bytes(),
         );
+    }
+    found
+}
+
+/// The page's status line at `url` once its script and fetches have run (the browser's
+/// dump of the page's DOM).
+fn status_line(browser: &Path, url: &str) -> String {
+    let output = Command::new(browser)
+        .args(["--headless", "--no-sandbox", "--disable-gpu", "--virtual-time-budget=30000", "--dump-dom", url])
+        .output()
+        .unwrap();
+    let dom = String::from_utf8_lossy(&output.stdout);
+    let start = dom.find("id=\"status\"").unwrap_or_else(|| panic!("no status line in the page: {dom}"));
+    let text = &dom[start..];
+    let text = &text[text.find('>').unwrap() + 1..];
+    text[..text.find('<').unwrap()].to_string()
+}
+
+/// A frame rendered with a Sun lamp: turned in the page, its status line says that the
+/// lamp stays as rendered (a relight turns the map alone, as `logsh relight` says too);
+/// unturned, it says nothing of it.
+#[test]
+fn the_page_says_a_sun_lamp_stays_as_rendered() {
+    let Some(browser) = required_browser("the_page_says_a_sun_lamp_stays_as_rendered") else {
         return;
     };
     let dir = tempfile::tempdir().unwrap();
-    let frames = rendered_cones(dir.path());
+    let sun = serde_json::json!([{"type": "sun", "direction": [0.5, -0.5, 0.7], "angle": 1.0, "strength": 2.0}]);
+    let frames = rendered_cones(dir.path(), sun);
+    let server = Server::start(&frames);
+    let (_, meta) = server.request("GET", "/frame/0/meta.json");
+    let meta: serde_json::Value = serde_json::from_slice(&meta).unwrap();
+    assert_eq!(meta["sun_lamps"], 1);
+    let turned = status_line(&browser, &format!("{}?rotation=75", server.address));
+    assert!(turned.contains("the scene's Sun lamp stays as rendered"), "{turned}");
+    let unturned = status_line(&browser, &server.address);
+    assert!(unturned.contains("relit") && !unturned.contains("Sun lamp"), "{unturned}");
+    server.stop();
+}
+
+#[test]
+fn the_page_relights_in_a_headless_browser() {
+    let Some(browser) = required_browser("the_page_relights_in_a_headless_browser") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let frames = rendered_cones(dir.path(), serde_json::json!([]));
     let frame = frames.join("render.0001.exr");
     for turn in ["0", "75"] {
         run(&[

@@ -74,6 +74,12 @@ pub struct TransferHeader {
     pub heightfield: bool,
     pub blockers: bool,
     pub lobes: Vec<PrefilteredLobe>,
+    /// The scene's Sun lamps as rendered (after `render --light-rotation`, which turns
+    /// them with the map), azimuth and elevation in degrees. Their light and sharp
+    /// shadows are in the `lamps_*` layers, which a relight keeps as they are: it turns
+    /// the map alone. Empty in files written before this was recorded.
+    #[serde(default)]
+    pub sun_lamps: Vec<[f64; 2]>,
     /// The scene's colour management for previews, its LUT file absolute
     /// ([`crate::scene::view`]).
     pub view: Option<crate::scene::ViewSpec>,
@@ -81,6 +87,10 @@ pub struct TransferHeader {
 
 /// Most prefiltered lobes a frame may list (one per Phong material).
 pub const MAX_LOBES: usize = 1024;
+
+/// Most Sun lamps a frame's header may list (a scene's own limit on its lamps,
+/// [`crate::scene::MAX_SUNS`]).
+pub const MAX_SUN_LAMPS: usize = crate::scene::MAX_SUNS;
 
 impl TransferHeader {
     /// Refuses a header a relight cannot use, naming `file`: an order outside the
@@ -112,6 +122,9 @@ impl TransferHeader {
                     ));
                 }
             }
+        }
+        if self.sun_lamps.len() > MAX_SUN_LAMPS || !self.sun_lamps.iter().all(|lamp| finite(lamp)) {
+            return bad(format!("its Sun lamps: give at most {MAX_SUN_LAMPS}, each a finite azimuth and elevation"));
         }
         if self.lobes.len() > MAX_LOBES {
             return bad(format!("{} prefiltered lobes, more than {MAX_LOBES}", self.lobes.len()));

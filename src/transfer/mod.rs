@@ -43,7 +43,8 @@
 //!
 //! The SH convention (order, basis, normalisation, axes, coefficient index), the light the
 //! frame was shaded with (map file, strength, Mapping rotation, turn), the window, whether
-//! the ground plane hides the lower hemisphere, and the prefiltered lobes.
+//! the ground plane hides the lower hemisphere, the prefiltered lobes, and the scene's
+//! Sun lamps as rendered (azimuth and elevation).
 //!
 //! # Size
 //!
@@ -59,7 +60,10 @@
 //! `--sharp-lights off`. Suns that a render took out of the map (`--sharp-lights auto`)
 //! come back as part of the SH light, with the soft shadows SH gives them; the scene's
 //! own Sun and point lamps stay as they were rendered (`lamps_*`), as `--light-rotation`
-//! leaves point lamps.
+//! leaves point lamps. A render's `--light-rotation` turns Sun lamps with the map, a
+//! relight's cannot (it would shade their sharp shadows again), so `logsh relight` says
+//! when it turns the map of a frame with Sun lamps: on a scene with a 2 deg Sun lamp, a
+//! relight turned 75 deg is 0.050 from the turned render (README).
 
 mod layers;
 mod relight;

@@ -48,6 +48,7 @@ fn header<T: Real>(kernel: &ShadingKernel<T>, plan: &FramePlan) -> TransferHeade
             .into_iter()
             .map(|(material, lobe, open)| PrefilteredLobe { material, lobe, open })
             .collect(),
+        sun_lamps: plan.frame.suns.iter().map(|sun| sun.azimuth_elevation()).collect(),
         view: plan.scene.view.absolute_spec(&plan.scene.dir),
     }
 }

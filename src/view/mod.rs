@@ -316,6 +316,8 @@ fn frame_bodies(
             let [azimuth, elevation] = sun.azimuth_elevation();
             serde_json::json!({"azimuth": azimuth, "elevation": elevation, "share": share})
         }).collect::<Vec<_>>(),
+        // The scene's Sun lamps, which stay as rendered however the page turns the map.
+        "sun_lamps": frame.header.sun_lamps.len(),
     });
     FrameBodies { meta: meta.to_string(), pixels, maps, cycles }
 }
