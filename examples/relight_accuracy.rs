@@ -3,7 +3,7 @@
 //!
 //! ```text
 //! cargo run --release --example relight_accuracy -- [--rotation DEG] [--repeats N] [--device cpu|gpu|auto]
-//!     [--relight-threads T] [--fresh-passes] SCENE...
+//!     [--relight-threads T] [--fresh-passes] [--keep-sun-lamps] SCENE...
 //! ```
 //!
 //! Per scene (its first frame): the transfer is rendered with `--sharp-lights off`,
@@ -22,7 +22,10 @@
 //! does in a sequence once its first frames are written; `--fresh-passes` allocates each
 //! relight's passes anew, as a first frame's are (the allocator may hand back the memory
 //! just freed). `--relight-threads T` relights on a pool of its own of `T` threads
-//! (rayon's global pool, one thread per core, by default).
+//! (rayon's global pool, one thread per core, by default). Where the light turns and the
+//! frame has Sun lamps, each relight shades them again turned, as `logsh relight` does
+//! by default (`--sun-lamps turn`), and its time counts that; `--keep-sun-lamps` leaves
+//! them as rendered (`--sun-lamps keep`).
 //!
 //! The shade runs where `--device` puts it (`cpu` by default; `logsh render`
 //! takes `auto`, a hardware GPU where there is one); the relight runs on the CPU, as `logsh
@@ -35,7 +38,7 @@ use logsh::executor::{DeviceChoice, Executor};
 use logsh::scene::output::SampleType;
 use logsh::scene::{EnvironmentMap, LightSource, Scene};
 use logsh::shade::ShadingSettings;
-use logsh::transfer::{relight_reusing, shade_with_transfer, RelightLight, RelightOptions, TransferFrame};
+use logsh::transfer::{relight_reusing, shade_with_transfer, RelightLight, RelightOptions, SunLampTurn, TransferFrame};
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -56,7 +59,7 @@ fn main() -> anyhow::Result<()> {
     let mut args = std::env::args().skip(1);
     let (mut rotation, mut repeats, mut scenes) = (0.0f64, 3usize, Vec::new());
     let mut device = DeviceChoice::Cpu;
-    let (mut relight_threads, mut fresh_passes) = (None, false);
+    let (mut relight_threads, mut fresh_passes, mut keep_sun_lamps) = (None, false, false);
     while let Some(a) = args.next() {
         match a.as_str() {
             "--rotation" => rotation = args.next().expect("--rotation DEG").parse()?,
@@ -67,6 +70,7 @@ fn main() -> anyhow::Result<()> {
             }
             "--relight-threads" => relight_threads = Some(args.next().expect("--relight-threads T").parse()?),
             "--fresh-passes" => fresh_passes = true,
+            "--keep-sun-lamps" => keep_sun_lamps = true,
             _ => scenes.push(PathBuf::from(a)),
         }
     }
@@ -92,7 +96,13 @@ fn main() -> anyhow::Result<()> {
         let (passes, transfer) = shade_with_transfer(&scene, &frame, &settings)?;
         let file = temp.path().join("transfer.exr");
         logsh::render::write_passes_with_transfer(&file, &passes, &transfer, SampleType::Half)?;
-        let transfer = TransferFrame::read(&file)?;
+        let mut transfer = TransferFrame::read(&file)?;
+        // The scene's Sun lamps turn with the map, shaded again per frame (`logsh relight
+        // --sun-lamps turn`): part of each relight's time, from the lamps as rendered.
+        let sun_lamps = (rotation != 0.0 && !transfer.header.sun_lamps.is_empty() && !keep_sun_lamps)
+            .then(|| SunLampTurn::new(&transfer.header, &file, rotation))
+            .transpose()?;
+        let rendered_lamps = (transfer.lamps_diffuse.clone(), transfer.lamps_specular.clone());
 
         let mut turned = Scene::load(dir)?;
         turned.turn_light(rotation)?;
@@ -129,7 +139,14 @@ fn main() -> anyhow::Result<()> {
             for timed in [false, true] {
                 let spare = if fresh_passes { None } else { relit.take() };
                 drop(relit.take());
+                if sun_lamps.is_some() {
+                    transfer.lamps_diffuse.clone_from(&rendered_lamps.0);
+                    transfer.lamps_specular.clone_from(&rendered_lamps.1);
+                }
                 let started = Instant::now();
+                if let Some(turn) = &sun_lamps {
+                    on_pool(pool.as_ref(), || turn.apply(&mut transfer, &file))?;
+                }
                 relit = Some(on_pool(pool.as_ref(), || relight_reusing(&transfer, &light, spare)));
                 match (round, timed) {
                     (0, false) => cold_relight = started.elapsed().as_secs_f64(),

@@ -322,9 +322,12 @@ pub struct RelightArgs {
     /// Relight with this environment map (EXR or HDR, oriented as a Blender World's Environment Texture) instead of the rendered light.
     #[arg(long)]
     pub light: Option<PathBuf>,
-    /// Turn the light by this many degrees about Z, on top of the rendered turn. The scene's Sun and point lamps stay as rendered.
+    /// Turn the light by this many degrees about Z, on top of the rendered turn: the map and, with --sun-lamps turn, the scene's Sun lamps, as `logsh render --light-rotation` turns them. Point lamps stay as rendered.
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     pub light_rotation: f64,
+    /// What --light-rotation does to the scene's Sun lamps: `turn` shades them again, turned, from the scene the frame was rendered from (as `logsh render --light-rotation` does; it costs about a Sun lamp's share of a render); `keep` leaves them and their shadows as rendered.
+    #[arg(long, value_enum, default_value_t = SunLamps::Turn)]
+    pub sun_lamps: SunLamps,
     /// Strength of the map [default: the rendered strength; 1 with --light]; scales a constant or SH light too.
     #[arg(long, allow_negative_numbers = true)]
     pub strength: Option<f32>,
@@ -334,6 +337,13 @@ pub struct RelightArgs {
     /// Storage of the colour passes and visibility terms (P and N are always float).
     #[arg(long, value_enum, default_value_t = SampleType::Half)]
     pub colour_type: SampleType,
+}
+
+/// `--sun-lamps`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum SunLamps {
+    Turn,
+    Keep,
 }
 
 #[derive(Args, Debug)]

@@ -390,9 +390,10 @@ pub fn info(args: &crate::cli::InfoArgs) -> Result<()> {
 
 /// `logsh relight`.
 pub fn relight(args: &crate::cli::RelightArgs) -> Result<()> {
+    use crate::cli::SunLamps;
     use crate::scene::ViewTransform;
     use crate::shade::ShadedPasses;
-    use crate::transfer::{relight_reusing, RelightLight, RelightOptions, TransferFrame};
+    use crate::transfer::{relight_reusing, RelightLight, RelightOptions, SunLampTurn, TransferFrame};
     if args.out.exists() && !args.out.is_dir() {
         return Err(anyhow!("--out {}: exists and is not a directory", args.out.display()));
     }
@@ -430,7 +431,8 @@ pub fn relight(args: &crate::cli::RelightArgs) -> Result<()> {
     let mut light: Option<RelightLight> = None;
     let mut warned = std::collections::HashSet::new();
     let mut warned_of_lamps = false;
-    let (mut building, mut relighting) = (0.0, 0.0);
+    let mut sun_lamps = None;
+    let (mut building, mut relighting, mut shading_lamps) = (0.0, 0.0, 0.0);
     // The next frame is read and the last one written while a frame is relit (one each:
     // at most two frames' transfer layers in memory). A frame that fails stops the
     // sequence once the frames before it are written; the first failure is reported.
@@ -466,7 +468,7 @@ pub fn relight(args: &crate::cli::RelightArgs) -> Result<()> {
         });
         let relit = || -> Result<()> {
             for (k, (file, frame)) in args.frames.iter().zip(read_rx).enumerate() {
-                let frame = frame?;
+                let mut frame = frame?;
                 let t = Instant::now();
                 let source = options.source(&frame.header);
                 if !light.as_ref().is_some_and(|l| l.serves(&source, &frame.header)) {
@@ -474,11 +476,26 @@ pub fn relight(args: &crate::cli::RelightArgs) -> Result<()> {
                     warn_of_suns_in_sh(&built, &mut warned);
                     light = Some(built);
                 }
-                if options.rotation != 0.0 && !frame.header.sun_lamps.is_empty() && !warned_of_lamps {
-                    warned_of_lamps = true;
-                    warn_of_sun_lamps(file, &frame.header.sun_lamps, options.rotation);
-                }
                 building += t.elapsed().as_secs_f64();
+                if options.rotation != 0.0 && !frame.header.sun_lamps.is_empty() {
+                    match args.sun_lamps {
+                        SunLamps::Keep if !warned_of_lamps => {
+                            warned_of_lamps = true;
+                            warn_of_sun_lamps(file, &frame.header.sun_lamps, options.rotation);
+                        }
+                        SunLamps::Keep => {}
+                        SunLamps::Turn => {
+                            let t = Instant::now();
+                            let key = (frame.header.scene.clone(), frame.header.light.clone(), frame.header.settings);
+                            if sun_lamps.as_ref().is_none_or(|(built, _)| *built != key) {
+                                sun_lamps = Some((key, SunLampTurn::new(&frame.header, file, options.rotation)?));
+                            }
+                            let (_, turn) = sun_lamps.as_ref().expect("built above");
+                            turn.apply(&mut frame, file)?;
+                            shading_lamps += t.elapsed().as_secs_f64();
+                        }
+                    }
+                }
                 let light = light.as_ref().expect("built above");
                 let t = Instant::now();
                 let passes = relight_reusing(&frame, light, spare_passes_rx.try_recv().ok());
@@ -504,13 +521,19 @@ pub fn relight(args: &crate::cli::RelightArgs) -> Result<()> {
         written.and(relit).map(|()| reading)
     })?;
     let (count, elapsed) = (args.frames.len(), started.elapsed().as_secs_f64());
+    let per_frame = |seconds: f64| 1e3 * seconds / count as f64;
+    let lamps = if sun_lamps.is_some() {
+        format!(", the Sun lamps turned {:.1} ms", per_frame(shading_lamps))
+    } else {
+        String::new()
+    };
     eprintln!(
         "relit {count} frame(s) in {elapsed:.3} s, {:.3} s a frame (reading, relighting and writing overlap: \
-         reading {:.1} ms, light {:.1} ms, relighting {:.1} ms per frame): {}",
+         reading {:.1} ms, light {:.1} ms, relighting {:.1} ms{lamps} per frame): {}",
         elapsed / count as f64,
-        1e3 * reading / count as f64,
-        1e3 * building / count as f64,
-        1e3 * relighting / count as f64,
+        per_frame(reading),
+        per_frame(building),
+        per_frame(relighting),
         args.out.display()
     );
     Ok(())
@@ -540,9 +563,9 @@ fn warn_of_suns_in_sh(
     }
 }
 
-/// Says that a relight turning the map by `degrees` keeps the Sun lamps `sun_lamps`
-/// (azimuth and elevation, as rendered in `file`) where `logsh render --light-rotation`
-/// would turn them; once per sequence.
+/// Says that a relight turning the map by `degrees` with `--sun-lamps keep` keeps the Sun
+/// lamps `sun_lamps` (azimuth and elevation, as rendered in `file`) where `logsh render
+/// --light-rotation` would turn them; once per sequence.
 fn warn_of_sun_lamps(file: &Path, sun_lamps: &[[f64; 2]], degrees: f64) {
     let lamps: Vec<String> = sun_lamps
         .iter()
@@ -550,9 +573,9 @@ fn warn_of_sun_lamps(file: &Path, sun_lamps: &[[f64; 2]], degrees: f64) {
         .collect();
     let (lamp, stays) = if lamps.len() > 1 { ("Sun lamps", "stay") } else { ("Sun lamp", "stays") };
     eprintln!(
-        "relight: {}: the scene's {lamp} ({}) {stays} as rendered, with {} shadows, in the lamps_* layers: a \
-         relight turns the map alone, where `logsh render --light-rotation {degrees}` turns Sun lamps with it \
-         and moves their shadows; for that, render the frames again",
+        "relight: {}: the scene's {lamp} ({}) {stays} as rendered, with {} shadows (--sun-lamps keep): the \
+         relight turns the map alone, where `logsh render --light-rotation {degrees}` and `logsh relight \
+         --sun-lamps turn` turn Sun lamps with it and move their shadows",
         file.display(),
         lamps.join("; "),
         if lamps.len() > 1 { "their" } else { "its" }

@@ -286,12 +286,15 @@ fn lamps_stay_as_rendered_while_the_environment_turns() {
     }
 }
 
-/// A Sun lamp is shaded sharp into the `lamps_*` layers, which a relight keeps: turning
-/// the map leaves it where it was rendered, where `logsh render --light-rotation` turns it
-/// with the map. The header records it as rendered (after the render's own turn), and a
-/// relight that turns the map says that it stays; one that does not turn says nothing.
+/// A Sun lamp is shaded sharp into the `lamps_*` layers. A relight that turns the map
+/// turns it too by default (`--sun-lamps turn`): it shades the lamp again from the scene,
+/// as rendered and turned, and equals `logsh render --light-rotation` within the target.
+/// With `--sun-lamps keep` the lamp stays as rendered, and the relight says so; unturned,
+/// it says nothing. The header records the lamp as rendered (after the render's own turn)
+/// and the render's settings; without its scene a turning relight is refused, the scene
+/// named, and `keep` still relights.
 #[test]
-fn a_sun_lamp_kept_while_the_map_turns_is_reported() {
+fn a_sun_lamp_turns_with_the_map_or_stays_as_rendered() {
     let dir = tempfile::tempdir().unwrap();
     let scene = dunes(dir.path());
     // Towards azimuth 30 deg, elevation 45 deg.
@@ -299,17 +302,21 @@ fn a_sun_lamp_kept_while_the_map_turns_is_reported() {
     let direction = [elevation.cos() * azimuth.cos(), elevation.cos() * azimuth.sin(), elevation.sin()];
     let lights = serde_json::json!([
         {"type": "sun", "direction": direction, "angle": 1.0, "strength": 3.0, "color": [1.0, 0.9, 0.8]},
+        {"type": "point", "position": [1.0, -2.0, 3.0], "radius": 0.3, "power": 2000.0, "color": [1.0, 0.8, 0.6], "soft_falloff": true},
     ]);
     support::sharp::load_with_lights(&scene, lights).unwrap();
     let transfer = dir.path().join("transfer");
     let common = ["--frames", "1", "--sharp-lights", "off", "--progress", "none", "--device", "cpu"];
-    run(&[&["render", path(&scene), "--out", path(&transfer), "--transfer", "--light-rotation", "20"], &common[..]]
-        .concat());
+    let render = ["render", path(&scene), "--out", path(&transfer), "--transfer", "--light-rotation", "20"];
+    run(&[&render[..], &common[..], &["--quality", "high"]].concat());
     let frame = transfer.join("render.0001.exr");
     let header = TransferFrame::read(&frame).unwrap().header;
     assert_eq!(header.sun_lamps.len(), 1, "{:?}", header.sun_lamps);
     let [a, e] = header.sun_lamps[0];
     assert!((a - 50.0).abs() < 1e-6 && (e - 45.0).abs() < 1e-6, "turned 20 deg with the map: {a}, {e}");
+    let high = logsh::shade::Quality::High.settings();
+    let recorded = header.settings.expect("the render's settings");
+    assert_eq!((recorded.order, recorded.horizon), (high.order, high.horizon), "--quality high recorded");
 
     let relight = |extra: &[&str], out: &str| {
         let out = dir.path().join(out);
@@ -317,18 +324,37 @@ fn a_sun_lamp_kept_while_the_map_turns_is_reported() {
         assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
         (out.join("render.0001.exr"), String::from_utf8_lossy(&output.stderr).into_owned())
     };
-    let (relit, said) = relight(&["--light-rotation", "60"], "turned");
+    let shaded = dir.path().join("shaded");
+    run(&[
+        &["render", path(&scene), "--out", path(&shaded), "--light-rotation", "80", "--quality", "high"],
+        &common[..],
+    ]
+    .concat());
+    let shaded = shaded.join("render.0001.exr");
+    let (turned, said) = relight(&["--light-rotation", "60"], "turned");
+    assert!(!said.contains("stays as rendered") && said.contains("the Sun lamps turned"), "{said}");
+    let worst = compare(&scene, 80.0, &turned, &shaded, "Sun lamp turned with the map");
+    assert!(worst <= RELIT_TOLERANCE, "relit with the Sun lamp turned differs from shaded by {worst}");
+
+    let (kept, said) = relight(&["--light-rotation", "60", "--sun-lamps", "keep"], "kept");
     assert!(said.contains("Sun lamp (azimuth 50.0 deg, elevation 45.0 deg) stays as rendered"), "{said}");
     assert!(said.contains("logsh render --light-rotation 60"), "{said}");
+    let worst = compare(&scene, 80.0, &kept, &shaded, "Sun lamp kept as rendered");
+    assert!(worst > 10.0 * RELIT_TOLERANCE, "the render's turned Sun lamp must differ: {worst}");
     let (_, quiet) = relight(&["--strength", "2"], "scaled");
     assert!(!quiet.contains("Sun lamp"), "{quiet}");
 
-    // What the message warns of: the render turns the lamp and moves its shadows, the
-    // relight does not.
-    let shaded = dir.path().join("shaded");
-    run(&[&["render", path(&scene), "--out", path(&shaded), "--light-rotation", "80"], &common[..]].concat());
-    let worst = compare(&scene, 80.0, &relit, &shaded.join("render.0001.exr"), "Sun lamp, map turned 60 more");
-    assert!(worst > 10.0 * RELIT_TOLERANCE, "the render's turned Sun lamp must differ: {worst}");
+    // The scene moved away (its map copied out first, to relight with): turning is
+    // refused with the scene named, keeping still relights.
+    let sky = dir.path().join("sky_copy.exr");
+    std::fs::copy(scene.join("sky.exr"), &sky).unwrap();
+    std::fs::rename(&scene, dir.path().join("moved")).unwrap();
+    let swapped = ["--light", path(&sky), "--light-rotation", "60"];
+    assert_fails_naming(
+        &[&["relight", path(&frame), "--out", path(&dir.path().join("gone"))], &swapped[..]].concat(),
+        &["render.0001.exr", path(&scene), "--sun-lamps keep"],
+    );
+    relight(&[&swapped[..], &["--sun-lamps", "keep"]].concat(), "kept without the scene");
 }
 
 #[test]

@@ -95,7 +95,8 @@ const DISTANCE_IN_SPACINGS: f64 = 1.0;
 const REACH_IN_DIAGONALS: f64 = 16.0;
 
 /// How a pyramid level is read between its samples.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
 pub enum LevelReconstruction {
     /// Bicubic uniform B-spline of the level's samples (SN08 Section 4 and Figure 9:
     /// smooth reconstruction is needed to avoid shadow artifacts). 16 taps.
@@ -105,7 +106,8 @@ pub enum LevelReconstruction {
 }
 
 /// How the horizon is taken over scale.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
 pub enum ScaleMax {
     /// Maximum of the cubic B-spline through the per-step angles (SN08 Eq. 4-5),
     /// sampled at knots and midpoints (SN08 Section 6).
@@ -117,7 +119,7 @@ pub enum ScaleMax {
 
 /// Knobs of the horizon search. Defaults are chosen by measurement: see the table
 /// on [`HorizonSettings::default`].
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct HorizonSettings {
     /// W: number of azimuths `phi_k = 2 pi k / W` (paper 000 Section 4.1; SN08 uses
     /// 16-32 for environment light). 1..=1024.

@@ -29,7 +29,8 @@ pub const Y0: f64 = 0.28209479177387814; // 1 / (2 sqrt(pi))
 pub const ONE_DC: f64 = 3.5449077018110318; // 2 sqrt(pi)
 
 /// How `exp*` is computed per pixel (`--exp`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, clap::ValueEnum, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
 pub enum ExpMethod {
     /// Quadrature on a coarse (2n+2)-node grid: within 1e-5 of exact.
     Quad,

@@ -126,9 +126,15 @@ pub fn surface_at(buffer: &GBuffer, i: usize, view_origin: Option<[f64; 3]>, fra
 /// The Sun lamps' radiance along `mirror`: each disk's radiance where the direction falls
 /// inside it.
 pub fn mirrored_suns(frame: &Frame, mirror: [f64; 3]) -> [f32; 3] {
+    suns_along(&frame.suns, mirror)
+}
+
+/// The radiance of those of `suns` whose disk holds the direction `mirror` (what
+/// [`mirrored_suns`] reads for a frame's Sun lamps).
+pub fn suns_along(suns: &[crate::scene::SunLight], mirror: [f64; 3]) -> [f32; 3] {
     let mut out = [0.0f32; 3];
     let dir = crate::scene::camera::normalize(mirror);
-    for sun in &frame.suns {
+    for sun in suns {
         if crate::scene::camera::dot(dir, sun.direction) >= sun.half_angle.cos() {
             let radiance = sun.strength / (std::f64::consts::PI * sun.half_angle.sin().powi(2)) as f32;
             for (o, c) in out.iter_mut().zip(sun.color) {

@@ -11,8 +11,8 @@ pub const MAX_DIRECTIONS: usize = 64;
 /// terms and their exponentials within f32's range.
 pub const MIN_EPSILON: f64 = 1e-6;
 
-/// The knobs of one shading run.
-#[derive(Clone, Copy, Debug, PartialEq)]
+/// The knobs of one shading run (recorded in a transfer frame's header).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct ShadingSettings {
     /// SH order n: n^2 coefficients per log vector.
     pub order: usize,
@@ -65,7 +65,8 @@ pub struct ShadingSettings {
 /// How the glossy lobe of a `phong` material is shaded (`--glossy`). The first two read
 /// a prefiltered environment scaled by a log-SH specular occlusion ([`super::glossy`]);
 /// a light given as SH coefficients has no map to prefilter and is always shaded `sh`.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, clap::ValueEnum, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
 pub enum GlossyMethod {
     /// The GGX lobe of the material's width, with GGX's directional albedo: the Glossy
     /// BSDF that `render_cycles.py` renders.
@@ -81,7 +82,8 @@ pub enum GlossyMethod {
 /// scaled by `w_l` (Sloan 2008, "Stupid Spherical Harmonics (SH) Tricks", Section 5): a
 /// truncated projection rings around a bright region, and the window trades that ringing
 /// for blur.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, clap::ValueEnum, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
 pub enum LightWindow {
     /// The projection as it is.
     None,
@@ -115,7 +117,8 @@ impl LightWindow {
 }
 
 /// Precision of the per-pixel kernel (`--precision`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, clap::ValueEnum, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
 pub enum Precision {
     /// Single precision, as the GPU pass runs.
     F32,

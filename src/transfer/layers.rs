@@ -76,10 +76,16 @@ pub struct TransferHeader {
     pub lobes: Vec<PrefilteredLobe>,
     /// The scene's Sun lamps as rendered (after `render --light-rotation`, which turns
     /// them with the map), azimuth and elevation in degrees. Their light and sharp
-    /// shadows are in the `lamps_*` layers, which a relight keeps as they are: it turns
-    /// the map alone. Empty in files written before this was recorded.
+    /// shadows are in the `lamps_*` layers; a relight that turns the map turns them too,
+    /// checked against this record ([`super::SunLampTurn`]). Empty in files written
+    /// before this was recorded.
     #[serde(default)]
     pub sun_lamps: Vec<[f64; 2]>,
+    /// The render's shading settings, with which a relight that turns the map shades the
+    /// Sun lamps again ([`super::SunLampTurn`]). `None` in files written before they were
+    /// recorded.
+    #[serde(default)]
+    pub settings: Option<crate::shade::ShadingSettings>,
     /// The scene's colour management for previews, its LUT file absolute
     /// ([`crate::scene::view`]).
     pub view: Option<crate::scene::ViewSpec>,

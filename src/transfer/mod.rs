@@ -43,8 +43,8 @@
 //!
 //! The SH convention (order, basis, normalisation, axes, coefficient index), the light the
 //! frame was shaded with (map file, strength, Mapping rotation, turn), the window, whether
-//! the ground plane hides the lower hemisphere, the prefiltered lobes, and the scene's
-//! Sun lamps as rendered (azimuth and elevation).
+//! the ground plane hides the lower hemisphere, the prefiltered lobes, the scene's Sun
+//! lamps as rendered (azimuth and elevation) and the render's shading settings.
 //!
 //! # Size
 //!
@@ -60,20 +60,22 @@
 //! `--sharp-lights off`. Suns that a render took out of the map (`--sharp-lights auto`)
 //! come back as part of the SH light, with the soft shadows SH gives them; the scene's
 //! own Sun and point lamps stay as they were rendered (`lamps_*`), as `--light-rotation`
-//! leaves point lamps. A render's `--light-rotation` turns Sun lamps with the map, a
-//! relight's cannot (it would shade their sharp shadows again), so `logsh relight` says
-//! when it turns the map of a frame with Sun lamps: on a scene with a 2 deg Sun lamp, a
-//! relight turned 75 deg is 0.050 from the turned render (README).
+//! leaves point lamps. A render's `--light-rotation` turns Sun lamps with the map; a
+//! relight does too by shading them again from the scene ([`SunLampTurn`], about two Sun
+//! lamps' shares of a render), or keeps them as rendered (`--sun-lamps keep`: on a scene
+//! with a 2 deg Sun lamp, 0.050 from the turned render, README).
 
 mod layers;
 mod relight;
 mod shade;
+mod sun_lamps;
 
 pub use layers::{PixelTransfer, PrefilteredLobe, ShConvention, TransferFrame, TransferHeader, TRANSFER_ATTRIBUTE};
 #[cfg(test)]
 pub(crate) use relight::relit_dunes;
 pub use relight::{relight, relight_reusing, RelightLight, RelightOptions, SampledMap, SAMPLED_MAP_WIDTH};
 pub use shade::shade_with_transfer;
+pub use sun_lamps::SunLampTurn;
 
 /// `glossy_lobe` codes (module doc).
 pub mod lobe_code {

@@ -316,7 +316,8 @@ fn frame_bodies(
             let [azimuth, elevation] = sun.azimuth_elevation();
             serde_json::json!({"azimuth": azimuth, "elevation": elevation, "share": share})
         }).collect::<Vec<_>>(),
-        // The scene's Sun lamps, which stay as rendered however the page turns the map.
+        // The scene's Sun lamps, which the page keeps as rendered however it turns the map
+        // (`logsh relight` turns them).
         "sun_lamps": frame.header.sun_lamps.len(),
     });
     FrameBodies { meta: meta.to_string(), pixels, maps, cycles }

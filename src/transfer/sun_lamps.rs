@@ -1,0 +1,167 @@
+//! The scene's Sun lamps turned with the map in a relight (`logsh relight --sun-lamps
+//! turn`, the default), as `logsh render --light-rotation` turns them.
+//!
+//! A Sun lamp is shaded sharp at render time, its shadows included, into the `lamps_*`
+//! layers with the point lamps: no transfer vector holds it. So a relight that turns the
+//! map shades the frame's Sun lamps again from the scene the frame was rendered from (its
+//! G-buffer, blockers and height field, the settings the header records), twice with the
+//! render's own kernel: as rendered and turned. The layers then hold
+//!
+//! ```text
+//! lamps = lamps as rendered - Sun lamps as rendered + Sun lamps turned
+//! ```
+//!
+//! which is the render's `lamps_*` under the turned light but for the half floats of the
+//! file (the Sun lamps cancel to its rounding, 2^-11 of the lamp's light). Water that
+//! mirrors a Sun lamp is read along its mirror direction, as the render reads it.
+
+use super::layers::{TransferFrame, TransferHeader};
+use crate::scene::light::{euler_xyz, rotate};
+use crate::scene::{LightSource, Scene, SceneError, SunLight};
+use crate::sh::Real;
+use crate::shade::frame::suns_along;
+use crate::shade::{pixel_source, FramePlan, Occluders, PixelSource, PlannedKernel, ShadingKernel, ShadingSettings};
+use rayon::prelude::*;
+use std::path::Path;
+
+/// How far a scene's Sun lamp may be from the header's record of it, in degrees of
+/// azimuth or elevation, and still be the lamp the frame was rendered with.
+const SAME_LAMP_DEGREES: f64 = 1e-6;
+
+/// The scene a frame was rendered from, with its light turned as it was for the render,
+/// and the further turn of a relight: what shades the frame's Sun lamps again.
+pub struct SunLampTurn {
+    scene: Scene,
+    settings: ShadingSettings,
+    /// The relight's turn about Z, on top of the render's.
+    turn: [[f64; 3]; 3],
+}
+
+impl SunLampTurn {
+    /// Loads the scene that `header` (of `file`) was rendered from, for a relight turning
+    /// the map by `degrees` more. Fails, naming `file`, where the header does not record
+    /// the render's settings or the scene cannot be read.
+    pub fn new(header: &TransferHeader, file: &Path, degrees: f64) -> Result<Self, SceneError> {
+        let keep = "relight with --sun-lamps keep to leave the Sun lamps as rendered";
+        let Some(settings) = header.settings else {
+            return Err(SceneError::invalid(
+                file,
+                format!("its header does not record the render's settings, which turning its Sun lamps needs: render it again with this logsh, or {keep}"),
+            ));
+        };
+        let mut scene = Scene::load(&header.scene).map_err(|e| {
+            SceneError::invalid(
+                file,
+                format!("its Sun lamps turn with the map and are shaded again from the scene it was rendered from, which cannot be read: {e}; {keep}"),
+            )
+        })?;
+        if let LightSource::Environment { turn, .. } = header.light {
+            scene.turn_light(turn)?;
+        }
+        let settings = ShadingSettings { sharp_lights: false, ..settings };
+        Ok(Self { scene, settings, turn: euler_xyz([0.0, 0.0, degrees.to_radians()]) })
+    }
+
+    /// Shades the Sun lamps of `frame` (read from `file`) again, as rendered and turned,
+    /// and moves its `lamps_*` layers from the one to the other.
+    pub fn apply(&self, frame: &mut TransferFrame, file: &Path) -> Result<(), SceneError> {
+        let mut scene_frame = self.scene.frame(frame.header.frame)?;
+        let g = &scene_frame.gbuffer;
+        if (g.width, g.height) != (frame.width, frame.height) {
+            return Err(SceneError::invalid(
+                file,
+                format!(
+                    "it is {}x{} but frame {} of its scene {} is {}x{} now: the scene changed since the render",
+                    frame.width,
+                    frame.height,
+                    frame.header.frame,
+                    self.scene.dir.display(),
+                    g.width,
+                    g.height
+                ),
+            ));
+        }
+        let rendered: Vec<[f64; 2]> = scene_frame.suns.iter().map(SunLight::azimuth_elevation).collect();
+        let same = rendered.len() == frame.header.sun_lamps.len()
+            && rendered
+                .iter()
+                .zip(&frame.header.sun_lamps)
+                .all(|(a, b)| (a[0] - b[0]).abs() <= SAME_LAMP_DEGREES && (a[1] - b[1]).abs() <= SAME_LAMP_DEGREES);
+        if !same {
+            return Err(SceneError::invalid(
+                file,
+                format!(
+                    "its scene {} has other Sun lamps ({}) than it was rendered with ({}); relight with --sun-lamps keep",
+                    self.scene.dir.display(),
+                    described(&rendered),
+                    described(&frame.header.sun_lamps)
+                ),
+            ));
+        }
+        // One kernel for both: the lamps as rendered, then turned; no point lamp.
+        let rendered_suns = scene_frame.suns.clone();
+        let turned = rendered_suns.iter().map(|sun| SunLight { direction: rotate(&self.turn, sun.direction), ..*sun });
+        scene_frame.suns.extend(turned.collect::<Vec<_>>());
+        scene_frame.points.clear();
+        let plan = FramePlan::new(&self.scene, &scene_frame, &self.settings)
+            .map_err(|e| SceneError::invalid(file, format!("its Sun lamps cannot be shaded again: {e}")))?;
+        let count = rendered_suns.len();
+        let turned_suns = &scene_frame.suns[count..];
+        match plan.kernel.as_ref() {
+            PlannedKernel::F32(kernel) => move_lamps(kernel, &plan, frame, &rendered_suns, turned_suns),
+            PlannedKernel::F64(kernel) => move_lamps(kernel, &plan, frame, &rendered_suns, turned_suns),
+        }
+        Ok(())
+    }
+}
+
+/// Sun lamps by azimuth and elevation, for a message.
+fn described(lamps: &[[f64; 2]]) -> String {
+    if lamps.is_empty() {
+        return "none".into();
+    }
+    let each =
+        lamps.iter().map(|[azimuth, elevation]| format!("azimuth {azimuth:.1} deg, elevation {elevation:.1} deg"));
+    each.collect::<Vec<_>>().join("; ")
+}
+
+/// `lamps += turned - rendered` per pixel of `frame`, the Sun lamps `rendered` and
+/// `turned` being the first and second halves of `kernel`'s suns.
+fn move_lamps<T: Real>(
+    kernel: &ShadingKernel<T>,
+    plan: &FramePlan,
+    frame: &mut TransferFrame,
+    rendered: &[SunLight],
+    turned: &[SunLight],
+) {
+    let count = rendered.len();
+    let pyramid = plan.terrain.as_ref().map(|terrain| terrain.horizon_pyramid(&plan.settings));
+    let blockers = (!plan.blockers.is_empty()).then_some(&plan.blockers);
+    let occluders = Occluders { blockers, horizons: pyramid.as_ref() };
+    let width = frame.width;
+    let moved = |lamps: &mut [f32; 3], tint: [f32; 3], before: [f32; 3], after: [f32; 3]| {
+        for k in 0..3 {
+            lamps[k] = (lamps[k] + (tint[k] * after[k] - tint[k] * before[k])).max(0.0);
+        }
+    };
+    frame.lamps_diffuse.par_chunks_mut(width).zip(frame.lamps_specular.par_chunks_mut(width)).enumerate().for_each(
+        |(y, (diffuse, specular))| {
+            for x in 0..width {
+                match pixel_source(&plan.scene.materials, plan.frame, x, y) {
+                    PixelSource::Surface { point, tint } => {
+                        let before = kernel.sun_lamps_lit(occluders, &point, 0..count);
+                        let after = kernel.sun_lamps_lit(occluders, &point, count..2 * count);
+                        if let (Some((d0, s0)), Some((d1, s1))) = (before, after) {
+                            moved(&mut diffuse[x], tint, d0, d1);
+                            moved(&mut specular[x], tint, s0, s1);
+                        }
+                    }
+                    PixelSource::WaterSky { tint, mirror } => {
+                        moved(&mut specular[x], tint, suns_along(rendered, mirror), suns_along(turned, mirror));
+                    }
+                    PixelSource::Background { .. } | PixelSource::WaterLamp { .. } => {}
+                }
+            }
+        },
+    );
+}
