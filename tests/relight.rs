@@ -468,6 +468,7 @@ fn bad_relight_inputs_are_refused_with_the_file_named() {
         ("/light", environment(-1.0), "strength"),
         ("/blockers", serde_json::json!(false), "sh_heightfield and sh_blockers"),
         ("/sun_lamps", serde_json::json!(vec![[30.0, 45.0]; 17]), "its Sun lamps: give at most 16"),
+        ("/sun_lamps", serde_json::json!([[30.0, 45.0]]), "lacks them where it does"),
     ];
     for (pointer, value, needle) in edits {
         let mut edited = header.clone();
@@ -550,6 +551,13 @@ fn assert_same_frame(a: &TransferFrame, b: &TransferFrame, what: &str) {
     ] {
         assert_eq!(bits(x.as_flattened()), bits(y.as_flattened()), "{what}: {name}");
     }
+    for (name, x, y) in [
+        ("sun_lamps_diffuse", &a.sun_lamps_diffuse, &b.sun_lamps_diffuse),
+        ("sun_lamps_specular", &a.sun_lamps_specular, &b.sun_lamps_specular),
+    ] {
+        let colours = |v: &Option<Vec<[f32; 3]>>| v.as_deref().map(|v| bits(v.as_flattened()));
+        assert_eq!(colours(x), colours(y), "{what}: {name}");
+    }
     assert_eq!(bits(a.position.as_flattened()), bits(b.position.as_flattened()), "{what}: P");
     assert_eq!(bits(a.normal.as_flattened()), bits(b.normal.as_flattened()), "{what}: N");
     assert_eq!(bits(&a.glossy_lobe), bits(&b.glossy_lobe), "{what}: glossy_lobe");
@@ -584,6 +592,12 @@ fn poisoned(mut frame: TransferFrame, scale: f64) -> TransferFrame {
         poison(layer, scale, [nan; 3]);
     }
     poison(&mut frame.glossy_weight, scale, [nan; 2]);
+    for layer in [&mut frame.sun_lamps_diffuse, &mut frame.sun_lamps_specular] {
+        match layer.as_mut() {
+            Some(values) if scale > 0.0 => poison(values, scale, [nan; 3]),
+            _ => *layer = None,
+        }
+    }
     frame.position = vec![[nan; 3]; frame.position.len()].into();
     frame
 }
@@ -594,17 +608,22 @@ fn poisoned(mut frame: TransferFrame, scale: f64) -> TransferFrame {
 /// through the crate's decoder. All read the same, afresh or into the memory of the frame
 /// read before (as `logsh relight` reads a sequence), whatever that held: NaN, fewer or
 /// more pixels, layers missing; passes that still share that frame's `P` keep it. A
-/// damaged block is an error naming the file.
+/// damaged block is an error naming the file. The scene has a Sun lamp, so every layer
+/// is in the frame.
 #[test]
 fn a_transfer_frame_reads_the_same_in_any_exr_layout() {
     use exr::prelude::{Blocks, Compression, ReadChannels, ReadLayers, WritableImage};
     let dir = tempfile::tempdir().unwrap();
     let scene = dunes(dir.path());
+    let sun = serde_json::json!([{"type": "sun", "direction": [0.5, 0.5, 0.7], "angle": 2.0, "strength": 2.0}]);
+    support::sharp::load_with_lights(&scene, sun).unwrap();
     let transfer = dir.path().join("transfer");
     let args = ["--frames", "1", "--order", "3", "--progress", "none"];
     run(&[&["render", path(&scene), "--out", path(&transfer), "--transfer"], &args[..]].concat());
     let file = transfer.join("render.0001.exr");
     let written = TransferFrame::read(&file).unwrap();
+    let lit = written.sun_lamps_diffuse.as_ref().expect("the Sun lamp's layer").iter().filter(|c| c[0] > 0.01);
+    assert!(lit.count() > 100, "the Sun lamp lights the frame");
     let image = exr::prelude::read()
         .no_deep_data()
         .largest_resolution_level()

@@ -897,11 +897,12 @@ impl<T: Real> ShadingKernel<T> {
         point: &SurfacePoint,
         material: &Material,
     ) -> ([f32; 3], [f32; 3]) {
-        self.sharp_lit(occluders, point, material, &self.suns, true)
+        self.sharp_lit(occluders, point, material, &self.suns, true).0
     }
 
     /// [`sunlit`](Self::sunlit) with `suns` (some of the kernel's), and with every point
-    /// lamp where `lamps`.
+    /// lamp where `lamps`; and the share of `suns` alone in it (the sums before the point
+    /// lamps are added: the same bits as without lamps).
     pub(crate) fn sharp_lit(
         &self,
         occluders: Occluders,
@@ -909,13 +910,16 @@ impl<T: Real> ShadingKernel<T> {
         material: &Material,
         suns: &[SunDisk],
         lamps: bool,
-    ) -> ([f32; 3], [f32; 3]) {
+    ) -> (SharpLit, SharpLit) {
         let (mut diffuse, mut glossy) = ([0.0f64; 3], [0.0f64; 3]);
+        let dark = ([0.0; 3], [0.0; 3]);
         let (albedo, phong) = match material {
             Material::Diffuse { albedo } | Material::Heightfield { albedo } => (*albedo, None),
             Material::Phong { albedo, specular, exponent } => (*albedo, Some((*specular, *exponent))),
-            Material::Water { .. } => return ([0.0; 3], [0.0; 3]),
+            Material::Water { .. } => return (dark, dark),
         };
+        let as_f32 = |d: [f64; 3], g: [f64; 3]| (d.map(|c| c as f32), g.map(|c| c as f32));
+        let mut suns_alone = None;
         let n = point.normal;
         // The glossy lobe as the environment's glossy term has it: the prefiltered one's
         // shape and albedo, or Eq. 27's Phong lobe with `--glossy sh`.
@@ -923,7 +927,10 @@ impl<T: Real> ShadingKernel<T> {
         let axis = reflect_view(point.view_origin, point.position, n);
         let sharp_albedo = sharp.map(|sharp| albedo_lookup(&sharp.albedo, dot(axis, n)));
         let lamps = self.points.iter().filter(|_| lamps).map(|lamp| SunDisk::of_lamp(lamp, point.position, n));
-        for sun in suns.iter().map(Cow::Borrowed).chain(lamps.map(Cow::Owned)) {
+        for (k, sun) in suns.iter().map(Cow::Borrowed).chain(lamps.map(Cow::Owned)).enumerate() {
+            if k == suns.len() {
+                suns_alone = Some(as_f32(diffuse, glossy));
+            }
             let v =
                 sun.visibility(occluders.blockers, occluders.horizons, self.ground, point.position, n, point.object);
             let d = sun.reflected(&v, |z| Lobe::Diffuse.value(z), n);
@@ -947,9 +954,13 @@ impl<T: Real> ShadingKernel<T> {
                 }
             }
         }
-        (diffuse.map(|c| c as f32), glossy.map(|c| c as f32))
+        let all = as_f32(diffuse, glossy);
+        (all, suns_alone.unwrap_or(all))
     }
 }
+
+/// Sharp lights' diffuse and specular radiance at a point ([`ShadingKernel::sharp_lit`]).
+type SharpLit = ([f32; 3], [f32; 3]);
 
 /// `exp*(lobe)` about +Z as ZH coefficients, exponentiated as the pixels' log vectors
 /// are: a zonal function stays zonal, its coefficients the `m = 0` ones.

@@ -166,6 +166,10 @@ pub struct TransferFrame {
     pub specular_colour: Vec<[f32; 3]>,
     pub lamps_diffuse: Vec<[f32; 3]>,
     pub lamps_specular: Vec<[f32; 3]>,
+    /// The Sun lamps' part of `lamps_*`, where the header lists Sun lamps: what a relight
+    /// that turns them takes out ([`super::SunLampTurn`]).
+    pub sun_lamps_diffuse: Option<Vec<[f32; 3]>>,
+    pub sun_lamps_specular: Option<Vec<[f32; 3]>>,
     pub glossy_lobe: Vec<f32>,
     pub glossy_direction: Vec<[f32; 3]>,
     pub glossy_weight: Vec<[f32; 2]>,
@@ -203,6 +207,8 @@ pub struct TransferRow<'a> {
     specular_colour: &'a mut [[f32; 3]],
     lamps_diffuse: &'a mut [[f32; 3]],
     lamps_specular: &'a mut [[f32; 3]],
+    sun_lamps_diffuse: Option<&'a mut [[f32; 3]]>,
+    sun_lamps_specular: Option<&'a mut [[f32; 3]]>,
     glossy_lobe: &'a mut [f32],
     glossy_direction: &'a mut [[f32; 3]],
     glossy_weight: &'a mut [[f32; 2]],
@@ -216,16 +222,18 @@ impl TransferRow<'_> {
         let dark = PointTransfer::DARK;
         let tinted = |tint: [f32; 3], c: [f32; 3]| [0, 1, 2].map(|k| tint[k] * c[k]);
         let to_f32 = |d: [f64; 3]| d.map(|c| c as f32);
-        let (point, tint, alpha, lobe, direction, lamps_specular, colour) = match pixel {
+        // The Sun lamps' part of the specular lamps: all of a water mirror's.
+        let (point, tint, alpha, lobe, direction, lamps_specular, sun_lamps_specular, colour) = match pixel {
             PixelTransfer::Background { ray } => {
                 let lobe = if ray.is_some() { lobe_code::MIRROR } else { lobe_code::NONE };
-                (&dark, [1.0; 3], 0.0, lobe, ray.map_or([0.0; 3], to_f32), [0.0; 3], [1.0; 3])
+                (&dark, [1.0; 3], 0.0, lobe, ray.map_or([0.0; 3], to_f32), [0.0; 3], [0.0; 3], [1.0; 3])
             }
             PixelTransfer::Mirror { tint, mirror, suns } => {
-                (&dark, tint, 1.0, lobe_code::MIRROR, to_f32(mirror), tinted(tint, suns), tint)
+                let suns = tinted(tint, suns);
+                (&dark, tint, 1.0, lobe_code::MIRROR, to_f32(mirror), suns, suns, tint)
             }
             PixelTransfer::Lamp { tint, radiance } => {
-                (&dark, tint, 1.0, lobe_code::NONE, [0.0; 3], tinted(tint, radiance), [0.0; 3])
+                (&dark, tint, 1.0, lobe_code::NONE, [0.0; 3], tinted(tint, radiance), [0.0; 3], [0.0; 3])
             }
             PixelTransfer::Surface { point, tint } => {
                 let (lobe, direction) = match point.glossy {
@@ -242,6 +250,7 @@ impl TransferRow<'_> {
                     lobe,
                     direction,
                     tinted(tint, point.lamps_specular),
+                    tinted(tint, point.sun_lamps_specular),
                     tinted(tint, point.specular_colour),
                 )
             }
@@ -262,6 +271,12 @@ impl TransferRow<'_> {
         self.specular_colour[x] = colour;
         self.lamps_diffuse[x] = tinted(tint, point.lamps_diffuse);
         self.lamps_specular[x] = lamps_specular;
+        if let Some(layer) = &mut self.sun_lamps_diffuse {
+            layer[x] = tinted(tint, point.sun_lamps_diffuse);
+        }
+        if let Some(layer) = &mut self.sun_lamps_specular {
+            layer[x] = sun_lamps_specular;
+        }
         self.glossy_lobe[x] = lobe;
         self.glossy_direction[x] = direction;
         self.glossy_weight[x] = match point.glossy {
@@ -285,6 +300,7 @@ impl TransferFrame {
         let n = width * height;
         let coefficients = n * coefficient_count(header.sh.order);
         let layer = |present: bool| present.then(|| vec![0.0; coefficients]);
+        let sun_lamps = !header.sun_lamps.is_empty();
         Self {
             width,
             height,
@@ -298,6 +314,8 @@ impl TransferFrame {
             specular_colour: vec![[0.0; 3]; n],
             lamps_diffuse: vec![[0.0; 3]; n],
             lamps_specular: vec![[0.0; 3]; n],
+            sun_lamps_diffuse: sun_lamps.then(|| vec![[0.0; 3]; n]),
+            sun_lamps_specular: sun_lamps.then(|| vec![[0.0; 3]; n]),
             glossy_lobe: vec![0.0; n],
             glossy_direction: vec![[0.0; 3]; n],
             glossy_weight: vec![[0.0; 2]; n],
@@ -332,6 +350,8 @@ impl TransferFrame {
         let mut specular_colour = self.specular_colour.chunks_mut(width);
         let mut lamps_diffuse = self.lamps_diffuse.chunks_mut(width);
         let mut lamps_specular = self.lamps_specular.chunks_mut(width);
+        let mut sun_lamps_diffuse = self.sun_lamps_diffuse.as_deref_mut().map(|layer| layer.chunks_mut(width));
+        let mut sun_lamps_specular = self.sun_lamps_specular.as_deref_mut().map(|layer| layer.chunks_mut(width));
         let mut glossy_lobe = self.glossy_lobe.chunks_mut(width);
         let mut glossy_direction = self.glossy_direction.chunks_mut(width);
         let mut glossy_weight = self.glossy_weight.chunks_mut(width);
@@ -349,6 +369,8 @@ impl TransferFrame {
                 specular_colour: specular_colour.next().expect(row),
                 lamps_diffuse: lamps_diffuse.next().expect(row),
                 lamps_specular: lamps_specular.next().expect(row),
+                sun_lamps_diffuse: sun_lamps_diffuse.as_mut().map(|rows| rows.next().expect(row)),
+                sun_lamps_specular: sun_lamps_specular.as_mut().map(|rows| rows.next().expect(row)),
                 glossy_lobe: glossy_lobe.next().expect(row),
                 glossy_direction: glossy_direction.next().expect(row),
                 glossy_weight: glossy_weight.next().expect(row),
@@ -392,6 +414,13 @@ impl TransferFrame {
             ("glossy_weight", &["X", "Y"], self.glossy_weight.as_flattened(), colour),
         ] {
             channels.extend(OutputChannel::layer(layer, names, values, kind));
+        }
+        for (layer, values) in
+            [("sun_lamps_diffuse", &self.sun_lamps_diffuse), ("sun_lamps_specular", &self.sun_lamps_specular)]
+        {
+            if let Some(values) = values {
+                channels.extend(OutputChannel::layer(layer, &rgb, values.as_flattened(), colour));
+            }
         }
         channels
     }
@@ -468,6 +497,14 @@ impl TransferFrame {
                  blockers, or lacks them where it does",
             ));
         }
+        let has_sun_lamps = channels.has("sun_lamps_diffuse.R");
+        if has_sun_lamps == header.sun_lamps.is_empty() {
+            return Err(SceneError::invalid(
+                file,
+                "holds sun_lamps_diffuse and sun_lamps_specular where its header lists no Sun lamp, or lacks them \
+                 where it does",
+            ));
+        }
         // Every value is written by `fill` below, so a spare's old values are left in place.
         let mut spare = spare.unwrap_or_else(|| TransferFrame::new(0, 0, header.clone(), false, false));
         let sh_layer = |layer: &mut Option<Vec<f32>>, present: bool| {
@@ -482,6 +519,9 @@ impl TransferFrame {
         let mut specular_colour = sized(spare.specular_colour, n);
         let mut lamps_diffuse = sized(spare.lamps_diffuse, n);
         let mut lamps_specular = sized(spare.lamps_specular, n);
+        let colour_layer = |layer: Option<Vec<[f32; 3]>>| has_sun_lamps.then(|| sized(layer.unwrap_or_default(), n));
+        let mut sun_lamps_diffuse = colour_layer(spare.sun_lamps_diffuse);
+        let mut sun_lamps_specular = colour_layer(spare.sun_lamps_specular);
         let mut glossy_direction = sized(spare.glossy_direction, n);
         let mut position = unshared(spare.position, n);
         let mut normal = unshared(spare.normal, n);
@@ -525,6 +565,13 @@ impl TransferFrame {
                 targets.push(Target { values, stride: count, channels: sh_names(name) });
             }
         }
+        for (layer, name) in
+            [(&mut sun_lamps_diffuse, "sun_lamps_diffuse."), (&mut sun_lamps_specular, "sun_lamps_specular.")]
+        {
+            if let Some(values) = layer {
+                targets.push(Target { values: values.as_flattened_mut(), stride: 3, channels: named(name, &rgb) });
+            }
+        }
         channels.fill(file, WHAT, &mut targets)?;
         drop(targets);
         let lobes = header.lobes.len();
@@ -555,6 +602,9 @@ impl TransferFrame {
             && [&albedo, &specular_colour, &lamps_diffuse, &lamps_specular, &glossy_direction]
                 .iter()
                 .all(|l| finite(l.as_flattened()))
+            && [&sun_lamps_diffuse, &sun_lamps_specular]
+                .iter()
+                .all(|l| l.as_ref().is_none_or(|v| finite(v.as_flattened())))
             && finite(glossy_weight.as_flattened())
             && finite(&alpha);
         if !all_finite {
@@ -573,6 +623,8 @@ impl TransferFrame {
             specular_colour,
             lamps_diffuse,
             lamps_specular,
+            sun_lamps_diffuse,
+            sun_lamps_specular,
             glossy_lobe,
             glossy_direction,
             glossy_weight,

@@ -17,7 +17,8 @@
 //! | `sh_heightfield_<k>.*`, `sh_blockers_<k>.*` | colour | their numerators; only in frames with both |
 //! | `sh_specular_<k>.*` | colour | the glossy transfer (below); only in scenes with a Phong material |
 //! | `albedo.{R,G,B}`, `specular_colour.{R,G,B}` | colour | the material's colours, times water's tint |
-//! | `lamps_diffuse.{R,G,B}`, `lamps_specular.{R,G,B}` | colour | the scene's Sun and point lamps, shaded (kept by a relight) |
+//! | `lamps_diffuse.{R,G,B}`, `lamps_specular.{R,G,B}` | colour | the scene's Sun and point lamps, shaded (kept by a relight, but for the Sun lamps when it turns them) |
+//! | `sun_lamps_diffuse.{R,G,B}`, `sun_lamps_specular.{R,G,B}` | colour | the Sun lamps' part of `lamps_*`; only in frames with a Sun lamp |
 //! | `glossy_lobe.V` | float | what the glossy term reads: 0 nothing, 1 the light itself (mirror, background), 2 `sh_specular`, `3 + j` the header's prefiltered lobe `j` |
 //! | `glossy_direction.{X,Y,Z}` | float | the direction it reads along: the mirrored view, or the camera ray |
 //! | `glossy_weight.{X,Y}` | colour | prefiltered lobes: `A share cone` and `A (1 - share)` |
@@ -50,9 +51,10 @@
 //!
 //! Per pixel at order `n`, in half floats: `n^2` per transfer layer (diffuse, unoccluded,
 //! specular with a Phong material, heightfield and blockers with both occluders), 14
-//! colour values and 4 floats. At order 4 with everything, `5 x 16 x 2 + 14 x 2 + 4 x 4 =
-//! 204` bytes, 106 MB uncompressed at 960 x 540 before ZIP; a diffuse scene of spheres
-//! only, `2 x 16 x 2 + 44 = 108` bytes.
+//! colour values and 4 floats, and 6 colour values more with a Sun lamp. At order 4 with
+//! everything but a Sun lamp, `5 x 16 x 2 + 14 x 2 + 4 x 4 = 204` bytes, 106 MB
+//! uncompressed at 960 x 540 before ZIP; a diffuse scene of spheres only, `2 x 16 x 2 + 44
+//! = 108` bytes.
 //!
 //! # What a relight cannot keep
 //!
@@ -61,8 +63,8 @@
 //! come back as part of the SH light, with the soft shadows SH gives them; the scene's
 //! own Sun and point lamps stay as they were rendered (`lamps_*`), as `--light-rotation`
 //! leaves point lamps. A render's `--light-rotation` turns Sun lamps with the map; a
-//! relight does too by shading them again from the scene ([`SunLampTurn`], about two Sun
-//! lamps' shares of a render), or keeps them as rendered (`--sun-lamps keep`: on a scene
+//! relight does too by shading them again from the scene ([`SunLampTurn`], about a Sun
+//! lamp's share of a render), or keeps them as rendered (`--sun-lamps keep`: on a scene
 //! with a 2 deg Sun lamp, 0.050 from the turned render, README).
 
 mod layers;

@@ -2,18 +2,19 @@
 //! turn`, the default), as `logsh render --light-rotation` turns them.
 //!
 //! A Sun lamp is shaded sharp at render time, its shadows included, into the `lamps_*`
-//! layers with the point lamps: no transfer vector holds it. So a relight that turns the
-//! map shades the frame's Sun lamps again from the scene the frame was rendered from (its
-//! G-buffer, blockers and height field, the settings the header records), twice with the
-//! render's own kernel: as rendered and turned. The layers then hold
+//! layers with the point lamps: no transfer vector holds it. Its part of them is written
+//! apart too (`sun_lamps_*`), and a relight that turns the map shades the frame's Sun
+//! lamps again, turned, from the scene the frame was rendered from (its G-buffer,
+//! blockers and height field, the settings the header records) with the render's own
+//! kernel. The layers then hold
 //!
 //! ```text
-//! lamps = lamps as rendered - Sun lamps as rendered + Sun lamps turned
+//! lamps = lamps - sun_lamps + Sun lamps turned
 //! ```
 //!
 //! which is the render's `lamps_*` under the turned light but for the half floats of the
-//! file (the Sun lamps cancel to its rounding, 2^-11 of the lamp's light). Water that
-//! mirrors a Sun lamp is read along its mirror direction, as the render reads it.
+//! file (the Sun lamps as rendered cancel to their rounding, 2^-11 of their light). Water
+//! that mirrors a Sun lamp is read along its mirror direction, as the render reads it.
 
 use super::layers::{TransferFrame, TransferHeader};
 use crate::scene::light::{euler_xyz, rotate};
@@ -62,8 +63,8 @@ impl SunLampTurn {
         Ok(Self { scene, settings, turn: euler_xyz([0.0, 0.0, degrees.to_radians()]) })
     }
 
-    /// Shades the Sun lamps of `frame` (read from `file`) again, as rendered and turned,
-    /// and moves its `lamps_*` layers from the one to the other.
+    /// Shades the Sun lamps of `frame` (read from `file`) again, turned, and moves its
+    /// `lamps_*` layers from the lamps as rendered (`sun_lamps_*`) to them.
     pub fn apply(&self, frame: &mut TransferFrame, file: &Path) -> Result<(), SceneError> {
         let mut scene_frame = self.scene.frame(frame.header.frame)?;
         let g = &scene_frame.gbuffer;
@@ -98,18 +99,16 @@ impl SunLampTurn {
                 ),
             ));
         }
-        // One kernel for both: the lamps as rendered, then turned; no point lamp.
-        let rendered_suns = scene_frame.suns.clone();
-        let turned = rendered_suns.iter().map(|sun| SunLight { direction: rotate(&self.turn, sun.direction), ..*sun });
-        scene_frame.suns.extend(turned.collect::<Vec<_>>());
+        // The kernel of the turned lamps alone, no point lamp.
+        for sun in &mut scene_frame.suns {
+            sun.direction = rotate(&self.turn, sun.direction);
+        }
         scene_frame.points.clear();
         let plan = FramePlan::new(&self.scene, &scene_frame, &self.settings)
             .map_err(|e| SceneError::invalid(file, format!("its Sun lamps cannot be shaded again: {e}")))?;
-        let count = rendered_suns.len();
-        let turned_suns = &scene_frame.suns[count..];
         match plan.kernel.as_ref() {
-            PlannedKernel::F32(kernel) => move_lamps(kernel, &plan, frame, &rendered_suns, turned_suns),
-            PlannedKernel::F64(kernel) => move_lamps(kernel, &plan, frame, &rendered_suns, turned_suns),
+            PlannedKernel::F32(kernel) => move_lamps(kernel, &plan, frame),
+            PlannedKernel::F64(kernel) => move_lamps(kernel, &plan, frame),
         }
         Ok(())
     }
@@ -125,43 +124,41 @@ fn described(lamps: &[[f64; 2]]) -> String {
     each.collect::<Vec<_>>().join("; ")
 }
 
-/// `lamps += turned - rendered` per pixel of `frame`, the Sun lamps `rendered` and
-/// `turned` being the first and second halves of `kernel`'s suns.
-fn move_lamps<T: Real>(
-    kernel: &ShadingKernel<T>,
-    plan: &FramePlan,
-    frame: &mut TransferFrame,
-    rendered: &[SunLight],
-    turned: &[SunLight],
-) {
-    let count = rendered.len();
+/// `lamps += turned - sun_lamps` per pixel of `frame`, the turned Sun lamps being
+/// `kernel`'s suns and `plan`'s frame's.
+fn move_lamps<T: Real>(kernel: &ShadingKernel<T>, plan: &FramePlan, frame: &mut TransferFrame) {
+    let count = plan.frame.suns.len();
+    let turned = &plan.frame.suns;
+    let (Some(rendered_diffuse), Some(rendered_specular)) = (&frame.sun_lamps_diffuse, &frame.sun_lamps_specular)
+    else {
+        unreachable!("a frame whose header lists Sun lamps holds their layers (checked on reading)");
+    };
     let pyramid = plan.terrain.as_ref().map(|terrain| terrain.horizon_pyramid(&plan.settings));
     let blockers = (!plan.blockers.is_empty()).then_some(&plan.blockers);
     let occluders = Occluders { blockers, horizons: pyramid.as_ref() };
     let width = frame.width;
-    let moved = |lamps: &mut [f32; 3], tint: [f32; 3], before: [f32; 3], after: [f32; 3]| {
+    // The tinted turned light in place of the rendered (tinted when written).
+    let moved = |lamps: &mut [f32; 3], rendered: [f32; 3], tint: [f32; 3], turned: [f32; 3]| {
         for k in 0..3 {
-            lamps[k] = (lamps[k] + (tint[k] * after[k] - tint[k] * before[k])).max(0.0);
+            lamps[k] = (lamps[k] - rendered[k] + tint[k] * turned[k]).max(0.0);
         }
     };
-    frame.lamps_diffuse.par_chunks_mut(width).zip(frame.lamps_specular.par_chunks_mut(width)).enumerate().for_each(
-        |(y, (diffuse, specular))| {
-            for x in 0..width {
-                match pixel_source(&plan.scene.materials, plan.frame, x, y) {
-                    PixelSource::Surface { point, tint } => {
-                        let before = kernel.sun_lamps_lit(occluders, &point, 0..count);
-                        let after = kernel.sun_lamps_lit(occluders, &point, count..2 * count);
-                        if let (Some((d0, s0)), Some((d1, s1))) = (before, after) {
-                            moved(&mut diffuse[x], tint, d0, d1);
-                            moved(&mut specular[x], tint, s0, s1);
-                        }
+    let rows = frame.lamps_diffuse.par_chunks_mut(width).zip(frame.lamps_specular.par_chunks_mut(width));
+    let rendered = rendered_diffuse.par_chunks(width).zip(rendered_specular.par_chunks(width));
+    rows.zip(rendered).enumerate().for_each(|(y, ((diffuse, specular), (rendered_diffuse, rendered_specular)))| {
+        for x in 0..width {
+            match pixel_source(&plan.scene.materials, plan.frame, x, y) {
+                PixelSource::Surface { point, tint } => {
+                    if let Some((d, s)) = kernel.sun_lamps_lit(occluders, &point, 0..count) {
+                        moved(&mut diffuse[x], rendered_diffuse[x], tint, d);
+                        moved(&mut specular[x], rendered_specular[x], tint, s);
                     }
-                    PixelSource::WaterSky { tint, mirror } => {
-                        moved(&mut specular[x], tint, suns_along(rendered, mirror), suns_along(turned, mirror));
-                    }
-                    PixelSource::Background { .. } | PixelSource::WaterLamp { .. } => {}
                 }
+                PixelSource::WaterSky { tint, mirror } => {
+                    moved(&mut specular[x], rendered_specular[x], tint, suns_along(turned, mirror));
+                }
+                PixelSource::Background { .. } | PixelSource::WaterLamp { .. } => {}
             }
-        },
-    );
+        }
+    });
 }

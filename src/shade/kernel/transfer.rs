@@ -51,9 +51,13 @@ pub struct PointTransfer {
     pub albedo: [f32; 3],
     pub specular_colour: [f32; 3],
     /// The scene's Sun and point lamps' share of the diffuse and specular passes (albedo
-    /// and specular colour applied): light that a relight of the environment keeps.
+    /// and specular colour applied): light that a relight of the environment keeps, but
+    /// for the Sun lamps' part when it turns them.
     pub lamps_diffuse: [f32; 3],
     pub lamps_specular: [f32; 3],
+    /// The Sun lamps' part of `lamps_*` (what a relight that turns them takes out).
+    pub sun_lamps_diffuse: [f32; 3],
+    pub sun_lamps_specular: [f32; 3],
 }
 
 impl PointTransfer {
@@ -69,6 +73,8 @@ impl PointTransfer {
         specular_colour: [0.0; 3],
         lamps_diffuse: [0.0; 3],
         lamps_specular: [0.0; 3],
+        sun_lamps_diffuse: [0.0; 3],
+        sun_lamps_specular: [0.0; 3],
     };
 }
 
@@ -117,7 +123,7 @@ impl<T: Real> ShadingKernel<T> {
         suns: std::ops::Range<usize>,
     ) -> Option<([f32; 3], [f32; 3])> {
         let lobes = self.materials.get(&point.material)?;
-        Some(self.sharp_lit(occluders, point, &lobes.material, &self.suns[suns], false))
+        Some(self.sharp_lit(occluders, point, &lobes.material, &self.suns[suns], false).0)
     }
 
     /// The transfer of `point` (module doc), and its passes as
@@ -198,10 +204,10 @@ impl<T: Real> ShadingKernel<T> {
             };
         }
         let scene_suns = scene_suns.min(self.suns.len());
-        (out.lamps_diffuse, out.lamps_specular) =
+        ((out.lamps_diffuse, out.lamps_specular), (out.sun_lamps_diffuse, out.sun_lamps_specular)) =
             self.sharp_lit(occluders, point, &lobes.material, &self.suns[..scene_suns], true);
         let (extracted_diffuse, extracted_specular) =
-            self.sharp_lit(occluders, point, &lobes.material, &self.suns[scene_suns..], false);
+            self.sharp_lit(occluders, point, &lobes.material, &self.suns[scene_suns..], false).0;
         let passes = PixelPasses {
             diffuse: [0, 1, 2].map(|k| lit_diffuse[k] * albedo[k] + (out.lamps_diffuse[k] + extracted_diffuse[k])),
             specular: [0, 1, 2]
