@@ -357,6 +357,52 @@ fn a_sun_lamp_turns_with_the_map_or_stays_as_rendered() {
     relight(&[&swapped[..], &["--sun-lamps", "keep"]].concat(), "kept without the scene");
 }
 
+/// Water that mirrors a Sun lamp shows it in `lamps_specular`; turned with the map, the
+/// lamp moves in the water as a render turned as far shows it. The lamp (20 deg wide) is
+/// placed along the mirror direction of the bay of the `dunes` sample (exported from
+/// Blender, whose water mirrors the sky) seen from the camera.
+#[test]
+fn water_mirrors_a_turned_sun_lamp_as_a_render_does() {
+    use logsh::transfer::lobe_code;
+    let dir = tempfile::tempdir().unwrap();
+    let sample = Path::new(env!("CARGO_MANIFEST_DIR")).join("gbuffers/dunes");
+    let scene = dir.path().join("dunes");
+    std::fs::create_dir_all(&scene).unwrap();
+    for entry in std::fs::read_dir(&sample).unwrap() {
+        let entry = entry.unwrap();
+        std::fs::copy(entry.path(), scene.join(entry.file_name())).unwrap();
+    }
+    let transfer = dir.path().join("transfer");
+    let common = ["--frames", "1", "--sharp-lights", "off", "--progress", "none", "--device", "cpu"];
+    run(&[&["render", path(&scene), "--out", path(&transfer), "--transfer"], &common[..]].concat());
+    let frame = TransferFrame::read(&transfer.join("render.0001.exr")).unwrap();
+    let water = (0..frame.alpha.len())
+        .filter(|&i| frame.alpha[i] == 1.0 && frame.glossy_lobe[i] == lobe_code::MIRROR)
+        .collect::<Vec<_>>();
+    assert!(water.len() > 50, "the bay mirrors the sky: {} pixels", water.len());
+    let mirror = frame.glossy_direction[water[water.len() / 2]];
+    let lights = serde_json::json!([{"type": "sun", "direction": mirror, "angle": 20.0, "strength": 4.0}]);
+    support::sharp::load_with_lights(&scene, lights).unwrap();
+    let lit = dir.path().join("lit");
+    run(&[&["render", path(&scene), "--out", path(&lit), "--transfer"], &common[..]].concat());
+    let frame = lit.join("render.0001.exr");
+    let mirrored = |file: &Path| {
+        let layers = channels(file);
+        water.iter().filter(|&&i| layers["sun_lamps_specular.R"][i] > 0.1).count()
+    };
+    let before = mirrored(&frame);
+    assert!(before > 10, "the water mirrors the Sun lamp: {before} pixels");
+    let (relit, shaded) = (dir.path().join("relit"), dir.path().join("shaded"));
+    run(&["relight", path(&frame), "--light-rotation", "15", "--out", path(&relit)]);
+    run(&[&["render", path(&scene), "--out", path(&shaded), "--light-rotation", "15"], &common[..]].concat());
+    let (relit, shaded) = (relit.join("render.0001.exr"), shaded.join("render.0001.exr"));
+    let (after, before) = (channels(&relit), channels(&frame));
+    let moved = water.iter().filter(|&&i| (after["specular.R"][i] - before["specular.R"][i]).abs() > 0.1).count();
+    assert!(moved > 5, "the lamp moves in the water: {moved} pixels");
+    let worst = compare(&scene, 15.0, &relit, &shaded, "Sun lamp mirrored in water, turned");
+    assert!(worst <= RELIT_TOLERANCE, "relit water differs from shaded by {worst}");
+}
+
 #[test]
 fn the_header_records_the_sh_convention_and_the_light() {
     let dir = tempfile::tempdir().unwrap();
