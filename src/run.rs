@@ -567,18 +567,14 @@ fn warn_of_suns_in_sh(
 /// lamps `sun_lamps` (azimuth and elevation, as rendered in `file`) where `logsh render
 /// --light-rotation` would turn them; once per sequence.
 fn warn_of_sun_lamps(file: &Path, sun_lamps: &[[f64; 2]], degrees: f64) {
-    let lamps: Vec<String> = sun_lamps
-        .iter()
-        .map(|[azimuth, elevation]| format!("azimuth {azimuth:.1} deg, elevation {elevation:.1} deg"))
-        .collect();
-    let (lamp, stays) = if lamps.len() > 1 { ("Sun lamps", "stay") } else { ("Sun lamp", "stays") };
+    let (lamp, stays, its) =
+        if sun_lamps.len() > 1 { ("Sun lamps", "stay", "their") } else { ("Sun lamp", "stays", "its") };
     eprintln!(
-        "relight: {}: the scene's {lamp} ({}) {stays} as rendered, with {} shadows (--sun-lamps keep): the \
+        "relight: {}: the scene's {lamp} ({}) {stays} as rendered, with {its} shadows (--sun-lamps keep): the \
          relight turns the map alone, where `logsh render --light-rotation {degrees}` and `logsh relight \
          --sun-lamps turn` turn Sun lamps with it and move their shadows",
         file.display(),
-        lamps.join("; "),
-        if lamps.len() > 1 { "their" } else { "its" }
+        crate::transfer::describe_sun_lamps(sun_lamps),
     );
 }
 

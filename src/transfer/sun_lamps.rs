@@ -94,8 +94,8 @@ impl SunLampTurn {
                 format!(
                     "its scene {} has other Sun lamps ({}) than it was rendered with ({}); relight with --sun-lamps keep",
                     self.scene.dir.display(),
-                    described(&rendered),
-                    described(&frame.header.sun_lamps)
+                    describe_sun_lamps(&rendered),
+                    describe_sun_lamps(&frame.header.sun_lamps)
                 ),
             ));
         }
@@ -106,16 +106,22 @@ impl SunLampTurn {
         scene_frame.points.clear();
         let plan = FramePlan::new(&self.scene, &scene_frame, &self.settings)
             .map_err(|e| SceneError::invalid(file, format!("its Sun lamps cannot be shaded again: {e}")))?;
+        let TransferFrame { width, lamps_diffuse, lamps_specular, sun_lamps_diffuse, sun_lamps_specular, .. } = frame;
+        let (Some(rendered_diffuse), Some(rendered_specular)) = (sun_lamps_diffuse, sun_lamps_specular) else {
+            return Err(SceneError::invalid(file, "holds no sun_lamps_diffuse and sun_lamps_specular to turn"));
+        };
+        let lamps = Lamps { width: *width, diffuse: lamps_diffuse, specular: lamps_specular };
+        let rendered = [rendered_diffuse.as_slice(), rendered_specular.as_slice()];
         match plan.kernel.as_ref() {
-            PlannedKernel::F32(kernel) => move_lamps(kernel, &plan, frame),
-            PlannedKernel::F64(kernel) => move_lamps(kernel, &plan, frame),
+            PlannedKernel::F32(kernel) => move_lamps(kernel, &plan, lamps, rendered),
+            PlannedKernel::F64(kernel) => move_lamps(kernel, &plan, lamps, rendered),
         }
         Ok(())
     }
 }
 
 /// Sun lamps by azimuth and elevation, for a message.
-fn described(lamps: &[[f64; 2]]) -> String {
+pub fn describe_sun_lamps(lamps: &[[f64; 2]]) -> String {
     if lamps.is_empty() {
         return "none".into();
     }
@@ -124,26 +130,30 @@ fn described(lamps: &[[f64; 2]]) -> String {
     each.collect::<Vec<_>>().join("; ")
 }
 
-/// `lamps += turned - sun_lamps` per pixel of `frame`, the turned Sun lamps being
-/// `kernel`'s suns and `plan`'s frame's.
-fn move_lamps<T: Real>(kernel: &ShadingKernel<T>, plan: &FramePlan, frame: &mut TransferFrame) {
+/// A frame's `lamps_*` layers, rows of `width`.
+struct Lamps<'a> {
+    width: usize,
+    diffuse: &'a mut [[f32; 3]],
+    specular: &'a mut [[f32; 3]],
+}
+
+/// `lamps += turned - rendered` per pixel, `rendered` the frame's `sun_lamps_*` (diffuse,
+/// specular) and the turned Sun lamps `kernel`'s suns, `plan`'s frame's.
+fn move_lamps<T: Real>(kernel: &ShadingKernel<T>, plan: &FramePlan, lamps: Lamps, rendered: [&[[f32; 3]]; 2]) {
     let count = plan.frame.suns.len();
     let turned = &plan.frame.suns;
-    let (Some(rendered_diffuse), Some(rendered_specular)) = (&frame.sun_lamps_diffuse, &frame.sun_lamps_specular)
-    else {
-        unreachable!("a frame whose header lists Sun lamps holds their layers (checked on reading)");
-    };
+    let [rendered_diffuse, rendered_specular] = rendered;
     let pyramid = plan.terrain.as_ref().map(|terrain| terrain.horizon_pyramid(&plan.settings));
     let blockers = (!plan.blockers.is_empty()).then_some(&plan.blockers);
     let occluders = Occluders { blockers, horizons: pyramid.as_ref() };
-    let width = frame.width;
+    let width = lamps.width;
     // The tinted turned light in place of the rendered (tinted when written).
     let moved = |lamps: &mut [f32; 3], rendered: [f32; 3], tint: [f32; 3], turned: [f32; 3]| {
         for k in 0..3 {
             lamps[k] = (lamps[k] - rendered[k] + tint[k] * turned[k]).max(0.0);
         }
     };
-    let rows = frame.lamps_diffuse.par_chunks_mut(width).zip(frame.lamps_specular.par_chunks_mut(width));
+    let rows = lamps.diffuse.par_chunks_mut(width).zip(lamps.specular.par_chunks_mut(width));
     let rendered = rendered_diffuse.par_chunks(width).zip(rendered_specular.par_chunks(width));
     rows.zip(rendered).enumerate().for_each(|(y, ((diffuse, specular), (rendered_diffuse, rendered_specular)))| {
         for x in 0..width {
