@@ -357,6 +357,28 @@ fn a_sun_lamp_turns_with_the_map_or_stays_as_rendered() {
     relight(&[&swapped[..], &["--sun-lamps", "keep"]].concat(), "kept without the scene");
 }
 
+/// Under a constant light, `--light-rotation` turns only the Sun lamps; a relight of a
+/// frame rendered turned starts from that turn (the header's `light_turn`), so it turns
+/// the lamp on from where the render left it.
+#[test]
+fn a_sun_lamp_under_a_constant_light_turns_on_from_the_rendered_turn() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = constant_light(&dunes(dir.path()), dir.path());
+    let lights = serde_json::json!([{"type": "sun", "direction": [0.6, 0.0, 0.8], "angle": 1.0, "strength": 3.0}]);
+    support::sharp::load_with_lights(&scene, lights).unwrap();
+    let common = ["--frames", "1", "--sharp-lights", "off", "--progress", "none", "--device", "cpu"];
+    let (transfer, relit, shaded) = (dir.path().join("transfer"), dir.path().join("relit"), dir.path().join("shaded"));
+    let render = ["render", path(&scene), "--out", path(&transfer), "--transfer", "--light-rotation", "30"];
+    run(&[&render[..], &common[..]].concat());
+    let frame = transfer.join("render.0001.exr");
+    assert_eq!(TransferFrame::read(&frame).unwrap().header.light_turn, 30.0);
+    run(&["relight", path(&frame), "--light-rotation", "40", "--out", path(&relit)]);
+    run(&[&["render", path(&scene), "--out", path(&shaded), "--light-rotation", "70"], &common[..]].concat());
+    let (relit, shaded) = (relit.join("render.0001.exr"), shaded.join("render.0001.exr"));
+    let worst = compare(&scene, 70.0, &relit, &shaded, "Sun lamp under a constant light, turned 30 then 40");
+    assert!(worst <= RELIT_TOLERANCE, "relit differs from shaded by {worst}");
+}
+
 /// Water that mirrors a Sun lamp shows it in `lamps_specular`; turned with the map, the
 /// lamp moves in the water as a render turned as far shows it. The lamp (20 deg wide) is
 /// placed along the mirror direction of the bay of the `dunes` sample (exported from

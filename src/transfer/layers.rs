@@ -81,6 +81,11 @@ pub struct TransferHeader {
     /// before this was recorded.
     #[serde(default)]
     pub sun_lamps: Vec<[f64; 2]>,
+    /// The render's `--light-rotation` in degrees, whatever the light (a constant light's
+    /// turn turns only the Sun lamps): the turn a relight starts the scene's Sun lamps
+    /// from.
+    #[serde(default)]
+    pub light_turn: f64,
     /// The render's shading settings, with which a relight that turns the map shades the
     /// Sun lamps again ([`super::SunLampTurn`]). `None` in files written before they were
     /// recorded.
@@ -129,8 +134,13 @@ impl TransferHeader {
                 }
             }
         }
-        if self.sun_lamps.len() > MAX_SUN_LAMPS || !self.sun_lamps.iter().all(|lamp| finite(lamp)) {
-            return bad(format!("its Sun lamps: give at most {MAX_SUN_LAMPS}, each a finite azimuth and elevation"));
+        if self.sun_lamps.len() > MAX_SUN_LAMPS
+            || !self.sun_lamps.iter().all(|lamp| finite(lamp))
+            || !self.light_turn.is_finite()
+        {
+            return bad(format!(
+                "its Sun lamps: give at most {MAX_SUN_LAMPS}, each a finite azimuth and elevation, and a finite light_turn"
+            ));
         }
         if self.lobes.len() > MAX_LOBES {
             return bad(format!("{} prefiltered lobes, more than {MAX_LOBES}", self.lobes.len()));

@@ -45,7 +45,8 @@
 //! The SH convention (order, basis, normalisation, axes, coefficient index), the light the
 //! frame was shaded with (map file, strength, Mapping rotation, turn), the window, whether
 //! the ground plane hides the lower hemisphere, the prefiltered lobes, the scene's Sun
-//! lamps as rendered (azimuth and elevation) and the render's shading settings.
+//! lamps as rendered (azimuth and elevation), the render's `--light-rotation` and its
+//! shading settings.
 //!
 //! # Size
 //!

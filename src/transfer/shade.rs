@@ -49,6 +49,7 @@ fn header<T: Real>(kernel: &ShadingKernel<T>, plan: &FramePlan) -> TransferHeade
             .map(|(material, lobe, open)| PrefilteredLobe { material, lobe, open })
             .collect(),
         sun_lamps: plan.frame.suns.iter().map(|sun| sun.azimuth_elevation()).collect(),
+        light_turn: plan.scene.light_turn,
         settings: Some(plan.settings),
         view: plan.scene.view.absolute_spec(&plan.scene.dir),
     }

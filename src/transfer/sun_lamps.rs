@@ -18,7 +18,7 @@
 
 use super::layers::{TransferFrame, TransferHeader};
 use crate::scene::light::{euler_xyz, rotate};
-use crate::scene::{LightSource, Scene, SceneError, SunLight};
+use crate::scene::{Scene, SceneError, SunLight};
 use crate::sh::Real;
 use crate::shade::frame::suns_along;
 use crate::shade::{pixel_source, FramePlan, Occluders, PixelSource, PlannedKernel, ShadingKernel, ShadingSettings};
@@ -56,9 +56,7 @@ impl SunLampTurn {
                 format!("its Sun lamps turn with the map and are shaded again from the scene it was rendered from, which cannot be read: {e}; {keep}"),
             )
         })?;
-        if let LightSource::Environment { turn, .. } = header.light {
-            scene.turn_light(turn)?;
-        }
+        scene.turn_light(header.light_turn)?;
         let settings = ShadingSettings { sharp_lights: false, ..settings };
         Ok(Self { scene, settings, turn: euler_xyz([0.0, 0.0, degrees.to_radians()]) })
     }
