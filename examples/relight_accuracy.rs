@@ -102,7 +102,8 @@ fn main() -> anyhow::Result<()> {
         let sun_lamps = (rotation != 0.0 && !transfer.header.sun_lamps.is_empty() && !keep_sun_lamps)
             .then(|| SunLampTurn::new(&transfer.header, &file, rotation))
             .transpose()?;
-        let rendered_lamps = (transfer.lamps_diffuse.clone(), transfer.lamps_specular.clone());
+        let rendered_lamps =
+            sun_lamps.as_ref().map(|_| (transfer.lamps_diffuse.clone(), transfer.lamps_specular.clone()));
 
         let mut turned = Scene::load(dir)?;
         turned.turn_light(rotation)?;
@@ -139,9 +140,9 @@ fn main() -> anyhow::Result<()> {
             for timed in [false, true] {
                 let spare = if fresh_passes { None } else { relit.take() };
                 drop(relit.take());
-                if sun_lamps.is_some() {
-                    transfer.lamps_diffuse.clone_from(&rendered_lamps.0);
-                    transfer.lamps_specular.clone_from(&rendered_lamps.1);
+                if let Some((diffuse, specular)) = &rendered_lamps {
+                    transfer.lamps_diffuse.clone_from(diffuse);
+                    transfer.lamps_specular.clone_from(specular);
                 }
                 let started = Instant::now();
                 if let Some(turn) = &sun_lamps {

@@ -136,9 +136,9 @@ struct Lamps<'a> {
 }
 
 /// `lamps += turned - rendered` per pixel, `rendered` the frame's `sun_lamps_*` (diffuse,
-/// specular) and the turned Sun lamps `kernel`'s suns, `plan`'s frame's.
+/// specular) and the turned Sun lamps `kernel`'s suns, `plan`'s frame's (and no other
+/// light).
 fn move_lamps<T: Real>(kernel: &ShadingKernel<T>, plan: &FramePlan, lamps: Lamps, rendered: [&[[f32; 3]]; 2]) {
-    let count = plan.frame.suns.len();
     let turned = &plan.frame.suns;
     let [rendered_diffuse, rendered_specular] = rendered;
     let pyramid = plan.terrain.as_ref().map(|terrain| terrain.horizon_pyramid(&plan.settings));
@@ -157,7 +157,7 @@ fn move_lamps<T: Real>(kernel: &ShadingKernel<T>, plan: &FramePlan, lamps: Lamps
         for x in 0..width {
             match pixel_source(&plan.scene.materials, plan.frame, x, y) {
                 PixelSource::Surface { point, tint } => {
-                    if let Some((d, s)) = kernel.sun_lamps_lit(occluders, &point, 0..count) {
+                    if let Some((d, s)) = kernel.sun_lamps_lit(occluders, &point) {
                         moved(&mut diffuse[x], rendered_diffuse[x], tint, d);
                         moved(&mut specular[x], rendered_specular[x], tint, s);
                     }

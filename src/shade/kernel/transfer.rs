@@ -112,18 +112,13 @@ impl<T: Real> ShadingKernel<T> {
         }
     }
 
-    /// The light of the kernel's suns `suns` at `point`, diffuse and specular, as
+    /// The light of the kernel's suns at `point`, diffuse and specular, as
     /// [`shade_transfer`](Self::shade_transfer) shades the scene's Sun lamps into
     /// `lamps_*` (here without the point lamps); `None` where `shade_transfer` is dark (a
     /// material the kernel does not know).
-    pub fn sun_lamps_lit(
-        &self,
-        occluders: Occluders,
-        point: &SurfacePoint,
-        suns: std::ops::Range<usize>,
-    ) -> Option<([f32; 3], [f32; 3])> {
+    pub fn sun_lamps_lit(&self, occluders: Occluders, point: &SurfacePoint) -> Option<([f32; 3], [f32; 3])> {
         let lobes = self.materials.get(&point.material)?;
-        Some(self.sharp_lit(occluders, point, &lobes.material, &self.suns[suns], false).0)
+        Some(self.sharp_lit(occluders, point, &lobes.material, &self.suns, false).0)
     }
 
     /// The transfer of `point` (module doc), and its passes as
