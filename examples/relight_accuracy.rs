@@ -30,8 +30,10 @@
 //! The shade runs where `--device` puts it (`cpu` by default; `logsh render`
 //! takes `auto`, a hardware GPU where there is one); the relight runs on the CPU, as `logsh
 //! relight` does. Where the scene directory holds a converged Cycles render of the frame
-//! (`cycles.NNNN.exr`, `blender_scripts/render_cycles.py`) and the light is not
-//! turned, the relit frame and the default shade are also compared with it.
+//! (`cycles.NNNN.exr`, `blender_scripts/render_cycles.py`), the relit frame and the
+//! default shade are also compared with it; turned by `DEG`, with
+//! `cycles-turned-DEG.NNNN.exr`, Cycles' render of the .blend that
+//! `blender_scripts/turn_light.py` turns by `DEG`.
 
 use logsh::compare::{frame_error, unoccluded_value};
 use logsh::executor::{DeviceChoice, Executor};
@@ -164,9 +166,12 @@ fn main() -> anyhow::Result<()> {
         let off = frame_error(material, &rgb(&relit), &rgb(&truth), unoccluded);
         let worst = off.per_pixel.iter().fold(0.0f64, |a, &b| a.max(b));
         let with_suns = frame_error(material, &rgb(&relit), &rgb(&auto), unoccluded);
-        let cycles = dir.join(format!("cycles.{number:04}.exr"));
+        let cycles = match rotation {
+            0.0 => dir.join(format!("cycles.{number:04}.exr")),
+            _ => dir.join(format!("cycles-turned-{rotation}.{number:04}.exr")),
+        };
         let against_cycles = match logsh::compare::read_rgb(&cycles) {
-            Ok((_, _, truth)) if rotation == 0.0 => format!(
+            Ok((_, _, truth)) => format!(
                 "{:.4} / {:.4}",
                 frame_error(material, &rgb(&relit), &truth, unoccluded).mean,
                 frame_error(material, &rgb(&auto), &truth, unoccluded).mean
