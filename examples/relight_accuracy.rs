@@ -102,7 +102,7 @@ fn main() -> anyhow::Result<()> {
         // The scene's Sun lamps turn with the map, shaded again per frame (`logsh relight
         // --sun-lamps turn`): part of each relight's time, from the lamps as rendered.
         let sun_lamps = (rotation != 0.0 && !transfer.header.sun_lamps.is_empty() && !keep_sun_lamps)
-            .then(|| SunLampTurn::new(&transfer.header, &file, rotation))
+            .then(|| SunLampTurn::new(&transfer.header, &file))
             .transpose()?;
         let rendered_lamps =
             sun_lamps.as_ref().map(|_| (transfer.lamps_diffuse.clone(), transfer.lamps_specular.clone()));
@@ -148,7 +148,7 @@ fn main() -> anyhow::Result<()> {
                 }
                 let started = Instant::now();
                 if let Some(turn) = &sun_lamps {
-                    on_pool(pool.as_ref(), || turn.apply(&mut transfer, &file))?;
+                    on_pool(pool.as_ref(), || turn.apply(&mut transfer, &file, rotation))?;
                 }
                 relit = Some(on_pool(pool.as_ref(), || relight_reusing(&transfer, &light, spare)));
                 match (round, timed) {

@@ -393,7 +393,9 @@ pub fn relight(args: &crate::cli::RelightArgs) -> Result<()> {
     use crate::cli::SunLamps;
     use crate::scene::ViewTransform;
     use crate::shade::ShadedPasses;
-    use crate::transfer::{relight_reusing, RelightLight, RelightOptions, SunLampTurn, TransferFrame};
+    use crate::transfer::{
+        offering_to_keep, relight_reusing, RelightLight, RelightOptions, SunLampTurn, TransferFrame,
+    };
     if args.out.exists() && !args.out.is_dir() {
         return Err(anyhow!("--out {}: exists and is not a directory", args.out.display()));
     }
@@ -486,12 +488,13 @@ pub fn relight(args: &crate::cli::RelightArgs) -> Result<()> {
                         SunLamps::Keep => {}
                         SunLamps::Turn => {
                             let t = Instant::now();
-                            let key = (frame.header.scene.clone(), frame.header.light.clone(), frame.header.settings);
+                            let header = &frame.header;
+                            let key = (header.scene.clone(), header.light.clone(), header.light_turn, header.settings);
                             if sun_lamps.as_ref().is_none_or(|(built, _)| *built != key) {
-                                sun_lamps = Some((key, SunLampTurn::new(&frame.header, file, options.rotation)?));
+                                sun_lamps = Some((key, SunLampTurn::new(header, file).map_err(offering_to_keep)?));
                             }
                             let (_, turn) = sun_lamps.as_ref().expect("built above");
-                            turn.apply(&mut frame, file)?;
+                            turn.apply(&mut frame, file, options.rotation).map_err(offering_to_keep)?;
                             shading_lamps += t.elapsed().as_secs_f64();
                         }
                     }

@@ -359,7 +359,7 @@ fn a_sun_lamp_turns_with_the_map_or_stays_as_rendered() {
 
 /// Under a constant light, `--light-rotation` turns only the Sun lamps; a relight of a
 /// frame rendered turned starts from that turn (the header's `light_turn`), so it turns
-/// the lamp on from where the render left it.
+/// the lamp on from where the render left it, each frame of one relight from its own.
 #[test]
 fn a_sun_lamp_under_a_constant_light_turns_on_from_the_rendered_turn() {
     let dir = tempfile::tempdir().unwrap();
@@ -372,11 +372,19 @@ fn a_sun_lamp_under_a_constant_light_turns_on_from_the_rendered_turn() {
     run(&[&render[..], &common[..]].concat());
     let frame = transfer.join("render.0001.exr");
     assert_eq!(TransferFrame::read(&frame).unwrap().header.light_turn, 30.0);
-    run(&["relight", path(&frame), "--light-rotation", "40", "--out", path(&relit)]);
-    run(&[&["render", path(&scene), "--out", path(&shaded), "--light-rotation", "70"], &common[..]].concat());
-    let (relit, shaded) = (relit.join("render.0001.exr"), shaded.join("render.0001.exr"));
-    let worst = compare(&scene, 70.0, &relit, &shaded, "Sun lamp under a constant light, turned 30 then 40");
-    assert!(worst <= RELIT_TOLERANCE, "relit differs from shaded by {worst}");
+    let other = ["render", path(&scene), "--out", path(&transfer), "--transfer", "--light-rotation", "50"];
+    run(&[&other[..], &["--name", "turned"], &common[..]].concat());
+    let other = transfer.join("turned.0001.exr");
+    run(&["relight", path(&frame), path(&other), "--light-rotation", "40", "--out", path(&relit)]);
+    for (name, turn) in [("render", 70.0), ("turned", 90.0)] {
+        let out = shaded.join(format!("{turn}"));
+        let args = ["render", path(&scene), "--out", path(&out), "--light-rotation", &format!("{turn}")];
+        run(&[&args[..], &common[..]].concat());
+        let (relit, shaded) = (relit.join(format!("{name}.0001.exr")), out.join("render.0001.exr"));
+        let what = format!("Sun lamp under a constant light, turned {} then 40", turn - 40.0);
+        let worst = compare(&scene, turn, &relit, &shaded, &what);
+        assert!(worst <= RELIT_TOLERANCE, "{what}: relit differs from shaded by {worst}");
+    }
 }
 
 /// Water that mirrors a Sun lamp shows it in `lamps_specular`; turned with the map, the

@@ -159,12 +159,13 @@ fn the_server_answers_the_page_and_a_frames_data() {
     assert_eq!(meta["cycles"], true, "the scene directory's cycles.0001.exr is found");
     assert_eq!(meta["light"].as_array().unwrap().len(), 3);
     assert_eq!(meta["suns_in_sh"], serde_json::json!([]), "the patch is too wide to be a sun");
-    assert_eq!(meta["sun_lamps"], 0, "the cones have no Sun lamp for the page to say stays as rendered");
+    assert_eq!(meta["sun_lamps"], 0, "the cones have no Sun lamp for the page to turn");
     let floats: u64 = meta["pixels"].as_array().unwrap().iter().map(|l| l["components"].as_u64().unwrap()).sum();
     let (_, pixels) = server.request("GET", "/frame/0/pixels.bin");
     assert_eq!(pixels.len() as u64, 4 * floats * 240 * 135, "every layer of the layout");
     let (_, cycles) = server.request("GET", "/frame/0/cycles.bin");
     assert_eq!(cycles.len(), 4 * 3 * 240 * 135);
+    assert_eq!(server.request("GET", "/frame/0/sun_lamps.bin?rotation=75").0, 404, "no Sun lamp to turn");
     assert_eq!(server.request("GET", "/frame/1/meta.json").0, 404);
     assert_eq!(server.request("GET", "/../Cargo.toml").0, 404);
     assert_eq!(server.request("POST", "/").0, 405);
@@ -254,31 +255,71 @@ fn status_line(browser: &Path, url: &str) -> String {
         .output()
         .unwrap();
     let dom = String::from_utf8_lossy(&output.stdout);
-    let start = dom.find("id=\"status\"").unwrap_or_else(|| panic!("no status line in the page: {dom}"));
+    let start = dom.find("id=\"status\"").unwrap_or_else(|| {
+        panic!("no status line in the page: {dom} (the browser said: {})", String::from_utf8_lossy(&output.stderr))
+    });
     let text = &dom[start..];
     let text = &text[text.find('>').unwrap() + 1..];
     text[..text.find('<').unwrap()].to_string()
 }
 
-/// A frame rendered with a Sun lamp: turned in the page, its status line says that the
-/// lamp stays as rendered (a relight turns the map alone, as `logsh relight` says too);
-/// unturned, it says nothing of it.
+/// A frame rendered with a Sun lamp: turned in the page, the lamp turns with the map as
+/// `logsh relight` turns it (the server shades it again, `sun_lamps.bin`), and the status
+/// line says so; unturned, it says nothing of it. Where the scene the frame was rendered
+/// from cannot be read, the lamp stays as rendered, and the status line says why.
 #[test]
-fn the_page_says_a_sun_lamp_stays_as_rendered() {
-    let Some(browser) = required_browser("the_page_says_a_sun_lamp_stays_as_rendered") else {
+fn the_page_turns_a_sun_lamp_with_the_map() {
+    let Some(browser) = required_browser("the_page_turns_a_sun_lamp_with_the_map") else {
         return;
     };
     let dir = tempfile::tempdir().unwrap();
     let sun = serde_json::json!([{"type": "sun", "direction": [0.5, -0.5, 0.7], "angle": 1.0, "strength": 2.0}]);
     let frames = rendered_cones(dir.path(), sun);
+    let frame = frames.join("render.0001.exr");
+    for (name, lamps) in [("turn", "turn"), ("keep", "keep")] {
+        let out = dir.path().join(name);
+        let args = ["relight", frame.to_str().unwrap(), "--light-rotation", "75", "--sun-lamps", lamps, "--out"];
+        run(&[&args[..], &[out.to_str().unwrap()]].concat());
+    }
+    let preview = |name: &str| image::open(dir.path().join(name).join("render.0001.png")).unwrap().to_rgba8();
     let server = Server::start(&frames);
     let (_, meta) = server.request("GET", "/frame/0/meta.json");
     let meta: serde_json::Value = serde_json::from_slice(&meta).unwrap();
-    assert_eq!(meta["sun_lamps"], 1);
-    let turned = status_line(&browser, &format!("{}?rotation=75", server.address));
-    assert!(turned.contains("the scene's Sun lamp stays as rendered"), "{turned}");
+    assert_eq!((&meta["sun_lamps"], &meta["sun_lamps_kept"]), (&serde_json::json!(1), &serde_json::Value::Null));
+    let (status, lamps) = server.request("GET", "/frame/0/sun_lamps.bin?rotation=75");
+    assert_eq!((status, lamps.len()), (200, 4 * 6 * 240 * 135), "both lamps layers, RGB f32");
+    assert_eq!(server.request("GET", "/frame/0/sun_lamps.bin").0, 400, "no rotation");
+    assert_eq!(server.request("GET", "/frame/0/sun_lamps.bin?rotation=inf").0, 400);
+    let url = format!("{}?rotation=75", server.address);
+    let shot = screenshot(&browser, &url, 480, 400, &dir.path().join("turned.png"));
+    let (to_turned, to_kept) = (difference(&shot, &preview("turn")), difference(&shot, &preview("keep")));
+    println!("screenshot at 75 degrees: {to_turned:.2} levels from logsh relight, {to_kept:.2} from --sun-lamps keep");
+    assert!(to_turned < 1.5, "the page differs from logsh relight by {to_turned:.2} levels");
+    assert!(to_kept > 3.0 * to_turned, "the page must turn the Sun lamp: {to_kept:.2} from the lamp kept");
+    let turned = status_line(&browser, &url);
+    println!("turned: {turned}");
+    assert!(turned.contains("the scene's Sun lamp turned with the map"), "{turned}");
     let unturned = status_line(&browser, &server.address);
     assert!(unturned.contains("relit") && !unturned.contains("Sun lamp"), "{unturned}");
+    server.stop();
+
+    // The scene's description gone (its map stays): the lamp stays as rendered, and the
+    // page says why.
+    let scene = dir.path().join("cones");
+    std::fs::rename(scene.join("scene.json"), scene.join("scene.json.moved")).unwrap();
+    let server = Server::start(&frames);
+    let (_, meta) = server.request("GET", "/frame/0/meta.json");
+    let meta: serde_json::Value = serde_json::from_slice(&meta).unwrap();
+    let why = meta["sun_lamps_kept"].as_str().expect("a reason").to_string();
+    assert!(why.contains("cannot be read"), "{why}");
+    assert_eq!(server.request("GET", "/frame/0/sun_lamps.bin?rotation=75").0, 409);
+    let url = format!("{}?rotation=75", server.address);
+    let kept = status_line(&browser, &url);
+    println!("kept: {kept}");
+    assert!(kept.contains("the scene's Sun lamp stays as rendered here") && kept.contains("cannot be read"), "{kept}");
+    let shot = screenshot(&browser, &url, 480, 400, &dir.path().join("kept.png"));
+    let to_kept = difference(&shot, &preview("keep"));
+    assert!(to_kept < 1.5, "the page differs from logsh relight --sun-lamps keep by {to_kept:.2} levels");
     server.stop();
 }
 

@@ -29,41 +29,52 @@ use std::path::Path;
 /// azimuth or elevation, and still be the lamp the frame was rendered with.
 const SAME_LAMP_DEGREES: f64 = 1e-6;
 
-/// The scene a frame was rendered from, with its light turned as it was for the render,
-/// and the further turn of a relight: what shades the frame's Sun lamps again.
+/// The scene a frame was rendered from, with its light turned as it was for the render:
+/// what shades the frame's Sun lamps again, turned further by a relight.
 pub struct SunLampTurn {
     scene: Scene,
     settings: ShadingSettings,
-    /// The relight's turn about Z, on top of the render's.
-    turn: [[f64; 3]; 3],
 }
 
 impl SunLampTurn {
-    /// Loads the scene that `header` (of `file`) was rendered from, for a relight turning
-    /// the map by `degrees` more. Fails, naming `file`, where the header does not record
-    /// the render's settings or the scene cannot be read.
-    pub fn new(header: &TransferHeader, file: &Path, degrees: f64) -> Result<Self, SceneError> {
-        let keep = "relight with --sun-lamps keep to leave the Sun lamps as rendered";
+    /// Loads the scene that `header` (of `file`) was rendered from. Fails, naming `file`,
+    /// where the header does not record the render's settings or the scene cannot be read
+    /// (`logsh relight` then offers to keep the lamps: [`offering_to_keep`]).
+    pub fn new(header: &TransferHeader, file: &Path) -> Result<Self, SceneError> {
         let Some(settings) = header.settings else {
             return Err(SceneError::invalid(
                 file,
-                format!("its header does not record the render's settings, which turning its Sun lamps needs: render it again with this logsh, or {keep}"),
+                "its header does not record the render's settings, which turning its Sun lamps needs: render it again with this logsh",
             ));
         };
         let mut scene = Scene::load(&header.scene).map_err(|e| {
             SceneError::invalid(
                 file,
-                format!("its Sun lamps turn with the map and are shaded again from the scene it was rendered from, which cannot be read: {e}; {keep}"),
+                format!("its Sun lamps turn with the map and are shaded again from the scene it was rendered from, which cannot be read: {e}"),
             )
         })?;
         scene.turn_light(header.light_turn)?;
         let settings = ShadingSettings { sharp_lights: false, ..settings };
-        Ok(Self { scene, settings, turn: euler_xyz([0.0, 0.0, degrees.to_radians()]) })
+        Ok(Self { scene, settings })
     }
 
-    /// Shades the Sun lamps of `frame` (read from `file`) again, turned, and moves its
-    /// `lamps_*` layers from the lamps as rendered (`sun_lamps_*`) to them.
-    pub fn apply(&self, frame: &mut TransferFrame, file: &Path) -> Result<(), SceneError> {
+    /// Shades the Sun lamps of `frame` (read from `file`) again, turned `degrees` about Z
+    /// on top of the render's turn, and moves its `lamps_*` layers from the lamps as
+    /// rendered (`sun_lamps_*`) to them.
+    pub fn apply(&self, frame: &mut TransferFrame, file: &Path, degrees: f64) -> Result<(), SceneError> {
+        [frame.lamps_diffuse, frame.lamps_specular] = self.turned_lamps(frame, file, degrees)?;
+        Ok(())
+    }
+
+    /// The `lamps_*` layers (diffuse, specular) of `frame` with its Sun lamps turned
+    /// `degrees` ([`Self::apply`]), the frame left as it is (`logsh view` turns them from
+    /// the rendered ones at each turn of its page).
+    pub fn turned_lamps(
+        &self,
+        frame: &TransferFrame,
+        file: &Path,
+        degrees: f64,
+    ) -> Result<[Vec<[f32; 3]>; 2], SceneError> {
         let mut scene_frame = self.scene.frame(frame.header.frame)?;
         let g = &scene_frame.gbuffer;
         if (g.width, g.height) != (frame.width, frame.height) {
@@ -90,7 +101,7 @@ impl SunLampTurn {
             return Err(SceneError::invalid(
                 file,
                 format!(
-                    "its scene {} has other Sun lamps ({}) than it was rendered with ({}); relight with --sun-lamps keep",
+                    "its scene {} has other Sun lamps ({}) than it was rendered with ({})",
                     self.scene.dir.display(),
                     describe_sun_lamps(&rendered),
                     describe_sun_lamps(&frame.header.sun_lamps)
@@ -98,23 +109,37 @@ impl SunLampTurn {
             ));
         }
         // The kernel of the turned lamps alone, no point lamp.
+        let turn = euler_xyz([0.0, 0.0, degrees.to_radians()]);
         for sun in &mut scene_frame.suns {
-            sun.direction = rotate(&self.turn, sun.direction);
+            sun.direction = rotate(&turn, sun.direction);
         }
         scene_frame.points.clear();
         let plan = FramePlan::new(&self.scene, &scene_frame, &self.settings)
             .map_err(|e| SceneError::invalid(file, format!("its Sun lamps cannot be shaded again: {e}")))?;
-        let TransferFrame { width, lamps_diffuse, lamps_specular, sun_lamps_diffuse, sun_lamps_specular, .. } = frame;
-        let (Some(rendered_diffuse), Some(rendered_specular)) = (sun_lamps_diffuse, sun_lamps_specular) else {
+        let (Some(rendered_diffuse), Some(rendered_specular)) = (&frame.sun_lamps_diffuse, &frame.sun_lamps_specular)
+        else {
             return Err(SceneError::invalid(file, "holds no sun_lamps_diffuse and sun_lamps_specular to turn"));
         };
-        let lamps = Lamps { width: *width, diffuse: lamps_diffuse, specular: lamps_specular };
+        let (mut diffuse, mut specular) = (frame.lamps_diffuse.clone(), frame.lamps_specular.clone());
+        let lamps = Lamps { width: frame.width, diffuse: &mut diffuse, specular: &mut specular };
         let rendered = [rendered_diffuse.as_slice(), rendered_specular.as_slice()];
         match plan.kernel.as_ref() {
             PlannedKernel::F32(kernel) => move_lamps(kernel, &plan, lamps, rendered),
             PlannedKernel::F64(kernel) => move_lamps(kernel, &plan, lamps, rendered),
         }
-        Ok(())
+        Ok([diffuse, specular])
+    }
+}
+
+/// `error`, of [`SunLampTurn::new`] or [`SunLampTurn::apply`], with what `logsh relight`
+/// offers instead.
+pub fn offering_to_keep(error: SceneError) -> SceneError {
+    match error {
+        SceneError::Invalid { file, message } => SceneError::Invalid {
+            file,
+            message: format!("{message}; relight with --sun-lamps keep to leave the Sun lamps as rendered"),
+        },
+        other => other,
     }
 }
 

@@ -11,6 +11,7 @@
 //! | `/frame/<i>/pixels.bin` | the transfer layers, little-endian f32, one array after another |
 //! | `/frame/<i>/maps.bin` | the maps the glossy lookups read ([`RelightLight::sampled_maps`]), then the scene's view transform LUT ([`crate::scene::view`]) |
 //! | `/frame/<i>/cycles.bin` | the Cycles render of the frame as RGB f32, where one is found |
+//! | `/frame/<i>/sun_lamps.bin?rotation=DEG` | the `lamps_diffuse` then `lamps_specular` layers (RGB f32) with the scene's Sun lamps turned `DEG` about Z, shaded again as `logsh relight` shades them ([`SunLampTurn`]) |
 //! | `/bench/start`, `/bench/end?runs=N&what=W` | the page's `?bench=N` mode: the server prints the time between the two |
 //!
 //! The page turns the light about Z by rotating its SH vector (exact, [`crate::sh::rotate_z`])
@@ -21,10 +22,12 @@
 //! step), in full once it is let go. It is the relight of [`crate::transfer::relight`]
 //! but for the maps, read from grids at most [`crate::transfer::SAMPLED_MAP_WIDTH`] wide,
 //! and the open lobes' light, from a 64 x 32 grid: a preview, for which `logsh relight`
-//! gives the frame.
+//! gives the frame. A frame with Sun lamps, once its turn is let go, asks the server for
+//! them turned (`sun_lamps.bin`: the scene shaded again, a Sun lamp's share of a render)
+//! and shows them as rendered until they come, or where the scene cannot be read.
 
 use crate::scene::ViewTransform;
-use crate::transfer::{RelightLight, RelightOptions, TransferFrame};
+use crate::transfer::{RelightLight, RelightOptions, SunLampTurn, TransferFrame};
 use anyhow::{anyhow, Context, Result};
 use std::io::{BufRead, BufReader, Write};
 use std::net::{TcpListener, TcpStream};
@@ -49,6 +52,56 @@ struct FrameBodies {
     pixels: Vec<u8>,
     maps: Vec<u8>,
     cycles: Option<Vec<u8>>,
+    /// What turns the frame's Sun lamps, where it has some.
+    sun_lamps: Option<SunLamps>,
+}
+
+/// A frame's Sun lamps, to be turned at the page's request (`sun_lamps.bin`).
+struct SunLamps {
+    file: PathBuf,
+    /// The frame without its transfer and colour layers: its header and lamps.
+    lamps: TransferFrame,
+    /// The pixels the page shows ([`preview_pixels`]).
+    shown: Vec<usize>,
+    /// The scene loaded to shade them, or why it cannot be (the page then keeps them as
+    /// rendered and says why).
+    turn: std::result::Result<SunLampTurn, String>,
+}
+
+impl SunLamps {
+    /// The lamps of `frame` (read from `file`), its other layers dropped, turned by `turn`.
+    fn new(
+        file: &Path,
+        mut frame: TransferFrame,
+        shown: Vec<usize>,
+        turn: std::result::Result<SunLampTurn, String>,
+    ) -> Self {
+        frame.diffuse = Vec::new();
+        frame.unoccluded = Vec::new();
+        (frame.heightfield, frame.blockers, frame.specular) = (None, None, None);
+        frame.albedo = Vec::new();
+        frame.specular_colour = Vec::new();
+        frame.glossy_lobe = Vec::new();
+        frame.glossy_direction = Vec::new();
+        frame.glossy_weight = Vec::new();
+        Self { file: file.to_path_buf(), lamps: frame, shown, turn }
+    }
+
+    /// `sun_lamps.bin` at `degrees` beyond the render's turn: the lamps' layers at the
+    /// shown pixels, diffuse then specular.
+    fn turned(&self, degrees: f64) -> Response {
+        let turn = match &self.turn {
+            Ok(turn) => turn,
+            Err(why) => return Response::error(409, why),
+        };
+        match turn.turned_lamps(&self.lamps, &self.file, degrees) {
+            Ok(layers) => {
+                let values = layers.iter().flat_map(|layer| at_pixels(&self.shown, layer.as_flattened(), 3));
+                Response::ok("application/octet-stream", values.flat_map(f32::to_le_bytes).collect())
+            }
+            Err(e) => Response::error(500, &e.to_string()),
+        }
+    }
 }
 
 impl Viewer {
@@ -110,7 +163,7 @@ impl Viewer {
         } else if path.starts_with("/bench/") {
             self.bench(path, query)
         } else {
-            self.route(path)
+            self.route(path, query)
         };
         response.send(stream)
     }
@@ -136,7 +189,7 @@ impl Viewer {
         Response::ok("text/plain", Vec::new())
     }
 
-    fn route(&self, path: &str) -> Response {
+    fn route(&self, path: &str, query: &str) -> Response {
         match path {
             "/" | "/index.html" => Response::ok("text/html; charset=utf-8", PAGE.as_bytes().to_vec()),
             "/frames.json" => {
@@ -169,6 +222,17 @@ impl Viewer {
                         Some(rgb) => Response::ok("application/octet-stream", rgb.clone()),
                         None => Response::error(404, "no Cycles render of this frame"),
                     },
+                    "sun_lamps.bin" => {
+                        let rotation = query.split('&').find_map(|pair| pair.strip_prefix("rotation="));
+                        match (&bodies.sun_lamps, rotation.and_then(|r| r.parse::<f64>().ok())) {
+                            (None, _) => Response::error(404, "this frame has no Sun lamp"),
+                            (_, None) => Response::error(400, "sun_lamps.bin takes ?rotation=DEG"),
+                            (_, Some(degrees)) if !degrees.is_finite() => {
+                                Response::error(400, "the rotation is not a number")
+                            }
+                            (Some(lamps), Some(degrees)) => lamps.turned(degrees),
+                        }
+                    }
                     _ => Response::error(404, "no such page"),
                 }
             }
@@ -189,7 +253,15 @@ impl Viewer {
             Some(spec) => ViewTransform::load(spec, Path::new("/"), file)?,
             None => ViewTransform::default(),
         };
-        let bodies = Arc::new(frame_bodies(file, &frame, &light, &view, PREVIEW_SIZE));
+        let turn = (!frame.header.sun_lamps.is_empty())
+            .then(|| SunLampTurn::new(&frame.header, file).map_err(|e| e.to_string()));
+        let kept = turn.as_ref().and_then(|turn| turn.as_ref().err().map(String::as_str));
+        let mut bodies = frame_bodies(file, &frame, &light, &view, PREVIEW_SIZE, kept);
+        if let Some(turn) = turn {
+            let (shown, ..) = preview_pixels(frame.width, frame.height, PREVIEW_SIZE);
+            bodies.sun_lamps = Some(SunLamps::new(file, frame, shown, turn));
+        }
+        let bodies = Arc::new(bodies);
         let mut kept = built();
         kept.retain(|(i, _)| *i != index);
         kept.push((index, bodies.clone()));
@@ -244,13 +316,15 @@ fn at_pixels<'a>(pixels: &'a [usize], values: &'a [f32], components: usize) -> i
     pixels.iter().flat_map(move |&i| values[i * components..(i + 1) * components].iter().copied())
 }
 
-/// The page's bodies of `frame`, within `size` ([`PREVIEW_SIZE`]).
+/// The page's bodies of `frame`, within `size` ([`PREVIEW_SIZE`]); `sun_lamps_kept` says
+/// why the server cannot turn its Sun lamps, where it cannot.
 fn frame_bodies(
     file: &Path,
     frame: &TransferFrame,
     light: &RelightLight,
     view: &ViewTransform,
     size: [usize; 2],
+    sun_lamps_kept: Option<&str>,
 ) -> FrameBodies {
     let (shown, [width, height], stride) = preview_pixels(frame.width, frame.height, size);
     let sampled = |values, components| at_pixels(&shown, values, components);
@@ -316,11 +390,12 @@ fn frame_bodies(
             let [azimuth, elevation] = sun.azimuth_elevation();
             serde_json::json!({"azimuth": azimuth, "elevation": elevation, "share": share})
         }).collect::<Vec<_>>(),
-        // The scene's Sun lamps, which the page keeps as rendered however it turns the map
-        // (`logsh relight` turns them).
+        // The scene's Sun lamps, which the page asks the server for turned
+        // (`sun_lamps.bin`).
         "sun_lamps": frame.header.sun_lamps.len(),
+        "sun_lamps_kept": sun_lamps_kept,
     });
-    FrameBodies { meta: meta.to_string(), pixels, maps, cycles }
+    FrameBodies { meta: meta.to_string(), pixels, maps, cycles, sun_lamps: None }
 }
 
 /// An HTTP response.
@@ -342,8 +417,10 @@ impl Response {
     fn send(self, mut stream: TcpStream) -> Result<()> {
         let reason = match self.status {
             200 => "OK",
+            400 => "Bad Request",
             404 => "Not Found",
             405 => "Method Not Allowed",
+            409 => "Conflict",
             _ => "Internal Server Error",
         };
         write!(
@@ -379,7 +456,7 @@ mod tests {
             (entry["offset"].as_u64().unwrap() as usize, entry["components"].as_u64().unwrap() as usize)
         };
         // 96x54 within 40x30: every third pixel (54 / 30 needs 2, 96 / 40 needs 3), 32x18.
-        let preview = frame_bodies(&file, &transfer, &light, &view, [40, 30]);
+        let preview = frame_bodies(&file, &transfer, &light, &view, [40, 30], None);
         let meta: serde_json::Value = serde_json::from_str(&preview.meta).unwrap();
         assert_eq!((meta["width"].as_u64(), meta["height"].as_u64()), (Some(32), Some(18)));
         assert_eq!(meta["source"], serde_json::json!({"width": 96, "height": 54, "stride": 3}));
@@ -402,7 +479,7 @@ mod tests {
         let (offset, _) = layer(&preview, "alpha");
         assert_eq!(values.len(), offset + 32 * 18, "alpha, the last layer, ends the body");
         // Within the preview's size: whole.
-        let whole = frame_bodies(&file, &transfer, &light, &view, PREVIEW_SIZE);
+        let whole = frame_bodies(&file, &transfer, &light, &view, PREVIEW_SIZE, None);
         let (offset, count) = layer(&whole, "diffuse");
         assert_eq!(&floats(&whole)[offset..offset + 96 * 54 * count], &transfer.diffuse[..]);
     }
