@@ -319,7 +319,7 @@ pub struct RelightArgs {
     /// Frames rendered with `logsh render --transfer`.
     #[arg(required = true)]
     pub frames: Vec<PathBuf>,
-    /// Relight with this environment map (EXR or HDR, oriented as a Blender World's Environment Texture) instead of the rendered light.
+    /// Relight with this environment map (EXR or HDR, oriented as a Blender World's Environment Texture) instead of the rendered light, turned as the render turned its light (its --light-rotation), then by --light-rotation.
     #[arg(long)]
     pub light: Option<PathBuf>,
     /// Turn the light by this many degrees about Z, on top of the rendered turn: the map and, with --sun-lamps turn, the scene's Sun lamps, as `logsh render --light-rotation` turns them. Point lamps stay as rendered.

@@ -400,12 +400,15 @@ pub fn relight(args: &crate::cli::RelightArgs) -> Result<()> {
         return Err(anyhow!("--out {}: exists and is not a directory", args.out.display()));
     }
     if !args.light_rotation.is_finite() {
-        return Err(anyhow!("--light-rotation {} is not a number", args.light_rotation));
+        return Err(anyhow!("--light-rotation {} is not a finite number of degrees", args.light_rotation));
     }
     if args.strength.is_some_and(|s| !(s.is_finite() && s >= 0.0)) {
         return Err(anyhow!("--strength {}: give a finite value >= 0", args.strength.unwrap_or_default()));
     }
-    let options = RelightOptions { light: args.light.clone(), rotation: args.light_rotation, strength: args.strength };
+    // Whole turns taken out first, exactly (`%` is exact), so that a vast angle turns as
+    // its remainder does.
+    let rotation = args.light_rotation % 360.0;
+    let options = RelightOptions { light: args.light.clone(), rotation, strength: args.strength };
     let mut outputs = Vec::new();
     for file in &args.frames {
         let name = file.file_name().ok_or_else(|| anyhow!("{}: not a file", file.display()))?;
@@ -427,8 +430,7 @@ pub fn relight(args: &crate::cli::RelightArgs) -> Result<()> {
         }
         outputs.push((exr, png, json));
     }
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("cannot create output directory {}", args.out.display()))?;
+    let _out = CreatedDirectory::new(&args.out)?;
     let started = Instant::now();
     let mut light: Option<RelightLight> = None;
     let mut warned = std::collections::HashSet::new();
@@ -563,6 +565,27 @@ fn warn_of_suns_in_sh(
             file.display(),
             describe_sun(&sun, share)
         );
+    }
+}
+
+/// An output directory, created if it is not there; one created for a run that then
+/// wrote nothing into it (its first frame refused) is removed again when this is dropped.
+struct CreatedDirectory<'a>(Option<&'a Path>);
+
+impl<'a> CreatedDirectory<'a> {
+    fn new(dir: &'a Path) -> Result<Self> {
+        let created = !dir.exists();
+        std::fs::create_dir_all(dir).with_context(|| format!("cannot create output directory {}", dir.display()))?;
+        Ok(Self(created.then_some(dir)))
+    }
+}
+
+impl Drop for CreatedDirectory<'_> {
+    fn drop(&mut self) {
+        // Removes an empty directory only.
+        if let Some(dir) = self.0 {
+            let _ = std::fs::remove_dir(dir);
+        }
     }
 }
 

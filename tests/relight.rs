@@ -253,6 +253,16 @@ fn a_swapped_and_scaled_light_relights_as_a_shade_under_it() {
     // And it is not the old light.
     let old = compare(&lit, 0.0, &frame, &shaded.join("render.0001.exr"), "the old light");
     assert!(old > 20.0 * RELIT_TOLERANCE, "the swapped map must change the frame: {old}");
+    // A frame rendered turned 20 deg: the swapped map turns as the rendered light did,
+    // then by --light-rotation, as a render of the scene under it turned as far.
+    run(&[&["render", path(&scene), "--out", path(&transfer), "--transfer", "--light-rotation", "20"], &args[..]]
+        .concat());
+    let swapped = ["--light", path(&map), "--strength", "3", "--light-rotation", "10"];
+    run(&[&["relight", path(&frame), "--out", path(&relit)], &swapped[..]].concat());
+    let turned = dir.path().join("turned");
+    run(&[&["render", path(&lit), "--out", path(&turned), "--light-rotation", "30"], &args[..]].concat());
+    let worst = compare(&lit, 30.0, &relit.join("render.0001.exr"), &turned.join("render.0001.exr"), "swapped, turned");
+    assert!(worst <= RELIT_TOLERANCE, "swapped map on a turned frame: relit differs from shaded by {worst}");
 }
 
 #[test]
@@ -291,7 +301,8 @@ fn lamps_stay_as_rendered_while_the_environment_turns() {
 /// as rendered and turned, and equals `logsh render --light-rotation` within the target.
 /// With `--sun-lamps keep` the lamp stays as rendered, and the relight says so; unturned,
 /// it says nothing. The header records the lamp as rendered (after the render's own turn)
-/// and the render's settings; without its scene a turning relight is refused, the scene
+/// and the render's settings; with its scene edited since the render (the lamp's
+/// strength, a blocker) or gone, a turning relight is refused, the scene and what changed
 /// named, and `keep` still relights.
 #[test]
 fn a_sun_lamp_turns_with_the_map_or_stays_as_rendered() {
@@ -304,7 +315,7 @@ fn a_sun_lamp_turns_with_the_map_or_stays_as_rendered() {
         {"type": "sun", "direction": direction, "angle": 1.0, "strength": 3.0, "color": [1.0, 0.9, 0.8]},
         {"type": "point", "position": [1.0, -2.0, 3.0], "radius": 0.3, "power": 2000.0, "color": [1.0, 0.8, 0.6], "soft_falloff": true},
     ]);
-    support::sharp::load_with_lights(&scene, lights).unwrap();
+    support::sharp::load_with_lights(&scene, lights.clone()).unwrap();
     let transfer = dir.path().join("transfer");
     let common = ["--frames", "1", "--sharp-lights", "off", "--progress", "none", "--device", "cpu"];
     let render = ["render", path(&scene), "--out", path(&transfer), "--transfer", "--light-rotation", "20"];
@@ -343,6 +354,33 @@ fn a_sun_lamp_turns_with_the_map_or_stays_as_rendered() {
     assert!(worst > 10.0 * RELIT_TOLERANCE, "the render's turned Sun lamp must differ: {worst}");
     let (_, quiet) = relight(&["--strength", "2"], "scaled");
     assert!(!quiet.contains("Sun lamp"), "{quiet}");
+    assert!(header.sun_lamp_inputs.is_some(), "what the lamp was shaded from is recorded");
+
+    // The scene edited since the render: the lamp's strength, then a blocker moved.
+    let refused = dir.path().join("refused");
+    let turning = ["relight", path(&frame), "--out", path(&refused), "--light-rotation", "60"];
+    let mut stronger = lights.clone();
+    stronger[0]["strength"] = serde_json::json!(5.0);
+    support::sharp::load_with_lights(&scene, stronger).unwrap();
+    assert_fails_naming(&turning, &["render.0001.exr", path(&scene), "its Sun lamps' light", "--sun-lamps keep"]);
+    support::sharp::load_with_lights(&scene, lights.clone()).unwrap();
+    relight(&["--light-rotation", "60"], "restored");
+    let blockers = scene.join("blockers.0001.json");
+    let original = std::fs::read_to_string(&blockers).unwrap();
+    let mut moved: serde_json::Value = serde_json::from_str(&original).unwrap();
+    moved["spheres"][0]["radius"] = serde_json::json!(moved["spheres"][0]["radius"].as_f64().unwrap() * 1.5);
+    std::fs::write(&blockers, moved.to_string()).unwrap();
+    assert_fails_naming(&turning, &["render.0001.exr", "the frame's blockers", "--sun-lamps keep"]);
+    relight(&["--light-rotation", "60", "--sun-lamps", "keep"], "kept after the edit");
+    std::fs::write(&blockers, original).unwrap();
+    // A vast angle turns as its remainder: 1e20 deg is 280 deg and some whole turns.
+    let [vast, remainder] =
+        ["1e20", "280"].map(|turn| std::fs::read(relight(&["--light-rotation", turn], turn).0).unwrap());
+    assert!(vast == remainder, "relit 1e20 deg and 280 deg differ");
+    let gbuffer = scene.join("gbuffer.0001.exr");
+    std::fs::rename(&gbuffer, scene.join("gbuffer.moved")).unwrap();
+    assert_fails_naming(&turning, &["render.0001.exr", "gbuffer.0001.exr", "--sun-lamps keep"]);
+    std::fs::rename(scene.join("gbuffer.moved"), &gbuffer).unwrap();
 
     // The scene moved away (its map copied out first, to relight with): turning is
     // refused with the scene named, keeping still relights.
@@ -385,6 +423,13 @@ fn a_sun_lamp_under_a_constant_light_turns_on_from_the_rendered_turn() {
         let worst = compare(&scene, turn, &relit, &shaded, &what);
         assert!(worst <= RELIT_TOLERANCE, "{what}: relit differs from shaded by {worst}");
     }
+    // A vast angle turns the lamp as its remainder does: 1e20 deg is 280 deg and whole turns.
+    let [vast, remainder] = ["1e20", "280"].map(|turn| {
+        let out = shaded.join(turn);
+        run(&[&["render", path(&scene), "--out", path(&out), "--light-rotation", turn], &common[..]].concat());
+        std::fs::read(out.join("render.0001.exr")).unwrap()
+    });
+    assert!(vast == remainder, "rendered 1e20 deg and 280 deg differ");
 }
 
 /// Water that mirrors a Sun lamp shows it in `lamps_specular`; turned with the map, the
@@ -488,12 +533,22 @@ fn bad_relight_inputs_are_refused_with_the_file_named() {
         &["render.0001.exr", "--transfer"],
     );
     assert_fails_naming(&["relight", path(&dir.path().join("missing.exr")), "--out", o], &["missing.exr"]);
+    assert!(!out.exists(), "a refused relight leaves no output directory of its own behind");
     assert_fails_naming(
         &["relight", path(&frame), "--light", path(&dir.path().join("nosky.exr")), "--out", o],
         &["nosky.exr"],
     );
     assert_fails_naming(&["relight", path(&frame), "--strength", "-1", "--out", o], &["--strength"]);
     assert_fails_naming(&["relight", path(&frame), "--light-rotation", "NaN", "--out", o], &["--light-rotation"]);
+    // The map it was rendered with gone: the frame, the map and `--light` named.
+    let sky = scene.join("sky.exr");
+    std::fs::rename(&sky, scene.join("sky.moved")).unwrap();
+    assert_fails_naming(
+        &["relight", path(&frame), "--strength", "2", "--out", o],
+        &["render.0001.exr", "sky.exr", "--light MAP"],
+    );
+    std::fs::rename(scene.join("sky.moved"), &sky).unwrap();
+
     // Never written over an input: the frame itself, relit into its own directory.
     let before = std::fs::read(&frame).unwrap();
     assert_fails_naming(&["relight", path(&frame), "--out", path(&transfer)], &["over an input"]);

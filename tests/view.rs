@@ -349,6 +349,9 @@ fn the_page_relights_in_a_headless_browser() {
     println!("screenshot at 75 degrees: {to_turned:.2} levels from logsh relight at 75, {to_unturned:.2} from 0");
     assert!(to_turned < 1.5, "the page's relight differs from logsh relight by {to_turned:.2} levels");
     assert!(to_unturned > 3.0 * to_turned, "the page must turn the light: {to_unturned:.2} from the unturned frame");
+    // A turn past the slider's range is the same turn.
+    let around = screenshot(&browser, &url("rotation=435"), 480, 400, &dir.path().join("around.png"));
+    assert_eq!(difference(&around, &preview("75")), to_turned, "435 degrees are 75");
     // The wipe shows Cycles' render on the right.
     let wiped = screenshot(&browser, &url("rotation=75&wipe=0"), 480, 400, &dir.path().join("wiped.png"));
     assert!(difference(&wiped, &preview("75")) > to_turned + 1.0, "the wipe must show the Cycles render");

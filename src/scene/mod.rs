@@ -734,8 +734,14 @@ impl Scene {
     /// degrees`. An `sh` light cannot be turned this way and is refused.
     pub fn turn_light(&mut self, degrees: f64) -> Result<(), SceneError> {
         if !degrees.is_finite() {
-            return Err(SceneError::invalid(&self.scene_file(), format!("--light-rotation {degrees} is not a number")));
+            return Err(SceneError::invalid(
+                &self.scene_file(),
+                format!("--light-rotation {degrees} is not a finite number of degrees"),
+            ));
         }
+        // Whole turns taken out first, exactly (`%` is exact), so that a vast angle turns
+        // as its remainder does.
+        let degrees = degrees % 360.0;
         if degrees == 0.0 {
             return Ok(());
         }

@@ -91,6 +91,12 @@ pub struct TransferHeader {
     /// recorded.
     #[serde(default)]
     pub settings: Option<crate::shade::ShadingSettings>,
+    /// What the frame's Sun lamps were shaded from, which a relight that turns them
+    /// checks the scene against ([`super::SunLampInputs`]). `None` in frames without a
+    /// Sun lamp and in files written before it was recorded (there only the lamps'
+    /// directions are checked).
+    #[serde(default)]
+    pub sun_lamp_inputs: Option<super::SunLampInputs>,
     /// The scene's colour management for previews, its LUT file absolute
     /// ([`crate::scene::view`]).
     pub view: Option<crate::scene::ViewSpec>,

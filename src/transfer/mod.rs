@@ -46,7 +46,7 @@
 //! frame was shaded with (map file, strength, Mapping rotation, turn), the window, whether
 //! the ground plane hides the lower hemisphere, the prefiltered lobes, the scene's Sun
 //! lamps as rendered (azimuth and elevation), the render's `--light-rotation` and its
-//! shading settings.
+//! shading settings, and checksums of what the Sun lamps were shaded from.
 //!
 //! # Size
 //!
@@ -78,7 +78,7 @@ pub use layers::{PixelTransfer, PrefilteredLobe, ShConvention, TransferFrame, Tr
 pub(crate) use relight::relit_dunes;
 pub use relight::{relight, relight_reusing, RelightLight, RelightOptions, SampledMap, SAMPLED_MAP_WIDTH};
 pub use shade::shade_with_transfer;
-pub use sun_lamps::{describe_sun_lamps, offering_to_keep, SunLampTurn};
+pub use sun_lamps::{describe_sun_lamps, offering_to_keep, SunLampInputs, SunLampTurn};
 
 /// `glossy_lobe` codes (module doc).
 pub mod lobe_code {

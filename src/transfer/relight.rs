@@ -20,7 +20,8 @@ use std::path::{Path, PathBuf};
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct RelightOptions {
     /// Another environment map (`--light`), in place of the rendered light; its Mapping
-    /// rotation is none.
+    /// rotation is none, and it is turned as the rendered light was (the render's
+    /// `--light-rotation`, which turned the scene's Sun lamps too), then by `rotation`.
     pub light: Option<PathBuf>,
     /// Degrees about Z on top of the rendered turn (`--light-rotation`).
     pub rotation: f64,
@@ -37,7 +38,7 @@ impl RelightOptions {
                 file: file.clone(),
                 strength: self.strength.unwrap_or(1.0),
                 rotation: [0.0; 3],
-                turn: self.rotation,
+                turn: header.light_turn + self.rotation,
             },
             (None, LightSource::Environment { file, strength, rotation, turn }) => LightSource::Environment {
                 file: file.clone(),
@@ -105,7 +106,13 @@ impl RelightLight {
                 if !strength.is_finite() || *strength < 0.0 {
                     return Err(SceneError::invalid(file, format!("strength {strength} is not a finite value >= 0")));
                 }
-                let map = EnvironmentMap::read(file)?;
+                let map = EnvironmentMap::read(file).map_err(|e| match &header.light {
+                    LightSource::Environment { file: rendered, .. } if rendered == file => SceneError::invalid(
+                        frame,
+                        format!("the map it was rendered with cannot be read ({e}); relight with --light MAP to light it with another"),
+                    ),
+                    _ => e,
+                })?;
                 Light::Environment { map: map.oriented(*rotation, *turn), strength: *strength }
             }
             LightSource::Constant(c) => Light::Constant(*c),

@@ -2,6 +2,7 @@
 //! transfer layers (`logsh render --transfer`).
 
 use super::layers::{PixelTransfer, PrefilteredLobe, ShConvention, TransferFrame, TransferHeader};
+use super::SunLampInputs;
 use crate::scene::{Frame, Scene};
 use crate::sh::Real;
 use crate::shade::compositing::{assemble, Pixel, ShadedPasses};
@@ -51,6 +52,7 @@ fn header<T: Real>(kernel: &ShadingKernel<T>, plan: &FramePlan) -> TransferHeade
         sun_lamps: plan.frame.suns.iter().map(|sun| sun.azimuth_elevation()).collect(),
         light_turn: plan.scene.light_turn,
         settings: Some(plan.settings),
+        sun_lamp_inputs: (!plan.frame.suns.is_empty()).then(|| SunLampInputs::of(plan.scene, plan.frame)),
         view: plan.scene.view.absolute_spec(&plan.scene.dir),
     }
 }

@@ -18,11 +18,12 @@
 
 use super::layers::{TransferFrame, TransferHeader};
 use crate::scene::light::{euler_xyz, rotate};
-use crate::scene::{Scene, SceneError, SunLight};
+use crate::scene::{Frame, Scene, SceneError, SunLight};
 use crate::sh::Real;
 use crate::shade::frame::suns_along;
 use crate::shade::{pixel_source, FramePlan, Occluders, PixelSource, PlannedKernel, ShadingKernel, ShadingSettings};
 use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
 use std::path::Path;
 
 /// How far a scene's Sun lamp may be from the header's record of it, in degrees of
@@ -75,7 +76,13 @@ impl SunLampTurn {
         file: &Path,
         degrees: f64,
     ) -> Result<[Vec<[f32; 3]>; 2], SceneError> {
-        let mut scene_frame = self.scene.frame(frame.header.frame)?;
+        let number = frame.header.frame;
+        let mut scene_frame = self.scene.frame(number).map_err(|e| {
+            SceneError::invalid(
+                file,
+                format!("its Sun lamps are shaded again from frame {number} of its scene, which cannot be read: {e}"),
+            )
+        })?;
         let g = &scene_frame.gbuffer;
         if (g.width, g.height) != (frame.width, frame.height) {
             return Err(SceneError::invalid(
@@ -108,6 +115,20 @@ impl SunLampTurn {
                 ),
             ));
         }
+        if let Some(recorded) = frame.header.sun_lamp_inputs {
+            let changed = SunLampInputs::of(&self.scene, &scene_frame).differing(&recorded);
+            if !changed.is_empty() {
+                return Err(SceneError::invalid(
+                    file,
+                    format!(
+                        "its scene {} has changed since frame {} was rendered from it ({}), and its Sun lamps would be shaded again from that",
+                        self.scene.dir.display(),
+                        frame.header.frame,
+                        changed.join(", ")
+                    ),
+                ));
+            }
+        }
         // The kernel of the turned lamps alone, no point lamp.
         let turn = euler_xyz([0.0, 0.0, degrees.to_radians()]);
         for sun in &mut scene_frame.suns {
@@ -128,6 +149,97 @@ impl SunLampTurn {
             PlannedKernel::F64(kernel) => move_lamps(kernel, &plan, lamps, rendered),
         }
         Ok([diffuse, specular])
+    }
+}
+
+/// What a frame's Sun lamps are shaded from, each part as a CRC-32 of its values: the
+/// transfer header records them at render time, and a relight that turns the lamps
+/// shades them again only from a scene whose parts are the same (an edited lamp, material
+/// or G-buffer would light the frame otherwise than its other layers do).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct SunLampInputs {
+    /// The Sun lamps as rendered: direction, angle, strength and colour.
+    pub lamps: u32,
+    /// The scene's material table.
+    pub materials: u32,
+    /// The frame's camera and G-buffer, and the water's reflection G-buffer.
+    pub gbuffer: u32,
+    /// The frame's blocker spheres.
+    pub blockers: u32,
+    /// The height map, its extent, and the ground plane.
+    pub terrain: u32,
+}
+
+impl SunLampInputs {
+    /// The parts of `frame` of `scene`, its Sun lamps as they are (after any turn).
+    pub fn of(scene: &Scene, frame: &Frame) -> Self {
+        let sum = |parts: &[&[u8]]| {
+            let mut hasher = crc32fast::Hasher::new();
+            for part in parts {
+                hasher.update(&part.len().to_le_bytes());
+                hasher.update(part);
+            }
+            hasher.finalize()
+        };
+        let f64s = |values: &[f64]| values.iter().flat_map(|v| v.to_le_bytes()).collect::<Vec<u8>>();
+        let lamps: Vec<f64> = frame
+            .suns
+            .iter()
+            .flat_map(|sun| {
+                let [r, g, b] = sun.color.map(f64::from);
+                [sun.direction[0], sun.direction[1], sun.direction[2], sun.half_angle, f64::from(sun.strength), r, g, b]
+            })
+            .collect();
+        // Debug prints every float so that it reads back exactly.
+        let materials = format!("{:?}", scene.materials);
+        let camera = frame.camera.as_ref().map(|camera| {
+            let mut values = camera.position.to_vec();
+            values.extend(camera.matrix_world.as_flattened());
+            values.extend([camera.lens_mm, camera.sensor_width_mm]);
+            f64s(&values)
+        });
+        let mut gbuffer: Vec<&[u8]> = camera.as_deref().into_iter().collect();
+        for g in [Some(&frame.gbuffer), frame.reflection.as_ref()].into_iter().flatten() {
+            let object = g.object.as_deref().unwrap_or(&[]);
+            gbuffer.extend([
+                bytemuck::cast_slice(&g.position),
+                bytemuck::cast_slice(&g.normal),
+                bytemuck::cast_slice(&g.material),
+                bytemuck::cast_slice(object),
+            ]);
+        }
+        let spheres: Vec<f64> = frame
+            .blockers
+            .iter()
+            .flat_map(|s| [s.center[0], s.center[1], s.center[2], s.radius, f64::from(s.object)])
+            .collect();
+        let ground = f64s(&frame.ground.into_iter().collect::<Vec<_>>());
+        let terrain = match &frame.height_map {
+            Some(map) => {
+                let extent = f64s(&[map.min[0], map.min[1], map.max[0], map.max[1], map.columns as f64]);
+                sum(&[bytemuck::cast_slice(&map.heights), &extent, &ground])
+            }
+            None => sum(&[&ground]),
+        };
+        Self {
+            lamps: sum(&[&f64s(&lamps)]),
+            materials: sum(&[materials.as_bytes()]),
+            gbuffer: sum(&gbuffer),
+            blockers: sum(&[&f64s(&spheres)]),
+            terrain,
+        }
+    }
+
+    /// The parts in which `self` and `other` differ, named for a message.
+    fn differing(&self, other: &Self) -> Vec<&'static str> {
+        let parts = [
+            (self.lamps != other.lamps, "its Sun lamps' light"),
+            (self.materials != other.materials, "its materials"),
+            (self.gbuffer != other.gbuffer, "the frame's G-buffer or camera"),
+            (self.blockers != other.blockers, "the frame's blockers"),
+            (self.terrain != other.terrain, "its height field or ground"),
+        ];
+        parts.into_iter().filter(|(differs, _)| *differs).map(|(_, name)| name).collect()
     }
 }
 
