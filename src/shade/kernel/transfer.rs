@@ -17,6 +17,7 @@ use super::{
 use crate::scene::Material;
 use crate::sh::{coefficient_count, Real, MAX_COEFFICIENTS};
 use crate::shade::glossy::SharpLobe;
+use crate::shade::sun::SunDisk;
 
 /// How a point's glossy term reads the light.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -112,13 +113,19 @@ impl<T: Real> ShadingKernel<T> {
         }
     }
 
-    /// The light of the kernel's suns at `point`, diffuse and specular, as
+    /// The light of `suns` at `point`, diffuse and specular, as
     /// [`shade_transfer`](Self::shade_transfer) shades the scene's Sun lamps into
     /// `lamps_*` (here without the point lamps); `None` where `shade_transfer` is dark (a
-    /// material the kernel does not know).
-    pub fn sun_lamps_lit(&self, occluders: Occluders, point: &SurfacePoint) -> Option<([f32; 3], [f32; 3])> {
+    /// material the kernel does not know). `suns` need not be the kernel's: a relight
+    /// turns the lamps it was built with.
+    pub fn sun_lamps_lit(
+        &self,
+        occluders: Occluders,
+        point: &SurfacePoint,
+        suns: &[SunDisk],
+    ) -> Option<([f32; 3], [f32; 3])> {
         let lobes = self.materials.get(&point.material)?;
-        Some(self.sharp_lit(occluders, point, &lobes.material, &self.suns, false).0)
+        Some(self.sharp_lit(occluders, point, &lobes.material, suns, false).0)
     }
 
     /// The transfer of `point` (module doc), and its passes as
