@@ -535,6 +535,10 @@ fn bad_relight_inputs_are_refused_with_the_file_named() {
     assert_fails_naming(&["relight", path(&dir.path().join("missing.exr")), "--out", o], &["missing.exr"]);
     assert!(!out.exists(), "a refused relight leaves no output directory of its own behind");
     assert_fails_naming(
+        &["relight", path(&transfer.join("render.0001.png")), "--out", o],
+        &["render.0001.png", "not an OpenEXR file"],
+    );
+    assert_fails_naming(
         &["relight", path(&frame), "--light", path(&dir.path().join("nosky.exr")), "--out", o],
         &["nosky.exr"],
     );

@@ -151,6 +151,10 @@ pub(crate) fn exr_error(file: &Path, what: &str, e: exr::error::Error) -> SceneE
         exr::error::Error::Io(io) if io.kind() == std::io::ErrorKind::UnexpectedEof => truncated(&io.to_string()),
         exr::error::Error::Io(io) => SceneError::io(file, what, io),
         exr::error::Error::Invalid(why) if why.contains("missing bytes") => truncated(&why),
+        exr::error::Error::Invalid(why) if why.contains("file identifier missing") => SceneError::Image {
+            file: file.to_path_buf(),
+            message: "not an OpenEXR file (it does not begin as one)".to_string(),
+        },
         other => SceneError::Image { file: file.to_path_buf(), message: other.to_string() },
     }
 }

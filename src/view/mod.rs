@@ -14,6 +14,11 @@
 //! | `/frame/<i>/sun_lamps.bin?rotation=DEG` | the `lamps_diffuse` then `lamps_specular` layers (RGB f32) with the scene's Sun lamps turned `DEG` about Z, shaded again as `logsh relight` shades them ([`SunLampTurn`]) |
 //! | `/bench/start`, `/bench/end?runs=N&what=W` | the page's `?bench=N` mode: the server prints the time between the two |
 //!
+//! The page takes its sliders' first values from its address: `?frame=I` (the index in
+//! `frames.json`, from 0), `rotation=DEG` (any angle, wrapped into -180 to 180),
+//! `strength=S`, `exposure=EV`, `wipe=F` (0 to 1), `pass=NAME`; `bench=N` and `proxy=N`
+//! time it (below).
+//!
 //! The page turns the light about Z by rotating its SH vector (exact, [`crate::sh::rotate_z`])
 //! and reading the maps along `Rz(-turn) R`; strength scales the environment, exposure
 //! adds to the scene's, and the image is shown through the scene's view transform as the
