@@ -6,17 +6,23 @@ a compositor can drive (docs/compositing.md).
         [--strength S] [--write OUT.exr] [--save OUT.blend]
     blender -b -P blender_scripts/relight_compositor.py -- FRAME.exr LIGHT.json ...
 
-LIGHT.json is what `logsh relight` writes beside each frame (`<frame>.light.json`: the
-light's SH vector, RGB per coefficient). The node tree computes, per colour channel,
+`python` is one with Blender's `bpy` module (`pip install bpy`), or run it in Blender as
+the second line does. LIGHT.json is what `logsh relight` writes beside each frame
+(`<frame>.light.json`: the light's SH vector, RGB per coefficient). The node tree
+computes, per colour channel,
 
     diffuse = albedo * max(strength * sum_k sh_diffuse_k L'_k, 0) + lamps_diffuse
 
-with `L'` the light turned by `rotation` degrees about Z: band by band the `(m, -m)` pair
-turns by `m` times the angle (`rotate_z` in src/sh/rotation.rs), which the tree does with
-cosine and sine nodes, so the turn stays live. With `--write`, the composite is rendered
-to OUT.exr (linear, float); with `--save`, the .blend is kept. The glossy term reads a
-prefiltered map along each pixel's mirror direction, which a compositor cannot: take it
-from `logsh relight`.
+with `L'` the light turned by `rotation` degrees about Z from where the frame was
+rendered: band by band the `(m, -m)` pair turns by `m` times the angle (`rotate_z` in
+src/sh/rotation.rs), which the tree does with cosine and sine nodes, so the turn stays
+live. A LIGHT.json from a relight that turned the map (`--light-rotation`) is turned back
+first, as its `source` and the frame's `logshTransfer` header say, so `--rotation 40`
+means what `logsh relight --light-rotation 40` means whichever relight wrote it. The
+frame's Sun lamps stay in `lamps_diffuse` as rendered (`logsh relight` turns them), and
+the script says so. With `--write`, the composite is rendered to OUT.exr (linear,
+float); with `--save`, the .blend is kept. The glossy term reads a prefiltered map along
+each pixel's mirror direction, which a compositor cannot: take it from `logsh relight`.
 """
 import argparse
 import json
@@ -36,10 +42,12 @@ def arguments():
     return parser.parse_args(argv)
 
 
-def exr_size(path):
-    """Width and height of an EXR's data window, from its header."""
+def exr_header(path):
+    """Width and height of an EXR's data window and its `logshTransfer` header (a dict),
+    from the first part's header."""
     import struct
 
+    size, transfer = None, None
     with open(path, "rb") as f:
         if f.read(4) != b"\x76\x2f\x31\x01":
             fail(f"{path}: not an EXR file")
@@ -47,13 +55,58 @@ def exr_size(path):
         while True:
             name = b"".join(iter(lambda: f.read(1), b"\x00"))
             if not name:
-                fail(f"{path}: no dataWindow in its header")
+                break
             b"".join(iter(lambda: f.read(1), b"\x00"))
-            (size,) = struct.unpack("<i", f.read(4))
-            value = f.read(size)
+            (length,) = struct.unpack("<i", f.read(4))
+            value = f.read(length)
             if name == b"dataWindow":
                 x0, y0, x1, y1 = struct.unpack("<4i", value)
-                return x1 - x0 + 1, y1 - y0 + 1
+                size = (x1 - x0 + 1, y1 - y0 + 1)
+            elif name == b"logshTransfer":
+                transfer = json.loads(value.decode("utf-8"))
+    if size is None:
+        fail(f"{path}: no dataWindow in its header")
+    if transfer is None:
+        fail(f"{path}: no logshTransfer header: render the frame with logsh render --transfer")
+    return size, transfer
+
+
+def rotate_z(sh, order, degrees):
+    """The RGB SH vector `sh` turned `degrees` about Z (src/sh/rotation.rs's rotate_z)."""
+    import math
+
+    out = [list(c) for c in sh]
+    for l in range(1, order):
+        for m in range(1, l + 1):
+            c, s = math.cos(m * math.radians(degrees)), math.sin(m * math.radians(degrees))
+            plus, minus = l * l + l + m, l * l + l - m
+            for k in range(3):
+                a, b = out[plus][k], out[minus][k]
+                out[plus][k], out[minus][k] = a * c - b * s, a * s + b * c
+    return out
+
+
+def from_frame(light, transfer, light_path, frame_path):
+    """`light` turned back to where the frame was rendered: the turn of its map beyond
+    the render's, which `logsh relight --light-rotation` gave it (an environment's
+    `source` records its turn; a constant light has none to undo)."""
+    order = transfer["sh"]["order"]
+    if light["order"] != order:
+        fail(f"{light_path} is a light of order {light['order']} but {frame_path} was rendered at order {order}: "
+             "take the light.json of a relight of this frame")
+    source = light.get("source", {})
+    turn = source.get("environment", {}).get("turn") if isinstance(source, dict) else None
+    rendered = transfer.get("light_turn", transfer["light"].get("environment", {}).get("turn", 0.0))
+    beyond = (turn - rendered) if turn is not None else 0.0
+    if beyond != 0.0:
+        print(f"note: {light_path} is the light turned {beyond:g} deg from the frame's "
+              f"(logsh relight --light-rotation); turned back, so --rotation starts from the frame's light")
+        light = dict(light, sh=rotate_z(light["sh"], order, -beyond))
+    if transfer.get("sun_lamps"):
+        count = len(transfer["sun_lamps"])
+        print(f"note: {frame_path} has {count} Sun lamp{'s' if count > 1 else ''}, which stay as rendered in "
+              "lamps_diffuse here (logsh relight --light-rotation turns them)")
+    return light
 
 
 def fail(message):
@@ -164,12 +217,14 @@ def main():
         fail(f"{args.light}: not a light written by logsh relight (an order and order^2 RGB coefficients)")
     if args.write and os.path.abspath(args.write) in (os.path.abspath(args.frame), os.path.abspath(args.light)):
         fail(f"{args.write}: would be written over an input")
+    size, transfer = exr_header(args.frame)
+    light = from_frame(light, transfer, args.light, args.frame)
     bpy.ops.wm.read_factory_settings(use_empty=True)
     scene = bpy.context.scene
     image = bpy.data.images.load(os.path.abspath(args.frame))
     build(scene, image, light, args.rotation, args.strength)
     # The composite has the scene's resolution: the frame's.
-    scene.render.resolution_x, scene.render.resolution_y = exr_size(args.frame)
+    scene.render.resolution_x, scene.render.resolution_y = size
     scene.render.resolution_percentage = 100
     if args.write:
         scene.render.engine = "BLENDER_WORKBENCH"

@@ -304,7 +304,7 @@ pub struct RenderArgs {
     /// Progress report: a bar on a terminal, plain lines in logs, JSON lines on stdout for scripts.
     #[arg(long, value_enum, default_value_t = crate::render::progress::ProgressMode::Auto)]
     pub progress: crate::render::progress::ProgressMode,
-    /// Storage of the colour passes and visibility terms (P and N are always float).
+    /// Storage of the colour passes and visibility terms (P and N are always float); half stops at 65504 rather than infinity.
     #[arg(long, value_enum, default_value_t = SampleType::Half)]
     pub colour_type: SampleType,
     /// Also write each pixel's transfer vectors (diffuse and specular, order^2 coefficients each), its colours and glossy lookup as EXR layers, for `logsh relight` and `logsh view`; shaded on the CPU.
@@ -334,7 +334,7 @@ pub struct RelightArgs {
     /// Output directory; receives each frame's relit EXR (beauty and passes, same file name), a PNG preview and <frame>.light.json (the light's SH vector).
     #[arg(long)]
     pub out: PathBuf,
-    /// Storage of the colour passes and visibility terms (P and N are always float).
+    /// Storage of the colour passes and visibility terms (P and N are always float); half stops at 65504 rather than infinity.
     #[arg(long, value_enum, default_value_t = SampleType::Half)]
     pub colour_type: SampleType,
 }

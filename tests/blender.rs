@@ -574,7 +574,9 @@ fn primitives_fit_their_volume() {
 /// `blender_scripts/relight_compositor.py` builds the diffuse relight in Blender's
 /// compositor from a frame's transfer layers; turned 40 degrees there, it equals `logsh
 /// relight --light-rotation 40`'s diffuse pass (which turns the map by resampling it, the
-/// compositor the SH vector exactly).
+/// compositor the SH vector exactly), whether its light.json comes from an unturned
+/// relight or from that turned one (which it turns back first, as docs/compositing.md's
+/// example has it). A light of another order than the frame's is refused, both named.
 #[test]
 fn the_compositor_recipe_relights_the_diffuse_pass() {
     let Some(python) = bpy_python() else { return };
@@ -591,16 +593,15 @@ fn the_compositor_recipe_relights_the_diffuse_pass() {
     let (unturned, turned) = (dir.path().join("relit0"), dir.path().join("relit40"));
     logsh(&["relight", &path(&frame), "--out", &path(&unturned)]);
     logsh(&["relight", &path(&frame), "--light-rotation", "40", "--out", &path(&turned)]);
-    let composite = dir.path().join("composite.exr");
-    let light = unturned.join("render.0001.light.json");
-    let args =
-        [frame.as_path(), light.as_path(), Path::new("--rotation"), Path::new("40"), Path::new("--write"), &composite];
-    assert_ok(&run_python(&python, "blender_scripts/relight_compositor.py", &args), "relight_compositor.py");
-    let (blender, relit, before) = (
-        raw_channels(&composite),
-        raw_channels(&turned.join("render.0001.exr")),
-        raw_channels(&unturned.join("render.0001.exr")),
-    );
+    let composite = |light: &Path, name: &str| {
+        let out = dir.path().join(name);
+        let args = [frame.as_path(), light, Path::new("--rotation"), Path::new("40"), Path::new("--write"), &out];
+        assert_ok(&run_python(&python, "blender_scripts/relight_compositor.py", &args), "relight_compositor.py");
+        raw_channels(&out)
+    };
+    let blender = composite(&unturned.join("render.0001.light.json"), "composite.exr");
+    let (relit, before) =
+        (raw_channels(&turned.join("render.0001.exr")), raw_channels(&unturned.join("render.0001.exr")));
     let floor = logsh::compare::unoccluded_value(&Scene::load(&cones).unwrap().frame(1).unwrap()).unwrap();
     let mean = |a: &HashMap<String, Vec<f32>>, b: &HashMap<String, Vec<f32>>| {
         let mut sum = 0.0;
@@ -616,6 +617,19 @@ fn the_compositor_recipe_relights_the_diffuse_pass() {
     );
     assert!(to_turned <= 2e-3, "the compositor's relight differs from logsh relight by {to_turned}");
     assert!(to_unturned > 3.0 * to_turned, "the compositor must turn the light: {to_unturned}");
+    // From the turned relight's light.json, turned back first: the same composite.
+    let from_turned = composite(&turned.join("render.0001.light.json"), "from_turned.exr");
+    let again = mean(&from_turned, &relit);
+    println!("from the light.json of the relight at 40 degrees: {again:.5} from logsh relight at 40");
+    assert!(again <= 2e-3, "from the turned light, the compositor's relight differs by {again}");
+    // A light of order 3 on a frame of order 4: refused, both named.
+    let low = dir.path().join("order3");
+    logsh(&["render", &path(&cones), "--frames", "1", "--order", "3", "--out", &path(&low), "--transfer"]);
+    logsh(&["relight", &path(&low.join("render.0001.exr")), "--out", &path(&low.join("relit"))]);
+    let light = low.join("relit/render.0001.light.json");
+    let output = run_python(&python, "blender_scripts/relight_compositor.py", &[frame.as_path(), light.as_path()]);
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(!output.status.success() && stderr.contains("order 3") && stderr.contains("order 4"), "{stderr}");
 }
 
 /// The PNG preview applies the scene's exposure and view transform as Blender shows them:

@@ -543,6 +543,12 @@ fn bad_relight_inputs_are_refused_with_the_file_named() {
         &["nosky.exr"],
     );
     assert_fails_naming(&["relight", path(&frame), "--strength", "-1", "--out", o], &["--strength"]);
+    // A vast strength: its half floats stop at the largest finite one, not infinity.
+    let vast = dir.path().join("vast");
+    run(&["relight", path(&frame), "--strength", "1e30", "--out", path(&vast)]);
+    let written = channels(&vast.join("render.0001.exr"));
+    assert!(written.values().flatten().all(|v| v.is_finite()), "a non-finite value written");
+    assert_eq!(written["R"].iter().fold(0.0f32, |a, &b| a.max(b)), 65504.0, "the beauty's halves saturate");
     assert_fails_naming(&["relight", path(&frame), "--light-rotation", "NaN", "--out", o], &["--light-rotation"]);
     // The map it was rendered with gone: the frame, the map and `--light` named.
     let sky = scene.join("sky.exr");

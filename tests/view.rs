@@ -166,7 +166,11 @@ fn the_server_answers_the_page_and_a_frames_data() {
     let (_, cycles) = server.request("GET", "/frame/0/cycles.bin");
     assert_eq!(cycles.len(), 4 * 3 * 240 * 135);
     assert_eq!(server.request("GET", "/frame/0/sun_lamps.bin?rotation=75").0, 404, "no Sun lamp to turn");
-    assert_eq!(server.request("GET", "/frame/1/meta.json").0, 404);
+    let (status, body) = server.request("GET", "/frame/1/meta.json");
+    assert_eq!(
+        (status, String::from_utf8_lossy(&body).as_ref()),
+        (404, "no frame 1: the directory has 1, numbered 0 to 0")
+    );
     assert_eq!(server.request("GET", "/../Cargo.toml").0, 404);
     assert_eq!(server.request("POST", "/").0, 405);
     server.stop();

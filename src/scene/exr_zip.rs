@@ -104,6 +104,13 @@ fn block_bytes(channels: &[&OutputChannel], width: usize, rows: std::ops::Range<
             }
             match channel.sample_type {
                 SampleType::Half => {
+                    // A value beyond half's range is written as its largest finite value
+                    // (65504), not as infinity: a file stays finite, and a transfer layer
+                    // reads back (a relight refuses infinities). `--colour-type float`
+                    // keeps such values.
+                    for v in &mut line {
+                        *v = v.clamp(-f32::from(f16::MAX), f32::from(f16::MAX));
+                    }
                     halves.convert_from_f32_slice(&line);
                     raw.extend(halves.iter().flat_map(|h| h.to_le_bytes()));
                 }

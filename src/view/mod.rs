@@ -213,7 +213,11 @@ impl Viewer {
                     return Response::error(404, "no such page");
                 };
                 let Some(index) = index.parse::<usize>().ok().filter(|&i| i < self.frames.len()) else {
-                    return Response::error(404, "no such frame");
+                    let count = self.frames.len();
+                    return Response::error(
+                        404,
+                        &format!("no frame {index}: the directory has {count}, numbered 0 to {}", count - 1),
+                    );
                 };
                 let bodies = match self.bodies(index) {
                     Ok(bodies) => bodies,
