@@ -90,6 +90,9 @@ pub fn write(
     })
 }
 
+/// The largest finite half float.
+const HALF_MAX: f32 = 65504.0;
+
 /// The uncompressed bytes of the scan lines `rows`: each line its channels in order.
 fn block_bytes(channels: &[&OutputChannel], width: usize, rows: std::ops::Range<usize>) -> Vec<u8> {
     let bytes_per_pixel: usize = channels.iter().map(|c| sample_bytes(c.sample_type)).sum();
@@ -109,7 +112,7 @@ fn block_bytes(channels: &[&OutputChannel], width: usize, rows: std::ops::Range<
                     // reads back (a relight refuses infinities). `--colour-type float`
                     // keeps such values.
                     for v in &mut line {
-                        *v = v.clamp(-f32::from(f16::MAX), f32::from(f16::MAX));
+                        *v = v.clamp(-HALF_MAX, HALF_MAX);
                     }
                     halves.convert_from_f32_slice(&line);
                     raw.extend(halves.iter().flat_map(|h| h.to_le_bytes()));
@@ -495,6 +498,11 @@ fn unpredict_sse2(bytes: &mut [u8], running: u8) -> u8 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn half_max_is_the_largest_finite_half() {
+        assert_eq!(HALF_MAX, f32::from(f16::MAX));
+    }
 
     /// OpenEXR's decoder (`ImfZip.cpp`), one byte at a time: the predictor undone, then
     /// the halves interleaved.
