@@ -405,10 +405,7 @@ pub fn relight(args: &crate::cli::RelightArgs) -> Result<()> {
     if args.strength.is_some_and(|s| !(s.is_finite() && s >= 0.0)) {
         return Err(anyhow!("--strength {}: give a finite value >= 0", args.strength.unwrap_or_default()));
     }
-    // Whole turns taken out first, exactly (`%` is exact), so that a vast angle turns as
-    // its remainder does.
-    let rotation = args.light_rotation % 360.0;
-    let options = RelightOptions { light: args.light.clone(), rotation, strength: args.strength };
+    let options = RelightOptions { light: args.light.clone(), rotation: args.light_rotation, strength: args.strength };
     let mut outputs = Vec::new();
     for file in &args.frames {
         let name = file.file_name().ok_or_else(|| anyhow!("{}: not a file", file.display()))?;

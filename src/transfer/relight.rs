@@ -33,18 +33,21 @@ pub struct RelightOptions {
 impl RelightOptions {
     /// The light to relight with, from the one `header` records.
     pub fn source(&self, header: &TransferHeader) -> LightSource {
+        // Whole turns taken out first, exactly (`%` is exact), so that a vast angle turns
+        // as its remainder does.
+        let degrees = self.rotation % 360.0;
         match (&self.light, &header.light) {
             (Some(file), _) => LightSource::Environment {
                 file: file.clone(),
                 strength: self.strength.unwrap_or(1.0),
                 rotation: [0.0; 3],
-                turn: header.light_turn + self.rotation,
+                turn: header.light_turn + degrees,
             },
             (None, LightSource::Environment { file, strength, rotation, turn }) => LightSource::Environment {
                 file: file.clone(),
                 strength: self.strength.unwrap_or(*strength),
                 rotation: *rotation,
-                turn: turn + self.rotation,
+                turn: turn + degrees,
             },
             (None, LightSource::Constant(c)) => LightSource::Constant(c.map(|v| v * self.strength.unwrap_or(1.0))),
             (None, LightSource::Sh(v)) => {
@@ -53,7 +56,7 @@ impl RelightOptions {
                 let mut turned: Vec<[f64; 3]> = v.iter().map(|c| c.map(|x| x * scale)).collect();
                 for k in 0..3 {
                     let mut channel: Vec<f64> = turned.iter().map(|c| c[k]).collect();
-                    rotate_z(order, &mut channel, self.rotation.to_radians());
+                    rotate_z(order, &mut channel, degrees.to_radians());
                     for (c, x) in turned.iter_mut().zip(channel) {
                         c[k] = x;
                     }

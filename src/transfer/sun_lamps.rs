@@ -148,7 +148,8 @@ impl SunLampTurn {
         scene_frame.points.clear();
         let plan = FramePlan::new(&self.scene, &scene_frame, &self.settings)
             .map_err(|e| SceneError::invalid(file, format!("its Sun lamps cannot be shaded again: {e}")))?;
-        let turn = euler_xyz([0.0, 0.0, degrees.to_radians()]);
+        // Whole turns taken out first, exactly, as for the map ([`super::RelightOptions::source`]).
+        let turn = euler_xyz([0.0, 0.0, (degrees % 360.0).to_radians()]);
         let turned: Vec<SunLight> =
             scene_frame.suns.iter().map(|sun| SunLight { direction: rotate(&turn, sun.direction), ..*sun }).collect();
         let (Some(rendered_diffuse), Some(rendered_specular)) = (&frame.sun_lamps_diffuse, &frame.sun_lamps_specular)
