@@ -78,6 +78,12 @@
 //! samples (bicubic B-spline) or 4 (bilinear). Building costs about `4 n^2`
 //! multiply-adds per level and `gamma(k) = 1/(1 - 2^(-2/k))` times the map's memory
 //! (3.4x at k = 4, SN08 Section 4); 92 ms for a 1025^2 map on 2 cores.
+//!
+//! A march with the maximum over steps stops once no later step can raise its horizon
+//! (each level's highest and lowest samples bound its reads), and one along a single
+//! azimuth, a sun's, once the horizon is known to lie below or above the disk
+//! ([`HorizonPyramid::horizon_against`]); it then reads only the receiver terms of the
+//! levels its steps reached. The horizons are the same to the bit.
 
 use super::{bilinear, HeightField, HeightFieldError};
 use rayon::prelude::*;
@@ -115,6 +121,43 @@ pub enum ScaleMax {
     /// Maximum over the steps only, one arctangent per direction (SN08 Section 6's
     /// speed-up for environment lighting).
     Steps,
+}
+
+/// The elevations between which a horizon matters, as the tangents of their bounds
+/// ([`HorizonPyramid::horizon_against`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ElevationBand {
+    /// A horizon at or below the elevation of this tangent is all one.
+    pub below: f64,
+    /// A horizon at or above the elevation of this tangent is all one.
+    pub above: f64,
+}
+
+impl ElevationBand {
+    /// Every elevation matters: the march finds the horizon.
+    pub const ALL: ElevationBand = ElevationBand { below: f64::NEG_INFINITY, above: f64::INFINITY };
+}
+
+/// Where a horizon lies against an [`ElevationBand`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum HorizonAgainst {
+    /// At or below the band's foot.
+    Below,
+    /// At or above its top.
+    Above,
+    /// This elevation, in radians (it may lie outside the band).
+    At(f64),
+}
+
+impl HorizonAgainst {
+    /// The elevation of a horizon marched against [`ElevationBand::ALL`].
+    fn elevation(self) -> f64 {
+        match self {
+            HorizonAgainst::At(horizon) => horizon,
+            HorizonAgainst::Below => 0.0,
+            HorizonAgainst::Above => std::f64::consts::FRAC_PI_2,
+        }
+    }
 }
 
 /// Knobs of the horizon search. Defaults are chosen by measurement: see the table
@@ -376,6 +419,34 @@ pub struct MarchStep {
     pub level: usize,
 }
 
+/// The margin of a march's step ceilings ([`HorizonPyramid::step_ceiling`]), relative
+/// to the terms it bounds.
+const CEILING_MARGIN: f64 = 1e-9;
+
+/// A receiver's terms `f_L(x)` (SN08 Eq. 2), one per level, read as a march first needs
+/// them and kept for the azimuths after it: a march that stops early reads few levels.
+struct ReceiverTerms {
+    terms: [f64; MAX_LEVELS],
+    /// Levels `0..read` are read (a march's steps read their levels in order).
+    read: usize,
+}
+
+impl ReceiverTerms {
+    fn new() -> Self {
+        Self { terms: [0.0; MAX_LEVELS], read: 0 }
+    }
+
+    /// The term of `level` of `pyramid` at `(x, y)`, the same point at every call.
+    #[inline]
+    fn term(&mut self, pyramid: &HorizonPyramid, level: usize, x: f64, y: f64) -> f64 {
+        while self.read <= level {
+            self.terms[self.read] = pyramid.sample_level(self.read, x, y);
+            self.read += 1;
+        }
+        self.terms[level]
+    }
+}
+
 /// The multi-resolution pyramid of one height field plus the march tables.
 #[derive(Clone, Debug)]
 pub struct HorizonPyramid {
@@ -386,6 +457,14 @@ pub struct HorizonPyramid {
     /// Per level and axis, grid units per world unit, `(n - 1) / (max - min)` (0 on an axis
     /// with one sample): a level read multiplies instead of dividing.
     grid_scales: Vec<[f64; 2]>,
+    /// Per level, its lowest and highest samples, between which every read of it lies.
+    peaks: Vec<[f64; 2]>,
+    /// Per step, the first later step of a coarser level (or the step count).
+    level_ends: Vec<usize>,
+    /// Per step `j`, at least the tangent of every step from `j` on from any receiver:
+    /// each step's level's relief (highest less lowest sample) over its distance, the
+    /// largest from `j` on, with [`CEILING_MARGIN`].
+    relief_ceilings: Vec<f64>,
     /// Whether [`Self::horizon_elevations`] marches in AVX2 lanes (`lanes`): decided once,
     /// when the pyramid is built.
     in_lanes: bool,
@@ -431,6 +510,26 @@ impl HorizonPyramid {
                 std::array::from_fn(|a| if n[a] > 1 { (n[a] - 1) as f64 / (max[a] - min[a]) } else { 0.0 })
             })
             .collect();
+        let peaks: Vec<[f64; 2]> = levels
+            .iter()
+            .map(|l| {
+                let heights = l.heights.iter().map(|&h| f64::from(h));
+                heights.fold([f64::INFINITY, f64::NEG_INFINITY], |[low, high], h| [low.min(h), high.max(h)])
+            })
+            .collect();
+        let level_ends = (0..plan.steps.len())
+            .map(|j| {
+                (j..plan.steps.len()).find(|&k| plan.steps[k].level > plan.steps[j].level).unwrap_or(plan.steps.len())
+            })
+            .collect();
+        let mut relief_ceilings = vec![f64::NEG_INFINITY; plan.steps.len()];
+        let mut highest = f64::NEG_INFINITY;
+        for (step, ceiling) in plan.steps.iter().zip(relief_ceilings.iter_mut()).rev() {
+            let [low, high] = peaks[step.level];
+            let tangent = (high - low + CEILING_MARGIN * (high.abs() + low.abs())) * step.inv_distance;
+            highest = highest.max(tangent + CEILING_MARGIN * tangent.abs());
+            *ceiling = highest;
+        }
         #[cfg(target_arch = "x86_64")]
         let in_lanes = settings.reconstruction == LevelReconstruction::BicubicBSpline
             && settings.scale_max == ScaleMax::Steps
@@ -462,6 +561,9 @@ impl HorizonPyramid {
             max,
             levels,
             grid_scales,
+            peaks,
+            level_ends,
+            relief_ceilings,
             in_lanes,
             padded,
             lane_steps,
@@ -575,14 +677,10 @@ impl HorizonPyramid {
         let above = (p[2] - self.height_at(x, y)).max(0.0);
 
         // Receiver term f_L(x) of SN08 Eq. 2, once per level, shared by all azimuths.
-        let used_levels = self.steps.last().map_or(1, |s| s.level + 1);
-        let mut receiver = [0.0f64; MAX_LEVELS];
-        for (level, r) in receiver.iter_mut().enumerate().take(used_levels) {
-            *r = self.sample_level(level, x, y);
-        }
-
+        let mut receiver = ReceiverTerms::new();
         for (k, out_k) in out.iter_mut().enumerate() {
-            *out_k = self.march(x, y, above, &receiver, self.directions[k], f64::INFINITY);
+            let dir = self.directions[k];
+            *out_k = self.march(x, y, above, &mut receiver, dir, f64::INFINITY, ElevationBand::ALL).elevation();
         }
     }
 
@@ -592,46 +690,99 @@ impl HorizonPyramid {
     /// horizontal distance to a local light, paper 002; infinite for a sun). 0 for a
     /// non-finite `p` or an empty pyramid.
     pub fn horizon_along(&self, p: [f64; 3], dir: [f64; 2], reach: f64) -> f64 {
+        self.horizon_against(p, dir, reach, ElevationBand::ALL).elevation()
+    }
+
+    /// [`Self::horizon_along`], told where it matters: a sun's disk needs the horizon
+    /// only between its lowest and highest directions (below, it hides none of the disk;
+    /// above, all of it), so the march stops once it knows the horizon is outside `band`.
+    pub fn horizon_against(&self, p: [f64; 3], dir: [f64; 2], reach: f64, band: ElevationBand) -> HorizonAgainst {
         if self.steps.is_empty() || !p.iter().chain(&dir).all(|v| v.is_finite()) {
-            return 0.0;
+            return HorizonAgainst::At(0.0);
         }
         let (x, y) = (p[0], p[1]);
         let above = (p[2] - self.height_at(x, y)).max(0.0);
-        let used_levels = self.steps.last().map_or(1, |s| s.level + 1);
-        let mut receiver = [0.0f64; MAX_LEVELS];
-        for (level, r) in receiver.iter_mut().enumerate().take(used_levels) {
-            *r = self.sample_level(level, x, y);
-        }
-        self.march(x, y, above, &receiver, dir, reach)
+        self.march(x, y, above, &mut ReceiverTerms::new(), dir, reach, band)
     }
 
-    /// One azimuth's march from `(x, y)`, `above` the surface, with the receiver term
-    /// per level already sampled, over the steps no farther than `reach`.
-    fn march(&self, x: f64, y: f64, above: f64, receiver: &[f64; MAX_LEVELS], dir: [f64; 2], reach: f64) -> f64 {
-        let mut omega = [0.0f64; MAX_STEPS];
+    /// One azimuth's march from `(x, y)`, `above` the surface, over the steps no farther
+    /// than `reach`, its receiver terms read into `receiver` as the steps need them.
+    ///
+    /// The horizon is `max(atan(t), 0)`, `t` the largest step tangent, so a step whose
+    /// tangent is at most `max(t so far, 0)` leaves it as it is, to the bit: the march
+    /// stops where no step from there on can rise above that ([`Self::step_ceiling`]), or
+    /// above the foot of `band` while `t` is below it, or where `t` passes the band's
+    /// top. The B-spline over scale reads every step.
+    #[allow(clippy::too_many_arguments)]
+    fn march(
+        &self,
+        x: f64,
+        y: f64,
+        above: f64,
+        receiver: &mut ReceiverTerms,
+        dir: [f64; 2],
+        reach: f64,
+        band: ElevationBand,
+    ) -> HorizonAgainst {
         let t_far = self.far_distance(x, y, dir);
-        let mut max_tan = f64::NEG_INFINITY;
-        let mut m = 0;
-        for step in &self.steps {
-            if step.distance > reach {
-                break;
-            }
+        // The steps marched: those within `reach`, up to the first past `t_far`.
+        let within = self.steps.partition_point(|step| step.distance <= reach);
+        let marched = self.steps[..within].iter().position(|step| step.distance > t_far).map_or(within, |j| j + 1);
+        let steps = &self.steps[..marched];
+        let tangent = |step: &MarchStep, start: f64| {
             let q = self.sample_level(step.level, x + step.distance * dir[0], y + step.distance * dir[1]);
-            let tangent = (q - receiver[step.level] - above) * step.inv_distance;
-            match self.settings.scale_max {
-                ScaleMax::BSpline => omega[m] = tangent.atan(),
-                ScaleMax::Steps => max_tan = max_tan.max(tangent),
-            }
-            m += 1;
-            if step.distance > t_far {
-                break;
-            }
-        }
-        let horizon = match self.settings.scale_max {
-            ScaleMax::Steps => max_tan.atan(),
-            ScaleMax::BSpline => bspline_max(&omega[..m]),
+            (q - start - above) * step.inv_distance
         };
-        horizon.max(0.0)
+        let horizon = match self.settings.scale_max {
+            ScaleMax::Steps => {
+                let mut max_tan = f64::NEG_INFINITY;
+                for (j, step) in steps.iter().enumerate() {
+                    let start = receiver.term(self, step.level, x, y);
+                    let (known, ceiling) = (max_tan.max(0.0), self.step_ceiling(j, marched, start, above));
+                    if known >= ceiling {
+                        break;
+                    }
+                    if known <= band.below && ceiling <= band.below {
+                        return HorizonAgainst::Below;
+                    }
+                    max_tan = max_tan.max(tangent(step, start));
+                    if max_tan >= band.above {
+                        return HorizonAgainst::Above;
+                    }
+                }
+                max_tan.atan()
+            }
+            ScaleMax::BSpline => {
+                let mut omega = [0.0f64; MAX_STEPS];
+                for (omega, step) in omega.iter_mut().zip(steps) {
+                    *omega = tangent(step, receiver.term(self, step.level, x, y)).atan();
+                }
+                bspline_max(&omega[..marched])
+            }
+        };
+        HorizonAgainst::At(horizon.max(0.0))
+    }
+
+    /// At least the tangent of every step from `j` to `marched`, the receiver's term at
+    /// step `j`'s level `start`, `above` the surface. A level's read lies between its
+    /// lowest and highest samples (bilinear and B-spline weights are nonnegative and sum
+    /// to 1): the steps of `j`'s level rise at most to its highest sample above `start`,
+    /// those of later levels at most their level's relief ([`Self::relief_ceilings`]),
+    /// whose receiver terms need not be read. The margin, 1e-9 of the terms, is far above
+    /// f64's rounding of a read's few dozen operations.
+    fn step_ceiling(&self, j: usize, marched: usize, start: f64, above: f64) -> f64 {
+        let step = &self.steps[j];
+        let level_end = self.level_ends[j].min(marched);
+        let peak = self.peaks[step.level][1];
+        let rise = peak - start - above + CEILING_MARGIN * (peak.abs() + start.abs() + above);
+        // rise / d over the level's steps: largest at the nearest if positive, else the farthest.
+        let inv_distance = if rise > 0.0 { step.inv_distance } else { self.steps[level_end - 1].inv_distance };
+        let tangent = rise * inv_distance;
+        let this_level = tangent + CEILING_MARGIN * tangent.abs();
+        match self.relief_ceilings.get(level_end) {
+            Some(&later) if level_end < marched => this_level.max(later),
+            _ => this_level,
+        }
     }
 
     /// Ray distance after which the clamped footprint of `(x, y) + t dir` stops
@@ -1291,6 +1442,75 @@ fn tent_weights(n_in: usize, n_out: usize) -> Vec<Vec<(usize, f64)>> {
 mod tests {
     use super::*;
 
+    /// One azimuth's march reading every step and every receiver term: what the march's
+    /// early stops must give, to the bit.
+    fn march_every_step(pyramid: &HorizonPyramid, p: [f64; 3], dir: [f64; 2], reach: f64) -> f64 {
+        let (x, y) = (p[0], p[1]);
+        let above = (p[2] - pyramid.height_at(x, y)).max(0.0);
+        let t_far = pyramid.far_distance(x, y, dir);
+        let mut max_tan = f64::NEG_INFINITY;
+        for step in &pyramid.steps {
+            if step.distance > reach {
+                break;
+            }
+            let q = pyramid.sample_level(step.level, x + step.distance * dir[0], y + step.distance * dir[1]);
+            let start = pyramid.sample_level(step.level, x, y);
+            max_tan = max_tan.max((q - start - above) * step.inv_distance);
+            if step.distance > t_far {
+                break;
+            }
+        }
+        max_tan.atan().max(0.0)
+    }
+
+    /// The march's stops (no later step can raise the horizon; it is known to lie below or
+    /// above a band) change no horizon: points on, above and outside a bumpy field, 24
+    /// azimuths, three reaches, four bands, each kind of stop seen.
+    #[test]
+    fn the_march_stops_early_without_changing_a_bit() {
+        let (columns, rows) = (45, 31);
+        let heights: Vec<f32> = (0..columns * rows)
+            .map(|i| {
+                let (x, y) = ((i % columns) as f32, (i / columns) as f32);
+                1.5 * (0.6 * x).sin() * (0.35 * y).cos() + 0.8 * (0.21 * x + 0.13 * y).sin() + 50.0
+            })
+            .collect();
+        let field = HeightField::new(heights, columns, rows, [-4.0, -3.0], [5.0, 3.0]).unwrap();
+        let pyramid = HorizonPyramid::new(&field, HorizonSettings::default()).unwrap();
+        let bands = [(0.0, 0.05), (0.1, 0.3), (0.5, 0.9), (1.0, 1.4)];
+        let (mut below, mut above, mut at) = (0, 0, 0);
+        for i in 0..60 {
+            let (x, y) = (-4.5 + 0.17 * i as f64, -3.2 + 0.61 * ((i * 7) % 11) as f64);
+            let p = [x, y, field.height_at(x, y) + [0.0, 0.02, 0.3, 1.5][i % 4]];
+            for k in 0..24 {
+                let dir = (k as f64 * std::f64::consts::TAU / 24.0).sin_cos();
+                let dir = [dir.1, dir.0];
+                for reach in [f64::INFINITY, 2.0, 0.3] {
+                    let every = march_every_step(&pyramid, p, dir, reach);
+                    assert_eq!(pyramid.horizon_along(p, dir, reach).to_bits(), every.to_bits(), "{p:?} {dir:?}");
+                    for (low, high) in bands {
+                        let band = ElevationBand { below: f64::tan(low), above: f64::tan(high) };
+                        match pyramid.horizon_against(p, dir, reach, band) {
+                            HorizonAgainst::Below => {
+                                assert!(every <= low + 1e-12, "{every} is above {low}");
+                                below += 1;
+                            }
+                            HorizonAgainst::Above => {
+                                assert!(every >= high - 1e-12, "{every} is below {high}");
+                                above += 1;
+                            }
+                            HorizonAgainst::At(horizon) => {
+                                assert_eq!(horizon.to_bits(), every.to_bits());
+                                at += 1;
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        assert!(below > 0 && above > 0 && at > 0, "below {below}, above {above}, at {at}");
+    }
+
     /// The eight-lane march (where the processor has AVX2) against the f64 march, azimuth by
     /// azimuth: points on and above a bumpy field, outside it, near its edges, and on a map
     /// with one row, at 16 and at 13 azimuths (a part-filled last chunk).
@@ -1328,14 +1548,12 @@ mod tests {
                     let p = [x, y, field.height_at(x, y) + lift];
                     let mut got = vec![0.0; directions];
                     pyramid.horizon_elevations(p, &mut got);
-                    let used = pyramid.steps.last().map_or(1, |s| s.level + 1);
-                    let mut receiver = [0.0f64; MAX_LEVELS];
-                    for (level, r) in receiver.iter_mut().enumerate().take(used) {
-                        *r = pyramid.sample_level(level, x, y);
-                    }
+                    let mut receiver = ReceiverTerms::new();
                     let above = (p[2] - pyramid.height_at(x, y)).max(0.0);
                     for (k, g) in got.iter().enumerate() {
-                        let expected = pyramid.march(x, y, above, &receiver, pyramid.directions[k], f64::INFINITY);
+                        let expected = pyramid
+                            .march(x, y, above, &mut receiver, pyramid.directions[k], f64::INFINITY, ElevationBand::ALL)
+                            .elevation();
                         worst = worst.max((g - expected).abs());
                     }
                 }

@@ -36,10 +36,10 @@
 //! the centre.
 
 use super::blocker_tree::BlockerTree;
-use crate::heightfield::HorizonPyramid;
+use crate::heightfield::{ElevationBand, HorizonAgainst, HorizonPyramid};
 use crate::scene::camera::{dot, frame_around};
 use crate::scene::{PointLight, SunLight};
-use std::f64::consts::PI;
+use std::f64::consts::{FRAC_PI_2, PI};
 
 /// Directions per sun disk (per pixel, each tested against the disk's occluders).
 pub const DISK_DIRECTIONS: usize = 32;
@@ -151,6 +151,30 @@ impl DiskDirections {
         }
     }
 
+    /// The elevations between which the height field's horizon changes the disk's
+    /// visibility: a horizon a patch below its lowest direction covers none of any
+    /// direction's patch, one a patch above its highest covers all of every one (the
+    /// share of the module doc, clamped), to the bit; 1e-9 rad of margin each way, far
+    /// above the rounding of the share's terms. The march stops once it knows the horizon
+    /// is outside ([`HorizonPyramid::horizon_against`]). With the march's other stop (no
+    /// later step can raise the horizon), a relight of the Sun-lamp scene (320x180, a Sun
+    /// lamp at 50 deg over a height field) turns its lamps in 75 to 95 ms a frame against
+    /// 130 to 162 ms, the same bits (2 cores, alternating runs).
+    fn horizon_band(&self) -> ElevationBand {
+        const MARGIN: f64 = 1e-9;
+        let (lowest, highest) = self
+            .directions
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(low, high), w| (low.min(w[2]), high.max(w[2])));
+        let patch = self.patch.min(1.0).asin();
+        let foot = lowest.clamp(-1.0, 1.0).asin() - patch - MARGIN;
+        let top = highest.clamp(-1.0, 1.0).asin() + patch + MARGIN;
+        ElevationBand {
+            below: if foot > 0.0 { foot.tan() } else { f64::NEG_INFINITY },
+            above: if top < FRAC_PI_2 - MARGIN { top.tan() } else { f64::INFINITY },
+        }
+    }
+
     /// Visibility of each direction, in `[0, 1]`, at `p` with unit normal `n` on object
     /// `object` (module doc), against the blockers, the height field and `planes`.
     pub fn visibility(
@@ -180,14 +204,24 @@ impl DiskDirections {
                 *b = b.max(covered(-w[2]));
             }
         }
+        // Hidden wholly (a sun behind the surface): no occluder can hide more.
+        if blocked.iter().all(|&b| b >= 1.0) {
+            return [0.0; DISK_DIRECTIONS];
+        }
         if let (Some(pyramid), Some(azimuth)) = (horizons, self.azimuth) {
             let horizontal_reach = self.reach * self.axis[0].hypot(self.axis[1]);
-            let (sin_h, cos_h) = pyramid.horizon_along(p, azimuth, horizontal_reach).sin_cos();
-            for (b, w) in blocked.iter_mut().zip(&self.directions) {
-                // x = horizon - elevation, in [-pi/2, pi]: past pi/2 it is deep inside.
-                let (sin_e, cos_e) = (w[2], (1.0 - w[2] * w[2]).max(0.0).sqrt());
-                let cos_x = cos_h * cos_e + sin_h * sin_e;
-                *b = b.max(if cos_x < 0.0 { 1.0 } else { covered(sin_h * cos_e - cos_h * sin_e) });
+            match pyramid.horizon_against(p, azimuth, horizontal_reach, self.horizon_band()) {
+                HorizonAgainst::Below => {}
+                HorizonAgainst::Above => return [0.0; DISK_DIRECTIONS],
+                HorizonAgainst::At(horizon) => {
+                    let (sin_h, cos_h) = horizon.sin_cos();
+                    for (b, w) in blocked.iter_mut().zip(&self.directions) {
+                        // x = horizon - elevation, in [-pi/2, pi]: past pi/2 it is deep inside.
+                        let (sin_e, cos_e) = (w[2], (1.0 - w[2] * w[2]).max(0.0).sqrt());
+                        let cos_x = cos_h * cos_e + sin_h * sin_e;
+                        *b = b.max(if cos_x < 0.0 { 1.0 } else { covered(sin_h * cos_e - cos_h * sin_e) });
+                    }
+                }
             }
         }
         if let Some(tree) = blockers {
@@ -339,6 +373,59 @@ pub fn cap_overlap(a: f64, b: f64, gamma: f64) -> f64 {
 mod tests {
     use super::*;
     use crate::scene::Sphere;
+
+    /// A disk's visibility over a height field, the march told the disk's band of
+    /// elevations ([`DiskDirections::horizon_band`]), equals it from the whole horizon to
+    /// the bit: disks from 2 to 85 deg high, 0.3 to 20 deg wide, on and above a bumpy
+    /// field, tilted normals included.
+    #[test]
+    fn the_horizon_band_changes_no_visibility() {
+        use crate::heightfield::{HeightField, HorizonSettings};
+        let (columns, rows) = (41, 41);
+        let heights: Vec<f32> = (0..columns * rows)
+            .map(|i| {
+                let (x, y) = ((i % columns) as f32, (i / columns) as f32);
+                0.9 * (0.5 * x).sin() * (0.4 * y).cos() + 0.3 * (0.17 * x - 0.23 * y).sin()
+            })
+            .collect();
+        let field = HeightField::new(heights, columns, rows, [-5.0, -5.0], [5.0, 5.0]).unwrap();
+        let pyramid = HorizonPyramid::new(&field, HorizonSettings::default()).unwrap();
+        let (mut partly, mut hidden, mut open) = (0, 0, 0);
+        for elevation in [2.0f64, 8.0, 20.0, 45.0, 85.0] {
+            for half_angle in [0.3f64, 3.0, 20.0] {
+                for azimuth in [10.0f64, 130.0, 250.0] {
+                    let (e, a) = (elevation.to_radians(), azimuth.to_radians());
+                    let axis = [e.cos() * a.cos(), e.cos() * a.sin(), e.sin()];
+                    let disk = DiskDirections::new(axis, half_angle.to_radians());
+                    for i in 0..25 {
+                        let (x, y) = (-4.0 + 0.33 * i as f64, 3.0 - 0.27 * i as f64);
+                        let p = [x, y, field.height_at(x, y) + [0.0, 0.05, 0.6][i % 3]];
+                        let n = [[0.0, 0.0, 1.0], [0.3, -0.2, 0.933_380_951_166_24]][i % 2];
+                        let got =
+                            disk.visibility(None, Some(&pyramid), Planes { tangent: true, ground: None }, p, n, 0);
+                        // The module doc's shares with the whole horizon.
+                        let two_patches = 2.0 * disk.patch;
+                        let covered = |sin_x: f64| (0.5 + sin_x / two_patches).clamp(0.0, 1.0);
+                        let horizon = pyramid.horizon_along(p, disk.azimuth.unwrap(), f64::INFINITY);
+                        let (sin_h, cos_h) = horizon.sin_cos();
+                        let expected = disk.directions.map(|w| {
+                            let (sin_e, cos_e) = (w[2], (1.0 - w[2] * w[2]).max(0.0).sqrt());
+                            let cos_x = cos_h * cos_e + sin_h * sin_e;
+                            let by_horizon = if cos_x < 0.0 { 1.0 } else { covered(sin_h * cos_e - cos_h * sin_e) };
+                            1.0 - covered(-dot(n, w)).max(by_horizon)
+                        });
+                        assert_eq!(got.map(f64::to_bits), expected.map(f64::to_bits), "{axis:?} {p:?}");
+                        match (got.iter().all(|&v| v == 0.0), got.iter().all(|&v| v == 1.0)) {
+                            (true, _) => hidden += 1,
+                            (_, true) => open += 1,
+                            _ => partly += 1,
+                        }
+                    }
+                }
+            }
+        }
+        assert!(partly > 0 && hidden > 0 && open > 0, "partly {partly}, hidden {hidden}, open {open}");
+    }
 
     /// The closed form against counting a fine uniform spiral of directions over cap `a`.
     #[test]
