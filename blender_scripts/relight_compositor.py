@@ -215,8 +215,14 @@ def main():
         light = json.load(f)
     if not isinstance(light.get("order"), int) or len(light.get("sh", [])) != light["order"] ** 2:
         fail(f"{args.light}: not a light written by logsh relight (an order and order^2 RGB coefficients)")
-    if args.write and os.path.abspath(args.write) in (os.path.abspath(args.frame), os.path.abspath(args.light)):
-        fail(f"{args.write}: would be written over an input")
+    inputs = (os.path.realpath(args.frame), os.path.realpath(args.light))
+    for output in (args.write, args.save):
+        if output and os.path.realpath(output) in inputs:
+            fail(f"{output}: would be written over an input")
+    if args.save and not args.save.lower().endswith(".blend"):
+        fail(f"--save {args.save}: give a .blend file name")
+    if args.write and args.save and os.path.realpath(args.write) == os.path.realpath(args.save):
+        fail(f"{args.write}: --write and --save name the same file")
     size, transfer = exr_header(args.frame)
     light = from_frame(light, transfer, args.light, args.frame)
     bpy.ops.wm.read_factory_settings(use_empty=True)

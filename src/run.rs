@@ -406,20 +406,38 @@ pub fn relight(args: &crate::cli::RelightArgs) -> Result<()> {
         return Err(anyhow!("--strength {}: give a finite value >= 0", args.strength.unwrap_or_default()));
     }
     let options = RelightOptions { light: args.light.clone(), rotation: args.light_rotation, strength: args.strength };
+    let canonical = |p: &Path| std::fs::canonicalize(p).ok();
+    // What the relight reads: the frames, --light, and by each frame's header the map it
+    // was lit with, its view's LUT, and the files of the scene it was rendered from (its
+    // Sun lamps are shaded again from them). A frame whose header does not read is
+    // refused when it is read.
+    let mut inputs: Vec<std::path::PathBuf> =
+        args.frames.iter().chain(&args.light).filter_map(|p| canonical(p)).collect();
+    let mut scenes: Vec<crate::scene::Scene> = Vec::new();
+    for file in &args.frames {
+        let Ok(header) = TransferFrame::read_header(file) else { continue };
+        if let crate::scene::LightSource::Environment { file, .. } = &header.light {
+            inputs.extend(canonical(file));
+        }
+        if let Some(lut) = header.view.as_ref().and_then(|view| view.lut.as_ref()) {
+            inputs.extend(canonical(&lut.file));
+        }
+        if !scenes.iter().any(|scene| scene.dir == header.scene) {
+            scenes.extend(crate::scene::Scene::load_description(&header.scene).ok());
+        }
+    }
     let mut outputs = Vec::new();
     for file in &args.frames {
         let name = file.file_name().ok_or_else(|| anyhow!("{}: not a file", file.display()))?;
         let exr = args.out.join(name).with_extension("exr");
         let png = exr.with_extension("png");
         let json = exr.with_extension("light.json");
-        let canonical = |p: &Path| std::fs::canonicalize(p).ok();
         for output in [&exr, &png, &json] {
-            if let Some(existing) = canonical(output) {
-                if args.frames.iter().any(|f| canonical(f).as_ref() == Some(&existing))
-                    || args.light.as_deref().and_then(canonical).as_ref() == Some(&existing)
-                {
-                    return Err(anyhow!("{}: would be written over an input; choose another --out", output.display()));
-                }
+            if canonical(output).is_some_and(|existing| inputs.contains(&existing)) {
+                return Err(anyhow!("{}: would be written over an input; choose another --out", output.display()));
+            }
+            for scene in &scenes {
+                scene.check_output_path(output).map_err(|e| anyhow!("{e}; choose another --out"))?;
             }
         }
         if outputs.iter().any(|(e, _, _): &(std::path::PathBuf, _, _)| *e == exr) {
@@ -431,7 +449,7 @@ pub fn relight(args: &crate::cli::RelightArgs) -> Result<()> {
     let started = Instant::now();
     let mut light: Option<RelightLight> = None;
     let mut warned = std::collections::HashSet::new();
-    let mut warned_of_lamps = false;
+    let (mut warned_of_lamps, mut warned_of_view) = (false, false);
     let mut sun_lamps = None;
     let (mut building, mut relighting, mut shading_lamps) = (0.0, 0.0, 0.0);
     // The next frame is read and the last one written while a frame is relit (one each:
@@ -473,6 +491,7 @@ pub fn relight(args: &crate::cli::RelightArgs) -> Result<()> {
                 let t = Instant::now();
                 let source = options.source(&frame.header);
                 if !light.as_ref().is_some_and(|l| l.serves(&source, &frame.header)) {
+                    options.check_rendered_map(&frame.header, file)?;
                     let built = RelightLight::new(source, &frame.header, file)?;
                     warn_of_suns_in_sh(&built, &mut warned);
                     light = Some(built);
@@ -502,10 +521,11 @@ pub fn relight(args: &crate::cli::RelightArgs) -> Result<()> {
                 let t = Instant::now();
                 let passes = relight_reusing(&frame, light, spare_passes_rx.try_recv().ok());
                 relighting += t.elapsed().as_secs_f64();
-                let view = match &frame.header.view {
-                    Some(spec) => ViewTransform::load(spec, Path::new("/"), file)?,
-                    None => ViewTransform::default(),
-                };
+                let (view, standard) = ViewTransform::for_preview(frame.header.view.as_ref(), file);
+                if let Some(reason) = standard.filter(|_| !warned_of_view) {
+                    warned_of_view = true;
+                    eprintln!("relight: {}: {reason}", file.display());
+                }
                 let description = serde_json::to_string_pretty(&light.description())? + "\n";
                 if write_tx.send((k, passes, view, description)).is_err() {
                     break;

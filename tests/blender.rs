@@ -630,6 +630,14 @@ fn the_compositor_recipe_relights_the_diffuse_pass() {
     let output = run_python(&python, "blender_scripts/relight_compositor.py", &[frame.as_path(), light.as_path()]);
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert!(!output.status.success() && stderr.contains("order 3") && stderr.contains("order 4"), "{stderr}");
+    // `--save` onto the frame it reads: refused, the frame untouched.
+    let before = std::fs::read(&frame).unwrap();
+    let light = unturned.join("render.0001.light.json");
+    let args = [frame.as_path(), light.as_path(), Path::new("--save"), frame.as_path()];
+    let output = run_python(&python, "blender_scripts/relight_compositor.py", &args);
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(!output.status.success() && stderr.contains("over an input"), "{stderr}");
+    assert_eq!(std::fs::read(&frame).unwrap(), before, "the frame is untouched");
 }
 
 /// The PNG preview applies the scene's exposure and view transform as Blender shows them:

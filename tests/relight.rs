@@ -71,7 +71,11 @@ fn compare(scene: &Path, turn: f64, relit: &Path, shaded: &Path, what: &str) -> 
     let mut scene = Scene::load(scene).unwrap();
     scene.turn_light(turn).unwrap();
     let frame = scene.frame(1).unwrap();
-    let floor = unoccluded_value(&frame).unwrap();
+    // An `sh` light has no map to integrate: its mean radiance, the DC term's.
+    let floor = unoccluded_value(&frame).unwrap_or_else(|| match frame.light.as_ref() {
+        logsh::scene::Light::Sh(v) => v[0].map(|c| c / (2.0 * std::f64::consts::PI.sqrt())),
+        other => panic!("no floor for {other:?}"),
+    });
     let (a, b) = (channels(relit), channels(shaded));
     let surface: Vec<bool> = frame.gbuffer.material.iter().map(|&m| m != 0).collect();
     let mean = |name: &str, unit: f64, only_surface: bool| {
@@ -590,21 +594,43 @@ fn bad_relight_inputs_are_refused_with_the_file_named() {
     assert_fails_naming(&["relight", path(&first), path(&second), "--out", path(&relit)], &["b.exr"]);
     assert!(relit.join("a.exr").is_file() && relit.join("a.png").is_file() && relit.join("a.light.json").is_file());
     assert!(!relit.join("b.exr").exists());
-    // A NaN in a transfer vector, or in a layer of three channels: refused, the file named.
-    for layer in ["sh_diffuse_0.R", "glossy_direction.Y"] {
+    // A NaN in a transfer vector, or in a layer of three channels: refused, the file, the
+    // layer and the pixel named.
+    for (layer, named) in [("sh_diffuse_0.R", "layer sh_diffuse"), ("glossy_direction.Y", "layer glossy_direction")] {
         let mut poisoned = channels(&frame);
         poisoned.get_mut(layer).unwrap_or_else(|| panic!("{layer} in the frame"))[100] = f32::NAN;
         let file = dir.path().join("poisoned.exr");
         write_frame(&file, &poisoned, &text);
-        assert_fails_naming(&["relight", path(&file), "--out", o], &["poisoned.exr", "not a finite number"]);
+        let named = format!("{named} at pixel (4, 1)");
+        assert_fails_naming(&["relight", path(&file), "--out", o], &["poisoned.exr", "not a finite number", &named]);
     }
+    // Nor over a file of the scene it reads: a frame named as the scene's G-buffer, or
+    // as its map, relit into the scene's directory.
+    for name in ["gbuffer.0001.exr", "sky.exr"] {
+        let input = scene.join(name);
+        let (before, named) = (std::fs::read(&input).unwrap(), dir.path().join("named").join(name));
+        std::fs::create_dir_all(named.parent().unwrap()).unwrap();
+        std::fs::copy(&frame, &named).unwrap();
+        assert_fails_naming(&["relight", path(&named), "--out", path(&scene)], &[name, "choose another --out"]);
+        assert_eq!(std::fs::read(&input).unwrap(), before, "{name} is untouched");
+    }
+    // The map it was rendered with changed since: refused, and lit by it with --light.
+    let sky_bytes = std::fs::read(&sky).unwrap();
+    write_swapped_map(&sky);
+    assert_fails_naming(
+        &["relight", path(&frame), "--out", o],
+        &["sky.exr", "has changed since the render", "--light"],
+    );
+    run(&["relight", path(&frame), "--light", path(&sky), "--out", path(&dir.path().join("swapped"))]);
+    std::fs::write(&sky, sky_bytes).unwrap();
     // Headers a relight cannot use: each refused with the file and what is wrong.
     let all = channels(&frame);
     let header: serde_json::Value = serde_json::from_str(&text).unwrap();
     let environment = |strength: f64| serde_json::json!({"environment": {"file": "sky.exr", "strength": strength, "rotation": [0.0, 0.0, 0.0], "turn": 0.0}});
     let edits = [
         ("/sh/order", serde_json::json!(12), "order 12"),
-        ("/light", serde_json::json!({"sh": vec![[1.0, 1.0, 1.0]; 100]}), "100 coefficients"),
+        ("/light", serde_json::json!({"sh": vec![[1.0, 1.0, 1.0]; 99]}), "99 coefficients"),
+        ("/version", serde_json::json!(2), "version 2 is not 1"),
         ("/lobes/0/lobe", serde_json::json!({"ggx": {"alpha": -1.0}}), "lobe of material"),
         ("/light", environment(-1.0), "strength"),
         ("/blockers", serde_json::json!(false), "sh_heightfield and sh_blockers"),
@@ -619,6 +645,85 @@ fn bad_relight_inputs_are_refused_with_the_file_named() {
         write_frame(&file, &all, &text);
         assert_fails_naming(&["relight", path(&file), "--out", o], &["edited.exr", needle]);
     }
+    // A view transform whose LUT is gone (frames moved away from their scene): relit, its
+    // preview in the Standard transform, and said so.
+    let mut edited = header.clone();
+    edited["view"] = serde_json::json!({"transform": "AgX", "lut": {"file": path(&dir.path().join("gone.exr")), "size": 33, "log2_range": [-10.0, 6.5]}});
+    let file = dir.path().join("agx.exr");
+    write_frame(&file, &all, &serde_json::to_string(&edited).unwrap());
+    let output = logsh().args(["relight", path(&file), "--out", path(&dir.path().join("agx"))]).output().unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(output.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("agx.exr")
+            && stderr.contains("Standard view transform, not the scene's AgX")
+            && stderr.contains("gone.exr"),
+        "{stderr}"
+    );
+    assert!(dir.path().join("agx/agx.png").is_file());
+}
+
+/// A scene whose light is an `sh` vector: the render reads all of it on the background and
+/// mirrors whatever the order, and so does the relight (before, it cut the light to the
+/// frame's order: 0.0030 from the render at order 4); a light of fewer coefficients than
+/// the order relights (it was refused); and one turned by the render equals one turned by
+/// the relight.
+#[test]
+fn an_sh_light_relights_whole_and_turned_as_its_render() {
+    let dir = tempfile::tempdir().unwrap();
+    let cones = Path::new(env!("CARGO_MANIFEST_DIR")).join("gbuffers/cones");
+    for (case, count) in [25usize, 9].into_iter().enumerate() {
+        let scene = constant_light(&cones, &dir.path().join(format!("sh{case}")));
+        let file = scene.join("scene.json");
+        let mut json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&file).unwrap()).unwrap();
+        let sh: Vec<[f64; 3]> = (0..count)
+            .map(|k| {
+                if k == 0 {
+                    [2.5, 2.6, 2.8]
+                } else {
+                    [0.4 / k as f64, 0.3 * (k as f64).sin(), 0.2 * (0.7 * k as f64).cos()]
+                }
+            })
+            .collect();
+        json["light"] = serde_json::json!({ "sh": sh });
+        std::fs::write(&file, json.to_string()).unwrap();
+        let out = dir.path().join(format!("out{case}"));
+        let common = ["--frames", "1", "--sharp-lights", "off", "--progress", "none", "--device", "cpu"];
+        for (name, turn) in [("transfer", "0"), ("turned", "40")] {
+            let extra: &[&str] = if name == "transfer" { &["--transfer"] } else { &[] };
+            let target = out.join(name);
+            run(&[&["render", path(&scene), "--out", path(&target), "--light-rotation", turn], &common[..], extra]
+                .concat());
+        }
+        let frame = out.join("transfer/render.0001.exr");
+        for (turn, rendered) in [(0.0, "transfer"), (40.0, "turned")] {
+            let relit = out.join(format!("relit{turn}"));
+            run(&["relight", path(&frame), "--light-rotation", &format!("{turn}"), "--out", path(&relit)]);
+            let what = format!("an sh light of {count} coefficients turned {turn}");
+            let worst = compare(
+                &scene,
+                turn,
+                &relit.join("render.0001.exr"),
+                &out.join(rendered).join("render.0001.exr"),
+                &what,
+            );
+            assert!(worst <= RELIT_TOLERANCE, "{what}: relit differs from shaded by {worst}");
+        }
+    }
+}
+
+/// `render --transfer --skip-existing` renders again a frame written without transfer
+/// layers, which a relight could not read.
+#[test]
+fn skip_existing_renders_again_a_frame_without_transfer_layers() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = dunes(dir.path());
+    let out = dir.path().join("frames");
+    let common = ["--frames", "1", "--progress", "none", "--device", "cpu"];
+    run(&[&["render", path(&scene), "--out", path(&out)], &common[..]].concat());
+    assert!(TransferFrame::read_header(&out.join("render.0001.exr")).is_err());
+    run(&[&["render", path(&scene), "--out", path(&out), "--transfer", "--skip-existing"], &common[..]].concat());
+    TransferFrame::read_header(&out.join("render.0001.exr")).expect("rendered again with its transfer layers");
 }
 
 /// A 128x64 sky gradient with a sun one texel wide at azimuth 40 deg, elevation 30 deg,

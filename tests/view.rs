@@ -173,6 +173,36 @@ fn the_server_answers_the_page_and_a_frames_data() {
     );
     assert_eq!(server.request("GET", "/../Cargo.toml").0, 404);
     assert_eq!(server.request("POST", "/").0, 405);
+    // While the server runs: the frame rendered again at order 3, a Cycles render of
+    // another size beside it (the scene's moved away), and the scene's LUT moved away.
+    // The page gets the new frame, says why it has no wipe, and shows the frame in the
+    // Standard view transform, saying so.
+    let scene = dir.path().join("cones");
+    let again = dir.path().join("again");
+    let render = Command::new(cargo_bin("logsh"))
+        .args(["render", scene.to_str().unwrap(), "--out", again.to_str().unwrap(), "--frames", "1"])
+        .args(["--order", "3", "--transfer", "--progress", "none", "--device", "cpu"])
+        .output()
+        .unwrap();
+    assert!(render.status.success(), "{}", String::from_utf8_lossy(&render.stderr));
+    std::fs::copy(again.join("render.0001.exr"), frames.join("render.0001.exr")).unwrap();
+    let zeros = vec![0.0f32; 64];
+    logsh::scene::output::write_exr_channels(
+        &frames.join("cycles.0001.exr"),
+        8,
+        8,
+        &[("R", &zeros), ("G", &zeros), ("B", &zeros)],
+    )
+    .unwrap();
+    std::fs::rename(scene.join("cycles.0001.exr"), scene.join("cycles.moved")).unwrap();
+    std::fs::rename(scene.join("view_lut.exr"), scene.join("view_lut.moved")).unwrap();
+    let (status, meta) = server.request("GET", "/frame/0/meta.json");
+    assert_eq!(status, 200, "{}", String::from_utf8_lossy(&meta));
+    let meta: serde_json::Value = serde_json::from_slice(&meta).unwrap();
+    assert_eq!((meta["order"].as_u64(), &meta["cycles"]), (Some(3), &serde_json::json!(false)));
+    let notes = meta["notes"].to_string();
+    assert!(notes.contains("no wipe against Cycles") && notes.contains("is 8x8, the frame 240x135"), "{notes}");
+    assert!(notes.contains("Standard view transform") && notes.contains("view_lut.exr"), "{notes}");
     server.stop();
 }
 

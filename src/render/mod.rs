@@ -101,10 +101,14 @@ pub fn check_outputs(scene: &Scene, options: &SequenceOptions) -> Result<(), Sce
     Ok(())
 }
 
-/// True when both outputs exist, the EXR's header reads, and the PNG is not empty.
-pub fn is_complete(outputs: &[PathBuf; 2]) -> bool {
+/// True when both outputs exist, the EXR's header reads (and records transfer layers,
+/// where `transfer` asks for them: a frame rendered without is rendered again), and the
+/// PNG is not empty.
+pub fn is_complete(outputs: &[PathBuf; 2], transfer: bool) -> bool {
     let [exr, png] = outputs;
-    exr::meta::MetaData::read_from_file(exr, false).is_ok() && std::fs::metadata(png).is_ok_and(|m| m.len() > 0)
+    exr::meta::MetaData::read_from_file(exr, false)
+        .is_ok_and(|meta| !transfer || crate::transfer::holds_transfer(&meta))
+        && std::fs::metadata(png).is_ok_and(|m| m.len() > 0)
 }
 
 /// Renders `options.frames` in order, reporting to `progress`; never stops early.
@@ -133,7 +137,7 @@ pub fn render_sequence(
             for (index, &frame) in options.frames.iter().enumerate() {
                 let outputs = frame_outputs(&options.out, &options.name, frame);
                 let started = Instant::now();
-                let work = if options.skip_existing && is_complete(&outputs) {
+                let work = if options.skip_existing && is_complete(&outputs, options.transfer) {
                     Read::Skipped
                 } else {
                     Read::Frame(guarded(|| Ok(Box::new(scene.frame(frame)?))))
@@ -323,6 +327,8 @@ pub fn write_passes_with_transfer(
 ) -> Result<(), output::OutputError> {
     let mut channels = pass_channels(passes, colour);
     channels.extend(transfer.channels(colour));
-    let attributes = [(crate::transfer::TRANSFER_ATTRIBUTE, transfer.header_text())];
+    let text =
+        transfer.header_text().map_err(|message| output::OutputError::Encode { file: path.to_path_buf(), message })?;
+    let attributes = [(crate::transfer::TRANSFER_ATTRIBUTE, text)];
     write_exr_layers(path, passes.width, passes.height, &channels, &attributes)
 }

@@ -341,6 +341,22 @@ impl BilinearTaps {
     }
 }
 
+/// An `sh` light (RGB coefficients, `order^2` of them) turned `degrees` about Z, as
+/// `--light-rotation` turns a map: what lay at azimuth `a` lies at `a + degrees`
+/// ([`crate::sh::rotation::rotate_z`], exact up to rounding).
+pub fn turned_sh(coefficients: &[[f64; 3]], degrees: f64) -> Vec<[f64; 3]> {
+    let order = (coefficients.len() as f64).sqrt().round() as usize;
+    let mut turned = coefficients.to_vec();
+    for k in 0..3 {
+        let mut channel: Vec<f64> = turned.iter().map(|c| c[k]).collect();
+        crate::sh::rotation::rotate_z(order, &mut channel, degrees.to_radians());
+        for (c, x) in turned.iter_mut().zip(channel) {
+            c[k] = x;
+        }
+    }
+    turned
+}
+
 /// The rotation matrix of Euler angles `angles` (radians) in Blender's XYZ order, as the
 /// Mapping node and object rotations use them: `R = Rz Ry Rx`.
 pub fn euler_xyz(angles: [f64; 3]) -> [[f64; 3]; 3] {

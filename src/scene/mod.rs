@@ -582,6 +582,22 @@ impl Scene {
     /// Reads and validates `dir/scene.json`, and the light and height map when they are
     /// the same for every frame.
     pub fn load(dir: &Path) -> Result<Scene, SceneError> {
+        let mut scene = Self::load_description(dir)?;
+        let frame = scene.default_frame();
+        if !matches!(&scene.light_spec, LightSpec::Environment { path, .. } if path.is_per_frame()) {
+            scene.static_light = Some(Arc::new(scene.read_light(frame)?));
+        }
+        if let Some(h) = &scene.heightfield {
+            if !h.heights.is_per_frame() {
+                scene.static_height_map = Some(Arc::new(scene.read_height_map(frame)?));
+            }
+        }
+        Ok(scene)
+    }
+
+    /// Reads and validates `dir/scene.json` alone, no map read: what names the scene's
+    /// files ([`Self::check_output_path`]).
+    pub fn load_description(dir: &Path) -> Result<Scene, SceneError> {
         if dir.is_file() {
             let blend = dir.extension().is_some_and(|e| e.eq_ignore_ascii_case("blend"));
             let what = if blend {
@@ -670,7 +686,7 @@ impl Scene {
             ));
         }
 
-        let mut scene = Scene {
+        let scene = Scene {
             dir: dir.to_path_buf(),
             frames: raw.frames,
             gbuffer: PathTemplate(raw.gbuffer),
@@ -690,15 +706,6 @@ impl Scene {
             static_light: None,
             static_height_map: None,
         };
-        let frame = scene.default_frame();
-        if !matches!(&scene.light_spec, LightSpec::Environment { path, .. } if path.is_per_frame()) {
-            scene.static_light = Some(Arc::new(scene.read_light(frame)?));
-        }
-        if let Some(h) = &scene.heightfield {
-            if !h.heights.is_per_frame() {
-                scene.static_height_map = Some(Arc::new(scene.read_height_map(frame)?));
-            }
-        }
         Ok(scene)
     }
 
@@ -731,7 +738,7 @@ impl Scene {
 
     /// Turns the scene's light (the environment and the suns) by `degrees` about Z, on
     /// top of scene.json's (`--light-rotation`): a sun at azimuth `a` moves to `a +
-    /// degrees`. An `sh` light cannot be turned this way and is refused.
+    /// degrees`; an `sh` light turns its coefficients ([`light::turned_sh`]).
     pub fn turn_light(&mut self, degrees: f64) -> Result<(), SceneError> {
         if !degrees.is_finite() {
             return Err(SceneError::invalid(
@@ -745,11 +752,8 @@ impl Scene {
         if degrees == 0.0 {
             return Ok(());
         }
-        if matches!(self.light_spec, LightSpec::Sh(_)) {
-            return Err(SceneError::invalid(
-                &self.scene_file(),
-                "--light-rotation turns environment maps and suns; this scene's light is an \"sh\" vector",
-            ));
+        if let LightSpec::Sh(coefficients) = &self.light_spec {
+            self.light_spec = LightSpec::Sh(light::turned_sh(coefficients, degrees));
         }
         self.light_turn += degrees;
         let turn = light::euler_xyz([0.0, 0.0, degrees.to_radians()]);

@@ -98,6 +98,34 @@ impl Default for ViewTransform {
 }
 
 impl ViewTransform {
+    /// The preview transform of a frame with transfer layers (`logsh relight`, `logsh
+    /// view`), `spec` its header's with the LUT's file absolute, `frame` the frame's file:
+    /// where the LUT cannot be read (the frames moved away from their scene), the
+    /// Standard transform at the scene's exposure, with the reason to say aloud. Only the
+    /// preview depends on it; the EXRs are linear.
+    pub fn for_preview(spec: Option<&ViewSpec>, frame: &Path) -> (Self, Option<String>) {
+        let Some(spec) = spec else { return (Self::default(), None) };
+        match Self::load(spec, Path::new("/"), frame) {
+            Ok(view) => (view, None),
+            Err(e) => {
+                let standard = ViewSpec {
+                    transform: "Standard".into(),
+                    look: "None".into(),
+                    gamma: 1.0,
+                    display: "sRGB".into(),
+                    lut: None,
+                    ..spec.clone()
+                };
+                let view = Self::load(&standard, Path::new("/"), frame).unwrap_or_default();
+                let reason = format!(
+                    "its preview is shown with the Standard view transform, not the scene's {} ({e})",
+                    spec.transform
+                );
+                (view, Some(reason))
+            }
+        }
+    }
+
     /// Reads `spec`'s LUT, relative to `dir` (a scene directory) when its file is; `file`
     /// is the description to name in errors.
     pub fn load(spec: &ViewSpec, dir: &Path, file: &Path) -> Result<Self, SceneError> {

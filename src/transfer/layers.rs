@@ -17,6 +17,9 @@ use std::path::Path;
 /// The name of the header attribute that holds [`TransferHeader`] as JSON.
 pub const TRANSFER_ATTRIBUTE: &str = "logshTransfer";
 
+/// The version of the header and layers this logsh writes and reads.
+pub const TRANSFER_VERSION: u32 = 1;
+
 /// The SH convention of the transfer vectors, spelled out for readers of the file
 /// ([`crate::sh::basis`]).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -100,7 +103,17 @@ pub struct TransferHeader {
     /// The scene's colour management for previews, its LUT file absolute
     /// ([`crate::scene::view`]).
     pub view: Option<crate::scene::ViewSpec>,
+    /// A CRC-32 of the environment map's file as rendered: a relight that reads the map
+    /// again from `light` checks it is the one the frame was lit with
+    /// ([`super::RelightOptions::check_rendered_map`]). `None` without a map, and in files
+    /// written before it was recorded.
+    #[serde(default)]
+    pub light_file_crc: Option<u32>,
 }
+
+/// Highest order of an `sh` light a header may record (the render holds a scene's
+/// whole: its background and mirrors read every coefficient).
+pub const MAX_SH_LIGHT_ORDER: usize = 64;
 
 /// Most prefiltered lobes a frame may list (one per Phong material).
 pub const MAX_LOBES: usize = 1024;
@@ -115,6 +128,12 @@ impl TransferHeader {
     fn check(&self, file: &Path) -> Result<(), SceneError> {
         let order = self.sh.order;
         let bad = |what: String| Err(SceneError::invalid(file, format!("its {TRANSFER_ATTRIBUTE} header: {what}")));
+        if self.version != TRANSFER_VERSION {
+            return bad(format!(
+                "version {} is not {TRANSFER_VERSION}, the one this logsh reads: relight it with the logsh that rendered it",
+                self.version
+            ));
+        }
         if !(MIN_ORDER..=MAX_ORDER).contains(&order) {
             return bad(format!("transfer order {order} is not in {MIN_ORDER}..={MAX_ORDER}"));
         }
@@ -132,9 +151,9 @@ impl TransferHeader {
             }
             LightSource::Sh(v) => {
                 let n = (v.len() as f64).sqrt().round() as usize;
-                if n * n != v.len() || !(order..=MAX_ORDER).contains(&n) || !v.iter().all(|c| finite(c)) {
+                if n * n != v.len() || !(1..=MAX_SH_LIGHT_ORDER).contains(&n) || !v.iter().all(|c| finite(c)) {
                     return bad(format!(
-                        "the SH light has {} coefficients; give n^2 finite ones, n from {order} to {MAX_ORDER}",
+                        "the SH light has {} coefficients; give n^2 finite ones, n from 1 to {MAX_SH_LIGHT_ORDER}",
                         v.len()
                     ));
                 }
@@ -162,6 +181,34 @@ impl TransferHeader {
         }
         Ok(())
     }
+}
+
+/// Whether an EXR whose headers are `meta` records transfer layers.
+pub fn holds_transfer(meta: &exr::meta::MetaData) -> bool {
+    meta.headers.iter().any(|h| h.own_attributes.other.keys().any(|k| k.as_slice() == TRANSFER_ATTRIBUTE.as_bytes()))
+}
+
+/// The checked [`TransferHeader`] of `file`, whose EXR headers are `meta`.
+fn header_of(file: &Path, meta: &exr::meta::MetaData) -> Result<TransferHeader, SceneError> {
+    let text = meta.headers.iter().find_map(|h| {
+        h.own_attributes
+            .other
+            .iter()
+            .find(|(k, _)| k.as_slice() == TRANSFER_ATTRIBUTE.as_bytes())
+            .map(|(_, v)| v.clone())
+    });
+    let header: TransferHeader = match text {
+        Some(exr::meta::attribute::AttributeValue::Text(t)) => serde_json::from_str(&t.to_string())
+            .map_err(|e| SceneError::invalid(file, format!("its {TRANSFER_ATTRIBUTE} header does not read: {e}")))?,
+        _ => {
+            return Err(SceneError::invalid(
+                file,
+                "has no transfer layers (no logshTransfer header): render it with `logsh render --transfer`",
+            ))
+        }
+    };
+    header.check(file)?;
+    Ok(header)
 }
 
 /// The transfer layers of one frame, row-major from the top row; the SH layers hold
@@ -442,9 +489,15 @@ impl TransferFrame {
     }
 
     /// The header as the JSON text of [`TRANSFER_ATTRIBUTE`]; EXR text is Latin-1, so
-    /// every other character (a file name's) is escaped as JSON `\u` escapes.
-    pub fn header_text(&self) -> String {
-        let json = serde_json::to_string(&self.header).expect("the header always serialises");
+    /// every other character (a file name's) is escaped as JSON `\u` escapes. Fails where
+    /// a path it records is not Unicode, which JSON cannot hold.
+    pub fn header_text(&self) -> Result<String, String> {
+        let json = serde_json::to_string(&self.header).map_err(|e| {
+            format!(
+                "the transfer header cannot record the scene {} or a file of it ({e}): rename it with Unicode characters",
+                self.header.scene.display()
+            )
+        })?;
         let mut text = String::with_capacity(json.len());
         for c in json.chars() {
             if c.is_ascii() {
@@ -456,7 +509,15 @@ impl TransferFrame {
                 }
             }
         }
-        text
+        Ok(text)
+    }
+
+    /// The header of a frame that `logsh render --transfer` wrote, read without its
+    /// pixels.
+    pub fn read_header(file: &Path) -> Result<TransferHeader, SceneError> {
+        let meta = exr::meta::MetaData::read_from_file(file, false)
+            .map_err(|e| crate::scene::error::exr_error(file, "a frame with transfer layers", e))?;
+        header_of(file, &meta)
     }
 
     /// Reads the transfer layers of a frame that `logsh render --transfer` wrote.
@@ -473,27 +534,7 @@ impl TransferFrame {
         let bytes = std::fs::read(file).map_err(|e| SceneError::io(file, WHAT, e))?;
         let meta = exr::meta::MetaData::read_from_buffered(std::io::Cursor::new(&bytes), false)
             .map_err(|e| crate::scene::error::exr_error(file, WHAT, e))?;
-        let text = meta.headers.iter().find_map(|h| {
-            h.own_attributes
-                .other
-                .iter()
-                .find(|(k, _)| k.as_slice() == TRANSFER_ATTRIBUTE.as_bytes())
-                .map(|(_, v)| v.clone())
-        });
-        let header: TransferHeader = match text {
-            Some(exr::meta::attribute::AttributeValue::Text(t)) => {
-                serde_json::from_str(&t.to_string()).map_err(|e| {
-                    SceneError::invalid(file, format!("its {TRANSFER_ATTRIBUTE} header does not read: {e}"))
-                })?
-            }
-            _ => {
-                return Err(SceneError::invalid(
-                    file,
-                    "has no transfer layers (no logshTransfer header): render it with `logsh render --transfer`",
-                ))
-            }
-        };
-        header.check(file)?;
+        let header = header_of(file, &meta)?;
         let channels = ChannelFile::new(file, WHAT, bytes, &meta, "sh_diffuse_0.R")?;
         let (width, height) = channels.size();
         let n = width * height;
@@ -624,7 +665,37 @@ impl TransferFrame {
             && finite(glossy_weight.as_flattened())
             && finite(&alpha);
         if !all_finite {
-            return Err(SceneError::NonFinite { file: file.to_path_buf(), what: "a transfer layer".into() });
+            // Named with its first pixel that is not finite (rare: a damaged file).
+            let mut layers: Vec<(&str, &[f32], usize)> =
+                vec![("sh_diffuse", &diffuse, count), ("sh_unoccluded", &unoccluded, count)];
+            for (name, layer) in
+                [("sh_heightfield", &heightfield), ("sh_blockers", &blockers), ("sh_specular", &specular)]
+            {
+                layers.extend(layer.as_deref().map(|v| (name, v, count)));
+            }
+            for (name, layer) in [
+                ("albedo", &albedo),
+                ("specular_colour", &specular_colour),
+                ("lamps_diffuse", &lamps_diffuse),
+                ("lamps_specular", &lamps_specular),
+                ("glossy_direction", &glossy_direction),
+            ] {
+                layers.push((name, layer.as_flattened(), 3));
+            }
+            for (name, layer) in
+                [("sun_lamps_diffuse", &sun_lamps_diffuse), ("sun_lamps_specular", &sun_lamps_specular)]
+            {
+                layers.extend(layer.as_deref().map(|v| (name, v.as_flattened(), 3)));
+            }
+            layers.extend([("glossy_weight", glossy_weight.as_flattened(), 2), ("alpha", &alpha[..], 1)]);
+            let what = layers
+                .iter()
+                .find_map(|(name, values, components)| {
+                    let at = values.iter().position(|v| !v.is_finite())? / components;
+                    Some(format!("layer {name} at pixel ({}, {})", at % width, at / width))
+                })
+                .unwrap_or_else(|| "a transfer layer".into());
+            return Err(SceneError::NonFinite { file: file.to_path_buf(), what });
         }
         Ok(TransferFrame {
             width,

@@ -73,10 +73,12 @@ mod relight;
 mod shade;
 mod sun_lamps;
 
-pub use layers::{PixelTransfer, PrefilteredLobe, ShConvention, TransferFrame, TransferHeader, TRANSFER_ATTRIBUTE};
+pub use layers::{
+    holds_transfer, PixelTransfer, PrefilteredLobe, ShConvention, TransferFrame, TransferHeader, TRANSFER_ATTRIBUTE,
+};
 #[cfg(test)]
 pub(crate) use relight::relit_dunes;
-pub use relight::{relight, relight_reusing, RelightLight, RelightOptions, SampledMap, SAMPLED_MAP_WIDTH};
+pub use relight::{file_crc, relight, relight_reusing, RelightLight, RelightOptions, SampledMap, SAMPLED_MAP_WIDTH};
 pub use shade::shade_with_transfer;
 pub use sun_lamps::{describe_sun_lamps, offering_to_keep, SunLampInputs, SunLampTurn};
 

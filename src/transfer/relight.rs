@@ -6,7 +6,7 @@ use super::lobe_code;
 use crate::scene::light::{equirectangular_to_direction, lookup_coordinates};
 use crate::scene::{EnvironmentMap, Light, LightSource, SceneError, SunLight};
 use crate::sh::basis::funk_hecke_factor;
-use crate::sh::{coefficient_count, eval_basis, rotate_z, MAX_COEFFICIENTS};
+use crate::sh::{coefficient_count, eval_basis, MAX_COEFFICIENTS};
 use crate::shade::compositing::ShadedPasses;
 use crate::shade::glossy::{MapLevels, Prefiltered};
 use crate::shade::kernel::{glossy_map, occlusion_ratio, visibility_ratio};
@@ -31,6 +31,29 @@ pub struct RelightOptions {
 }
 
 impl RelightOptions {
+    /// Refuses to relight a frame of `header` (read from `frame`) with the map it was
+    /// rendered with where that map's file has changed since the render
+    /// ([`TransferHeader::light_file_crc`]): its transfer and lamps were shaded under the
+    /// old one. A map given with `--light` is what the user asks for, and passes.
+    pub fn check_rendered_map(&self, header: &TransferHeader, frame: &Path) -> Result<(), SceneError> {
+        match (&self.light, &header.light, header.light_file_crc) {
+            (None, LightSource::Environment { file, .. }, Some(rendered))
+                if file_crc(file).is_some_and(|now| now != rendered) =>
+            {
+                Err(SceneError::invalid(
+                    frame,
+                    format!(
+                        "the map it was rendered with, {}, has changed since the render; relight with --light {} to \
+                         light it with the map as it is now",
+                        file.display(),
+                        file.display()
+                    ),
+                ))
+            }
+            _ => Ok(()),
+        }
+    }
+
     /// The light to relight with, from the one `header` records.
     pub fn source(&self, header: &TransferHeader) -> LightSource {
         // Whole turns taken out first, exactly (`%` is exact), so that a vast angle turns
@@ -51,20 +74,18 @@ impl RelightOptions {
             },
             (None, LightSource::Constant(c)) => LightSource::Constant(c.map(|v| v * self.strength.unwrap_or(1.0))),
             (None, LightSource::Sh(v)) => {
-                let order = (v.len() as f64).sqrt().round() as usize;
                 let scale = f64::from(self.strength.unwrap_or(1.0));
-                let mut turned: Vec<[f64; 3]> = v.iter().map(|c| c.map(|x| x * scale)).collect();
-                for k in 0..3 {
-                    let mut channel: Vec<f64> = turned.iter().map(|c| c[k]).collect();
-                    rotate_z(order, &mut channel, degrees.to_radians());
-                    for (c, x) in turned.iter_mut().zip(channel) {
-                        c[k] = x;
-                    }
-                }
-                LightSource::Sh(turned)
+                let scaled: Vec<[f64; 3]> = v.iter().map(|c| c.map(|x| x * scale)).collect();
+                LightSource::Sh(crate::scene::light::turned_sh(&scaled, degrees))
             }
         }
     }
+}
+
+/// A CRC-32 of `file`'s bytes, `None` where it cannot be read (a 1024x512 map of floats
+/// in about a millisecond).
+pub fn file_crc(file: &Path) -> Option<u32> {
+    std::fs::read(file).ok().map(|bytes| crc32fast::hash(&bytes))
 }
 
 /// Partial sums of a pixel's dot products.
@@ -119,19 +140,10 @@ impl RelightLight {
                 Light::Environment { map: map.oriented(*rotation, *turn), strength: *strength }
             }
             LightSource::Constant(c) => Light::Constant(*c),
-            LightSource::Sh(v) => {
-                if v.len() < coefficient_count(order) {
-                    return Err(SceneError::invalid(
-                        frame,
-                        format!(
-                            "its header's SH light has {} coefficients; order {order} needs {}",
-                            v.len(),
-                            order * order
-                        ),
-                    ));
-                }
-                Light::Sh(v[..coefficient_count(order)].to_vec())
-            }
+            // Whole, as the render holds it: the transfer dots its first `order^2`
+            // coefficients (zeros past a shorter light's), the background and the mirrors
+            // read every one.
+            LightSource::Sh(v) => Light::Sh(v.clone()),
         };
         let window = LightWindow::from_str(&header.light_window, true).map_err(|_| {
             SceneError::invalid(frame, format!("its header names an unknown light window \"{}\"", header.light_window))

@@ -46,7 +46,7 @@ const PAGE: &str = include_str!("page.html");
 pub struct Viewer {
     frames: Vec<PathBuf>,
     /// The bodies of the frames last asked for (at most [`KEPT_FRAMES`]), newest last.
-    built: Mutex<Vec<(usize, Arc<FrameBodies>)>>,
+    built: Mutex<Vec<(FrameStamp, Arc<FrameBodies>)>>,
     /// When the page's benchmark started ([`PAGE`]'s `?bench=N`).
     bench: Mutex<Option<std::time::Instant>>,
 }
@@ -252,32 +252,48 @@ impl Viewer {
     /// the last [`KEPT_FRAMES`] asked for (a 960 x 540 frame's are about 140 MB).
     fn bodies(&self, index: usize) -> Result<Arc<FrameBodies>> {
         let built = || self.built.lock().unwrap_or_else(|p| p.into_inner());
-        if let Some((_, bodies)) = built().iter().find(|(i, _)| *i == index) {
+        let file = &self.frames[index];
+        // A frame written again since (rendered anew) is read again.
+        let stamp = FrameStamp::of(index, file);
+        if let Some((_, bodies)) = built().iter().find(|(kept, _)| *kept == stamp) {
             return Ok(bodies.clone());
         }
-        let file = &self.frames[index];
         let frame = TransferFrame::read(file)?;
-        let light = RelightLight::new(RelightOptions::default().source(&frame.header), &frame.header, file)?;
-        let view = match &frame.header.view {
-            Some(spec) => ViewTransform::load(spec, Path::new("/"), file)?,
-            None => ViewTransform::default(),
-        };
+        let options = RelightOptions::default();
+        options.check_rendered_map(&frame.header, file)?;
+        let light = RelightLight::new(options.source(&frame.header), &frame.header, file)?;
+        let (view, standard) = ViewTransform::for_preview(frame.header.view.as_ref(), file);
         let turn = (!frame.header.sun_lamps.is_empty())
             .then(|| SunLampTurn::new(&frame.header, file).map_err(|e| e.to_string()));
         let kept = turn.as_ref().and_then(|turn| turn.as_ref().err().map(String::as_str));
-        let mut bodies = frame_bodies(file, &frame, &light, &view, PREVIEW_SIZE, kept);
+        let mut bodies = frame_bodies(file, &frame, &light, &view, PREVIEW_SIZE, kept, standard);
         if let Some(turn) = turn {
             let (shown, ..) = preview_pixels(frame.width, frame.height, PREVIEW_SIZE);
             bodies.sun_lamps = Some(SunLamps::new(file, frame, shown, turn));
         }
         let bodies = Arc::new(bodies);
         let mut kept = built();
-        kept.retain(|(i, _)| *i != index);
-        kept.push((index, bodies.clone()));
+        kept.retain(|(kept, _)| kept.index != index);
+        kept.push((stamp, bodies.clone()));
         if kept.len() > KEPT_FRAMES {
             kept.remove(0);
         }
         Ok(bodies)
+    }
+}
+
+/// A frame's index and its file's size and time of last writing, as its responses
+/// were built from it.
+#[derive(Clone, Debug, PartialEq)]
+struct FrameStamp {
+    index: usize,
+    written: Option<(u64, std::time::SystemTime)>,
+}
+
+impl FrameStamp {
+    fn of(index: usize, file: &Path) -> Self {
+        let written = std::fs::metadata(file).ok().and_then(|m| Some((m.len(), m.modified().ok()?)));
+        Self { index, written }
     }
 }
 
@@ -286,24 +302,27 @@ const KEPT_FRAMES: usize = 2;
 
 /// Whether `file`'s header says it holds transfer layers.
 fn has_transfer(file: &Path) -> bool {
-    exr::meta::MetaData::read_from_file(file, false).is_ok_and(|meta| {
-        meta.headers.iter().any(|h| {
-            h.own_attributes.other.keys().any(|k| k.as_slice() == crate::transfer::TRANSFER_ATTRIBUTE.as_bytes())
-        })
-    })
+    exr::meta::MetaData::read_from_file(file, false).is_ok_and(|meta| crate::transfer::holds_transfer(&meta))
 }
 
 /// The Cycles render of the frame: `cycles.NNNN.exr` beside the frame, or in the scene
 /// directory it was rendered from.
-fn cycles_render(file: &Path, frame: &TransferFrame) -> Option<Vec<[f32; 3]>> {
+fn cycles_render(file: &Path, frame: &TransferFrame) -> (Option<Vec<[f32; 3]>>, Option<String>) {
     let name = format!("cycles.{:04}.exr", frame.header.frame);
     let beside = file.parent().map(|d| d.join(&name));
-    [beside, Some(frame.header.scene.join(&name))].into_iter().flatten().find_map(|candidate| {
-        crate::compare::read_rgb(&candidate)
-            .ok()
-            .filter(|(w, h, _)| (*w, *h) == (frame.width, frame.height))
-            .map(|(_, _, rgb)| rgb)
-    })
+    let mut unused = None;
+    for candidate in [beside, Some(frame.header.scene.join(&name))].into_iter().flatten() {
+        if !candidate.exists() {
+            continue;
+        }
+        let why = match crate::compare::read_rgb(&candidate) {
+            Ok((w, h, rgb)) if (w, h) == (frame.width, frame.height) => return (Some(rgb), None),
+            Ok((w, h, _)) => format!("{} is {w}x{h}, the frame {}x{}", candidate.display(), frame.width, frame.height),
+            Err(e) => e.to_string(),
+        };
+        unused.get_or_insert(format!("no wipe against Cycles: {why}"));
+    }
+    (None, unused)
 }
 
 /// The largest frame the page is sent whole: a larger one is sent as every `stride`-th
@@ -334,6 +353,7 @@ fn frame_bodies(
     view: &ViewTransform,
     size: [usize; 2],
     sun_lamps_kept: Option<&str>,
+    view_standard: Option<String>,
 ) -> FrameBodies {
     let (shown, [width, height], stride) = preview_pixels(frame.width, frame.height, size);
     let sampled = |values, components| at_pixels(&shown, values, components);
@@ -380,8 +400,14 @@ fn frame_bodies(
         }
         serde_json::json!({"size": lut.size, "log2_range": lut.log2_range, "offset": offset})
     });
-    let cycles = cycles_render(file, frame)
-        .map(|rgb| at_pixels(&shown, rgb.as_flattened(), 3).flat_map(|v| v.to_le_bytes()).collect());
+    let (cycles, no_cycles) = cycles_render(file, frame);
+    let cycles: Option<Vec<u8>> =
+        cycles.map(|rgb| at_pixels(&shown, rgb.as_flattened(), 3).flat_map(|v| v.to_le_bytes()).collect());
+    // What the page says beside its status: why it shows what it shows.
+    let notes: Vec<String> = [view_standard, no_cycles].into_iter().flatten().collect();
+    for note in &notes {
+        eprintln!("view: {}: {note}", file.display());
+    }
     let meta = serde_json::json!({
         "file": file.file_name().unwrap_or_default().to_string_lossy(),
         "width": width,
@@ -403,6 +429,7 @@ fn frame_bodies(
         // (`sun_lamps.bin`).
         "sun_lamps": frame.header.sun_lamps.len(),
         "sun_lamps_kept": sun_lamps_kept,
+        "notes": notes,
     });
     FrameBodies { meta: meta.to_string(), pixels, maps, cycles, sun_lamps: None }
 }
@@ -465,7 +492,7 @@ mod tests {
             (entry["offset"].as_u64().unwrap() as usize, entry["components"].as_u64().unwrap() as usize)
         };
         // 96x54 within 40x30: every third pixel (54 / 30 needs 2, 96 / 40 needs 3), 32x18.
-        let preview = frame_bodies(&file, &transfer, &light, &view, [40, 30], None);
+        let preview = frame_bodies(&file, &transfer, &light, &view, [40, 30], None, None);
         let meta: serde_json::Value = serde_json::from_str(&preview.meta).unwrap();
         assert_eq!((meta["width"].as_u64(), meta["height"].as_u64()), (Some(32), Some(18)));
         assert_eq!(meta["source"], serde_json::json!({"width": 96, "height": 54, "stride": 3}));
@@ -488,7 +515,7 @@ mod tests {
         let (offset, _) = layer(&preview, "alpha");
         assert_eq!(values.len(), offset + 32 * 18, "alpha, the last layer, ends the body");
         // Within the preview's size: whole.
-        let whole = frame_bodies(&file, &transfer, &light, &view, PREVIEW_SIZE, None);
+        let whole = frame_bodies(&file, &transfer, &light, &view, PREVIEW_SIZE, None, None);
         let (offset, count) = layer(&whole, "diffuse");
         assert_eq!(&floats(&whole)[offset..offset + 96 * 54 * count], &transfer.diffuse[..]);
     }
