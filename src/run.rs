@@ -272,6 +272,23 @@ pub fn render(args: &crate::cli::RenderArgs) -> Result<()> {
     }
     let mut scene = Scene::load(&args.scene)?;
     scene.turn_light(args.shading.light_rotation)?;
+    if args.transfer {
+        // The transfer header records the scene's folder, map and LUT as JSON text, which
+        // holds no path that is not Unicode: refused before any frame is shaded.
+        let dir = std::path::absolute(&scene.dir).unwrap_or_else(|_| scene.dir.clone());
+        let recorded = serde_json::to_string(&(
+            &dir,
+            scene.light_source(scene.default_frame()),
+            scene.view.absolute_spec(&scene.dir),
+        ));
+        if let Err(e) = recorded {
+            return Err(anyhow!(
+                "{}: --transfer records the scene's folder and files in each frame's header, and one of their paths \
+                 is not Unicode ({e}): rename it",
+                dir.display()
+            ));
+        }
+    }
     let frames: Vec<i64> = match &args.frames {
         Some(spec) => spec.frames.clone(),
         None => {
@@ -414,6 +431,9 @@ pub fn relight(args: &crate::cli::RelightArgs) -> Result<()> {
     let mut inputs: Vec<std::path::PathBuf> =
         args.frames.iter().chain(&args.light).filter_map(|p| canonical(p)).collect();
     let mut scenes: Vec<crate::scene::Scene> = Vec::new();
+    // Scenes whose scene.json does not read, which name no file: nothing is written into
+    // their folders.
+    let mut unread = Vec::new();
     for file in &args.frames {
         let Ok(header) = TransferFrame::read_header(file) else { continue };
         if let crate::scene::LightSource::Environment { file, .. } = &header.light {
@@ -423,8 +443,21 @@ pub fn relight(args: &crate::cli::RelightArgs) -> Result<()> {
             inputs.extend(canonical(&lut.file));
         }
         if !scenes.iter().any(|scene| scene.dir == header.scene) {
-            scenes.extend(crate::scene::Scene::load_description(&header.scene).ok());
+            match crate::scene::Scene::load_description(&header.scene) {
+                Ok(scene) => scenes.push(scene),
+                Err(e) => unread.extend(canonical(&header.scene).map(|dir| (dir, e))),
+            }
         }
+    }
+    if let Some((dir, e)) =
+        canonical(&args.out).and_then(|out| unread.into_iter().find(|(dir, _)| out.starts_with(dir)))
+    {
+        return Err(anyhow!(
+            "--out {}: lies in the scene {} its frames were rendered from, whose scene.json does not read ({e}), so \
+             which of its files must not be written over is unknown; choose another --out",
+            args.out.display(),
+            dir.display()
+        ));
     }
     let mut outputs = Vec::new();
     for file in &args.frames {
@@ -491,11 +524,11 @@ pub fn relight(args: &crate::cli::RelightArgs) -> Result<()> {
                 let t = Instant::now();
                 let source = options.source(&frame.header);
                 if !light.as_ref().is_some_and(|l| l.serves(&source, &frame.header)) {
-                    options.check_rendered_map(&frame.header, file)?;
                     let built = RelightLight::new(source, &frame.header, file)?;
                     warn_of_suns_in_sh(&built, &mut warned);
                     light = Some(built);
                 }
+                options.check_rendered_map(light.as_ref().expect("built above"), &frame.header, file)?;
                 building += t.elapsed().as_secs_f64();
                 if options.rotation != 0.0 && !frame.header.sun_lamps.is_empty() {
                     match args.sun_lamps {

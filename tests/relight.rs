@@ -593,15 +593,17 @@ fn bad_relight_inputs_are_refused_with_the_file_named() {
     let relit = dir.path().join("relit");
     assert_fails_naming(&["relight", path(&first), path(&second), "--out", path(&relit)], &["b.exr"]);
     assert!(relit.join("a.exr").is_file() && relit.join("a.png").is_file() && relit.join("a.light.json").is_file());
+    // A relit frame relit again: it holds no transfer layers, and is named as relit.
+    assert_fails_naming(&["relight", path(&relit.join("a.exr")), "--out", o], &["a.exr", "it is a relit frame"]);
     assert!(!relit.join("b.exr").exists());
     // A NaN in a transfer vector, or in a layer of three channels: refused, the file, the
     // layer and the pixel named.
-    for (layer, named) in [("sh_diffuse_0.R", "layer sh_diffuse"), ("glossy_direction.Y", "layer glossy_direction")] {
+    for layer in ["sh_diffuse_0.R", "glossy_direction.Y"] {
         let mut poisoned = channels(&frame);
         poisoned.get_mut(layer).unwrap_or_else(|| panic!("{layer} in the frame"))[100] = f32::NAN;
         let file = dir.path().join("poisoned.exr");
         write_frame(&file, &poisoned, &text);
-        let named = format!("{named} at pixel (4, 1)");
+        let named = format!("channel {layer} at pixel (4, 1)");
         assert_fails_naming(&["relight", path(&file), "--out", o], &["poisoned.exr", "not a finite number", &named]);
     }
     // Nor over a file of the scene it reads: a frame named as the scene's G-buffer, or
@@ -614,6 +616,25 @@ fn bad_relight_inputs_are_refused_with_the_file_named() {
         assert_fails_naming(&["relight", path(&named), "--out", path(&scene)], &[name, "choose another --out"]);
         assert_eq!(std::fs::read(&input).unwrap(), before, "{name} is untouched");
     }
+    // Nor through a link and `..` (`x/link/..` is the scene), nor into a scene whose
+    // scene.json does not read (which files are its own is unknown).
+    std::fs::create_dir_all(scene.join("sub")).unwrap();
+    std::fs::create_dir_all(dir.path().join("x")).unwrap();
+    std::os::unix::fs::symlink(scene.join("sub"), dir.path().join("x/link")).unwrap();
+    let named = dir.path().join("named/gbuffer.0001.exr");
+    let before = std::fs::read(scene.join("gbuffer.0001.exr")).unwrap();
+    assert_fails_naming(
+        &["relight", path(&named), "--out", path(&dir.path().join("x/link/.."))],
+        &["gbuffer.0001.exr", "choose another --out"],
+    );
+    let description = std::fs::read_to_string(scene.join("scene.json")).unwrap();
+    std::fs::write(scene.join("scene.json"), description.replacen('{', "{\"typo\": 1, ", 1)).unwrap();
+    assert_fails_naming(
+        &["relight", path(&named), "--out", path(&scene)],
+        &["scene.json does not read", "choose another --out"],
+    );
+    std::fs::write(scene.join("scene.json"), description).unwrap();
+    assert_eq!(std::fs::read(scene.join("gbuffer.0001.exr")).unwrap(), before, "the G-buffer is untouched");
     // The map it was rendered with changed since: refused, and lit by it with --light.
     let sky_bytes = std::fs::read(&sky).unwrap();
     write_swapped_map(&sky);
@@ -622,6 +643,19 @@ fn bad_relight_inputs_are_refused_with_the_file_named() {
         &["sky.exr", "has changed since the render", "--light"],
     );
     run(&["relight", path(&frame), "--light", path(&sky), "--out", path(&dir.path().join("swapped"))]);
+    // A frame rendered under the new map first, then one under the old: they share the
+    // light, and the second is still refused.
+    let newer = dir.path().join("newer");
+    run(&["render", path(&scene), "--out", path(&newer), "--frames", "1", "--progress", "none", "--transfer"]);
+    let mixed = dir.path().join("mixed");
+    std::fs::create_dir_all(&mixed).unwrap();
+    std::fs::copy(newer.join("render.0001.exr"), mixed.join("a.exr")).unwrap();
+    std::fs::copy(&frame, mixed.join("b.exr")).unwrap();
+    let relit_mixed = dir.path().join("relit_mixed");
+    assert_fails_naming(
+        &["relight", path(&mixed.join("a.exr")), path(&mixed.join("b.exr")), "--out", path(&relit_mixed)],
+        &["b.exr", "has changed since the render"],
+    );
     std::fs::write(&sky, sky_bytes).unwrap();
     // Headers a relight cannot use: each refused with the file and what is wrong.
     let all = channels(&frame);
@@ -663,6 +697,50 @@ fn bad_relight_inputs_are_refused_with_the_file_named() {
     assert!(dir.path().join("agx/agx.png").is_file());
 }
 
+/// Inputs kept behind symbolic links, as studios keep them: a G-buffer folder that is a
+/// link to storage, and G-buffer files that are links. Neither `relight` nor `render`
+/// writes over them (both wrote over them before, comparing the output as resolved with
+/// the template as written).
+#[test]
+fn outputs_never_replace_a_linked_input() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = dunes(dir.path());
+    let transfer = dir.path().join("transfer");
+    run(&["render", path(&scene), "--out", path(&transfer), "--frames", "1", "--progress", "none", "--transfer"]);
+    let named = dir.path().join("named/gbuffer.0001.exr");
+    std::fs::create_dir_all(named.parent().unwrap()).unwrap();
+    std::fs::copy(transfer.join("render.0001.exr"), &named).unwrap();
+    // The G-buffers in storage, the scene's `gb` a link to it.
+    let storage = dir.path().join("storage");
+    std::fs::create_dir_all(&storage).unwrap();
+    for entry in std::fs::read_dir(&scene).unwrap() {
+        let entry = entry.unwrap();
+        if entry.file_name().to_string_lossy().starts_with("gbuffer.") {
+            std::fs::rename(entry.path(), storage.join(entry.file_name())).unwrap();
+        }
+    }
+    std::os::unix::fs::symlink(&storage, scene.join("gb")).unwrap();
+    let description = std::fs::read_to_string(scene.join("scene.json")).unwrap();
+    std::fs::write(scene.join("scene.json"), description.replace("gbuffer.####.exr", "gb/gbuffer.####.exr")).unwrap();
+    let before = std::fs::read(storage.join("gbuffer.0001.exr")).unwrap();
+    assert_fails_naming(&["relight", path(&named), "--out", path(&scene.join("gb"))], &["gb/gbuffer.####.exr"]);
+    let gb = scene.join("gb");
+    let render =
+        ["render", path(&scene), "--out", path(&gb), "--name", "gbuffer", "--frames", "1", "--progress", "none"];
+    assert_fails_naming(&render, &["gb/gbuffer.####.exr"]);
+    // The G-buffer files themselves links into storage.
+    std::fs::remove_file(scene.join("gb")).unwrap();
+    for entry in std::fs::read_dir(&storage).unwrap() {
+        let entry = entry.unwrap();
+        std::os::unix::fs::symlink(entry.path(), scene.join(entry.file_name())).unwrap();
+    }
+    std::fs::write(scene.join("scene.json"), &description).unwrap();
+    assert_fails_naming(&["relight", path(&named), "--out", path(&scene)], &["gbuffer.####.exr"]);
+    assert_fails_naming(&["relight", path(&named), "--out", path(&storage)], &["gbuffer.####.exr"]);
+    assert!(std::fs::symlink_metadata(scene.join("gbuffer.0001.exr")).unwrap().file_type().is_symlink());
+    assert_eq!(std::fs::read(storage.join("gbuffer.0001.exr")).unwrap(), before, "the G-buffer is untouched");
+}
+
 /// A scene whose light is an `sh` vector: the render reads all of it on the background and
 /// mirrors whatever the order, and so does the relight (before, it cut the light to the
 /// frame's order: 0.0030 from the render at order 4); a light of fewer coefficients than
@@ -672,7 +750,8 @@ fn bad_relight_inputs_are_refused_with_the_file_named() {
 fn an_sh_light_relights_whole_and_turned_as_its_render() {
     let dir = tempfile::tempdir().unwrap();
     let cones = Path::new(env!("CARGO_MANIFEST_DIR")).join("gbuffers/cones");
-    for (case, count) in [25usize, 9].into_iter().enumerate() {
+    // Order 5 (more than the frame's 4), 3 (fewer), 9 (more than the kernel's 8).
+    for (case, count) in [25usize, 9, 81].into_iter().enumerate() {
         let scene = constant_light(&cones, &dir.path().join(format!("sh{case}")));
         let file = scene.join("scene.json");
         let mut json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&file).unwrap()).unwrap();

@@ -341,15 +341,33 @@ impl BilinearTaps {
     }
 }
 
+/// Highest order of an `sh` light in scene.json, and in a transfer header, which records
+/// the light whole (its background and mirrors read every coefficient).
+pub const MAX_SH_LIGHT_ORDER: usize = 64;
+
+/// A CRC-32 of `file`'s bytes, `None` where it cannot be read: 1.3 ms for a 1024x512 map
+/// of floats that do not compress (6.3 MB, 2 cores, median of 15).
+pub fn file_crc(file: &Path) -> Option<u32> {
+    std::fs::read(file).ok().map(|bytes| crc32fast::hash(&bytes))
+}
+
 /// An `sh` light (RGB coefficients, `order^2` of them) turned `degrees` about Z, as
 /// `--light-rotation` turns a map: what lay at azimuth `a` lies at `a + degrees`
 /// ([`crate::sh::rotation::rotate_z`], exact up to rounding).
 pub fn turned_sh(coefficients: &[[f64; 3]], degrees: f64) -> Vec<[f64; 3]> {
     let order = (coefficients.len() as f64).sqrt().round() as usize;
+    // `cos(m angle), sin(m angle)` each from its own angle: any order (a light's may pass
+    // the kernel's), no recurrence drift.
+    let phases: Vec<(f64, f64)> = (0..order)
+        .map(|m| {
+            let (sin, cos) = (m as f64 * degrees.to_radians()).sin_cos();
+            (cos, sin)
+        })
+        .collect();
     let mut turned = coefficients.to_vec();
     for k in 0..3 {
         let mut channel: Vec<f64> = turned.iter().map(|c| c[k]).collect();
-        crate::sh::rotation::rotate_z(order, &mut channel, degrees.to_radians());
+        crate::sh::rotation::rotate_z_with(order, &mut channel, &phases);
         for (c, x) in turned.iter_mut().zip(channel) {
             c[k] = x;
         }

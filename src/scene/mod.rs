@@ -226,6 +226,8 @@ pub struct Frame {
     pub blockers: Vec<Sphere>,
     pub height_map: Option<Arc<HeightMap>>,
     pub light: Arc<Light>,
+    /// The CRC-32 of the light's map file as it was read, `None` without a map.
+    pub light_file_crc: Option<u32>,
     /// The scene's suns (`lights` in scene.json).
     pub suns: Vec<SunLight>,
     /// The scene's point lamps (`lights` in scene.json).
@@ -269,7 +271,8 @@ pub struct Scene {
     /// [`MAX_SUPERSAMPLE`]): the G-buffers are this many times the camera's resolution,
     /// and the outputs are resolved back to it ([`crate::shade::resolve`]).
     pub supersample: usize,
-    static_light: Option<Arc<Light>>,
+    /// With the CRC-32 of the map's file as it was read ([`light::file_crc`]).
+    static_light: Option<(Arc<Light>, Option<u32>)>,
     static_height_map: Option<Arc<HeightMap>>,
 }
 
@@ -564,10 +567,14 @@ fn parse_light(file: &Path, l: &LightFile) -> Result<LightSpec, SceneError> {
     }
     let sh = l.sh.as_ref().expect("one of the three is present");
     let n = (sh.len() as f64).sqrt().round() as usize;
-    if sh.is_empty() || n * n != sh.len() {
+    if sh.is_empty() || n * n != sh.len() || n > light::MAX_SH_LIGHT_ORDER {
         return Err(SceneError::invalid(
             file,
-            format!("light sh has {} coefficients; it needs order^2 (1, 4, 9, 16, ...)", sh.len()),
+            format!(
+                "light sh has {} coefficients; it needs order^2 (1, 4, 9, 16, ...), order at most {}",
+                sh.len(),
+                light::MAX_SH_LIGHT_ORDER
+            ),
         ));
     }
     for (i, c) in sh.iter().enumerate() {
@@ -585,7 +592,8 @@ impl Scene {
         let mut scene = Self::load_description(dir)?;
         let frame = scene.default_frame();
         if !matches!(&scene.light_spec, LightSpec::Environment { path, .. } if path.is_per_frame()) {
-            scene.static_light = Some(Arc::new(scene.read_light(frame)?));
+            let (light, crc) = scene.read_light(frame)?;
+            scene.static_light = Some((Arc::new(light), crc));
         }
         if let Some(h) = &scene.heightfield {
             if !h.heights.is_per_frame() {
@@ -761,7 +769,8 @@ impl Scene {
             sun.direction = light::rotate(&turn, sun.direction);
         }
         if self.static_light.is_some() {
-            self.static_light = Some(Arc::new(self.read_light(self.default_frame())?));
+            let (light, crc) = self.read_light(self.default_frame())?;
+            self.static_light = Some((Arc::new(light), crc));
         }
         Ok(())
     }
@@ -786,11 +795,18 @@ impl Scene {
 
     /// The light of `frame` (shared when its path has no `#`).
     pub fn light(&self, frame: i64) -> Result<Arc<Light>, SceneError> {
+        Ok(self.light_as_read(frame)?.0)
+    }
+
+    /// [`Self::light`], with the CRC-32 of its map's file as it was read (`None` without
+    /// a map): what a frame's transfer header records.
+    pub fn light_as_read(&self, frame: i64) -> Result<(Arc<Light>, Option<u32>), SceneError> {
         match &self.static_light {
-            Some(l) => Ok(l.clone()),
+            Some((light, crc)) => Ok((light.clone(), *crc)),
             None => {
                 self.check_frame(frame)?;
-                Ok(Arc::new(self.read_light(frame)?))
+                let (light, crc) = self.read_light(frame)?;
+                Ok((Arc::new(light), crc))
             }
         }
     }
@@ -807,14 +823,18 @@ impl Scene {
         Ok(Some(Arc::new(self.read_height_map(frame)?)))
     }
 
-    fn read_light(&self, frame: i64) -> Result<Light, SceneError> {
+    /// The light of `frame`, with the CRC-32 of its map's file taken just before the map
+    /// is read from it.
+    fn read_light(&self, frame: i64) -> Result<(Light, Option<u32>), SceneError> {
         match &self.light_spec {
             LightSpec::Environment { path, strength, rotation } => {
-                let map = EnvironmentMap::read(&path.resolve(&self.dir, frame))?;
-                Ok(Light::Environment { map: map.oriented(*rotation, self.light_turn), strength: *strength })
+                let file = path.resolve(&self.dir, frame);
+                let crc = light::file_crc(&file);
+                let map = EnvironmentMap::read(&file)?;
+                Ok((Light::Environment { map: map.oriented(*rotation, self.light_turn), strength: *strength }, crc))
             }
-            LightSpec::Constant(c) => Ok(Light::Constant(*c)),
-            LightSpec::Sh(v) => Ok(Light::Sh(v.clone())),
+            LightSpec::Constant(c) => Ok((Light::Constant(*c), None)),
+            LightSpec::Sh(v) => Ok((Light::Sh(v.clone()), None)),
         }
     }
 
@@ -888,6 +908,7 @@ impl Scene {
             None => Vec::new(),
             Some(t) => camera::read_blockers(&t.resolve(&self.dir, frame), frame)?,
         };
+        let (light, light_file_crc) = self.light_as_read(frame)?;
         Ok(Frame {
             number: frame,
             gbuffer,
@@ -895,7 +916,8 @@ impl Scene {
             camera,
             blockers,
             height_map: self.height_map(frame)?,
-            light: self.light(frame)?,
+            light,
+            light_file_crc,
             suns: self.suns.clone(),
             points: self.points.clone(),
             ground: self.ground,
@@ -920,24 +942,42 @@ impl Scene {
         t
     }
 
-    /// Refuses an output path that is `scene.json` or any input of any frame (a templated
-    /// input matches every frame number, inside or outside `frames`). Paths are compared
-    /// after resolving `.`/`..` and symbolic links of the existing part.
+    /// Refuses an output path that is `scene.json`, the view's LUT or any input of any
+    /// frame (a templated input matches every frame number, inside or outside `frames`).
+    /// Paths are compared where writing would put the file ([`written_entry`]: links
+    /// and `..` resolved as the system resolves them), against each input's own entry and
+    /// the file it resolves to; a templated input's directory is resolved the same way.
     pub fn check_output_path(&self, path: &Path) -> Result<(), SceneError> {
-        let out = normalise(path);
-        if out == normalise(&self.scene_file()) {
+        let out = written_entry(path);
+        let is =
+            |input: &Path| out == written_entry(input) || std::fs::canonicalize(input).is_ok_and(|real| real == out);
+        if is(&self.scene_file()) {
             return Err(SceneError::OutputIsInput { file: path.to_path_buf(), what: "the scene description".into() });
         }
-        let dir = normalise(&self.dir);
+        if let Some(lut) = self.view.spec.as_ref().and_then(|spec| spec.lut.as_ref()) {
+            if is(&self.dir.join(&lut.file)) {
+                return Err(SceneError::OutputIsInput {
+                    file: path.to_path_buf(),
+                    what: "the view transform's LUT".into(),
+                });
+            }
+        }
+        let dir = written_entry(&self.dir);
         for t in self.templates() {
-            let resolved = normalise(&self.dir.join(&t.0));
-            let hit = if t.is_per_frame() {
-                out.strip_prefix(&dir).ok().and_then(|rel| rel.to_str()).is_some_and(|rel| {
-                    let template = normalise_relative(&t.0);
-                    PathTemplate(template).matches_any_frame(&rel.replace('\\', "/"))
-                })
-            } else {
-                out == resolved
+            let template = Path::new(&t.0);
+            let (folder, pattern) =
+                (template.parent().unwrap_or(Path::new("")), template.file_name().and_then(|n| n.to_str()));
+            let hit = match pattern {
+                // The output's name against the template's, in the template's folder.
+                Some(pattern) if t.is_per_frame() && !folder.to_string_lossy().contains('#') => {
+                    out.file_name().and_then(|n| n.to_str()).is_some_and(|name| {
+                        PathTemplate(pattern.into()).matches_any_frame(name) && is(&self.dir.join(folder).join(name))
+                    })
+                }
+                _ if t.is_per_frame() => out.strip_prefix(&dir).ok().and_then(|rel| rel.to_str()).is_some_and(|rel| {
+                    PathTemplate(normalise_relative(&t.0)).matches_any_frame(&rel.replace('\\', "/"))
+                }),
+                _ => is(&self.dir.join(template)),
             };
             if hit {
                 return Err(SceneError::OutputIsInput { file: path.to_path_buf(), what: format!("input \"{}\"", t.0) });
@@ -947,37 +987,30 @@ impl Scene {
     }
 }
 
-/// Absolute, lexically normalised path with the existing ancestor canonicalised.
-fn normalise(path: &Path) -> PathBuf {
+/// Where writing `path` puts a file: its folder as the system resolves it (each
+/// symbolic link resolved where it stands, so that `link/..` is the link target's parent,
+/// as the system has it), and its own name unresolved (a file is written beside it and
+/// renamed onto the name, which replaces a link rather than its target). Absolute; the
+/// part that does not exist yet is kept as written.
+fn written_entry(path: &Path) -> PathBuf {
     let abs =
         if path.is_absolute() { path.to_path_buf() } else { std::env::current_dir().unwrap_or_default().join(path) };
-    let mut clean = PathBuf::new();
-    for c in abs.components() {
-        match c {
-            std::path::Component::ParentDir => {
-                clean.pop();
-            }
+    let components: Vec<_> = abs.components().collect();
+    let mut resolved = PathBuf::new();
+    for (k, component) in components.iter().enumerate() {
+        match component {
             std::path::Component::CurDir => {}
-            other => clean.push(other),
-        }
-    }
-    // Canonicalise the longest existing prefix (resolves symlinks), keep the rest.
-    let mut existing = clean.clone();
-    let mut rest = Vec::new();
-    while !existing.exists() {
-        match (existing.file_name().map(|n| n.to_os_string()), existing.parent()) {
-            (Some(name), Some(parent)) => {
-                rest.push(name);
-                existing = parent.to_path_buf();
+            std::path::Component::ParentDir => {
+                resolved.pop();
             }
-            _ => break,
+            std::path::Component::Normal(name) if k + 1 < components.len() => {
+                let next = resolved.join(name);
+                resolved = next.canonicalize().unwrap_or(next);
+            }
+            other => resolved.push(other),
         }
     }
-    let mut out = existing.canonicalize().unwrap_or(existing);
-    for name in rest.into_iter().rev() {
-        out.push(name);
-    }
-    out
+    resolved
 }
 
 fn normalise_relative(path: &str) -> String {

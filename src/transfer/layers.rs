@@ -111,10 +111,6 @@ pub struct TransferHeader {
     pub light_file_crc: Option<u32>,
 }
 
-/// Highest order of an `sh` light a header may record (the render holds a scene's
-/// whole: its background and mirrors read every coefficient).
-pub const MAX_SH_LIGHT_ORDER: usize = 64;
-
 /// Most prefiltered lobes a frame may list (one per Phong material).
 pub const MAX_LOBES: usize = 1024;
 
@@ -151,10 +147,14 @@ impl TransferHeader {
             }
             LightSource::Sh(v) => {
                 let n = (v.len() as f64).sqrt().round() as usize;
-                if n * n != v.len() || !(1..=MAX_SH_LIGHT_ORDER).contains(&n) || !v.iter().all(|c| finite(c)) {
+                if n * n != v.len()
+                    || !(1..=crate::scene::light::MAX_SH_LIGHT_ORDER).contains(&n)
+                    || !v.iter().all(|c| finite(c))
+                {
                     return bad(format!(
-                        "the SH light has {} coefficients; give n^2 finite ones, n from 1 to {MAX_SH_LIGHT_ORDER}",
-                        v.len()
+                        "the SH light has {} coefficients; give n^2 finite ones, n from 1 to {}",
+                        v.len(),
+                        crate::scene::light::MAX_SH_LIGHT_ORDER
                     ));
                 }
             }
@@ -183,6 +183,9 @@ impl TransferHeader {
     }
 }
 
+/// A layer's channels in the file, each with its place among a pixel's values.
+type ChannelNames = Vec<(String, usize)>;
+
 /// Whether an EXR whose headers are `meta` records transfer layers.
 pub fn holds_transfer(meta: &exr::meta::MetaData) -> bool {
     meta.headers.iter().any(|h| h.own_attributes.other.keys().any(|k| k.as_slice() == TRANSFER_ATTRIBUTE.as_bytes()))
@@ -201,10 +204,20 @@ fn header_of(file: &Path, meta: &exr::meta::MetaData) -> Result<TransferHeader, 
         Some(exr::meta::attribute::AttributeValue::Text(t)) => serde_json::from_str(&t.to_string())
             .map_err(|e| SceneError::invalid(file, format!("its {TRANSFER_ATTRIBUTE} header does not read: {e}")))?,
         _ => {
+            // A relight's own output (beside its light.json) holds passes, not transfer.
+            let relit = file.with_extension("light.json").is_file();
+            let hint = if relit {
+                "; it is a relit frame (beside its light.json), and a relight writes no transfer layers: relight the \
+                 frame it was relit from"
+            } else {
+                ""
+            };
             return Err(SceneError::invalid(
                 file,
-                "has no transfer layers (no logshTransfer header): render it with `logsh render --transfer`",
-            ))
+                format!(
+                    "has no transfer layers (no logshTransfer header): render it with `logsh render --transfer`{hint}"
+                ),
+            ));
         }
     };
     header.check(file)?;
@@ -665,34 +678,38 @@ impl TransferFrame {
             && finite(glossy_weight.as_flattened())
             && finite(&alpha);
         if !all_finite {
-            // Named with its first pixel that is not finite (rare: a damaged file).
-            let mut layers: Vec<(&str, &[f32], usize)> =
-                vec![("sh_diffuse", &diffuse, count), ("sh_unoccluded", &unoccluded, count)];
+            // Named by the file's channel, with its first pixel that is not finite (rare:
+            // a damaged file).
+            let mut layers: Vec<(&[f32], ChannelNames)> =
+                vec![(&diffuse, sh_names("sh_diffuse")), (&unoccluded, sh_names("sh_unoccluded"))];
             for (name, layer) in
                 [("sh_heightfield", &heightfield), ("sh_blockers", &blockers), ("sh_specular", &specular)]
             {
-                layers.extend(layer.as_deref().map(|v| (name, v, count)));
+                layers.extend(layer.as_deref().map(|v| (v, sh_names(name))));
             }
             for (name, layer) in [
-                ("albedo", &albedo),
-                ("specular_colour", &specular_colour),
-                ("lamps_diffuse", &lamps_diffuse),
-                ("lamps_specular", &lamps_specular),
-                ("glossy_direction", &glossy_direction),
+                ("albedo.", &albedo),
+                ("specular_colour.", &specular_colour),
+                ("lamps_diffuse.", &lamps_diffuse),
+                ("lamps_specular.", &lamps_specular),
             ] {
-                layers.push((name, layer.as_flattened(), 3));
+                layers.push((layer.as_flattened(), named(name, &rgb)));
             }
+            layers.push((glossy_direction.as_flattened(), named("glossy_direction.", &xyz)));
             for (name, layer) in
-                [("sun_lamps_diffuse", &sun_lamps_diffuse), ("sun_lamps_specular", &sun_lamps_specular)]
+                [("sun_lamps_diffuse.", &sun_lamps_diffuse), ("sun_lamps_specular.", &sun_lamps_specular)]
             {
-                layers.extend(layer.as_deref().map(|v| (name, v.as_flattened(), 3)));
+                layers.extend(layer.as_deref().map(|v| (v.as_flattened(), named(name, &rgb))));
             }
-            layers.extend([("glossy_weight", glossy_weight.as_flattened(), 2), ("alpha", &alpha[..], 1)]);
+            layers.push((glossy_weight.as_flattened(), named("glossy_weight.", &["X", "Y"])));
+            layers.push((&alpha, named("", &["A"])));
             let what = layers
                 .iter()
-                .find_map(|(name, values, components)| {
-                    let at = values.iter().position(|v| !v.is_finite())? / components;
-                    Some(format!("layer {name} at pixel ({}, {})", at % width, at / width))
+                .find_map(|(values, channels)| {
+                    let (stride, at) = (channels.len(), values.iter().position(|v| !v.is_finite())?);
+                    let channel = channels.iter().find(|(_, offset)| *offset == at % stride)?;
+                    let pixel = at / stride;
+                    Some(format!("channel {} at pixel ({}, {})", channel.0, pixel % width, pixel / width))
                 })
                 .unwrap_or_else(|| "a transfer layer".into());
             return Err(SceneError::NonFinite { file: file.to_path_buf(), what });

@@ -78,7 +78,7 @@ pub use layers::{
 };
 #[cfg(test)]
 pub(crate) use relight::relit_dunes;
-pub use relight::{file_crc, relight, relight_reusing, RelightLight, RelightOptions, SampledMap, SAMPLED_MAP_WIDTH};
+pub use relight::{relight, relight_reusing, RelightLight, RelightOptions, SampledMap, SAMPLED_MAP_WIDTH};
 pub use shade::shade_with_transfer;
 pub use sun_lamps::{describe_sun_lamps, offering_to_keep, SunLampInputs, SunLampTurn};
 

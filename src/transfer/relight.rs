@@ -3,7 +3,7 @@
 
 use super::layers::{TransferFrame, TransferHeader};
 use super::lobe_code;
-use crate::scene::light::{equirectangular_to_direction, lookup_coordinates};
+use crate::scene::light::{equirectangular_to_direction, file_crc, lookup_coordinates};
 use crate::scene::{EnvironmentMap, Light, LightSource, SceneError, SunLight};
 use crate::sh::basis::funk_hecke_factor;
 use crate::sh::{coefficient_count, eval_basis, MAX_COEFFICIENTS};
@@ -32,19 +32,24 @@ pub struct RelightOptions {
 
 impl RelightOptions {
     /// Refuses to relight a frame of `header` (read from `frame`) with the map it was
-    /// rendered with where that map's file has changed since the render
-    /// ([`TransferHeader::light_file_crc`]): its transfer and lamps were shaded under the
-    /// old one. A map given with `--light` is what the user asks for, and passes.
-    pub fn check_rendered_map(&self, header: &TransferHeader, frame: &Path) -> Result<(), SceneError> {
+    /// rendered with, `light` built from that map, where its file has changed since the
+    /// render ([`TransferHeader::light_file_crc`] against the CRC-32 of the file as
+    /// `light` read it): its transfer and lamps were shaded under the old one. Each frame
+    /// is checked, those that share a light too. A map given with `--light` is what the
+    /// user asks for, and passes.
+    pub fn check_rendered_map(
+        &self,
+        light: &RelightLight,
+        header: &TransferHeader,
+        frame: &Path,
+    ) -> Result<(), SceneError> {
         match (&self.light, &header.light, header.light_file_crc) {
-            (None, LightSource::Environment { file, .. }, Some(rendered))
-                if file_crc(file).is_some_and(|now| now != rendered) =>
-            {
+            (None, LightSource::Environment { file, .. }, Some(rendered)) if light.map_crc != Some(rendered) => {
                 Err(SceneError::invalid(
                     frame,
                     format!(
-                        "the map it was rendered with, {}, has changed since the render; relight with --light {} to \
-                         light it with the map as it is now",
+                        "the map it was rendered with, {}, has changed since the render; `logsh relight --light {}` \
+                         lights it with the map as it is now",
                         file.display(),
                         file.display()
                     ),
@@ -82,12 +87,6 @@ impl RelightOptions {
     }
 }
 
-/// A CRC-32 of `file`'s bytes, `None` where it cannot be read (a 1024x512 map of floats
-/// in about a millisecond).
-pub fn file_crc(file: &Path) -> Option<u32> {
-    std::fs::read(file).ok().map(|bytes| crc32fast::hash(&bytes))
-}
-
 /// Partial sums of a pixel's dot products.
 const DOT_LANES: usize = 8;
 
@@ -118,6 +117,8 @@ pub struct RelightLight {
     open: Vec<Blocks>,
     /// What it was built for, to be reused by the next frame of a sequence.
     key: (usize, String, bool, Vec<super::layers::PrefilteredLobe>),
+    /// The CRC-32 of its map's file as it was read ([`crate::scene::light::file_crc`]).
+    map_crc: Option<u32>,
 }
 
 impl RelightLight {
@@ -125,8 +126,10 @@ impl RelightLight {
     /// is the file `header` came from, named in its errors.
     pub fn new(source: LightSource, header: &TransferHeader, frame: &Path) -> Result<Self, SceneError> {
         let order = header.sh.order;
+        let mut map_crc = None;
         let light = match &source {
             LightSource::Environment { file, strength, rotation, turn } => {
+                map_crc = file_crc(file);
                 if !strength.is_finite() || *strength < 0.0 {
                     return Err(SceneError::invalid(file, format!("strength {strength} is not a finite value >= 0")));
                 }
@@ -160,7 +163,7 @@ impl RelightLight {
             header.lobes.iter().map(|lobe| levels.as_ref().map(|levels| levels.prefilter(lobe.lobe))).collect();
         let open = header.lobes.iter().map(|lobe| open_light_blocks(&sh, &lobe.open)).collect();
         let key = (order, header.light_window.clone(), header.sky_only, header.lobes.clone());
-        Ok(Self { source, light, sh, blocks, prefiltered, open, key })
+        Ok(Self { source, light, sh, blocks, prefiltered, open, key, map_crc })
     }
 
     /// The suns a render's `--sharp-lights auto` would take out of this light's map and
@@ -254,8 +257,16 @@ impl RelightLight {
     /// source and its SH vector, RGB per coefficient in the header's convention, which a
     /// compositor dots with the transfer layers (docs/compositing.md).
     pub fn description(&self) -> serde_json::Value {
+        // A map's path as text: JSON holds no path that is not Unicode, which is written
+        // with U+FFFD for what does not decode (the light's SH vector is what the file is for).
+        let source = match &self.source {
+            LightSource::Environment { file, strength, rotation, turn } => serde_json::json!({"environment": {
+                "file": file.to_string_lossy(), "strength": strength, "rotation": rotation, "turn": turn,
+            }}),
+            other => serde_json::to_value(other).unwrap_or_default(),
+        };
         serde_json::json!({
-            "source": self.source,
+            "source": source,
             "order": self.key.0,
             "light_window": self.key.1,
             // RGB per coefficient.

@@ -3,7 +3,7 @@
 
 use super::layers::{PixelTransfer, PrefilteredLobe, ShConvention, TransferFrame, TransferHeader};
 use super::SunLampInputs;
-use crate::scene::{Frame, LightSource, Scene};
+use crate::scene::{Frame, Scene};
 use crate::sh::Real;
 use crate::shade::compositing::{assemble, Pixel, ShadedPasses};
 use crate::shade::frame::mirrored_suns;
@@ -34,12 +34,12 @@ pub fn shade_with_transfer(
 /// The header of a frame shaded by `kernel` under `plan`.
 fn header<T: Real>(kernel: &ShadingKernel<T>, plan: &FramePlan) -> TransferHeader {
     let window = plan.settings.light_window.to_possible_value().expect("every window has a name");
-    let light = plan.scene.light_source(plan.frame.number);
     TransferHeader {
         version: super::layers::TRANSFER_VERSION,
         scene: std::path::absolute(&plan.scene.dir).unwrap_or_else(|_| plan.scene.dir.clone()),
         frame: plan.frame.number,
         sh: ShConvention::of_order(kernel.order()),
+        light: plan.scene.light_source(plan.frame.number),
         light_window: window.get_name().to_string(),
         sky_only: kernel.has_ground(),
         heightfield: plan.terrain.is_some(),
@@ -54,11 +54,7 @@ fn header<T: Real>(kernel: &ShadingKernel<T>, plan: &FramePlan) -> TransferHeade
         settings: Some(plan.settings),
         sun_lamp_inputs: (!plan.frame.suns.is_empty()).then(|| SunLampInputs::of(plan.scene, plan.frame)),
         view: plan.scene.view.absolute_spec(&plan.scene.dir),
-        light_file_crc: match &light {
-            LightSource::Environment { file, .. } => crate::transfer::file_crc(file),
-            _ => None,
-        },
-        light,
+        light_file_crc: plan.frame.light_file_crc,
     }
 }
 

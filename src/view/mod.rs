@@ -57,6 +57,9 @@ struct FrameBodies {
     pixels: Vec<u8>,
     maps: Vec<u8>,
     cycles: Option<Vec<u8>>,
+    /// The Cycles renders looked for and how each was written (or `None` for one not
+    /// there): one added or written again is read.
+    cycles_files: Vec<(PathBuf, Option<Written>)>,
     /// What turns the frame's Sun lamps, where it has some.
     sun_lamps: Option<SunLamps>,
 }
@@ -255,13 +258,14 @@ impl Viewer {
         let file = &self.frames[index];
         // A frame written again since (rendered anew) is read again.
         let stamp = FrameStamp::of(index, file);
-        if let Some((_, bodies)) = built().iter().find(|(kept, _)| *kept == stamp) {
+        let unchanged = |bodies: &FrameBodies| bodies.cycles_files.iter().all(|(path, was)| written(path) == *was);
+        if let Some((_, bodies)) = built().iter().find(|(kept, bodies)| *kept == stamp && unchanged(bodies)) {
             return Ok(bodies.clone());
         }
         let frame = TransferFrame::read(file)?;
         let options = RelightOptions::default();
-        options.check_rendered_map(&frame.header, file)?;
         let light = RelightLight::new(options.source(&frame.header), &frame.header, file)?;
+        options.check_rendered_map(&light, &frame.header, file)?;
         let (view, standard) = ViewTransform::for_preview(frame.header.view.as_ref(), file);
         let turn = (!frame.header.sun_lamps.is_empty())
             .then(|| SunLampTurn::new(&frame.header, file).map_err(|e| e.to_string()));
@@ -282,18 +286,24 @@ impl Viewer {
     }
 }
 
-/// A frame's index and its file's size and time of last writing, as its responses
-/// were built from it.
+/// A file's size and time of last writing.
+type Written = (u64, std::time::SystemTime);
+
+/// How `file` was last written, `None` where it is not there.
+fn written(file: &Path) -> Option<Written> {
+    std::fs::metadata(file).ok().and_then(|m| Some((m.len(), m.modified().ok()?)))
+}
+
+/// A frame's index and how its file was written, as its responses were built from it.
 #[derive(Clone, Debug, PartialEq)]
 struct FrameStamp {
     index: usize,
-    written: Option<(u64, std::time::SystemTime)>,
+    written: Option<Written>,
 }
 
 impl FrameStamp {
     fn of(index: usize, file: &Path) -> Self {
-        let written = std::fs::metadata(file).ok().and_then(|m| Some((m.len(), m.modified().ok()?)));
-        Self { index, written }
+        Self { index, written: written(file) }
     }
 }
 
@@ -305,24 +315,29 @@ fn has_transfer(file: &Path) -> bool {
     exr::meta::MetaData::read_from_file(file, false).is_ok_and(|meta| crate::transfer::holds_transfer(&meta))
 }
 
-/// The Cycles render of the frame: `cycles.NNNN.exr` beside the frame, or in the scene
-/// directory it was rendered from.
+/// The Cycles render of the frame, the first of [`cycles_candidates`] of its size; where
+/// one is there but cannot be shown, why (the page says it).
 fn cycles_render(file: &Path, frame: &TransferFrame) -> (Option<Vec<[f32; 3]>>, Option<String>) {
-    let name = format!("cycles.{:04}.exr", frame.header.frame);
-    let beside = file.parent().map(|d| d.join(&name));
     let mut unused = None;
-    for candidate in [beside, Some(frame.header.scene.join(&name))].into_iter().flatten() {
+    for candidate in cycles_candidates(file, frame) {
         if !candidate.exists() {
             continue;
         }
         let why = match crate::compare::read_rgb(&candidate) {
             Ok((w, h, rgb)) if (w, h) == (frame.width, frame.height) => return (Some(rgb), None),
             Ok((w, h, _)) => format!("{} is {w}x{h}, the frame {}x{}", candidate.display(), frame.width, frame.height),
-            Err(e) => e.to_string(),
+            Err(e) => format!("{} has no RGB image to show ({e})", candidate.display()),
         };
         unused.get_or_insert(format!("no wipe against Cycles: {why}"));
     }
     (None, unused)
+}
+
+/// Where the Cycles render of `frame` (read from `file`) is looked for, in order:
+/// `cycles.NNNN.exr` beside the frame, then in the scene directory it was rendered from.
+fn cycles_candidates(file: &Path, frame: &TransferFrame) -> Vec<PathBuf> {
+    let name = format!("cycles.{:04}.exr", frame.header.frame);
+    file.parent().map(|d| d.join(&name)).into_iter().chain([frame.header.scene.join(&name)]).collect()
 }
 
 /// The largest frame the page is sent whole: a larger one is sent as every `stride`-th
@@ -431,7 +446,8 @@ fn frame_bodies(
         "sun_lamps_kept": sun_lamps_kept,
         "notes": notes,
     });
-    FrameBodies { meta: meta.to_string(), pixels, maps, cycles, sun_lamps: None }
+    let cycles_files = cycles_candidates(file, frame).into_iter().map(|path| (path.clone(), written(&path))).collect();
+    FrameBodies { meta: meta.to_string(), pixels, maps, cycles, cycles_files, sun_lamps: None }
 }
 
 /// An HTTP response.
