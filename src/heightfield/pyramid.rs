@@ -384,14 +384,14 @@ struct PaddedLevel {
 }
 
 impl PaddedLevel {
-    fn new(level: &PyramidLevel) -> Self {
+    /// `level` padded, `peak` its highest sample ([`HorizonPyramid::peaks`]).
+    fn new(level: &PyramidLevel, peak: f32) -> Self {
         let (columns, rows) = (level.columns, level.rows);
         let stride = columns + 3;
         let clamp = |k: usize, n: usize| k.saturating_sub(1).min(n - 1);
         let samples = (0..(rows + 3) * stride)
             .map(|at| level.heights[clamp(at / stride, rows) * columns + clamp(at % stride, columns)])
             .collect();
-        let peak = level.heights.iter().copied().fold(f32::NEG_INFINITY, f32::max);
         Self { stride, samples, peak, last: [(columns - 1) as f32, (rows - 1) as f32] }
     }
 }
@@ -536,7 +536,11 @@ impl HorizonPyramid {
             && lanes::available(&levels);
         #[cfg(not(target_arch = "x86_64"))]
         let in_lanes = false;
-        let padded = if in_lanes { levels.par_iter().map(PaddedLevel::new).collect() } else { Vec::new() };
+        let padded = if in_lanes {
+            levels.par_iter().zip(&peaks).map(|(level, &[_, peak])| PaddedLevel::new(level, peak as f32)).collect()
+        } else {
+            Vec::new()
+        };
         let (steps, directions) = (plan.steps.clone(), plan.directions.clone());
         let lane_steps = if in_lanes {
             steps

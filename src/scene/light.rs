@@ -356,18 +356,10 @@ pub fn file_crc(file: &Path) -> Option<u32> {
 /// ([`crate::sh::rotation::rotate_z`], exact up to rounding).
 pub fn turned_sh(coefficients: &[[f64; 3]], degrees: f64) -> Vec<[f64; 3]> {
     let order = (coefficients.len() as f64).sqrt().round() as usize;
-    // `cos(m angle), sin(m angle)` each from its own angle: any order (a light's may pass
-    // the kernel's), no recurrence drift.
-    let phases: Vec<(f64, f64)> = (0..order)
-        .map(|m| {
-            let (sin, cos) = (m as f64 * degrees.to_radians()).sin_cos();
-            (cos, sin)
-        })
-        .collect();
     let mut turned = coefficients.to_vec();
     for k in 0..3 {
         let mut channel: Vec<f64> = turned.iter().map(|c| c[k]).collect();
-        crate::sh::rotation::rotate_z_with(order, &mut channel, &phases);
+        crate::sh::rotation::rotate_z(order, &mut channel, degrees.to_radians());
         for (c, x) in turned.iter_mut().zip(channel) {
             c[k] = x;
         }

@@ -60,9 +60,16 @@ pub fn z_rotation_phases<T: Real>(order: usize, angle: T) -> [(T, T); super::MAX
 
 /// Rotates an expansion by `angle` about +Z in place (the function moves
 /// counter-clockwise seen from above: `f'(phi) = f(phi - angle)`). Band by band, the
-/// `(y_l^m, y_l^-m)` pair turns by `m * angle`. Exact up to rounding.
+/// `(y_l^m, y_l^-m)` pair turns by `m * angle`. Exact up to rounding, at any order (an
+/// `sh` light's may pass the kernel's [`super::MAX_ORDER`]): each `cos(m angle), sin(m
+/// angle)` is taken from its own angle.
 pub fn rotate_z<T: Real>(order: usize, coeffs: &mut [T], angle: T) {
-    let phases = z_rotation_phases(order, angle);
+    let phases: Vec<(T, T)> = (0..order)
+        .map(|m| {
+            let (sin, cos) = (T::of(m as f64) * angle).sin_cos();
+            (cos, sin)
+        })
+        .collect();
     rotate_z_with(order, coeffs, &phases);
 }
 
