@@ -35,7 +35,7 @@ pub enum Command {
     Bench(BenchArgs),
     /// Shade a sequence of frames into multi-layer EXRs (beauty and compositing passes) and PNG previews; keeps going when a frame fails.
     Render(RenderArgs),
-    /// List the parts, layers, channels, sizes and sample types of an EXR file (headers only).
+    /// List the parts, layers, channels, sizes and sample types of an EXR file (headers only; a file cut short is refused).
     Info(InfoArgs),
     /// Recompute the beauty and every pass of frames rendered with --transfer under a turned, scaled or swapped environment, without shading again.
     Relight(RelightArgs),

@@ -1,8 +1,9 @@
 //! `logsh info`: what an EXR file holds (parts, layers, channels, sizes, sample types),
-//! read from its headers alone, so that a damaged or enormous file is described or
-//! refused without reading its pixels.
+//! read from its headers and chunk offsets alone, so that a damaged, cut short or enormous
+//! file is described or refused without reading its pixels.
 
 use crate::scene::SceneError;
+use exr::io::{PeekRead, Tracking};
 use serde::Serialize;
 use std::path::Path;
 
@@ -51,11 +52,15 @@ pub struct ExrInfo {
     pub parts: Vec<PartInfo>,
 }
 
-/// Reads the headers of `file`.
+/// Reads the headers of `file`, and its chunk offsets and last chunk's size, to refuse a
+/// file that ends before its pixels do ([`check_complete`]).
 pub fn describe(file: &Path) -> Result<ExrInfo, SceneError> {
     let bytes = std::fs::metadata(file).map_err(|e| SceneError::io(file, "the EXR file", e))?.len();
-    let meta = exr::meta::MetaData::read_from_file(file, false)
+    let opened = std::fs::File::open(file).map_err(|e| SceneError::io(file, "the EXR file", e))?;
+    let mut read = PeekRead::new(Tracking::new(std::io::BufReader::new(opened)));
+    let meta = exr::meta::MetaData::read_from_buffered(&mut read, false)
         .map_err(|e| crate::scene::error::exr_error(file, "the EXR file", e))?;
+    check_complete(file, &meta, &mut read, bytes)?;
     let parts = meta
         .headers
         .iter()
@@ -91,6 +96,62 @@ pub fn describe(file: &Path) -> Result<ExrInfo, SceneError> {
         })
         .collect();
     Ok(ExrInfo { file: file.display().to_string(), bytes, parts })
+}
+
+/// Refuses `file` (`bytes` long, its headers `meta` read from `read`, which stands where
+/// they end) where a chunk of pixels starts past its end or its last chunk ends past it:
+/// a file cut short (a copy or a write interrupted) has whole headers and offset tables,
+/// and only a read of its pixels would find it out. The offset tables follow the headers,
+/// eight bytes per chunk; a chunk starts with its part number in a multi-part file, then
+/// its line (or four tile coordinates) and its byte count (OpenEXR's file layout). Deep
+/// parts, whose chunks say more, are checked by their offsets alone.
+fn check_complete(
+    file: &Path,
+    meta: &exr::meta::MetaData,
+    read: &mut PeekRead<Tracking<std::io::BufReader<std::fs::File>>>,
+    bytes: u64,
+) -> Result<(), SceneError> {
+    let cut = |what: String| {
+        SceneError::invalid(file, format!("the file ends early ({bytes} bytes): {what}; write or copy it again"))
+    };
+    let chunks: usize = meta.headers.iter().map(|h| h.chunk_count).sum();
+    let tables_end = read.byte_position() as u64 + 8 * chunks as u64;
+    if tables_end > bytes {
+        return Err(cut(format!("its {chunks} chunk offsets end at byte {tables_end}")));
+    }
+    let mut last: Option<(u64, &exr::meta::header::Header)> = None;
+    for header in meta.headers.iter() {
+        for _ in 0..header.chunk_count {
+            let mut offset = [0u8; 8];
+            std::io::Read::read_exact(read, &mut offset).map_err(|e| SceneError::io(file, "the EXR file", e))?;
+            let offset = u64::from_le_bytes(offset);
+            if offset >= bytes {
+                return Err(cut(format!("a chunk of pixels starts at byte {offset}")));
+            }
+            if last.is_none_or(|(at, _)| offset > at) {
+                last = Some((offset, header));
+            }
+        }
+    }
+    let Some((offset, header)) = last.filter(|(_, header)| !header.deep) else {
+        return Ok(());
+    };
+    let part_number = if meta.requirements.is_multilayer() { 4 } else { 0 };
+    let coordinates = match header.blocks {
+        exr::meta::BlockDescription::ScanLines => 4,
+        exr::meta::BlockDescription::Tiles(_) => 16,
+    };
+    let size_at = offset + part_number + coordinates;
+    let mut size = [0u8; 4];
+    let mut opened = std::fs::File::open(file).map_err(|e| SceneError::io(file, "the EXR file", e))?;
+    std::io::Seek::seek(&mut opened, std::io::SeekFrom::Start(size_at))
+        .and_then(|_| std::io::Read::read_exact(&mut opened, &mut size))
+        .map_err(|_| cut(format!("its last chunk of pixels, at byte {offset}, is cut short")))?;
+    let end = size_at + 4 + u64::from(u32::from_le_bytes(size));
+    if end > bytes {
+        return Err(cut(format!("its last chunk of pixels, at byte {offset}, ends at byte {end}")));
+    }
+    Ok(())
 }
 
 fn group_layers(channels: &[ChannelInfo]) -> Vec<LayerInfo> {
@@ -144,4 +205,56 @@ pub fn to_text(info: &ExrInfo) -> String {
         }
     }
     s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use exr::prelude::*;
+
+    fn layer(name: &str, blocks: Blocks) -> Layer<AnyChannels<FlatSamples>> {
+        let encoding = Encoding { compression: Compression::ZIP16, blocks, line_order: LineOrder::Increasing };
+        let samples = |k: usize| FlatSamples::F32((0..61 * 47).map(|i| ((i * k) % 13) as f32).collect());
+        let channels = AnyChannels::sort(
+            [AnyChannel::new("R", samples(7)), AnyChannel::new("G", samples(3))].into_iter().collect(),
+        );
+        Layer::new((61, 47), LayerAttributes::named(name), encoding, channels)
+    }
+
+    /// A file cut short anywhere after its headers, by one byte or by half, is refused
+    /// with the cut named, and a whole one is described: one part of scan lines, tiles,
+    /// and two parts.
+    #[test]
+    fn a_file_cut_short_is_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let (lines, tiles) = (Blocks::ScanLines, Blocks::Tiles(Vec2(16, 16)));
+        let files = [("lines", 1), ("tiles", 1), ("parts", 2)].map(|(name, parts)| {
+            let file = dir.path().join(format!("{name}.exr"));
+            let blocks = if name == "tiles" { tiles } else { lines };
+            let layers: Vec<_> = ["a", "b"][..parts].iter().map(|name| layer(name, blocks)).collect();
+            Image::from_layers(ImageAttributes::new(IntegerBounds::from_dimensions((61, 47))), layers)
+                .write()
+                .to_file(&file)
+                .unwrap();
+            (file, parts)
+        });
+        for (file, parts) in &files {
+            let whole = std::fs::read(file).unwrap();
+            let info = describe(file).unwrap();
+            assert_eq!(info.parts.len(), *parts, "{}", file.display());
+            let headers = exr::meta::MetaData::read_from_file(file, false).unwrap();
+            let chunks: usize = headers.headers.iter().map(|h| h.chunk_count).sum();
+            assert!(chunks > 2, "{}: {chunks} chunks", file.display());
+            for kept in [whole.len() - 1, whole.len() - 20, whole.len() / 2] {
+                let cut = dir.path().join("cut.exr");
+                std::fs::write(&cut, &whole[..kept]).unwrap();
+                let error = describe(&cut).unwrap_err().to_string();
+                assert!(
+                    error.contains("cut.exr") && error.contains("ends early"),
+                    "{}, {kept} bytes: {error}",
+                    file.display()
+                );
+            }
+        }
+    }
 }
