@@ -9,7 +9,7 @@ use logsh::compare::unoccluded_value;
 use logsh::scene::output::write_exr_channels;
 use logsh::scene::{LightSource, Scene};
 use logsh::synth::{self, ExampleOptions};
-use logsh::transfer::TransferFrame;
+use logsh::transfer::{SunLampTurn, TransferFrame};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use support::exr_channels as channels;
@@ -397,6 +397,60 @@ fn a_sun_lamp_turns_with_the_map_or_stays_as_rendered() {
         &["render.0001.exr", path(&scene), "--sun-lamps keep"],
     );
     relight(&[&swapped[..], &["--sun-lamps", "keep"]].concat(), "kept without the scene");
+}
+
+/// A frame's Sun lamps turned from its scene frame read once ([`SunLampTurn::prepare`],
+/// as the viewer turns a frame again and again) are the bits of those turned from the
+/// scene read at each turn, and so are the next frame's, whose pyramid is the first
+/// frame's where the scene has one height map, and its own where each frame has one.
+#[test]
+fn sun_lamps_turn_the_same_from_a_frame_read_once() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = dunes(dir.path());
+    let lights = serde_json::json!([{"type": "sun", "direction": [0.9, -0.2, 0.35], "angle": 2.0, "strength": 3.0}]);
+    support::sharp::load_with_lights(&scene, lights).unwrap();
+    // The same scene with a height map per frame, frame 2's raised and steeper.
+    let per_frame = dir.path().join("per_frame");
+    std::fs::create_dir_all(&per_frame).unwrap();
+    for entry in std::fs::read_dir(&scene).unwrap() {
+        let entry = entry.unwrap();
+        std::fs::copy(entry.path(), per_frame.join(entry.file_name())).unwrap();
+    }
+    let map = logsh::scene::HeightMap::read(&scene.join("heightmap.exr"), None, [0.0; 2], [1.0; 2]).unwrap();
+    for (number, scale) in [(1, 1.0f32), (2, 1.6)] {
+        let steeper =
+            logsh::scene::HeightMap { heights: map.heights.iter().map(|h| h * scale).collect(), ..map.clone() };
+        synth::write_height_map_exr(&per_frame.join(format!("heightmap.{number:04}.exr")), &steeper).unwrap();
+    }
+    let file = per_frame.join("scene.json");
+    let mut json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&file).unwrap()).unwrap();
+    json["heightfield"]["heights"] = serde_json::json!("heightmap.####.exr");
+    std::fs::write(&file, json.to_string()).unwrap();
+
+    for (scene, name) in [(&scene, "one map"), (&per_frame, "a map per frame")] {
+        let transfer = dir.path().join(format!("transfer {name}"));
+        let common = ["--sharp-lights", "off", "--progress", "none", "--device", "cpu", "--transfer"];
+        run(&[&["render", path(scene), "--out", path(&transfer), "--frames", "1-2"], &common[..]].concat());
+        let files = [1, 2].map(|n| transfer.join(format!("render.{n:04}.exr")));
+        let frames = files.clone().map(|f| TransferFrame::read(&f).unwrap());
+        let turn = SunLampTurn::new(&frames[0].header, &files[0]).unwrap();
+        for (frame, file) in frames.iter().zip(&files) {
+            let prepared = turn.prepare(frame, file).unwrap();
+            for degrees in [40.0, 75.0, -130.0] {
+                let once = turn.turned_prepared(&prepared, frame, file, degrees).unwrap();
+                let fresh = SunLampTurn::new(&frame.header, file).unwrap().turned_lamps(frame, file, degrees).unwrap();
+                let bits = |layers: &[Vec<[f32; 3]>; 2]| {
+                    layers.iter().flatten().flatten().map(|v| v.to_bits()).collect::<Vec<u32>>()
+                };
+                assert!(bits(&once) == bits(&fresh), "{name}, frame {}, {degrees} deg", frame.header.frame);
+                assert!(once[0] != frame.lamps_diffuse, "{name}: the lamp must turn");
+            }
+        }
+        if name == "a map per frame" {
+            let unturned = |frame: &TransferFrame| frame.sun_lamps_diffuse.clone().unwrap();
+            assert!(unturned(&frames[0]) != unturned(&frames[1]), "frame 2's steeper terrain must shade otherwise");
+        }
+    }
 }
 
 /// Under a constant light, `--light-rotation` turns only the Sun lamps; a relight of a

@@ -322,6 +322,9 @@ fn the_page_turns_a_sun_lamp_with_the_map() {
     assert_eq!((&meta["sun_lamps"], &meta["sun_lamps_kept"]), (&serde_json::json!(1), &serde_json::Value::Null));
     let (status, lamps) = server.request("GET", "/frame/0/sun_lamps.bin?rotation=75");
     assert_eq!((status, lamps.len()), (200, 4 * 6 * 240 * 135), "both lamps layers, RGB f32");
+    // Turned again from the scene frame its first turn read: the same bits, and turned on.
+    assert!(server.request("GET", "/frame/0/sun_lamps.bin?rotation=75").1 == lamps, "turned 75 deg again");
+    assert!(server.request("GET", "/frame/0/sun_lamps.bin?rotation=40").1 != lamps, "turned 40 deg");
     assert_eq!(server.request("GET", "/frame/0/sun_lamps.bin").0, 400, "no rotation");
     assert_eq!(server.request("GET", "/frame/0/sun_lamps.bin?rotation=inf").0, 400);
     let url = format!("{}?rotation=75", server.address);

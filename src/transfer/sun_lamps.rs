@@ -17,8 +17,9 @@
 //! that mirrors a Sun lamp is read along its mirror direction, as the render reads it.
 
 use super::layers::{TransferFrame, TransferHeader};
+use crate::heightfield::HorizonPyramid;
 use crate::scene::light::{euler_xyz, rotate};
-use crate::scene::{Frame, Scene, SceneError, SunLight};
+use crate::scene::{Frame, HeightMap, Scene, SceneError, SunLight};
 use crate::sh::Real;
 use crate::shade::frame::suns_along;
 use crate::shade::sun::SunDisk;
@@ -26,6 +27,7 @@ use crate::shade::{pixel_source, FramePlan, Occluders, PixelSource, PlannedKerne
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
+use std::sync::{Arc, Mutex};
 
 /// How far a scene's Sun lamp may be from the header's record of it, in degrees of
 /// azimuth or elevation, and still be the lamp the frame was rendered with.
@@ -36,6 +38,19 @@ const SAME_LAMP_DEGREES: f64 = 1e-6;
 pub struct SunLampTurn {
     scene: Scene,
     settings: ShadingSettings,
+    /// The last frame's height map and its filtered pyramid, which the frames after it
+    /// share where the scene's height map is one for all frames (4.5 to 6 ms of a turn of
+    /// the Sun-lamp scene's frames).
+    pyramid: Mutex<Option<(Arc<HeightMap>, Arc<HorizonPyramid>)>>,
+}
+
+/// A frame's Sun lamps made ready to turn ([`SunLampTurn::prepare`]): its frame of the
+/// scene read and checked against what the frame records, and its height field's pyramid
+/// filtered, which every turn of the frame shares (the viewer's turns of one frame).
+pub struct SunLampFrame {
+    /// The frame of the scene, its point lamps taken out.
+    scene_frame: Frame,
+    pyramid: Option<Arc<HorizonPyramid>>,
 }
 
 impl SunLampTurn {
@@ -68,7 +83,7 @@ impl SunLampTurn {
             phong_epsilon: Some(settings.epsilon),
             ..settings
         };
-        Ok(Self { scene, settings })
+        Ok(Self { scene, settings, pyramid: Mutex::new(None) })
     }
 
     /// Shades the Sun lamps of `frame` (read from `file`) again, turned `degrees` about Z
@@ -88,6 +103,14 @@ impl SunLampTurn {
         file: &Path,
         degrees: f64,
     ) -> Result<[Vec<[f32; 3]>; 2], SceneError> {
+        self.turned_prepared(&self.prepare(frame, file)?, frame, file, degrees)
+    }
+
+    /// The frame of the scene that `frame` (read from `file`) was rendered from, read and
+    /// checked to be the one it was rendered from (its size, its Sun lamps, and the
+    /// lamps, materials, G-buffer, blockers and terrain the header records), with its
+    /// height field's pyramid: what [`Self::turned_prepared`] turns.
+    pub fn prepare(&self, frame: &TransferFrame, file: &Path) -> Result<SunLampFrame, SceneError> {
         let number = frame.header.frame;
         let mut scene_frame = self.scene.frame(number).map_err(|e| {
             SceneError::invalid(
@@ -141,13 +164,53 @@ impl SunLampTurn {
                 ));
             }
         }
-        // The frame's kernel with the lamps as rendered and no point lamp, which the frames
-        // and turns after it share ([`FramePlan`]'s cache: the viewer's turns of the
-        // Sun-lamp scene take 70 to 76 ms each so, 95 to 101 ms with a kernel per turn);
-        // the turned lamps are shaded through it.
         scene_frame.points.clear();
-        let plan = FramePlan::new(&self.scene, &scene_frame, &self.settings)
-            .map_err(|e| SceneError::invalid(file, format!("its Sun lamps cannot be shaded again: {e}")))?;
+        let pyramid = match &scene_frame.height_map {
+            Some(map) => Some(self.pyramid_of(&scene_frame, map, file)?),
+            None => None,
+        };
+        Ok(SunLampFrame { scene_frame, pyramid })
+    }
+
+    /// The filtered pyramid of `scene_frame`'s height map `map`: the last frame's where the
+    /// map is the same (the scene's one map for all frames), else filtered anew.
+    fn pyramid_of(
+        &self,
+        scene_frame: &Frame,
+        map: &Arc<HeightMap>,
+        file: &Path,
+    ) -> Result<Arc<HorizonPyramid>, SceneError> {
+        let mut last = self.pyramid.lock().unwrap_or_else(|p| p.into_inner());
+        if let Some((_, pyramid)) = last.as_ref().filter(|(built, _)| Arc::ptr_eq(built, map)) {
+            return Ok(pyramid.clone());
+        }
+        let plan = self.plan(scene_frame, file)?;
+        let terrain = plan.terrain.as_ref().expect("a frame with a height map has terrain");
+        let pyramid = Arc::new(terrain.horizon_pyramid(&plan.settings));
+        *last = Some((map.clone(), pyramid.clone()));
+        Ok(pyramid)
+    }
+
+    /// The frame's kernel with the lamps as rendered and no point lamp, which the frames
+    /// and turns after it share ([`FramePlan`]'s cache: the viewer's turns of the
+    /// Sun-lamp scene took 70 to 76 ms each so, 95 to 101 ms with a kernel per turn); the
+    /// turned lamps are shaded through it.
+    fn plan<'a>(&'a self, scene_frame: &'a Frame, file: &Path) -> Result<FramePlan<'a>, SceneError> {
+        FramePlan::new(&self.scene, scene_frame, &self.settings)
+            .map_err(|e| SceneError::invalid(file, format!("its Sun lamps cannot be shaded again: {e}")))
+    }
+
+    /// [`Self::turned_lamps`] of `prepared`, made ready from `frame` (of `file`) by
+    /// [`Self::prepare`].
+    pub fn turned_prepared(
+        &self,
+        prepared: &SunLampFrame,
+        frame: &TransferFrame,
+        file: &Path,
+        degrees: f64,
+    ) -> Result<[Vec<[f32; 3]>; 2], SceneError> {
+        let scene_frame = &prepared.scene_frame;
+        let plan = self.plan(scene_frame, file)?;
         // Whole turns taken out first, exactly, as for the map ([`super::RelightOptions::source`]).
         let turn = euler_xyz([0.0, 0.0, (degrees % 360.0).to_radians()]);
         let turned: Vec<SunLight> =
@@ -159,9 +222,10 @@ impl SunLampTurn {
         let (mut diffuse, mut specular) = (frame.lamps_diffuse.clone(), frame.lamps_specular.clone());
         let lamps = Lamps { width: frame.width, diffuse: &mut diffuse, specular: &mut specular };
         let rendered = [rendered_diffuse.as_slice(), rendered_specular.as_slice()];
+        let pyramid = prepared.pyramid.as_deref();
         match plan.kernel.as_ref() {
-            PlannedKernel::F32(kernel) => move_lamps(kernel, &plan, &turned, lamps, rendered),
-            PlannedKernel::F64(kernel) => move_lamps(kernel, &plan, &turned, lamps, rendered),
+            PlannedKernel::F32(kernel) => move_lamps(kernel, &plan, pyramid, &turned, lamps, rendered),
+            PlannedKernel::F64(kernel) => move_lamps(kernel, &plan, pyramid, &turned, lamps, rendered),
         }
         Ok([diffuse, specular])
     }
@@ -288,19 +352,20 @@ struct Lamps<'a> {
 }
 
 /// `lamps += turned - rendered` per pixel, `rendered` the frame's `sun_lamps_*` (diffuse,
-/// specular), the lamps `turned` shaded by `kernel`, `plan`'s frame's.
+/// specular), the lamps `turned` shaded by `kernel`, `plan`'s frame's, its height field's
+/// pyramid `pyramid`.
 fn move_lamps<T: Real>(
     kernel: &ShadingKernel<T>,
     plan: &FramePlan,
+    pyramid: Option<&HorizonPyramid>,
     turned: &[SunLight],
     lamps: Lamps,
     rendered: [&[[f32; 3]]; 2],
 ) {
     let disks: Vec<SunDisk> = turned.iter().map(SunDisk::new).collect();
     let [rendered_diffuse, rendered_specular] = rendered;
-    let pyramid = plan.terrain.as_ref().map(|terrain| terrain.horizon_pyramid(&plan.settings));
     let blockers = (!plan.blockers.is_empty()).then_some(&plan.blockers);
-    let occluders = Occluders { blockers, horizons: pyramid.as_ref() };
+    let occluders = Occluders { blockers, horizons: pyramid };
     let width = lamps.width;
     // The tinted turned light in place of the rendered (tinted when written).
     let moved = |lamps: &mut [f32; 3], rendered: [f32; 3], tint: [f32; 3], turned: [f32; 3]| {
