@@ -114,8 +114,9 @@ fn check_complete(
     let cut = |what: String| {
         SceneError::invalid(file, format!("the file ends early ({bytes} bytes): {what}; write or copy it again"))
     };
-    let chunks: usize = meta.headers.iter().map(|h| h.chunk_count).sum();
-    let tables_end = read.byte_position() as u64 + 8 * chunks as u64;
+    // Saturating: a header's tile count may be absurd.
+    let chunks = meta.headers.iter().fold(0u64, |sum, h| sum.saturating_add(h.chunk_count as u64));
+    let tables_end = (read.byte_position() as u64).saturating_add(chunks.saturating_mul(8));
     if tables_end > bytes {
         return Err(cut(format!("its {chunks} chunk offsets end at byte {tables_end}")));
     }
