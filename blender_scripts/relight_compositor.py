@@ -16,12 +16,13 @@ computes, per colour channel,
 with `L'` the light turned by `rotation` degrees about Z from where the frame was
 rendered: band by band the `(m, -m)` pair turns by `m` times the angle (`rotate_z` in
 src/sh/rotation.rs), which the tree does with cosine and sine nodes, so the turn stays
-live. A LIGHT.json from a relight that turned the map (`--light-rotation`) is turned back
-first, as its `source` and the frame's `logshTransfer` header say, so `--rotation 40`
-means what `logsh relight --light-rotation 40` means whichever relight wrote it. The
+live. A LIGHT.json from a relight that turned the light (`--light-rotation`) is turned
+back first, by the turn it records (`turned_from_frame`), so `--rotation 40` means what
+`logsh relight --light-rotation 40` means whichever relight wrote it. The
 frame's Sun lamps stay in `lamps_diffuse` as rendered (`logsh relight` turns them), and
 the script says so. With `--write`, the composite is rendered to OUT.exr (linear,
-float); with `--save`, the .blend is kept. The glossy term reads a prefiltered map along
+float; the name must end in `.exr` and is written as given); with `--save`, the .blend
+is kept. The glossy term reads a prefiltered map along
 each pixel's mirror direction, which a compositor cannot: take it from `logsh relight`.
 """
 import argparse
@@ -48,22 +49,41 @@ def exr_header(path):
     import struct
 
     size, transfer = None, None
+    damaged = f"{path}: the file ends early or its header is damaged; write or copy it again"
+
+    def exactly(f, count):
+        data = f.read(count)
+        if len(data) != count:
+            fail(damaged)
+        return data
+
+    def text(f):
+        """A null-terminated name (attribute names and types are at most 255 bytes)."""
+        name = bytearray()
+        while (byte := exactly(f, 1)) != b"\x00":
+            name += byte
+            if len(name) > 255:
+                fail(damaged)
+        return bytes(name)
+
     with open(path, "rb") as f:
         if f.read(4) != b"\x76\x2f\x31\x01":
             fail(f"{path}: not an EXR file")
-        f.read(4)
-        while True:
-            name = b"".join(iter(lambda: f.read(1), b"\x00"))
-            if not name:
-                break
-            b"".join(iter(lambda: f.read(1), b"\x00"))
-            (length,) = struct.unpack("<i", f.read(4))
-            value = f.read(length)
-            if name == b"dataWindow":
-                x0, y0, x1, y1 = struct.unpack("<4i", value)
-                size = (x1 - x0 + 1, y1 - y0 + 1)
-            elif name == b"logshTransfer":
-                transfer = json.loads(value.decode("utf-8"))
+        exactly(f, 4)
+        while name := text(f):
+            text(f)
+            (length,) = struct.unpack("<i", exactly(f, 4))
+            if length < 0:
+                fail(damaged)
+            value = exactly(f, length)
+            try:
+                if name == b"dataWindow":
+                    x0, y0, x1, y1 = struct.unpack("<4i", value)
+                    size = (x1 - x0 + 1, y1 - y0 + 1)
+                elif name == b"logshTransfer":
+                    transfer = json.loads(value.decode("utf-8"))
+            except (struct.error, ValueError):
+                fail(f"{path}: its {name.decode('latin-1')} header does not read")
     if size is None:
         fail(f"{path}: no dataWindow in its header")
     if transfer is None:
@@ -94,10 +114,16 @@ def from_frame(light, transfer, light_path, frame_path):
     if light["order"] != order:
         fail(f"{light_path} is a light of order {light['order']} but {frame_path} was rendered at order {order}: "
              "take the light.json of a relight of this frame")
-    source = light.get("source", {})
-    turn = source.get("environment", {}).get("turn") if isinstance(source, dict) else None
-    rendered = transfer.get("light_turn", transfer["light"].get("environment", {}).get("turn", 0.0))
-    beyond = (turn - rendered) if turn is not None else 0.0
+    beyond = light.get("turned_from_frame")
+    if not isinstance(beyond, (int, float)):
+        # A light.json of an earlier logsh: an environment's source records its turn.
+        source = light.get("source", {})
+        turn = source.get("environment", {}).get("turn") if isinstance(source, dict) else None
+        rendered = transfer.get("light_turn", transfer["light"].get("environment", {}).get("turn", 0.0))
+        beyond = (turn - rendered) if turn is not None else 0.0
+        if isinstance(source, dict) and "sh" in source:
+            fail(f"{light_path}: a light.json of an earlier logsh, which does not record how far it turned an sh "
+                 "light: relight the frame again with this logsh")
     if beyond != 0.0:
         print(f"note: {light_path} is the light turned {beyond:g} deg from the frame's "
               f"(logsh relight --light-rotation); turned back, so --rotation starts from the frame's light")
@@ -215,9 +241,16 @@ def main():
         light = json.load(f)
     if not isinstance(light.get("order"), int) or len(light.get("sh", [])) != light["order"] ** 2:
         fail(f"{args.light}: not a light written by logsh relight (an order and order^2 RGB coefficients)")
+    # The composite is written to --write as named (no extension added, no '#' replaced
+    # by the frame number), so that the check below is of the file written.
+    if args.write and not args.write.lower().endswith(".exr"):
+        fail(f"--write {args.write}: give an .exr file name")
+    if args.write and "#" in args.write:
+        fail(f"--write {args.write}: Blender would write a frame number in place of its '#'; give a name without")
     inputs = (os.path.realpath(args.frame), os.path.realpath(args.light))
     for output in (args.write, args.save):
-        if output and os.path.realpath(output) in inputs:
+        same = output and os.path.exists(output) and any(os.path.samefile(output, i) for i in inputs)
+        if output and (os.path.realpath(output) in inputs or same):
             fail(f"{output}: would be written over an input")
     if args.save and not args.save.lower().endswith(".blend"):
         fail(f"--save {args.save}: give a .blend file name")
@@ -236,6 +269,7 @@ def main():
         scene.render.engine = "BLENDER_WORKBENCH"
         scene.render.image_settings.file_format = "OPEN_EXR"
         scene.render.image_settings.color_depth = "32"
+        scene.render.use_file_extension = False
         scene.render.filepath = os.path.abspath(args.write)
         bpy.ops.render.render(write_still=True)
         print(f"wrote {args.write}")

@@ -559,7 +559,7 @@ pub fn relight(args: &crate::cli::RelightArgs) -> Result<()> {
                     warned_of_view = true;
                     eprintln!("relight: {}: {reason}", file.display());
                 }
-                let description = serde_json::to_string_pretty(&light.description())? + "\n";
+                let description = serde_json::to_string_pretty(&light.description(options.rotation % 360.0))? + "\n";
                 if write_tx.send((k, passes, view, description)).is_err() {
                     break;
                 }

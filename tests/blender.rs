@@ -638,6 +638,65 @@ fn the_compositor_recipe_relights_the_diffuse_pass() {
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert!(!output.status.success() && stderr.contains("over an input"), "{stderr}");
     assert_eq!(std::fs::read(&frame).unwrap(), before, "the frame is untouched");
+    // `--write` of the frame's name without `.exr`, to which Blender would add it, and
+    // with a '#', which Blender would number: refused, the frame untouched.
+    for named in [frames.join("render.0001"), frames.join("render.####.exr")] {
+        let args = [frame.as_path(), light.as_path(), Path::new("--write"), named.as_path()];
+        let output = run_python(&python, "blender_scripts/relight_compositor.py", &args);
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert!(!output.status.success() && stderr.contains("--write"), "{}: {stderr}", named.display());
+        assert_eq!(std::fs::read(&frame).unwrap(), before, "the frame is untouched by {}", named.display());
+    }
+    // A frame cut short in its header: refused at once (the header's reader looped at the
+    // end of the file before).
+    let cut = dir.path().join("cut.exr");
+    std::fs::write(&cut, &before[..2000]).unwrap();
+    let mut child = std::process::Command::new(&python)
+        .arg(Path::new(REPO).join("blender_scripts/relight_compositor.py"))
+        .args([&cut, &light])
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let started = std::time::Instant::now();
+    while child.try_wait().unwrap().is_none() {
+        if started.elapsed().as_secs() > 120 {
+            child.kill().ok();
+            panic!("relight_compositor.py still reads a cut frame after two minutes");
+        }
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    let output = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(!output.status.success() && stderr.contains("cut.exr") && stderr.contains("ends early"), "{stderr}");
+
+    // An `sh` light, relit turned 40: its light.json records the turn, which the compositor
+    // takes back first (it turned the light twice, to 80 degrees, before).
+    let scene = dir.path().join("cones_sh");
+    std::fs::create_dir_all(&scene).unwrap();
+    for entry in std::fs::read_dir(&cones).unwrap() {
+        let entry = entry.unwrap();
+        if entry.path().is_file() {
+            std::fs::copy(entry.path(), scene.join(entry.file_name())).unwrap();
+        }
+    }
+    let description = scene.join("scene.json");
+    let mut json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&description).unwrap()).unwrap();
+    let mut sh = vec![[0.0f64; 3]; 25];
+    (sh[0], sh[1], sh[3], sh[5], sh[22]) = ([1.0; 3], [0.2, 0.3, 0.1], [0.8, 0.6, 0.5], [0.2; 3], [0.1, 0.2, 0.1]);
+    json["light"] = serde_json::json!({ "sh": sh });
+    std::fs::write(&description, json.to_string()).unwrap();
+    let sh_frames = dir.path().join("sh_frames");
+    logsh(&["render", &path(&scene), "--frames", "1", "--out", &path(&sh_frames), "--transfer", "--progress", "none"]);
+    let frame = sh_frames.join("render.0001.exr");
+    let turned = dir.path().join("sh_relit40");
+    logsh(&["relight", &path(&frame), "--light-rotation", "40", "--out", &path(&turned)]);
+    let out = dir.path().join("sh_composite.exr");
+    let light = turned.join("render.0001.light.json");
+    let args = [frame.as_path(), &light, Path::new("--rotation"), Path::new("40"), Path::new("--write"), &out];
+    assert_ok(&run_python(&python, "blender_scripts/relight_compositor.py", &args), "relight_compositor.py");
+    let sh_mean = mean(&raw_channels(&out), &raw_channels(&turned.join("render.0001.exr")));
+    println!("an sh light from the light.json of the relight at 40 degrees: {sh_mean:.5} from logsh relight at 40");
+    assert!(sh_mean <= 2e-3, "the compositor's relight of an sh light differs by {sh_mean}");
 }
 
 /// The PNG preview applies the scene's exposure and view transform as Blender shows them:

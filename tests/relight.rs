@@ -267,6 +267,21 @@ fn a_swapped_and_scaled_light_relights_as_a_shade_under_it() {
     run(&[&["render", path(&lit), "--out", path(&turned), "--light-rotation", "30"], &args[..]].concat());
     let worst = compare(&lit, 30.0, &relit.join("render.0001.exr"), &turned.join("render.0001.exr"), "swapped, turned");
     assert!(worst <= RELIT_TOLERANCE, "swapped map on a turned frame: relit differs from shaded by {worst}");
+    // The light.json records the turn beyond the frame's light and the map's path, made
+    // absolute from a relative --light.
+    let relative = logsh()
+        .current_dir(dir.path())
+        .args(["relight", path(&frame), "--light", "swapped.exr", "--light-rotation", "370", "--out", "relative"])
+        .output()
+        .unwrap();
+    assert!(relative.status.success(), "{}", String::from_utf8_lossy(&relative.stderr));
+    let described = |dir: &Path| -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(dir.join("render.0001.light.json")).unwrap()).unwrap()
+    };
+    let (swapped, relative) = (described(&relit), described(&dir.path().join("relative")));
+    assert_eq!((&swapped["turned_from_frame"], &relative["turned_from_frame"]), (&10.0.into(), &10.0.into()));
+    let file = relative["source"]["environment"]["file"].as_str().unwrap();
+    assert_eq!(Path::new(file), std::path::absolute(&map).unwrap(), "{file}");
 }
 
 #[test]

@@ -254,19 +254,26 @@ impl RelightLight {
     }
 
     /// What `logsh relight` writes beside each frame (`<frame>.light.json`): the light's
-    /// source and its SH vector, RGB per coefficient in the header's convention, which a
-    /// compositor dots with the transfer layers (docs/compositing.md).
-    pub fn description(&self) -> serde_json::Value {
-        // A map's path as text: JSON holds no path that is not Unicode, which is written
-        // with U+FFFD for what does not decode (the light's SH vector is what the file is for).
+    /// source, its turn about Z beyond the frame's rendered light (`--light-rotation`,
+    /// whole turns taken out), and its SH vector, RGB per coefficient in the header's
+    /// convention, which a compositor dots with the transfer layers after turning it back
+    /// by that turn (docs/compositing.md: an `sh` source records none of its own).
+    pub fn description(&self, turned_from_frame: f64) -> serde_json::Value {
+        // A map's path as text, made absolute (the file is read from anywhere): JSON holds
+        // no path that is not Unicode, which is written with U+FFFD for what does not
+        // decode (the light's SH vector is what the file is for).
         let source = match &self.source {
-            LightSource::Environment { file, strength, rotation, turn } => serde_json::json!({"environment": {
-                "file": file.to_string_lossy(), "strength": strength, "rotation": rotation, "turn": turn,
-            }}),
+            LightSource::Environment { file, strength, rotation, turn } => {
+                let file = std::path::absolute(file).unwrap_or_else(|_| file.clone());
+                serde_json::json!({"environment": {
+                    "file": file.to_string_lossy(), "strength": strength, "rotation": rotation, "turn": turn,
+                }})
+            }
             other => serde_json::to_value(other).unwrap_or_default(),
         };
         serde_json::json!({
             "source": source,
+            "turned_from_frame": turned_from_frame,
             "order": self.key.0,
             "light_window": self.key.1,
             // RGB per coefficient.
