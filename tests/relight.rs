@@ -459,6 +459,11 @@ fn sun_lamps_turn_the_same_from_a_frame_read_once() {
                 };
                 assert!(bits(&once) == bits(&fresh), "{name}, frame {}, {degrees} deg", frame.header.frame);
                 assert!(once[0] != frame.lamps_diffuse, "{name}: the lamp must turn");
+                // At some pixels alone (the viewer's preview of a wide frame): theirs.
+                let pixels: Vec<usize> = (0..frame.width * frame.height).rev().step_by(7).collect();
+                let at = turn.turned_at(&prepared, frame, file, degrees, Some(&pixels)).unwrap();
+                let picked = once.each_ref().map(|layer| pixels.iter().map(|&i| layer[i]).collect::<Vec<_>>());
+                assert!(bits(&at) == bits(&picked), "{name}, at some pixels, {degrees} deg");
             }
         }
         if name == "a map per frame" {

@@ -35,7 +35,12 @@ impl Server {
 
     /// Status and body of `method path`.
     fn request(&self, method: &str, path: &str) -> (u16, Vec<u8>) {
-        let host = self.address.trim_start_matches("http://").trim_end_matches('/');
+        Self::request_to(&self.address, method, path)
+    }
+
+    /// [`Self::request`] to the server at `address`, from any thread.
+    fn request_to(address: &str, method: &str, path: &str) -> (u16, Vec<u8>) {
+        let host = address.trim_start_matches("http://").trim_end_matches('/');
         let mut stream = TcpStream::connect(host).unwrap();
         write!(stream, "{method} {path} HTTP/1.1\r\nHost: {host}\r\nConnection: close\r\n\r\n").unwrap();
         let mut response = Vec::new();
@@ -219,6 +224,54 @@ fn a_directory_without_transfer_layers_is_refused() {
 }
 
 /// Debian's Chromium, or another Chromium-based browser on the PATH.
+/// A frame's Sun-lamp turn refused for a scene that cannot be read, or that changed since
+/// the render, is tried again at the next request, and turns once the scene is put back;
+/// turns asked for together, before the frame was ever read, read it once and agree.
+#[test]
+fn a_refused_sun_lamp_turn_is_tried_again_and_first_turns_agree() {
+    let dir = tempfile::tempdir().unwrap();
+    let sun = serde_json::json!([{"type": "sun", "direction": [0.5, -0.5, 0.7], "angle": 1.0, "strength": 2.0}]);
+    let frames = rendered_cones(dir.path(), sun);
+    let description = dir.path().join("cones/scene.json");
+    let original = std::fs::read_to_string(&description).unwrap();
+    let meta = |server: &Server| -> serde_json::Value {
+        serde_json::from_slice(&server.request("GET", "/frame/0/meta.json").1).unwrap()
+    };
+
+    // Twelve first turns at once: one read of the frame, the same lamps for each.
+    let server = Server::start(&frames);
+    let turns: Vec<_> = (0..12)
+        .map(|_| {
+            let (address, path) = (server.address.clone(), "/frame/0/sun_lamps.bin?rotation=75");
+            std::thread::spawn(move || Server::request_to(&address, "GET", path))
+        })
+        .collect();
+    let turned: Vec<(u16, Vec<u8>)> = turns.into_iter().map(|t| t.join().unwrap()).collect();
+    assert!(turned.iter().all(|(status, lamps)| *status == 200 && *lamps == turned[0].1), "twelve turns at once");
+    server.stop();
+
+    // The scene's description gone when the frame is first read: kept, and said why.
+    std::fs::rename(&description, dir.path().join("moved.json")).unwrap();
+    let server = Server::start(&frames);
+    assert!(meta(&server)["sun_lamps_kept"].as_str().unwrap().contains("cannot be read"));
+    assert_eq!(server.request("GET", "/frame/0/sun_lamps.bin?rotation=75").0, 409);
+    std::fs::rename(dir.path().join("moved.json"), &description).unwrap();
+    assert_eq!(meta(&server)["sun_lamps_kept"], serde_json::Value::Null, "the scene put back");
+    assert!(server.request("GET", "/frame/0/sun_lamps.bin?rotation=75") == turned[0], "turned as before");
+    server.stop();
+
+    // The lamp made stronger before the first turn: refused, then turned once put back.
+    std::fs::write(&description, original.replace("\"strength\": 2.0", "\"strength\": 3.0")).unwrap();
+    assert_ne!(std::fs::read_to_string(&description).unwrap(), original, "the lamp made stronger");
+    let server = Server::start(&frames);
+    let (status, why) = server.request("GET", "/frame/0/sun_lamps.bin?rotation=75");
+    assert_eq!(status, 500, "{}", String::from_utf8_lossy(&why));
+    assert!(String::from_utf8_lossy(&why).contains("its Sun lamps' light"), "{}", String::from_utf8_lossy(&why));
+    std::fs::write(&description, &original).unwrap();
+    assert!(server.request("GET", "/frame/0/sun_lamps.bin?rotation=75") == turned[0], "turned once put back");
+    server.stop();
+}
+
 fn browser() -> Option<PathBuf> {
     ["chromium", "chromium-browser", "google-chrome", "google-chrome-stable"].iter().find_map(|name| {
         let found = Command::new("which").arg(name).output().ok()?;

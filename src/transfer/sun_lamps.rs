@@ -209,6 +209,20 @@ impl SunLampTurn {
         file: &Path,
         degrees: f64,
     ) -> Result<[Vec<[f32; 3]>; 2], SceneError> {
+        self.turned_at(prepared, frame, file, degrees, None)
+    }
+
+    /// [`Self::turned_prepared`] at `pixels` alone (indices into the frame's rows), in
+    /// their order, or at every pixel for `None`: the viewer's preview of a frame wider
+    /// than it shows one pixel in `stride^2` of it ([`crate::view`]), and shades only those.
+    pub fn turned_at(
+        &self,
+        prepared: &SunLampFrame,
+        frame: &TransferFrame,
+        file: &Path,
+        degrees: f64,
+        pixels: Option<&[usize]>,
+    ) -> Result<[Vec<[f32; 3]>; 2], SceneError> {
         let scene_frame = &prepared.scene_frame;
         let plan = self.plan(scene_frame, file)?;
         // Whole turns taken out first, exactly, as for the map ([`super::RelightOptions::source`]).
@@ -219,13 +233,26 @@ impl SunLampTurn {
         else {
             return Err(SceneError::invalid(file, "holds no sun_lamps_diffuse and sun_lamps_specular to turn"));
         };
-        let (mut diffuse, mut specular) = (frame.lamps_diffuse.clone(), frame.lamps_specular.clone());
-        let lamps = Lamps { width: frame.width, diffuse: &mut diffuse, specular: &mut specular };
-        let rendered = [rendered_diffuse.as_slice(), rendered_specular.as_slice()];
+        let layers = [&frame.lamps_diffuse, &frame.lamps_specular, rendered_diffuse, rendered_specular];
+        if let Some(&outside) = pixels.into_iter().flatten().find(|&&i| layers.iter().any(|layer| i >= layer.len())) {
+            return Err(SceneError::invalid(file, format!("has no pixel {outside} to turn its Sun lamps at")));
+        }
+        let taken = |layer: &Vec<[f32; 3]>| match pixels {
+            Some(pixels) => pixels.iter().map(|&i| layer[i]).collect(),
+            None => layer.clone(),
+        };
+        let [mut diffuse, mut specular, rendered_diffuse, rendered_specular] = layers.map(taken);
+        let lamps = Lamps {
+            width: frame.width,
+            pixels,
+            diffuse: &mut diffuse,
+            specular: &mut specular,
+            rendered: [&rendered_diffuse, &rendered_specular],
+        };
         let pyramid = prepared.pyramid.as_deref();
         match plan.kernel.as_ref() {
-            PlannedKernel::F32(kernel) => move_lamps(kernel, &plan, pyramid, &turned, lamps, rendered),
-            PlannedKernel::F64(kernel) => move_lamps(kernel, &plan, pyramid, &turned, lamps, rendered),
+            PlannedKernel::F32(kernel) => move_lamps(kernel, &plan, pyramid, &turned, lamps),
+            PlannedKernel::F64(kernel) => move_lamps(kernel, &plan, pyramid, &turned, lamps),
         }
         Ok([diffuse, specular])
     }
@@ -344,51 +371,61 @@ pub fn describe_sun_lamps(lamps: &[[f64; 2]]) -> String {
     each.collect::<Vec<_>>().join("; ")
 }
 
-/// A frame's `lamps_*` layers, rows of `width`.
+/// A frame's `lamps_*` layers and its `sun_lamps_*` (`rendered`, diffuse and specular),
+/// at every pixel, rows of `width`, or at `pixels` alone.
 struct Lamps<'a> {
     width: usize,
+    pixels: Option<&'a [usize]>,
     diffuse: &'a mut [[f32; 3]],
     specular: &'a mut [[f32; 3]],
+    rendered: [&'a [[f32; 3]]; 2],
 }
 
-/// `lamps += turned - rendered` per pixel, `rendered` the frame's `sun_lamps_*` (diffuse,
-/// specular), the lamps `turned` shaded by `kernel`, `plan`'s frame's, its height field's
-/// pyramid `pyramid`.
+/// `lamps += turned - rendered` per pixel of `lamps`, the lamps `turned` shaded by
+/// `kernel`, `plan`'s frame's, its height field's pyramid `pyramid`.
 fn move_lamps<T: Real>(
     kernel: &ShadingKernel<T>,
     plan: &FramePlan,
     pyramid: Option<&HorizonPyramid>,
     turned: &[SunLight],
     lamps: Lamps,
-    rendered: [&[[f32; 3]]; 2],
 ) {
     let disks: Vec<SunDisk> = turned.iter().map(SunDisk::new).collect();
-    let [rendered_diffuse, rendered_specular] = rendered;
     let blockers = (!plan.blockers.is_empty()).then_some(&plan.blockers);
     let occluders = Occluders { blockers, horizons: pyramid };
-    let width = lamps.width;
     // The tinted turned light in place of the rendered (tinted when written).
     let moved = |lamps: &mut [f32; 3], rendered: [f32; 3], tint: [f32; 3], turned: [f32; 3]| {
         for k in 0..3 {
             lamps[k] = (lamps[k] - rendered[k] + tint[k] * turned[k]).max(0.0);
         }
     };
-    let rows = lamps.diffuse.par_chunks_mut(width).zip(lamps.specular.par_chunks_mut(width));
-    let rendered = rendered_diffuse.par_chunks(width).zip(rendered_specular.par_chunks(width));
-    rows.zip(rendered).enumerate().for_each(|(y, ((diffuse, specular), (rendered_diffuse, rendered_specular)))| {
-        for x in 0..width {
-            match pixel_source(&plan.scene.materials, plan.frame, x, y) {
-                PixelSource::Surface { point, tint } => {
-                    if let Some((d, s)) = kernel.sun_lamps_lit(occluders, &point, &disks) {
-                        moved(&mut diffuse[x], rendered_diffuse[x], tint, d);
-                        moved(&mut specular[x], rendered_specular[x], tint, s);
-                    }
+    let pixel = |(x, y): (usize, usize),
+                 [diffuse, specular]: [&mut [f32; 3]; 2],
+                 [rendered_diffuse, rendered_specular]: [[f32; 3]; 2]| {
+        match pixel_source(&plan.scene.materials, plan.frame, x, y) {
+            PixelSource::Surface { point, tint } => {
+                if let Some((d, s)) = kernel.sun_lamps_lit(occluders, &point, &disks) {
+                    moved(diffuse, rendered_diffuse, tint, d);
+                    moved(specular, rendered_specular, tint, s);
                 }
-                PixelSource::WaterSky { tint, mirror } => {
-                    moved(&mut specular[x], rendered_specular[x], tint, suns_along(turned, mirror));
-                }
-                PixelSource::Background { .. } | PixelSource::WaterLamp { .. } => {}
             }
+            PixelSource::WaterSky { tint, mirror } => {
+                moved(specular, rendered_specular, tint, suns_along(turned, mirror));
+            }
+            PixelSource::Background { .. } | PixelSource::WaterLamp { .. } => {}
         }
-    });
+    };
+    let (width, [rendered_diffuse, rendered_specular]) = (lamps.width, lamps.rendered);
+    let lamp_pairs = lamps.diffuse.par_iter_mut().zip(lamps.specular.par_iter_mut());
+    let rendered_pairs = rendered_diffuse.par_iter().zip(rendered_specular.par_iter());
+    let each = lamp_pairs.zip(rendered_pairs).enumerate();
+    match lamps.pixels {
+        // Rows apart, as the render shades them.
+        None => each
+            .with_min_len(width)
+            .for_each(|(i, ((d, s), (rd, rs)))| pixel((i % width, i / width), [d, s], [*rd, *rs])),
+        Some(pixels) => each
+            .with_min_len(256)
+            .for_each(|(k, ((d, s), (rd, rs)))| pixel((pixels[k] % width, pixels[k] / width), [d, s], [*rd, *rs])),
+    }
 }

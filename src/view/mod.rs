@@ -49,6 +49,9 @@ pub struct Viewer {
     built: Mutex<Vec<(FrameStamp, Arc<FrameBodies>)>>,
     /// When the page's benchmark started ([`PAGE`]'s `?bench=N`).
     bench: Mutex<Option<std::time::Instant>>,
+    /// Held while a frame's bodies are built, so that requests that come together build
+    /// them once (twenty at once each built their own: 7 to 8 times as slow, and 880 MB).
+    building: Mutex<()>,
 }
 
 /// The responses of one frame.
@@ -72,13 +75,14 @@ struct SunLamps {
     /// The pixels the page shows ([`preview_pixels`]).
     shown: Vec<usize>,
     /// The scene loaded to shade them, or why it cannot be (the page then keeps them as
-    /// rendered and says why).
-    turn: std::result::Result<SunLampTurn, String>,
-    /// The frame's scene frame, read and checked at its first turn, which the turns after
-    /// it share: a turn of the Sun-lamp scene's frame (320x180) 62 to 67 ms against 84 to
-    /// 92 ms reading the G-buffer and filtering the pyramid at every turn (medians of 11
-    /// turns, three runs alternating, 2 busy cores).
-    prepared: Mutex<Option<Arc<SunLampFrame>>>,
+    /// rendered and says why; [`Viewer::bodies`] tries again at the frame's next request).
+    turn: std::result::Result<Arc<SunLampTurn>, String>,
+    /// The frame's scene frame, read and checked at its first turn, with the scene that
+    /// read it, which the turns after it share: a turn of the Sun-lamp scene's frame
+    /// (320x180) 62 to 67 ms against 84 to 92 ms reading the G-buffer and filtering the
+    /// pyramid at every turn (medians of 11 turns, three runs alternating, 2 busy cores).
+    /// Held while it is read, so that turns asked for together read it once.
+    prepared: Mutex<Option<(Arc<SunLampTurn>, Arc<SunLampFrame>)>>,
 }
 
 impl SunLamps {
@@ -87,7 +91,7 @@ impl SunLamps {
         file: &Path,
         mut frame: TransferFrame,
         shown: Vec<usize>,
-        turn: std::result::Result<SunLampTurn, String>,
+        turn: std::result::Result<Arc<SunLampTurn>, String>,
     ) -> Self {
         frame.diffuse = Vec::new();
         frame.unoccluded = Vec::new();
@@ -107,22 +111,26 @@ impl SunLamps {
             Ok(turn) => turn,
             Err(why) => return Response::error(409, why),
         };
-        let prepared = self.prepared.lock().unwrap_or_else(|p| p.into_inner()).clone();
-        let prepared = match prepared {
-            Some(prepared) => prepared,
-            // Checked again at each turn until it passes: a scene put back is then seen.
-            None => match turn.prepare(&self.lamps, &self.file) {
-                Ok(prepared) => {
-                    let prepared = Arc::new(prepared);
-                    *self.prepared.lock().unwrap_or_else(|p| p.into_inner()) = Some(prepared.clone());
-                    prepared
-                }
-                Err(e) => return Response::error(500, &e.to_string()),
-            },
+        let (turn, prepared) = {
+            let mut prepared = self.prepared.lock().unwrap_or_else(|p| p.into_inner());
+            match prepared.as_ref() {
+                Some(both) => both.clone(),
+                // Checked again at each turn until it passes, the scene loaded again where
+                // it fails: a scene put back since it was loaded is then seen.
+                None => match turn.prepare(&self.lamps, &self.file).map(|frame| (turn.clone(), frame)).or_else(|e| {
+                    let fresh = SunLampTurn::new(&self.lamps.header, &self.file).map_err(|_| e)?;
+                    fresh.prepare(&self.lamps, &self.file).map(|frame| (Arc::new(fresh), frame))
+                }) {
+                    Ok((turn, frame)) => prepared.insert((turn, Arc::new(frame))).clone(),
+                    Err(e) => return Response::error(500, &e.to_string()),
+                },
+            }
         };
-        match turn.turned_prepared(&prepared, &self.lamps, &self.file, degrees) {
+        // Shaded at the shown pixels alone: one in `stride^2` of a frame wider than the
+        // preview.
+        match turn.turned_at(&prepared, &self.lamps, &self.file, degrees, Some(&self.shown)) {
             Ok(layers) => {
-                let values = layers.iter().flat_map(|layer| at_pixels(&self.shown, layer.as_flattened(), 3));
+                let values = layers.iter().flat_map(|layer| layer.as_flattened().iter().copied());
                 Response::ok("application/octet-stream", values.flat_map(f32::to_le_bytes).collect())
             }
             Err(e) => Response::error(500, &e.to_string()),
@@ -148,7 +156,7 @@ impl Viewer {
                 dir.display()
             ));
         }
-        Ok(Self { frames, built: Mutex::new(Vec::new()), bench: Mutex::new(None) })
+        Ok(Self { frames, built: Mutex::new(Vec::new()), bench: Mutex::new(None), building: Mutex::new(()) })
     }
 
     /// Listens on 127.0.0.1:`port` (0: any free port) and serves until the process ends;
@@ -277,8 +285,18 @@ impl Viewer {
         // A frame written again since (rendered anew) is read again.
         let stamp = FrameStamp::of(index, file);
         let unchanged = |bodies: &FrameBodies| bodies.cycles_files.iter().all(|(path, was)| written(path) == *was);
-        if let Some((_, bodies)) = built().iter().find(|(kept, bodies)| *kept == stamp && unchanged(bodies)) {
-            return Ok(bodies.clone());
+        let kept = || built().iter().find(|(kept, bodies)| *kept == stamp && unchanged(bodies)).map(|(_, b)| b.clone());
+        // Kept, unless its Sun lamps could not be turned and now can (the scene put back).
+        let current = |bodies: &FrameBodies| match &bodies.sun_lamps {
+            Some(SunLamps { turn: Err(_), lamps, .. }) => SunLampTurn::new(&lamps.header, file).is_err(),
+            _ => true,
+        };
+        if let Some(bodies) = kept().filter(|bodies| current(bodies)) {
+            return Ok(bodies);
+        }
+        let _building = self.building.lock().unwrap_or_else(|p| p.into_inner());
+        if let Some(bodies) = kept().filter(|bodies| current(bodies)) {
+            return Ok(bodies);
         }
         let frame = TransferFrame::read(file)?;
         let options = RelightOptions::default();
@@ -286,7 +304,7 @@ impl Viewer {
         options.check_rendered_map(&light, &frame.header, file)?;
         let (view, standard) = ViewTransform::for_preview(frame.header.view.as_ref(), file);
         let turn = (!frame.header.sun_lamps.is_empty())
-            .then(|| SunLampTurn::new(&frame.header, file).map_err(|e| e.to_string()));
+            .then(|| SunLampTurn::new(&frame.header, file).map(Arc::new).map_err(|e| e.to_string()));
         let kept = turn.as_ref().and_then(|turn| turn.as_ref().err().map(String::as_str));
         let mut bodies = frame_bodies(file, &frame, &light, &view, PREVIEW_SIZE, kept, standard);
         if let Some(turn) = turn {
