@@ -329,7 +329,7 @@ pub struct RelightArgs {
     #[arg(long, value_enum, default_value_t = SunLamps::Turn)]
     pub sun_lamps: SunLamps,
     /// Strength of the map [default: the rendered strength; 1 with --light]; scales a constant or SH light too.
-    #[arg(long, allow_negative_numbers = true)]
+    #[arg(long, allow_negative_numbers = true, value_parser = relight_strength)]
     pub strength: Option<f32>,
     /// Output directory; receives each frame's relit EXR (beauty and passes, same file name), a PNG preview and <frame>.light.json (the light's SH vector).
     #[arg(long)]
@@ -366,4 +366,14 @@ pub struct InfoArgs {
     /// Print JSON instead of text.
     #[arg(long)]
     pub json: bool,
+}
+
+/// `--strength` of `logsh relight`: a finite value from 0 to the largest f32, refused as
+/// typed (an f32 read 1e39 as infinity, and the message named a value no one typed).
+fn relight_strength(text: &str) -> Result<f32, String> {
+    match text.trim().parse::<f64>() {
+        Ok(value) if value.is_finite() && (0.0..=f64::from(f32::MAX)).contains(&value) => Ok(value as f32),
+        Ok(_) => Err(format!("give a finite value from 0 to {:e}", f32::MAX)),
+        Err(e) => Err(e.to_string()),
+    }
 }

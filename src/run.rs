@@ -419,9 +419,6 @@ pub fn relight(args: &crate::cli::RelightArgs) -> Result<()> {
     if !args.light_rotation.is_finite() {
         return Err(anyhow!("--light-rotation {} is not a finite number of degrees", args.light_rotation));
     }
-    if args.strength.is_some_and(|s| !(s.is_finite() && s >= 0.0)) {
-        return Err(anyhow!("--strength {}: give a finite value >= 0", args.strength.unwrap_or_default()));
-    }
     let options = RelightOptions { light: args.light.clone(), rotation: args.light_rotation, strength: args.strength };
     let canonical = |p: &Path| std::fs::canonicalize(p).ok();
     // What the relight reads: the frames, --light, and by each frame's header the map it
@@ -518,8 +515,10 @@ pub fn relight(args: &crate::cli::RelightArgs) -> Result<()> {
             }
             Ok(())
         });
+        let mut at = 0;
         let relit = || -> Result<()> {
             for (k, (file, frame)) in args.frames.iter().zip(read_rx).enumerate() {
+                at = k;
                 let mut frame = frame?;
                 let t = Instant::now();
                 let source = options.source(&frame.header);
@@ -568,7 +567,17 @@ pub fn relight(args: &crate::cli::RelightArgs) -> Result<()> {
             }
             Ok(())
         };
-        let relit = relit();
+        // A failure names the frames it leaves out.
+        let relit = relit().map_err(|e| {
+            let left: Vec<String> = args.frames[at + 1..].iter().map(|f| f.display().to_string()).collect();
+            match left.len() {
+                0 => e,
+                n => anyhow!(
+                    "{e:#}; the relight stops there, and {n} frame(s) after it are not relit: {}",
+                    left.join(", ")
+                ),
+            }
+        });
         drop(write_tx);
         let written = writer.join().expect("the writer does not panic");
         let reading = reader.join().expect("the reader does not panic");

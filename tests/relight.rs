@@ -620,7 +620,29 @@ fn bad_relight_inputs_are_refused_with_the_file_named() {
         &["relight", path(&frame), "--light", path(&dir.path().join("nosky.exr")), "--out", o],
         &["nosky.exr"],
     );
-    assert_fails_naming(&["relight", path(&frame), "--strength", "-1", "--out", o], &["--strength"]);
+    // A sequence whose second frame is cut short: the first is relit, and the error names
+    // the frame after it, which is not.
+    let sequence = dir.path().join("sequence");
+    std::fs::create_dir_all(&sequence).unwrap();
+    let bytes = std::fs::read(&frame).unwrap();
+    let [a, b, c] = ["a", "b", "c"].map(|name| sequence.join(format!("{name}.exr")));
+    for (file, kept) in [(&a, bytes.len()), (&b, 3000), (&c, bytes.len())] {
+        std::fs::write(file, &bytes[..kept]).unwrap();
+    }
+    let stopped = sequence.join("relit");
+    assert_fails_naming(
+        &["relight", path(&a), path(&b), path(&c), "--out", path(&stopped)],
+        &["b.exr", "ends early", "1 frame(s) after it are not relit", "c.exr"],
+    );
+    assert!(stopped.join("a.exr").is_file() && !stopped.join("c.exr").exists());
+    // Refused as typed, as clap refuses a value (exit 2): past an f32 too, which read as
+    // infinity and was refused as "inf".
+    for strength in ["-1", "1e39", "nan"] {
+        let output = logsh().args(["relight", path(&frame), "--strength", strength, "--out", o]).output().unwrap();
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert_eq!(output.status.code(), Some(2), "--strength {strength}: {stderr}");
+        assert!(stderr.contains(&format!("'{strength}' for '--strength")), "{stderr}");
+    }
     // A vast strength: its half floats stop at the largest finite one, not infinity.
     let vast = dir.path().join("vast");
     run(&["relight", path(&frame), "--strength", "1e30", "--out", path(&vast)]);
