@@ -39,7 +39,7 @@ pub struct SunLampTurn {
     scene: Scene,
     settings: ShadingSettings,
     /// The last frame's height map and its filtered pyramid, which the frames after it
-    /// share where the scene's height map is one for all frames (4.5 to 6 ms of a turn of
+    /// share where the scene's height map is one for all frames (4.5 to 6.5 ms of a turn of
     /// the Sun-lamp scene's frames).
     pyramid: Mutex<Option<(Arc<HeightMap>, Arc<HorizonPyramid>)>>,
 }
