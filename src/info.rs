@@ -144,9 +144,8 @@ fn check_complete(
     };
     let size_at = offset + part_number + coordinates;
     let mut size = [0u8; 4];
-    let mut opened = std::fs::File::open(file).map_err(|e| SceneError::io(file, "the EXR file", e))?;
-    std::io::Seek::seek(&mut opened, std::io::SeekFrom::Start(size_at))
-        .and_then(|_| std::io::Read::read_exact(&mut opened, &mut size))
+    read.skip_to(size_at as usize)
+        .and_then(|()| std::io::Read::read_exact(read, &mut size))
         .map_err(|_| cut(format!("its last chunk of pixels, at byte {offset}, is cut short")))?;
     let end = size_at + 4 + u64::from(u32::from_le_bytes(size));
     if end > bytes {

@@ -558,7 +558,8 @@ pub fn relight(args: &crate::cli::RelightArgs) -> Result<()> {
                     warned_of_view = true;
                     eprintln!("relight: {}: {reason}", file.display());
                 }
-                let description = serde_json::to_string_pretty(&light.description(options.rotation % 360.0))? + "\n";
+                let description =
+                    serde_json::to_string_pretty(&light.description(options.turn_beyond_render()))? + "\n";
                 if write_tx.send((k, passes, view, description)).is_err() {
                     break;
                 }

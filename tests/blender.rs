@@ -6,6 +6,8 @@
 //! The interpreter is the one named by `LOGSH_BPY_PYTHON` (`.ci/bpy-setup` makes one in
 //! `.venv-bpy`). Unset, or unable to import bpy, each test prints why it is skipped and
 //! passes, unless `LOGSH_REQUIRE_BPY=1`, where that is a failure (CI sets both).
+mod support;
+
 use assert_cmd::Command;
 use exr::prelude::{read, FlatSamples, ReadChannels, ReadLayers};
 use logsh::scene::{Scene, Sphere};
@@ -672,13 +674,7 @@ fn the_compositor_recipe_relights_the_diffuse_pass() {
     // An `sh` light, relit turned 40: its light.json records the turn, which the compositor
     // takes back first (it turned the light twice, to 80 degrees, before).
     let scene = dir.path().join("cones_sh");
-    std::fs::create_dir_all(&scene).unwrap();
-    for entry in std::fs::read_dir(&cones).unwrap() {
-        let entry = entry.unwrap();
-        if entry.path().is_file() {
-            std::fs::copy(entry.path(), scene.join(entry.file_name())).unwrap();
-        }
-    }
+    support::copy_scene(&cones, &scene);
     let description = scene.join("scene.json");
     let mut json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&description).unwrap()).unwrap();
     let mut sh = vec![[0.0f64; 3]; 25];

@@ -47,16 +47,17 @@ fn dunes(dir: &Path) -> PathBuf {
 /// A copy of the scene `from` under a constant light, in `dir`.
 fn constant_light(from: &Path, dir: &Path) -> PathBuf {
     let out = dir.join("constant");
-    std::fs::create_dir_all(&out).unwrap();
-    for entry in std::fs::read_dir(from).unwrap() {
-        let entry = entry.unwrap();
-        std::fs::copy(entry.path(), out.join(entry.file_name())).unwrap();
-    }
+    support::copy_scene(from, &out);
     let file = out.join("scene.json");
     let mut scene: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&file).unwrap()).unwrap();
     scene["light"] = serde_json::json!({ "constant": [0.8, 0.9, 1.0] });
     std::fs::write(&file, scene.to_string()).unwrap();
     out
+}
+
+/// Frame 1 of `scene` rendered with its transfer layers into `out`.
+fn render_transfer(scene: &Path, out: &Path) {
+    run(&["render", path(scene), "--out", path(out), "--frames", "1", "--progress", "none", "--transfer"]);
 }
 
 fn path(p: &Path) -> &str {
@@ -236,11 +237,7 @@ fn a_swapped_and_scaled_light_relights_as_a_shade_under_it() {
     ]);
     // The same scene lit by the swapped map at strength 3, shaded afresh.
     let lit = dir.path().join("lit");
-    std::fs::create_dir_all(&lit).unwrap();
-    for entry in std::fs::read_dir(&scene).unwrap() {
-        let entry = entry.unwrap();
-        std::fs::copy(entry.path(), lit.join(entry.file_name())).unwrap();
-    }
+    support::copy_scene(&scene, &lit);
     let file = lit.join("scene.json");
     let mut json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&file).unwrap()).unwrap();
     std::fs::copy(&map, lit.join("swapped.exr")).unwrap();
@@ -426,11 +423,7 @@ fn sun_lamps_turn_the_same_from_a_frame_read_once() {
     support::sharp::load_with_lights(&scene, lights).unwrap();
     // The same scene with a height map per frame, frame 2's raised and steeper.
     let per_frame = dir.path().join("per_frame");
-    std::fs::create_dir_all(&per_frame).unwrap();
-    for entry in std::fs::read_dir(&scene).unwrap() {
-        let entry = entry.unwrap();
-        std::fs::copy(entry.path(), per_frame.join(entry.file_name())).unwrap();
-    }
+    support::copy_scene(&scene, &per_frame);
     let map = logsh::scene::HeightMap::read(&scene.join("heightmap.exr"), None, [0.0; 2], [1.0; 2]).unwrap();
     for (number, scale) in [(1, 1.0f32), (2, 1.6)] {
         let steeper =
@@ -520,11 +513,7 @@ fn water_mirrors_a_turned_sun_lamp_as_a_render_does() {
     let dir = tempfile::tempdir().unwrap();
     let sample = Path::new(env!("CARGO_MANIFEST_DIR")).join("gbuffers/dunes");
     let scene = dir.path().join("dunes");
-    std::fs::create_dir_all(&scene).unwrap();
-    for entry in std::fs::read_dir(&sample).unwrap() {
-        let entry = entry.unwrap();
-        std::fs::copy(entry.path(), scene.join(entry.file_name())).unwrap();
-    }
+    support::copy_scene(&sample, &scene);
     let transfer = dir.path().join("transfer");
     let common = ["--frames", "1", "--sharp-lights", "off", "--progress", "none", "--device", "cpu"];
     run(&[&["render", path(&scene), "--out", path(&transfer), "--transfer"], &common[..]].concat());
@@ -602,7 +591,7 @@ fn bad_relight_inputs_are_refused_with_the_file_named() {
     let plain = dir.path().join("plain");
     let transfer = dir.path().join("transfer");
     run(&["render", path(&scene), "--out", path(&plain), "--frames", "1", "--progress", "none", "--device", "cpu"]);
-    run(&["render", path(&scene), "--out", path(&transfer), "--frames", "1", "--progress", "none", "--transfer"]);
+    render_transfer(&scene, &transfer);
     let frame = transfer.join("render.0001.exr");
     let out = dir.path().join("out");
     let o = path(&out);
@@ -742,7 +731,7 @@ fn bad_relight_inputs_are_refused_with_the_file_named() {
     // A frame rendered under the new map first, then one under the old: they share the
     // light, and the second is still refused.
     let newer = dir.path().join("newer");
-    run(&["render", path(&scene), "--out", path(&newer), "--frames", "1", "--progress", "none", "--transfer"]);
+    render_transfer(&scene, &newer);
     let mixed = dir.path().join("mixed");
     std::fs::create_dir_all(&mixed).unwrap();
     std::fs::copy(newer.join("render.0001.exr"), mixed.join("a.exr")).unwrap();
@@ -802,7 +791,7 @@ fn outputs_never_replace_a_linked_input() {
     let dir = tempfile::tempdir().unwrap();
     let scene = dunes(dir.path());
     let transfer = dir.path().join("transfer");
-    run(&["render", path(&scene), "--out", path(&transfer), "--frames", "1", "--progress", "none", "--transfer"]);
+    render_transfer(&scene, &transfer);
     let named = dir.path().join("named/gbuffer.0001.exr");
     std::fs::create_dir_all(named.parent().unwrap()).unwrap();
     std::fs::copy(transfer.join("render.0001.exr"), &named).unwrap();
@@ -927,7 +916,7 @@ fn a_sun_kept_in_sh_is_reported() {
     let dir = tempfile::tempdir().unwrap();
     let scene = dunes(dir.path());
     let transfer = dir.path().join("transfer");
-    run(&["render", path(&scene), "--out", path(&transfer), "--frames", "1", "--progress", "none", "--transfer"]);
+    render_transfer(&scene, &transfer);
     let frame = transfer.join("render.0001.exr");
     let sunny = dir.path().join("sunny.exr");
     write_sunny_map(&sunny);

@@ -6,6 +6,8 @@
 //! unless `LOGSH_REQUIRE_BROWSER=1` (which `.ci/run` sets once it has installed Debian's
 //! `chromium`).
 
+mod support;
+
 use assert_cmd::cargo::cargo_bin;
 use std::io::{BufRead, BufReader, Read, Write};
 use std::net::TcpStream;
@@ -79,11 +81,7 @@ fn run(args: &[&str]) {
 fn rendered_cones(dir: &Path, lights: serde_json::Value) -> PathBuf {
     let sample = Path::new(env!("CARGO_MANIFEST_DIR")).join("gbuffers/cones");
     let scene = dir.join("cones");
-    std::fs::create_dir_all(&scene).unwrap();
-    for entry in std::fs::read_dir(&sample).unwrap() {
-        let entry = entry.unwrap();
-        std::fs::copy(entry.path(), scene.join(entry.file_name())).unwrap();
-    }
+    support::copy_scene(&sample, &scene);
     let (width, height) = (128usize, 64usize);
     let mut rgb = [vec![0.0f32; width * height], vec![0.0f32; width * height], vec![0.0f32; width * height]];
     for row in 0..height {

@@ -59,11 +59,16 @@ impl RelightOptions {
         }
     }
 
+    /// The turn about Z beyond the rendered light, whole turns taken out first, exactly
+    /// (`%` is exact), so that a vast angle turns as its remainder does: what the light is
+    /// turned by ([`Self::source`]) and what light.json records of it.
+    pub fn turn_beyond_render(&self) -> f64 {
+        self.rotation % 360.0
+    }
+
     /// The light to relight with, from the one `header` records.
     pub fn source(&self, header: &TransferHeader) -> LightSource {
-        // Whole turns taken out first, exactly (`%` is exact), so that a vast angle turns
-        // as its remainder does.
-        let degrees = self.rotation % 360.0;
+        let degrees = self.turn_beyond_render();
         match (&self.light, &header.light) {
             (Some(file), _) => LightSource::Environment {
                 file: file.clone(),

@@ -4,6 +4,17 @@
 
 pub mod sharp;
 
+/// `to`, made a copy of the files of the scene directory `from` (its folders left out).
+pub fn copy_scene(from: &std::path::Path, to: &std::path::Path) {
+    std::fs::create_dir_all(to).unwrap();
+    for entry in std::fs::read_dir(from).unwrap() {
+        let entry = entry.unwrap();
+        if entry.path().is_file() {
+            std::fs::copy(entry.path(), to.join(entry.file_name())).unwrap();
+        }
+    }
+}
+
 /// Every channel of a single-part EXR as f32, by full name.
 pub fn exr_channels(path: &std::path::Path) -> std::collections::HashMap<String, Vec<f32>> {
     use exr::prelude::{read_all_flat_layers_from_file, FlatSamples};
