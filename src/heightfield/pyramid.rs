@@ -136,6 +136,20 @@ pub struct ElevationBand {
 impl ElevationBand {
     /// Every elevation matters: the march finds the horizon.
     pub const ALL: ElevationBand = ElevationBand { below: f64::NEG_INFINITY, above: f64::INFINITY };
+
+    /// Where a march's largest step tangent `t` puts the horizon, `max(atan t, 0)`: a
+    /// horizon at or below the foot hides what one marched to its end there would, and
+    /// one at or above the top the same (the band's definition).
+    fn against(self, t: f64) -> HorizonAgainst {
+        let known = t.max(0.0);
+        if t >= self.above {
+            HorizonAgainst::Above
+        } else if known <= self.below {
+            HorizonAgainst::Below
+        } else {
+            HorizonAgainst::At(known.atan())
+        }
+    }
 }
 
 /// Where a horizon lies against an [`ElevationBand`].
@@ -403,6 +417,13 @@ struct LaneStep {
     reach: [f32; 2],
     /// `1 / d_j`.
     inv_distance: f32,
+    /// `1 / d` of the last step of its level.
+    level_last_inv_distance: f32,
+    /// At least the tangent of any step of a later level from any receiver, in the
+    /// lanes' f32 arithmetic: each such step's level's relief over its distance, the
+    /// largest, with the margin of the lanes' ceilings (1e-5 of the terms, far above f32's
+    /// rounding of a read's few dozen operations); `-inf` for the last level's steps.
+    later: f32,
     /// The level it reads.
     level: usize,
 }
@@ -517,7 +538,7 @@ impl HorizonPyramid {
                 heights.fold([f64::INFINITY, f64::NEG_INFINITY], |[low, high], h| [low.min(h), high.max(h)])
             })
             .collect();
-        let level_ends = (0..plan.steps.len())
+        let level_ends: Vec<usize> = (0..plan.steps.len())
             .map(|j| {
                 (j..plan.steps.len()).find(|&k| plan.steps[k].level > plan.steps[j].level).unwrap_or(plan.steps.len())
             })
@@ -545,10 +566,22 @@ impl HorizonPyramid {
         let lane_steps = if in_lanes {
             steps
                 .iter()
-                .map(|step: &MarchStep| LaneStep {
-                    reach: grid_scales[step.level].map(|scale: f64| (step.distance * scale) as f32),
-                    inv_distance: step.inv_distance as f32,
-                    level: step.level,
+                .enumerate()
+                .map(|(j, step): (usize, &MarchStep)| {
+                    const MARGIN: f64 = 1e-5;
+                    let level_end: usize = level_ends[j];
+                    let later = steps[level_end..].iter().fold(f64::NEG_INFINITY, |highest, later: &MarchStep| {
+                        let [low, high] = peaks[later.level];
+                        let tangent = (high - low + MARGIN * (high.abs() + low.abs())) * later.inv_distance;
+                        highest.max(tangent + MARGIN * tangent.abs())
+                    });
+                    LaneStep {
+                        reach: grid_scales[step.level].map(|scale: f64| (step.distance * scale) as f32),
+                        inv_distance: step.inv_distance as f32,
+                        level_last_inv_distance: steps[level_end - 1].inv_distance as f32,
+                        later: later as f32,
+                        level: step.level,
+                    }
                 })
                 .collect()
         } else {
@@ -700,13 +733,100 @@ impl HorizonPyramid {
     /// [`Self::horizon_along`], told where it matters: a sun's disk needs the horizon
     /// only between its lowest and highest directions (below, it hides none of the disk;
     /// above, all of it), so the march stops once it knows the horizon is outside `band`.
+    ///
+    /// Where the environment's horizons are marched in lanes, so is this one, in the same
+    /// f32 arithmetic ([`Self::horizons_against`]); the f64 march otherwise.
     pub fn horizon_against(&self, p: [f64; 3], dir: [f64; 2], reach: f64, band: ElevationBand) -> HorizonAgainst {
-        if self.steps.is_empty() || !p.iter().chain(&dir).all(|v| v.is_finite()) {
-            return HorizonAgainst::At(0.0);
+        let mut out = [HorizonAgainst::Below];
+        self.horizons_against(&[p], dir, reach, band, &mut out);
+        out[0]
+    }
+
+    /// [`Self::horizon_against`] from each of `points` along the one azimuth `dir`, into
+    /// `out`: a frame's pixels against one sun. Where the environment's horizons are
+    /// marched in lanes, eight receivers are marched at once, one per lane, each with the
+    /// bits it gets alone (so a pixel's horizon does not depend on the pixels marched
+    /// beside it, nor on whether it was marched with any). The Sun-lamp scene's frame
+    /// (320x180, a Sun lamp at 50 deg over a height field): its turned lamps' horizons
+    /// took 65 % of their shading marched one pixel at a time in f64, and the turn took 47
+    /// ms; marched so, 24 ms (2 cores, the frame read beforehand).
+    pub fn horizons_against(
+        &self,
+        points: &[[f64; 3]],
+        dir: [f64; 2],
+        reach: f64,
+        band: ElevationBand,
+        out: &mut [HorizonAgainst],
+    ) {
+        assert_eq!(points.len(), out.len(), "horizons_against: one answer per point");
+        let marchable = |p: &[f64; 3]| !self.steps.is_empty() && p.iter().chain(&dir).all(|v| v.is_finite());
+        let receiver = |p: &[f64; 3]| {
+            let (x, y) = (p[0], p[1]);
+            (x, y, (p[2] - self.height_at(x, y)).max(0.0))
+        };
+        #[cfg(target_arch = "x86_64")]
+        if self.in_lanes {
+            // The band's bounds rounded outwards to f32, so that a lane that stops at one
+            // stops where the f64 comparison would.
+            let outwards = |bound: f64, down: bool| {
+                let rounded = bound as f32;
+                match f64::from(rounded) {
+                    r if down && r > bound => -next_up(-rounded),
+                    r if !down && r < bound => next_up(rounded),
+                    _ => rounded,
+                }
+            };
+            let lane_band = [outwards(band.below, true), outwards(band.above, false)];
+            let mut eight = [lanes::AlongReceiver { x: 0.0, y: 0.0, above: 0.0, taken: 0 }; 8];
+            let mut slots = [usize::MAX; 8];
+            let mut filled = 0;
+            let flush = |eight: &[lanes::AlongReceiver], slots: &[usize], out: &mut [HorizonAgainst]| {
+                let mut tangents = [0.0f32; 8];
+                // SAFETY: `in_lanes` means `lanes::available` held when the pyramid was
+                // built, and each `taken` is a step count.
+                unsafe { lanes::tangents_along(self, eight, dir, lane_band, &mut tangents) };
+                for (&slot, tangent) in slots.iter().zip(tangents) {
+                    out[slot] = band.against(f64::from(tangent));
+                }
+            };
+            for (k, p) in points.iter().enumerate() {
+                if !marchable(p) {
+                    out[k] = HorizonAgainst::At(0.0);
+                    continue;
+                }
+                let (x, y, above) = receiver(p);
+                eight[filled] = lanes::AlongReceiver { x, y, above, taken: self.steps_marched(x, y, dir, reach) };
+                slots[filled] = k;
+                filled += 1;
+                if filled == 8 {
+                    flush(&eight, &slots, out);
+                    filled = 0;
+                }
+            }
+            if filled > 0 {
+                flush(&eight[..filled], &slots[..filled], out);
+            }
+            return;
         }
-        let (x, y) = (p[0], p[1]);
-        let above = (p[2] - self.height_at(x, y)).max(0.0);
-        self.march(x, y, above, &mut ReceiverTerms::new(), dir, reach, band)
+        for (p, out) in points.iter().zip(out) {
+            *out = match marchable(p) {
+                true => {
+                    let (x, y, above) = receiver(p);
+                    self.march(x, y, above, &mut ReceiverTerms::new(), dir, reach, band)
+                }
+                false => HorizonAgainst::At(0.0),
+            };
+        }
+    }
+
+    /// How many steps the march from `(x, y)` along `dir` takes: those within `reach`, up
+    /// to the first past the point where its footprint stops moving.
+    fn steps_marched(&self, x: f64, y: f64, dir: [f64; 2], reach: f64) -> usize {
+        let t_far = self.far_distance(x, y, dir);
+        let within = self.steps.partition_point(|step| step.distance <= reach);
+        // The steps lie in order of distance.
+        let before_far = self.steps[..within].partition_point(|step| step.distance <= t_far);
+        (before_far + 1).min(within)
     }
 
     /// One azimuth's march from `(x, y)`, `above` the surface, over the steps no farther
@@ -728,10 +848,7 @@ impl HorizonPyramid {
         reach: f64,
         band: ElevationBand,
     ) -> HorizonAgainst {
-        let t_far = self.far_distance(x, y, dir);
-        // The steps marched: those within `reach`, up to the first past `t_far`.
-        let within = self.steps.partition_point(|step| step.distance <= reach);
-        let marched = self.steps[..within].iter().position(|step| step.distance > t_far).map_or(within, |j| j + 1);
+        let marched = self.steps_marched(x, y, dir, reach);
         let steps = &self.steps[..marched];
         let tangent = |step: &MarchStep, start: f64| {
             let q = self.sample_level(step.level, x + step.distance * dir[0], y + step.distance * dir[1]);
@@ -862,6 +979,8 @@ impl HorizonPyramid {
 /// and maximum over steps. Each lane is one azimuth; its 16 taps are four rows of four
 /// contiguous samples of the padded level, and a lane stops after its own last step (the
 /// scalar march's `t_far` and step table) or once no later step can raise its horizon.
+/// The march of [`HorizonPyramid::horizons_against`] turns it about: one azimuth (a sun's)
+/// from eight receivers (a frame's pixels), a receiver per lane ([`tangents_along`]).
 ///
 /// Positions are f32 grid units, and a level read is the weighted sum of its taps'
 /// heights above the receiver term `f_L(x)` (read in f32, eight levels per pass), so no
@@ -967,6 +1086,126 @@ mod lanes {
                 march_sixteen(pyramid, &receiver, &ceilings, sixteen, out);
             }
         }
+    }
+
+    /// One receiver of [`tangents_along`]: where it is, how far `above` the surface, and
+    /// how many steps it takes (the scalar march's count, `t_far` and the reach).
+    #[derive(Clone, Copy)]
+    pub struct AlongReceiver {
+        pub x: f64,
+        pub y: f64,
+        pub above: f64,
+        pub taken: usize,
+    }
+
+    /// The horizon tangents of up to eight `receivers` along one azimuth `dir`, one
+    /// receiver per lane, into `out` (`-inf` for a lane that takes no step).
+    ///
+    /// Each lane reads its levels as [`horizons`] does: its receiver terms (the same
+    /// operations as [`receivers`], one level for eight receivers rather than eight levels
+    /// for one) and its steps' B-spline reads above them, in f32. The terms of a level are
+    /// read once the march reaches it, as the f64 march reads them, and a lane stops as
+    /// that march against a band stops: once no later step can rise above its horizon (the
+    /// ceiling of its level's steps from its own terms, of later levels from their relief,
+    /// [`LaneStep::later`]), once its horizon and every later step are at or below
+    /// `band[0]`, or once its horizon reaches `band[1]` (the band's bounds as tangents,
+    /// rounded outwards to f32). A stop where no later step can change the answer leaves
+    /// each lane's tangent what it would be marched alone, whatever lanes beside it.
+    ///
+    /// # Safety
+    /// The processor has AVX2 and FMA, [`available`] holds for `pyramid`'s levels, and
+    /// every receiver's `taken` is at most the step count.
+    #[target_feature(enable = "avx2,fma")]
+    pub unsafe fn tangents_along(
+        pyramid: &HorizonPyramid,
+        receivers: &[AlongReceiver],
+        dir: [f64; 2],
+        band: [f32; 2],
+        out: &mut [f32; 8],
+    ) {
+        const MARGIN: f32 = 1e-5;
+        let (mut xs, mut ys, mut above, mut taken) = ([0.0f64; 8], [0.0f64; 8], [0.0f32; 8], [0i32; 8]);
+        for (lane, receiver) in receivers.iter().take(8).enumerate() {
+            (xs[lane], ys[lane], above[lane]) = (receiver.x, receiver.y, receiver.above as f32);
+            taken[lane] = receiver.taken as i32;
+        }
+        let longest = taken.iter().max().map_or(0, |&t| t as usize);
+        let load = |values: &[f32; 8]| _mm256_loadu_ps(values.as_ptr());
+        let abs = |v: __m256| _mm256_andnot_ps(_mm256_set1_ps(-0.0), v);
+        let (taken, above) = (_mm256_loadu_si256(taken.as_ptr().cast()), load(&above));
+        let (dx, dy) = (_mm256_set1_ps(dir[0] as f32), _mm256_set1_ps(dir[1] as f32));
+        let (below, top, margin) = (_mm256_set1_ps(band[0]), _mm256_set1_ps(band[1]), _mm256_set1_ps(MARGIN));
+        let zero = _mm256_setzero_ps();
+        // The current level's receiver terms, and the highest any of its reads rises above
+        // them (its peak less the terms, with the margin of `step_ceilings`).
+        let (mut level, mut u0, mut v0, mut base, mut start, mut rise) = (usize::MAX, zero, zero, zero, zero, zero);
+        let mut max_tan = _mm256_set1_ps(f32::NEG_INFINITY);
+        for (j, step) in pyramid.lane_steps[..longest].iter().enumerate() {
+            if step.level != level {
+                level = step.level;
+                let (scale, padded) = (pyramid.grid_scales[level], &pyramid.padded[level]);
+                let (mut u, mut v) = ([0.0f32; 8], [0.0f32; 8]);
+                for lane in 0..8 {
+                    u[lane] = ((xs[lane] - pyramid.min[0]) * scale[0]) as f32;
+                    v[lane] = ((ys[lane] - pyramid.min[1]) * scale[1]) as f32;
+                }
+                (u0, v0) = (load(&u), load(&v));
+                // `receivers`' base and start: the taps' sum above 0 is their sum.
+                base = rise_lanes(padded, u0, v0, zero);
+                start = _mm256_add_ps(rise_lanes(padded, u0, v0, base), above);
+                let peak = _mm256_set1_ps(padded.peak);
+                let terms = _mm256_add_ps(_mm256_add_ps(abs(peak), abs(base)), abs(start));
+                rise = _mm256_fmadd_ps(margin, terms, _mm256_sub_ps(_mm256_sub_ps(peak, base), start));
+            }
+            // rise / d over the level's steps: largest at the nearest if positive, else the farthest.
+            let nearest = _mm256_mul_ps(rise, _mm256_set1_ps(step.inv_distance));
+            let farthest = _mm256_mul_ps(rise, _mm256_set1_ps(step.level_last_inv_distance));
+            let this_level = _mm256_blendv_ps(farthest, nearest, _mm256_cmp_ps::<_CMP_GT_OQ>(rise, zero));
+            let this_level = _mm256_fmadd_ps(margin, abs(this_level), this_level);
+            let ceiling = _mm256_max_ps(this_level, _mm256_set1_ps(step.later));
+            let known = _mm256_max_ps(max_tan, zero);
+            let rising = _mm256_cmp_ps::<_CMP_LT_OQ>(known, ceiling);
+            let settled_below =
+                _mm256_and_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(known, below), _mm256_cmp_ps::<_CMP_LE_OQ>(ceiling, below));
+            let under_top = _mm256_cmp_ps::<_CMP_LT_OQ>(max_tan, top);
+            let taking = _mm256_castsi256_ps(_mm256_cmpgt_epi32(taken, _mm256_set1_epi32(j as i32)));
+            let marching = _mm256_and_ps(_mm256_and_ps(_mm256_andnot_ps(settled_below, rising), under_top), taking);
+            if _mm256_movemask_ps(marching) == 0 {
+                break;
+            }
+            let u = _mm256_fmadd_ps(_mm256_set1_ps(step.reach[0]), dx, u0);
+            let v = _mm256_fmadd_ps(_mm256_set1_ps(step.reach[1]), dy, v0);
+            let climb = _mm256_sub_ps(rise_lanes(&pyramid.padded[level], u, v, base), start);
+            let tangent = _mm256_mul_ps(climb, _mm256_set1_ps(step.inv_distance));
+            max_tan = _mm256_blendv_ps(max_tan, _mm256_max_ps(max_tan, tangent), marching);
+        }
+        _mm256_storeu_ps(out.as_mut_ptr(), max_tan);
+    }
+
+    /// [`tangents_along`]'s tangent for one receiver with no stop: every step it takes,
+    /// read as a lane reads it (the tests' check that the stops change no bit).
+    #[cfg(test)]
+    #[target_feature(enable = "avx2,fma")]
+    pub unsafe fn every_step_along(pyramid: &HorizonPyramid, receiver: AlongReceiver, dir: [f64; 2]) -> f32 {
+        let lane = |v: __m256| {
+            let mut values = [0.0f32; 8];
+            _mm256_storeu_ps(values.as_mut_ptr(), v);
+            values[0]
+        };
+        let (dx, dy) = (_mm256_set1_ps(dir[0] as f32), _mm256_set1_ps(dir[1] as f32));
+        let mut max_tan = f32::NEG_INFINITY;
+        for step in &pyramid.lane_steps[..receiver.taken] {
+            let (scale, padded) = (pyramid.grid_scales[step.level], &pyramid.padded[step.level]);
+            let u0 = _mm256_set1_ps(((receiver.x - pyramid.min[0]) * scale[0]) as f32);
+            let v0 = _mm256_set1_ps(((receiver.y - pyramid.min[1]) * scale[1]) as f32);
+            let base = rise_lanes(padded, u0, v0, _mm256_setzero_ps());
+            let start = _mm256_add_ps(rise_lanes(padded, u0, v0, base), _mm256_set1_ps(receiver.above as f32));
+            let u = _mm256_fmadd_ps(_mm256_set1_ps(step.reach[0]), dx, u0);
+            let v = _mm256_fmadd_ps(_mm256_set1_ps(step.reach[1]), dy, v0);
+            let climb = _mm256_sub_ps(rise_lanes(padded, u, v, base), start);
+            max_tan = max_tan.max(lane(_mm256_mul_ps(climb, _mm256_set1_ps(step.inv_distance))));
+        }
+        max_tan
     }
 
     /// The steps each azimuth takes into `taken`: every step up to `t_far` and the first
@@ -1345,6 +1584,18 @@ mod lanes {
     }
 }
 
+/// The least f32 above `x` (`f32::next_up`, which this crate's Rust version lacks).
+fn next_up(x: f32) -> f32 {
+    if x.is_nan() || x == f32::INFINITY {
+        return x;
+    }
+    if x == 0.0 {
+        return f32::from_bits(1);
+    }
+    let bits = x.to_bits();
+    f32::from_bits(if x > 0.0 { bits + 1 } else { bits - 1 })
+}
+
 /// Uniform cubic B-spline basis at fraction `t` (SN08 Section 4, after Eq. 4).
 #[inline]
 fn bspline_weights(t: f64) -> [f64; 4] {
@@ -1467,11 +1718,9 @@ mod tests {
         max_tan.atan().max(0.0)
     }
 
-    /// The march's stops (no later step can raise the horizon; it is known to lie below or
-    /// above a band) change no horizon: points on, above and outside a bumpy field, 24
-    /// azimuths, three reaches, four bands, each kind of stop seen.
-    #[test]
-    fn the_march_stops_early_without_changing_a_bit() {
+    /// A pyramid of a bumpy field 50 above zero, and 61 points on it, just above it, above
+    /// it and outside it, for the single-azimuth marches.
+    fn bumpy_field_and_points() -> (HorizonPyramid, Vec<[f64; 3]>) {
         let (columns, rows) = (45, 31);
         let heights: Vec<f32> = (0..columns * rows)
             .map(|i| {
@@ -1480,21 +1729,37 @@ mod tests {
             })
             .collect();
         let field = HeightField::new(heights, columns, rows, [-4.0, -3.0], [5.0, 3.0]).unwrap();
-        let pyramid = HorizonPyramid::new(&field, HorizonSettings::default()).unwrap();
+        let points = (0..61)
+            .map(|i| {
+                let (x, y) = (-4.5 + 0.17 * i as f64, -3.2 + 0.61 * ((i * 7) % 11) as f64);
+                [x, y, field.height_at(x, y) + [0.0, 0.02, 0.3, 1.5][i % 4]]
+            })
+            .collect();
+        (HorizonPyramid::new(&field, HorizonSettings::default()).unwrap(), points)
+    }
+
+    /// The march's stops (no later step can raise the horizon; it is known to lie below or
+    /// above a band) change no horizon: points on, above and outside a bumpy field, 24
+    /// azimuths, three reaches, four bands, each kind of stop seen.
+    #[test]
+    fn the_march_stops_early_without_changing_a_bit() {
+        let (pyramid, points) = bumpy_field_and_points();
         let bands = [(0.0, 0.05), (0.1, 0.3), (0.5, 0.9), (1.0, 1.4)];
         let (mut below, mut above, mut at) = (0, 0, 0);
-        for i in 0..60 {
-            let (x, y) = (-4.5 + 0.17 * i as f64, -3.2 + 0.61 * ((i * 7) % 11) as f64);
-            let p = [x, y, field.height_at(x, y) + [0.0, 0.02, 0.3, 1.5][i % 4]];
+        for &p in &points[..60] {
+            let (x, y) = (p[0], p[1]);
+            let lift = (p[2] - pyramid.height_at(x, y)).max(0.0);
+            let f64_march = |dir, reach, band| pyramid.march(x, y, lift, &mut ReceiverTerms::new(), dir, reach, band);
             for k in 0..24 {
                 let dir = (k as f64 * std::f64::consts::TAU / 24.0).sin_cos();
                 let dir = [dir.1, dir.0];
                 for reach in [f64::INFINITY, 2.0, 0.3] {
                     let every = march_every_step(&pyramid, p, dir, reach);
-                    assert_eq!(pyramid.horizon_along(p, dir, reach).to_bits(), every.to_bits(), "{p:?} {dir:?}");
+                    let whole = f64_march(dir, reach, ElevationBand::ALL).elevation();
+                    assert_eq!(whole.to_bits(), every.to_bits(), "{p:?} {dir:?}");
                     for (low, high) in bands {
                         let band = ElevationBand { below: f64::tan(low), above: f64::tan(high) };
-                        match pyramid.horizon_against(p, dir, reach, band) {
+                        match f64_march(dir, reach, band) {
                             HorizonAgainst::Below => {
                                 assert!(every <= low + 1e-12, "{every} is above {low}");
                                 below += 1;
@@ -1513,6 +1778,98 @@ mod tests {
             }
         }
         assert!(below > 0 && above > 0 && at > 0, "below {below}, above {above}, at {at}");
+    }
+
+    /// `next_up` steps to the adjacent f32: above `x`, with nothing between.
+    #[test]
+    fn next_up_is_the_least_f32_above() {
+        for x in [0.0f32, -0.0, 1e-45, -1e-45, 1.0, -1.0, 0.7, -3.3e7, f32::MAX, f32::NEG_INFINITY] {
+            let up = next_up(x);
+            assert!(up > x, "{x} -> {up}");
+            let between = ((f64::from(x) + f64::from(up)) / 2.0) as f32;
+            assert!(x == f32::MAX || x == f32::NEG_INFINITY || between == x || between == up, "{x} -> {up}");
+        }
+        assert_eq!(next_up(f32::NEG_INFINITY), -f32::MAX);
+        assert_eq!(next_up(f32::INFINITY), f32::INFINITY);
+        assert!(next_up(f32::NAN).is_nan());
+    }
+
+    /// One azimuth's march from many receivers in lanes ([`HorizonPyramid::horizons_against`],
+    /// where the processor has AVX2): its stops change no bit of a lane's tangent marched
+    /// over every step; a receiver gets the same bits alone as among others, whichever lanes
+    /// it shares; and the horizon is the f64 march's within 1e-5 rad. Points on, above and
+    /// outside a bumpy field, 24 azimuths, three reaches, four bands, each kind of stop seen.
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn the_lanes_march_one_azimuth_from_many_receivers() {
+        let (pyramid, points) = bumpy_field_and_points();
+        if !pyramid.in_lanes {
+            eprintln!("skipped: the processor lacks AVX2 or FMA");
+            return;
+        }
+        let bits = |a: HorizonAgainst| match a {
+            HorizonAgainst::Below => (0, 0),
+            HorizonAgainst::Above => (1, 0),
+            HorizonAgainst::At(h) => (2, h.to_bits()),
+        };
+        let bands = [(0.0, 0.05), (0.1, 0.3), (0.5, 0.9), (1.0, 1.4)];
+        let (mut below, mut above, mut at, mut worst) = (0, 0, 0, 0.0f64);
+        for k in 0..24 {
+            let dir = (k as f64 * std::f64::consts::TAU / 24.0).sin_cos();
+            let dir = [dir.1, dir.0];
+            for reach in [f64::INFINITY, 2.0, 0.3] {
+                let every: Vec<f64> = points
+                    .iter()
+                    .map(|p| {
+                        let above = (p[2] - pyramid.height_at(p[0], p[1])).max(0.0);
+                        let taken = pyramid.steps_marched(p[0], p[1], dir, reach);
+                        let receiver = lanes::AlongReceiver { x: p[0], y: p[1], above, taken };
+                        // SAFETY: the pyramid marches in lanes, so the processor has AVX2 and FMA.
+                        let t = unsafe { lanes::every_step_along(&pyramid, receiver, dir) };
+                        f64::from(t).max(0.0).atan()
+                    })
+                    .collect();
+                for (p, every) in points.iter().zip(&every) {
+                    worst = worst.max((every - march_every_step(&pyramid, *p, dir, reach)).abs());
+                }
+                for band in [ElevationBand::ALL]
+                    .into_iter()
+                    .chain(bands.map(|(low, high)| ElevationBand { below: f64::tan(low), above: f64::tan(high) }))
+                {
+                    let mut together = vec![HorizonAgainst::Below; points.len()];
+                    pyramid.horizons_against(&points, dir, reach, band, &mut together);
+                    // Alone, and among others in another grouping (every third left out).
+                    let alone: Vec<HorizonAgainst> =
+                        points.iter().map(|&p| pyramid.horizon_against(p, dir, reach, band)).collect();
+                    let thirds: Vec<[f64; 3]> = points.iter().copied().skip(1).step_by(3).collect();
+                    let mut regrouped = vec![HorizonAgainst::Below; thirds.len()];
+                    pyramid.horizons_against(&thirds, dir, reach, band, &mut regrouped);
+                    for (i, (got, every)) in together.iter().zip(&every).enumerate() {
+                        assert_eq!(bits(*got), bits(alone[i]), "{:?} {dir:?}", points[i]);
+                        if i % 3 == 1 {
+                            assert_eq!(bits(*got), bits(regrouped[i / 3]), "{:?} {dir:?}", points[i]);
+                        }
+                        match *got {
+                            HorizonAgainst::Below => {
+                                assert!(*every <= band.below.atan() + 1e-12, "{every} is above the band");
+                                below += 1;
+                            }
+                            HorizonAgainst::Above => {
+                                assert!(*every >= band.above.atan() - 1e-12, "{every} is below the band");
+                                above += 1;
+                            }
+                            HorizonAgainst::At(horizon) => {
+                                assert_eq!(horizon.to_bits(), every.to_bits(), "{:?} {dir:?}", points[i]);
+                                at += 1;
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        assert!(below > 0 && above > 0 && at > 0, "below {below}, above {above}, at {at}");
+        assert!(worst < 1e-5, "worst horizon difference {worst} rad");
+        eprintln!("worst horizon difference between one azimuth's lanes and the f64 march: {worst:.1e} rad");
     }
 
     /// The eight-lane march (where the processor has AVX2) against the f64 march, azimuth by

@@ -12,8 +12,8 @@ use super::glossy::{
     albedo_lookup, albedo_table, cone_share, cone_weights, ggx_alpha, MapLevels, Prefiltered, SharpLobe,
 };
 use super::settings::{GlossyMethod, ShadingSettings, MAX_DIRECTIONS};
-use super::sun::{DiskDirections, DiskShape, Planes, SunDisk, DISK_DIRECTIONS};
-use crate::heightfield::HorizonPyramid;
+use super::sun::{DiskDirections, DiskHorizon, DiskShape, Planes, SunDisk, DISK_DIRECTIONS};
+use crate::heightfield::{HorizonAgainst, HorizonPyramid};
 use crate::logsh::{
     cap_log_zh, lobe_log_zh_as, optimal_lobe_epsilon, view_blocker, BlockerView, Lobe, WedgeOperator, WedgeTurn,
 };
@@ -897,7 +897,7 @@ impl<T: Real> ShadingKernel<T> {
         point: &SurfacePoint,
         material: &Material,
     ) -> ([f32; 3], [f32; 3]) {
-        self.sharp_lit(occluders, point, material, &self.suns, true).0
+        self.sharp_lit(occluders, point, material, &self.suns, true, None).0
     }
 
     /// [`sunlit`](Self::sunlit) with `suns` (some of the kernel's), and with every point
@@ -910,6 +910,7 @@ impl<T: Real> ShadingKernel<T> {
         material: &Material,
         suns: &[SunDisk],
         lamps: bool,
+        known: Option<&[HorizonAgainst]>,
     ) -> (SharpLit, SharpLit) {
         let (mut diffuse, mut glossy) = ([0.0f64; 3], [0.0f64; 3]);
         let dark = ([0.0; 3], [0.0; 3]);
@@ -931,8 +932,18 @@ impl<T: Real> ShadingKernel<T> {
             if k == suns.len() {
                 suns_alone = Some(as_f32(diffuse, glossy));
             }
-            let v =
-                sun.visibility(occluders.blockers, occluders.horizons, self.ground, point.position, n, point.object);
+            // The suns' horizons marched already with the frame's other pixels, where given.
+            let horizon = match (known.and_then(|known| known.get(k)), occluders.horizons) {
+                (Some(&against), _) => DiskHorizon::Known(against),
+                (None, Some(pyramid)) => DiskHorizon::Marched(pyramid),
+                (None, None) => DiskHorizon::None,
+            };
+            let planes = SunDisk::planes(self.ground);
+            let v = sun.disk.visibility_against(occluders.blockers, horizon, planes, point.position, n, point.object);
+            // Wholly hidden: every term below is 0 (the lobes are finite), the same bits.
+            if v.iter().all(|&v| v == 0.0) {
+                continue;
+            }
             let d = sun.reflected(&v, |z| Lobe::Diffuse.value(z), n);
             for i in 0..3 {
                 diffuse[i] += d[i] * f64::from(albedo[i]);

@@ -86,6 +86,9 @@ pub struct DiskDirections {
     pub half_angle: f64,
     /// Unit directions over the disk, uniform by solid angle.
     pub directions: [[f64; 3]; DISK_DIRECTIONS],
+    /// The directions by coordinate, `by_axis[k][i] = directions[i][k]`, as the blockers'
+    /// caps are tested against them ([`cover_by_cap`]).
+    by_axis: [[f64; DISK_DIRECTIONS]; 3],
     /// Angular radius of the patch each direction stands for.
     pub patch: f64,
     /// Unit xy of the axis's azimuth (for the horizon), `None` for an axis at the zenith
@@ -95,6 +98,9 @@ pub struct DiskDirections {
     /// beyond it, casts nothing (paper 002's horizon restricted to a local light's
     /// distance). Infinite for a sun or a lobe.
     pub reach: f64,
+    /// [`Self::horizon_band`], computed at its first use (a sun's disk is built once and
+    /// read per pixel).
+    band: std::sync::OnceLock<ElevationBand>,
 }
 
 /// Which planes a disk's visibility test counts besides the blockers and the height
@@ -145,9 +151,11 @@ impl DiskDirections {
             axis,
             half_angle,
             directions,
+            by_axis: std::array::from_fn(|k| directions.map(|w| w[k])),
             patch: patch_radius(half_angle),
             azimuth: (horizontal > 1e-9).then(|| [axis[0] / horizontal, axis[1] / horizontal]),
             reach: f64::INFINITY,
+            band: std::sync::OnceLock::new(),
         }
     }
 
@@ -161,6 +169,11 @@ impl DiskDirections {
     /// lamp at 50 deg over a height field) turns its lamps in 75 to 95 ms a frame against
     /// 130 to 162 ms, the same bits (2 cores, alternating runs).
     fn horizon_band(&self) -> ElevationBand {
+        *self.band.get_or_init(|| self.computed_horizon_band())
+    }
+
+    /// [`Self::horizon_band`] computed.
+    fn computed_horizon_band(&self) -> ElevationBand {
         const MARGIN: f64 = 1e-9;
         let (lowest, highest) = self
             .directions
@@ -186,6 +199,61 @@ impl DiskDirections {
         n: [f64; 3],
         object: u32,
     ) -> [f64; DISK_DIRECTIONS] {
+        let horizon = horizons.map_or(DiskHorizon::None, DiskHorizon::Marched);
+        self.visibility_against(blockers, horizon, planes, p, n, object)
+    }
+
+    /// Whether `planes` alone hide the whole disk at `p` with unit normal `n` (a sun
+    /// behind the surface): [`Self::visibility`] is then 0 without a march.
+    pub fn hidden_by_planes(&self, planes: Planes, p: [f64; 3], n: [f64; 3]) -> bool {
+        let ground = planes.ground.is_some_and(|z| super::kernel::above_ground(p, z));
+        self.directions.iter().all(|&w| self.plane_share(planes.tangent, ground, n, w) >= 1.0)
+    }
+
+    /// The share of each direction's patch that `planes` cover.
+    fn plane_shares(&self, planes: Planes, p: [f64; 3], n: [f64; 3]) -> [f64; DISK_DIRECTIONS] {
+        let ground = planes.ground.is_some_and(|z| super::kernel::above_ground(p, z));
+        let mut blocked = [0.0f64; DISK_DIRECTIONS];
+        for (b, &w) in blocked.iter_mut().zip(&self.directions) {
+            *b = self.plane_share(planes.tangent, ground, n, w);
+        }
+        blocked
+    }
+
+    /// The share of direction `w`'s patch that the tangent plane (where `tangent`) and the
+    /// ground (where `ground`) cover, the larger.
+    #[inline(always)]
+    fn plane_share(&self, tangent: bool, ground: bool, n: [f64; 3], w: [f64; 3]) -> f64 {
+        let covered = |sin_x: f64| (0.5 + sin_x / (2.0 * self.patch)).clamp(0.0, 1.0);
+        let by_tangent = if tangent { 0.0f64.max(covered(-dot(n, w))) } else { 0.0 };
+        if ground {
+            by_tangent.max(covered(-w[2]))
+        } else {
+            by_tangent
+        }
+    }
+
+    /// The elevations between which the height field's horizon changes the disk's
+    /// visibility ([`Self::horizon_band`]), where its axis has an azimuth to march: what
+    /// a frame's horizons are marched against before its pixels are shaded
+    /// ([`DiskHorizon::Known`]).
+    pub fn march_band(&self) -> Option<MarchAlong> {
+        let horizontal_reach = self.reach * self.axis[0].hypot(self.axis[1]);
+        self.azimuth.map(|azimuth| MarchAlong { azimuth, horizontal_reach, band: self.horizon_band() })
+    }
+
+    /// [`Self::visibility`] with the height field's horizon from `horizon`: marched here,
+    /// or marched already with the other pixels of a frame
+    /// ([`HorizonPyramid::horizons_against`]), the same bits.
+    pub fn visibility_against(
+        &self,
+        blockers: Option<&BlockerTree>,
+        horizon: DiskHorizon,
+        planes: Planes,
+        p: [f64; 3],
+        n: [f64; 3],
+        object: u32,
+    ) -> [f64; DISK_DIRECTIONS] {
         let two_patches = 2.0 * self.patch;
         // The blocked share from the sine of the signed angle `x` from the occluder's
         // boundary (positive inside it): within the patch, where the share is not clamped,
@@ -193,24 +261,20 @@ impl DiskDirections {
         // only guarantee to 4096 ulp (shaders/disk.wgsl computes the same).
         let covered = |sin_x: f64| (0.5 + sin_x / two_patches).clamp(0.0, 1.0);
         // Blocked share per direction, the largest over the occluders.
-        let mut blocked = [0.0f64; DISK_DIRECTIONS];
-        if planes.tangent {
-            for (b, w) in blocked.iter_mut().zip(&self.directions) {
-                *b = b.max(covered(-dot(n, *w)));
-            }
-        }
-        if planes.ground.is_some_and(|z| super::kernel::above_ground(p, z)) {
-            for (b, w) in blocked.iter_mut().zip(&self.directions) {
-                *b = b.max(covered(-w[2]));
-            }
-        }
+        let mut blocked = self.plane_shares(planes, p, n);
         // Hidden wholly (a sun behind the surface): no occluder can hide more.
         if blocked.iter().all(|&b| b >= 1.0) {
             return [0.0; DISK_DIRECTIONS];
         }
-        if let (Some(pyramid), Some(azimuth)) = (horizons, self.azimuth) {
-            let horizontal_reach = self.reach * self.axis[0].hypot(self.axis[1]);
-            match pyramid.horizon_against(p, azimuth, horizontal_reach, self.horizon_band()) {
+        let against = match horizon {
+            DiskHorizon::None => None,
+            DiskHorizon::Known(against) => self.azimuth.map(|_| against),
+            DiskHorizon::Marched(pyramid) => self
+                .march_band()
+                .map(|along| pyramid.horizon_against(p, along.azimuth, along.horizontal_reach, along.band)),
+        };
+        if let Some(against) = against {
+            match against {
                 HorizonAgainst::Below => {}
                 HorizonAgainst::Above => return [0.0; DISK_DIRECTIONS],
                 HorizonAgainst::At(horizon) => {
@@ -225,7 +289,6 @@ impl DiskDirections {
             }
         }
         if let Some(tree) = blockers {
-            let by_axis: [[f64; DISK_DIRECTIONS]; 3] = std::array::from_fn(|k| self.directions.map(|w| w[k]));
             tree.visit_cone(p, n, object, self.axis, self.half_angle + self.patch, |sphere| {
                 let d = [0, 1, 2].map(|k| sphere.center[k] - p[k]);
                 let distance = dot(d, d).sqrt();
@@ -239,10 +302,13 @@ impl DiskDirections {
                 // The cap's half-angle: asin(r / d), a hemisphere from inside.
                 let sin_cap = (sphere.radius / distance).min(1.0);
                 let cos_cap = (1.0 - sin_cap * sin_cap).sqrt();
-                cover_by_cap(&by_axis, axis, [sin_cap, cos_cap], two_patches, &mut blocked);
+                cover_by_cap(&self.by_axis, axis, [sin_cap, cos_cap], two_patches, &mut blocked);
             });
         }
-        blocked.map(|b| 1.0 - b)
+        for b in blocked.iter_mut() {
+            *b = 1.0 - *b;
+        }
+        blocked
     }
 }
 
@@ -293,6 +359,28 @@ fn cover_by_cap(
     each(by_axis, axis, cap, two_patches, blocked)
 }
 
+/// How a disk's horizon is marched ([`HorizonPyramid::horizon_against`]'s arguments but
+/// the receiver).
+#[derive(Clone, Copy, Debug)]
+pub struct MarchAlong {
+    /// Unit xy of the axis's azimuth.
+    pub azimuth: [f64; 2],
+    /// How far the march may go, horizontally ([`DiskDirections::reach`]).
+    pub horizontal_reach: f64,
+    pub band: ElevationBand,
+}
+
+/// Where a disk's visibility takes the height field's horizon from.
+#[derive(Clone, Copy, Debug)]
+pub enum DiskHorizon<'a> {
+    /// No height field.
+    None,
+    /// Marched along the disk's azimuth from the receiver, against its band.
+    Marched(&'a HorizonPyramid),
+    /// Marched so already ([`DiskDirections::march_band`]).
+    Known(HorizonAgainst),
+}
+
 /// A sun prepared for shading: its disk's directions and what they integrate to.
 #[derive(Clone, Debug)]
 pub struct SunDisk {
@@ -332,7 +420,12 @@ impl SunDisk {
         n: [f64; 3],
         object: u32,
     ) -> [f64; DISK_DIRECTIONS] {
-        self.disk.visibility(blockers, horizons, Planes { tangent: true, ground }, p, n, object)
+        self.disk.visibility(blockers, horizons, Self::planes(ground), p, n, object)
+    }
+
+    /// The planes [`Self::visibility`] counts besides the blockers and the height field.
+    pub fn planes(ground: Option<f64>) -> Planes {
+        Planes { tangent: true, ground }
     }
 
     /// `integral over the disk of L V lobe(axis . w) dw` for a lobe given by its value at `cos theta` from `axis`, given the disk's

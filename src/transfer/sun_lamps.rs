@@ -17,15 +17,16 @@
 //! that mirrors a Sun lamp is read along its mirror direction, as the render reads it.
 
 use super::layers::{TransferFrame, TransferHeader};
-use crate::heightfield::HorizonPyramid;
+use crate::heightfield::{HorizonAgainst, HorizonPyramid};
 use crate::scene::light::{euler_xyz, rotate};
 use crate::scene::{Frame, HeightMap, Scene, SceneError, SunLight};
 use crate::sh::Real;
 use crate::shade::frame::suns_along;
-use crate::shade::sun::SunDisk;
+use crate::shade::sun::{Planes, SunDisk};
 use crate::shade::{pixel_source, FramePlan, Occluders, PixelSource, PlannedKernel, ShadingKernel, ShadingSettings};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
+use std::borrow::Cow;
 use std::path::Path;
 use std::sync::{Arc, Mutex};
 
@@ -237,11 +238,15 @@ impl SunLampTurn {
         if let Some(&outside) = pixels.into_iter().flatten().find(|&&i| layers.iter().any(|layer| i >= layer.len())) {
             return Err(SceneError::invalid(file, format!("has no pixel {outside} to turn its Sun lamps at")));
         }
-        let taken = |layer: &Vec<[f32; 3]>| match pixels {
-            Some(pixels) => pixels.iter().map(|&i| layer[i]).collect(),
-            None => layer.clone(),
-        };
-        let [mut diffuse, mut specular, rendered_diffuse, rendered_specular] = layers.map(taken);
+        // The layers at `pixels`, or whole; the rendered ones are only read.
+        fn taken<'a>(layer: &'a [[f32; 3]], pixels: Option<&[usize]>) -> Cow<'a, [[f32; 3]]> {
+            match pixels {
+                Some(pixels) => Cow::Owned(pixels.iter().map(|&i| layer[i]).collect()),
+                None => Cow::Borrowed(layer),
+            }
+        }
+        let [diffuse, specular, rendered_diffuse, rendered_specular] = layers.map(|layer| taken(layer, pixels));
+        let (mut diffuse, mut specular) = (diffuse.into_owned(), specular.into_owned());
         let lamps = Lamps {
             width: frame.width,
             pixels,
@@ -381,6 +386,10 @@ struct Lamps<'a> {
     rendered: [&'a [[f32; 3]]; 2],
 }
 
+/// Pixels shaded together: their horizons along each turned lamp are marched eight at a
+/// time ([`HorizonPyramid::horizons_against`]) before each is shaded.
+const CHUNK: usize = 256;
+
 /// `lamps += turned - rendered` per pixel of `lamps`, the lamps `turned` shaded by
 /// `kernel`, `plan`'s frame's, its height field's pyramid `pyramid`.
 fn move_lamps<T: Real>(
@@ -399,33 +408,58 @@ fn move_lamps<T: Real>(
             lamps[k] = (lamps[k] - rendered[k] + tint[k] * turned[k]).max(0.0);
         }
     };
-    let pixel = |(x, y): (usize, usize),
-                 [diffuse, specular]: [&mut [f32; 3]; 2],
-                 [rendered_diffuse, rendered_specular]: [[f32; 3]; 2]| {
-        match pixel_source(&plan.scene.materials, plan.frame, x, y) {
-            PixelSource::Surface { point, tint } => {
-                if let Some((d, s)) = kernel.sun_lamps_lit(occluders, &point, &disks) {
-                    moved(diffuse, rendered_diffuse, tint, d);
-                    moved(specular, rendered_specular, tint, s);
+    let (width, pixels) = (lamps.width, lamps.pixels);
+    let [rendered_diffuse, rendered_specular] = lamps.rendered;
+    let chunks = lamps.diffuse.par_chunks_mut(CHUNK).zip(lamps.specular.par_chunks_mut(CHUNK));
+    let rendered = rendered_diffuse.par_chunks(CHUNK).zip(rendered_specular.par_chunks(CHUNK));
+    chunks.zip(rendered).enumerate().for_each(|(c, ((diffuse, specular), (rendered_diffuse, rendered_specular)))| {
+        let sources: Vec<PixelSource> = (c * CHUNK..c * CHUNK + diffuse.len())
+            .map(|k| {
+                let i = pixels.map_or(k, |pixels| pixels[k]);
+                pixel_source(&plan.scene.materials, plan.frame, i % width, i / width)
+            })
+            .collect();
+        let horizons = pyramid.map(|pyramid| chunk_horizons(pyramid, &disks, &sources));
+        for (i, source) in sources.into_iter().enumerate() {
+            let (d, s, rd, rs) = (&mut diffuse[i], &mut specular[i], rendered_diffuse[i], rendered_specular[i]);
+            match source {
+                PixelSource::Surface { point, tint } => {
+                    let known = horizons.as_ref().map(|h| &h[i * disks.len()..(i + 1) * disks.len()]);
+                    if let Some((lit_d, lit_s)) = kernel.sun_lamps_lit(occluders, &point, &disks, known) {
+                        moved(d, rd, tint, lit_d);
+                        moved(s, rs, tint, lit_s);
+                    }
+                }
+                PixelSource::WaterSky { tint, mirror } => moved(s, rs, tint, suns_along(turned, mirror)),
+                PixelSource::Background { .. } | PixelSource::WaterLamp { .. } => {}
+            }
+        }
+    });
+}
+
+/// Each of `sources`' horizons along each of `disks` (pixel first, disk second), marched
+/// together where the pixel is a surface that its tangent plane does not wholly hide the
+/// disk from; the rest are not read
+/// ([`crate::shade::sun::DiskDirections::visibility_against`] returns first).
+fn chunk_horizons(pyramid: &HorizonPyramid, disks: &[SunDisk], sources: &[PixelSource]) -> Vec<HorizonAgainst> {
+    let mut horizons = vec![HorizonAgainst::Below; sources.len() * disks.len()];
+    let tangent = Planes { tangent: true, ground: None };
+    for (s, disk) in disks.iter().enumerate() {
+        let Some(along) = disk.disk.march_band() else { continue };
+        let (mut points, mut at) = (Vec::with_capacity(sources.len()), Vec::with_capacity(sources.len()));
+        for (i, source) in sources.iter().enumerate() {
+            if let PixelSource::Surface { point, .. } = source {
+                if !disk.disk.hidden_by_planes(tangent, point.position, point.normal) {
+                    points.push(point.position);
+                    at.push(i);
                 }
             }
-            PixelSource::WaterSky { tint, mirror } => {
-                moved(specular, rendered_specular, tint, suns_along(turned, mirror));
-            }
-            PixelSource::Background { .. } | PixelSource::WaterLamp { .. } => {}
         }
-    };
-    let (width, [rendered_diffuse, rendered_specular]) = (lamps.width, lamps.rendered);
-    let lamp_pairs = lamps.diffuse.par_iter_mut().zip(lamps.specular.par_iter_mut());
-    let rendered_pairs = rendered_diffuse.par_iter().zip(rendered_specular.par_iter());
-    let each = lamp_pairs.zip(rendered_pairs).enumerate();
-    match lamps.pixels {
-        // Rows apart, as the render shades them.
-        None => each
-            .with_min_len(width)
-            .for_each(|(i, ((d, s), (rd, rs)))| pixel((i % width, i / width), [d, s], [*rd, *rs])),
-        Some(pixels) => each
-            .with_min_len(256)
-            .for_each(|(k, ((d, s), (rd, rs)))| pixel((pixels[k] % width, pixels[k] / width), [d, s], [*rd, *rs])),
+        let mut marched = vec![HorizonAgainst::Below; points.len()];
+        pyramid.horizons_against(&points, along.azimuth, along.horizontal_reach, along.band, &mut marched);
+        for (i, against) in at.into_iter().zip(marched) {
+            horizons[i * disks.len() + s] = against;
+        }
     }
+    horizons
 }

@@ -14,6 +14,7 @@ use super::{
     as_f32_array, occlusion_ratio, open_lit, visibility_ratio, Caps, OccluderSet, Occluders, PixelPasses,
     ShadingKernel, SurfacePoint,
 };
+use crate::heightfield::HorizonAgainst;
 use crate::scene::Material;
 use crate::sh::{coefficient_count, Real, MAX_COEFFICIENTS};
 use crate::shade::glossy::SharpLobe;
@@ -117,15 +118,18 @@ impl<T: Real> ShadingKernel<T> {
     /// [`shade_transfer`](Self::shade_transfer) shades the scene's Sun lamps into
     /// `lamps_*` (here without the point lamps); `None` where `shade_transfer` is dark (a
     /// material the kernel does not know). `suns` need not be the kernel's: a relight
-    /// turns the lamps it was built with.
+    /// turns the lamps it was built with. `horizons`, where given, holds each sun's
+    /// horizon at `point`, marched with the frame's other pixels
+    /// ([`crate::heightfield::HorizonPyramid::horizons_against`]; the same bits).
     pub fn sun_lamps_lit(
         &self,
         occluders: Occluders,
         point: &SurfacePoint,
         suns: &[SunDisk],
+        horizons: Option<&[HorizonAgainst]>,
     ) -> Option<([f32; 3], [f32; 3])> {
         let lobes = self.materials.get(&point.material)?;
-        Some(self.sharp_lit(occluders, point, &lobes.material, suns, false).0)
+        Some(self.sharp_lit(occluders, point, &lobes.material, suns, false, horizons).0)
     }
 
     /// The transfer of `point` (module doc), and its passes as
@@ -207,9 +211,9 @@ impl<T: Real> ShadingKernel<T> {
         }
         let scene_suns = scene_suns.min(self.suns.len());
         ((out.lamps_diffuse, out.lamps_specular), (out.sun_lamps_diffuse, out.sun_lamps_specular)) =
-            self.sharp_lit(occluders, point, &lobes.material, &self.suns[..scene_suns], true);
+            self.sharp_lit(occluders, point, &lobes.material, &self.suns[..scene_suns], true, None);
         let (extracted_diffuse, extracted_specular) =
-            self.sharp_lit(occluders, point, &lobes.material, &self.suns[scene_suns..], false).0;
+            self.sharp_lit(occluders, point, &lobes.material, &self.suns[scene_suns..], false, None).0;
         let passes = PixelPasses {
             diffuse: [0, 1, 2].map(|k| lit_diffuse[k] * albedo[k] + (out.lamps_diffuse[k] + extracted_diffuse[k])),
             specular: [0, 1, 2]
