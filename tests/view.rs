@@ -221,7 +221,6 @@ fn a_directory_without_transfer_layers_is_refused() {
     assert!(stderr.contains("--transfer") && stderr.contains(dir.path().to_str().unwrap()), "{stderr}");
 }
 
-/// Debian's Chromium, or another Chromium-based browser on the PATH.
 /// A frame's Sun-lamp turn refused for a scene that cannot be read, or that changed since
 /// the render, is tried again at the next request, and turns once the scene is put back;
 /// turns asked for together, before the frame was ever read, read it once and agree.
@@ -270,6 +269,7 @@ fn a_refused_sun_lamp_turn_is_tried_again_and_first_turns_agree() {
     server.stop();
 }
 
+/// Debian's Chromium, or another Chromium-based browser on the PATH.
 fn browser() -> Option<PathBuf> {
     ["chromium", "chromium-browser", "google-chrome", "google-chrome-stable"].iter().find_map(|name| {
         let found = Command::new("which").arg(name).output().ok()?;

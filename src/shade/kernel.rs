@@ -938,8 +938,7 @@ impl<T: Real> ShadingKernel<T> {
                 (None, Some(pyramid)) => DiskHorizon::Marched(pyramid),
                 (None, None) => DiskHorizon::None,
             };
-            let planes = SunDisk::planes(self.ground);
-            let v = sun.disk.visibility_against(occluders.blockers, horizon, planes, point.position, n, point.object);
+            let v = sun.visibility(occluders.blockers, horizon, self.ground, point.position, n, point.object);
             // Wholly hidden: every term below is 0 (the lobes are finite), the same bits.
             if v.iter().all(|&v| v == 0.0) {
                 continue;

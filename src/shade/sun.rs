@@ -410,22 +410,17 @@ impl SunDisk {
 
     /// Visibility of each disk direction, in `[0, 1]`, at `p` with unit normal `n` on
     /// object `object` (module doc): the tangent plane, the ground plane at `ground`, the
-    /// height field and the blockers.
+    /// height field (its horizon from `horizon`) and the blockers.
     pub fn visibility(
         &self,
         blockers: Option<&BlockerTree>,
-        horizons: Option<&HorizonPyramid>,
+        horizon: DiskHorizon,
         ground: Option<f64>,
         p: [f64; 3],
         n: [f64; 3],
         object: u32,
     ) -> [f64; DISK_DIRECTIONS] {
-        self.disk.visibility(blockers, horizons, Self::planes(ground), p, n, object)
-    }
-
-    /// The planes [`Self::visibility`] counts besides the blockers and the height field.
-    pub fn planes(ground: Option<f64>) -> Planes {
-        Planes { tangent: true, ground }
+        self.disk.visibility_against(blockers, horizon, Planes { tangent: true, ground }, p, n, object)
     }
 
     /// `integral over the disk of L V lobe(axis . w) dw` for a lobe given by its value at `cos theta` from `axis`, given the disk's
@@ -558,7 +553,7 @@ mod tests {
         let distance = 10.0;
         for (offset, radius) in [(0.0, 0.3), (0.5, 0.6), (0.7, 0.4), (0.9, 0.2), (0.3, 1.5)] {
             let tree = BlockerTree::new(&[Sphere::new([offset, 0.0, distance], radius)], 0.0);
-            let v = disk.visibility(Some(&tree), None, None, [0.0; 3], [0.0, 0.0, 1.0], 0);
+            let v = disk.visibility(Some(&tree), DiskHorizon::None, None, [0.0; 3], [0.0, 0.0, 1.0], 0);
             let visible = v.iter().sum::<f64>() / DISK_DIRECTIONS as f64;
             let cap = (radius / distance.hypot(offset)).asin();
             let gamma = (offset / distance).atan();
