@@ -777,6 +777,7 @@ impl HorizonPyramid {
                 }
             };
             let lane_band = [outwards(band.below, true), outwards(band.above, false)];
+            let within = self.steps_within(reach);
             let mut eight = [lanes::AlongReceiver { x: 0.0, y: 0.0, above: 0.0, taken: 0 }; 8];
             let mut slots = [usize::MAX; 8];
             let mut filled = 0;
@@ -795,7 +796,7 @@ impl HorizonPyramid {
                     continue;
                 }
                 let (x, y, above) = receiver(p);
-                eight[filled] = lanes::AlongReceiver { x, y, above, taken: self.steps_marched(x, y, dir, reach) };
+                eight[filled] = lanes::AlongReceiver { x, y, above, taken: self.steps_marched(x, y, dir, within) };
                 slots[filled] = k;
                 filled += 1;
                 if filled == 8 {
@@ -819,12 +820,15 @@ impl HorizonPyramid {
         }
     }
 
-    /// How many steps the march from `(x, y)` along `dir` takes: those within `reach`, up
-    /// to the first past the point where its footprint stops moving.
-    fn steps_marched(&self, x: f64, y: f64, dir: [f64; 2], reach: f64) -> usize {
+    /// How many steps lie within `reach` (the steps lie in order of distance).
+    fn steps_within(&self, reach: f64) -> usize {
+        self.steps.partition_point(|step| step.distance <= reach)
+    }
+
+    /// How many steps the march from `(x, y)` along `dir` takes: of the first `within`,
+    /// those up to the first past the point where its footprint stops moving.
+    fn steps_marched(&self, x: f64, y: f64, dir: [f64; 2], within: usize) -> usize {
         let t_far = self.far_distance(x, y, dir);
-        let within = self.steps.partition_point(|step| step.distance <= reach);
-        // The steps lie in order of distance.
         let before_far = self.steps[..within].partition_point(|step| step.distance <= t_far);
         (before_far + 1).min(within)
     }
@@ -848,7 +852,7 @@ impl HorizonPyramid {
         reach: f64,
         band: ElevationBand,
     ) -> HorizonAgainst {
-        let marched = self.steps_marched(x, y, dir, reach);
+        let marched = self.steps_marched(x, y, dir, self.steps_within(reach));
         let steps = &self.steps[..marched];
         let tangent = |step: &MarchStep, start: f64| {
             let q = self.sample_level(step.level, x + step.distance * dir[0], y + step.distance * dir[1]);
@@ -1822,7 +1826,7 @@ mod tests {
                     .iter()
                     .map(|p| {
                         let above = (p[2] - pyramid.height_at(p[0], p[1])).max(0.0);
-                        let taken = pyramid.steps_marched(p[0], p[1], dir, reach);
+                        let taken = pyramid.steps_marched(p[0], p[1], dir, pyramid.steps_within(reach));
                         let receiver = lanes::AlongReceiver { x: p[0], y: p[1], above, taken };
                         // SAFETY: the pyramid marches in lanes, so the processor has AVX2 and FMA.
                         let t = unsafe { lanes::every_step_along(&pyramid, receiver, dir) };

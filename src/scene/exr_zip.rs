@@ -1,6 +1,6 @@
 //! The blocks of a ZIP-compressed scan-line EXR, encoded for every EXR logsh writes and
-//! decoded for a frame with transfer layers; the `exr` crate still writes the header and
-//! the block table, and reads them.
+//! decoded for a frame with transfer layers and for a G-buffer, any number of parts; the
+//! `exr` crate still writes the header and the block table, and reads them.
 //!
 //! The format is OpenEXR's (`ImfZip.cpp`, "Technical introduction to OpenEXR"): a block
 //! holds 16 scan lines (ZIP) or one (ZIPS), each line its channels in name order, each
@@ -28,6 +28,7 @@ use rayon::prelude::*;
 use std::io::Write;
 
 use super::error::{exr_error, SceneError};
+use super::exr_read::PartChannel;
 use super::output::{OutputChannel, SampleType};
 use std::path::Path;
 
@@ -173,77 +174,91 @@ pub struct Target<'a> {
     pub channels: Vec<(String, usize)>,
 }
 
-/// Whether [`read_into`] decodes the part `header` of a file of one part: scan lines,
-/// uncompressed or ZIP, no subsampling, no part name (so channel names are full names).
+/// Whether [`read_into`] decodes the part `header`: scan lines, uncompressed or ZIP, no
+/// subsampling.
 pub fn decodes(header: &Header) -> bool {
     matches!(header.compression, Compression::ZIP16 | Compression::ZIP1 | Compression::Uncompressed)
         && header.blocks == BlockDescription::ScanLines
         && !header.deep
-        && header.own_attributes.layer_name.as_ref().is_none_or(|n| n.as_slice().is_empty())
         && header.channels.list.iter().all(|c| c.sampling == exr::math::Vec2(1, 1))
 }
 
-/// Fills `targets` from `bytes`, the EXR `file` of one part that [`decodes`] takes,
-/// decoding its blocks in parallel straight into them. A channel the file lacks is an
-/// error naming it.
+/// Fills `targets` from `bytes`, an EXR `file` whose every part [`decodes`], decoding the
+/// blocks of the parts it takes channels from in parallel straight into them; the other
+/// parts are not read. Target `t`'s channel `k` lies at `found[t][k]`, in a part of
+/// `size`.
 ///
 /// A frame with transfer layers at 960x540 (88 channels, 101.6 MB decoded) is read this
 /// way in about half the time the `exr` crate's reader and the copies into place took;
-/// halves convert exactly.
-pub fn read_into(file: &Path, what: &str, bytes: &[u8], targets: &mut [Target]) -> Result<(), SceneError> {
+/// halves convert exactly. A Blender 5 G-buffer at 320x180 (six parts, 15 channels of
+/// floats) in a third of the time: 8 of its channels are taken.
+pub fn read_into(
+    file: &Path,
+    what: &str,
+    bytes: &[u8],
+    size: (usize, usize),
+    targets: &mut [Target],
+    found: &[Vec<PartChannel>],
+) -> Result<(), SceneError> {
+    let (width, height) = size;
     let reader = exr::block::read(std::io::Cursor::new(bytes), false).map_err(|e| exr_error(file, what, e))?;
-    let header = match reader.headers() {
-        [header] if decodes(header) => header.clone(),
-        _ => return Err(SceneError::invalid(file, "is not a single ZIP or uncompressed scan-line part")),
-    };
-    let (width, height) = (header.layer_size.0, header.layer_size.1);
-    let lines = header.compression.scan_lines_per_block();
-    // Each channel's byte offset in a line, and where its samples go.
-    let mut line_offset = 0;
-    let mut layout = Vec::new();
-    for channel in header.channels.list.iter() {
-        layout.push((line_offset, channel.sample_type));
-        line_offset += width * channel.sample_type.bytes_per_sample();
+    let headers = reader.headers();
+    if !headers.iter().all(decodes) {
+        return Err(SceneError::invalid(file, "holds a part that is not ZIP or uncompressed scan lines"));
     }
-    let line_bytes = line_offset;
-    let mut routes: Vec<Vec<Route>> = Vec::new();
-    for target in targets.iter() {
+    let mut parts: Vec<Part> =
+        headers.iter().enumerate().map(|(p, header)| Part::new(header, p, targets.len())).collect();
+    for (t, (target, found)) in targets.iter().zip(found).enumerate() {
         debug_assert_eq!(target.values.len(), width * height * target.stride);
-        let mut to_target = Vec::new();
-        for (name, offset) in &target.channels {
+        for ((name, offset), at) in target.channels.iter().zip(found) {
             debug_assert!(*offset < target.stride, "{name} at {offset} of a pixel's {}", target.stride);
-            let Some(k) = header.channels.list.iter().position(|c| c.name.to_string() == *name) else {
-                return Err(SceneError::MissingChannel {
-                    file: file.to_path_buf(),
-                    channel: name.clone(),
-                    found: header.channels.list.iter().map(|c| c.name.to_string()).collect(),
-                });
-            };
-            let (at, kind) = layout[k];
-            to_target.push(Route { at, kind, offset: *offset });
+            let part = &mut parts[at.part];
+            debug_assert_eq!(part.width, width, "{name}'s part");
+            let (at, kind) = part.layout[at.channel];
+            part.routes[t].push(Route { at, kind, offset: *offset });
         }
-        routes.push(to_target);
     }
-
-    let blocks = height.div_ceil(lines);
-    let mut compressed: Vec<Option<Vec<u8>>> = vec![None; blocks];
-    let top = header.own_attributes.layer_position.y();
-    for chunk in reader.all_chunks(false).map_err(|e| exr_error(file, what, e))? {
+    let used: Vec<bool> = parts.iter().map(|part| part.routes.iter().any(|r| !r.is_empty())).collect();
+    for (part, _) in parts.iter_mut().zip(&used).filter(|(_, &used)| used) {
+        part.blocks = vec![None; height.div_ceil(part.lines)];
+    }
+    let chunks = reader.filter_chunks(false, |_, _, block| used[block.layer]).map_err(|e| exr_error(file, what, e))?;
+    for chunk in chunks {
         let chunk = chunk.map_err(|e| exr_error(file, what, e))?;
-        let CompressedBlock::ScanLine(block) = chunk.compressed_block else {
-            return Err(SceneError::invalid(file, "holds a tile in a scan-line part"));
+        let Some(part) = parts.get_mut(chunk.layer_index) else {
+            return Err(SceneError::invalid(
+                file,
+                format!("has a block of part {}, which it lacks", chunk.layer_index),
+            ));
         };
-        let index = usize::try_from(i64::from(block.y_coordinate) - i64::from(top)).ok().map(|y| y / lines);
-        match index.and_then(|i| compressed.get_mut(i)) {
+        let CompressedBlock::ScanLine(block) = chunk.compressed_block else {
+            return Err(SceneError::invalid(file, format!("holds a tile in the scan lines{}", part.label)));
+        };
+        let index = usize::try_from(i64::from(block.y_coordinate) - i64::from(part.top)).ok().map(|y| y / part.lines);
+        match index.and_then(|i| part.blocks.get_mut(i)) {
             Some(slot @ None) => *slot = Some(block.compressed_pixels_le),
-            _ => return Err(SceneError::invalid(file, format!("has a stray block at line {}", block.y_coordinate))),
+            _ => {
+                return Err(SceneError::invalid(
+                    file,
+                    format!("has a stray block at line {}{}", block.y_coordinate, part.label),
+                ))
+            }
+        }
+    }
+    // Blocks are decoded in groups of rows that every part's blocks divide (ZIP's 16
+    // lines, or single lines), each group's parts one after another: the parts' channels
+    // may share a target's pixels.
+    let group_lines = parts.iter().zip(&used).filter(|(_, &used)| used).map(|(part, _)| part.lines).max().unwrap_or(1);
+    let mut per_group: Vec<Vec<PartBlock>> = (0..height.div_ceil(group_lines)).map(|_| Vec::new()).collect();
+    for (p, part) in parts.iter_mut().enumerate() {
+        for (index, bytes) in std::mem::take(&mut part.blocks).into_iter().enumerate() {
+            per_group[index * part.lines / group_lines].push(PartBlock { part: p, index, bytes });
         }
     }
     let strides: Vec<usize> = targets.iter().map(|t| t.stride).collect();
-    // Each target cut at the blocks' rows, then regrouped block by block.
-    let mut per_block: Vec<Vec<&mut [f32]>> = (0..blocks).map(|_| Vec::with_capacity(targets.len())).collect();
+    let mut outputs: Vec<Vec<&mut [f32]>> = per_group.iter().map(|_| Vec::with_capacity(targets.len())).collect();
     for target in targets.iter_mut() {
-        for (slot, rows) in per_block.iter_mut().zip(target.values.chunks_mut(lines * width * target.stride)) {
+        for (slot, rows) in outputs.iter_mut().zip(target.values.chunks_mut(group_lines * width * target.stride)) {
             slot.push(rows);
         }
     }
@@ -251,28 +266,114 @@ pub fn read_into(file: &Path, what: &str, bytes: &[u8], targets: &mut [Target]) 
     // 960x540 with transfer layers: a fresh buffer per block faulted in every page of the
     // frame's 100 MB once more), taken from a pool and returned, so that no lock is held
     // while the block's lines are scattered in tasks of their own.
-    let inflaters = std::sync::Mutex::new(Vec::<Inflater>::new());
-    let most = routes.iter().map(Vec::len).max().unwrap_or(0);
-    type Block<'a> = (usize, (Option<Vec<u8>>, Vec<&'a mut [f32]>));
-    let decode = |(index, (block, outputs)): Block| {
-        let Some(block) = block else {
-            return Err(SceneError::Image {
-                file: file.to_path_buf(),
-                message: format!("the block at line {} is missing; write or copy it again", index * lines),
-            });
+    let pool = std::sync::Mutex::new(Vec::<Inflater>::new());
+    let most = parts.iter().flat_map(|part| part.routes.iter().map(Vec::len)).max().unwrap_or(0);
+    let decoder = BlockDecoder { file, width, height, strides: &strides, pool: &pool, most };
+    per_group.into_par_iter().zip(outputs).enumerate().try_for_each(|(group, (blocks, mut outputs))| {
+        for PartBlock { part: p, index, bytes } in blocks {
+            let part = &parts[p];
+            let first = index * part.lines - group * group_lines;
+            let rows = part.lines.min(height - index * part.lines);
+            let block_outputs = outputs
+                .iter_mut()
+                .zip(&strides)
+                .map(|(out, &stride)| &mut out[first * width * stride..(first + rows) * width * stride])
+                .collect();
+            decoder.decode(part, index, bytes, block_outputs)?;
+        }
+        Ok(())
+    })
+}
+
+/// Block `index` of part `part`, as stored; `None` where the file lacks it.
+struct PartBlock {
+    part: usize,
+    index: usize,
+    bytes: Option<Vec<u8>>,
+}
+
+/// A part's layout, and where the samples of the channels taken from it go.
+struct Part {
+    width: usize,
+    /// Scan lines per block.
+    lines: usize,
+    /// The first line's y.
+    top: i32,
+    /// Each channel's byte offset in a line, and its type.
+    layout: Vec<(usize, ExrSampleType)>,
+    line_bytes: usize,
+    /// For each target, its channels in this part.
+    routes: Vec<Vec<Route>>,
+    /// The compressed blocks, from the top, where the part is read.
+    blocks: Vec<Option<Vec<u8>>>,
+    /// Names the part in an error of a file of several parts.
+    label: String,
+}
+
+impl Part {
+    fn new(header: &Header, index: usize, targets: usize) -> Self {
+        let width = header.layer_size.0;
+        let mut line_bytes = 0;
+        let mut layout = Vec::new();
+        for channel in header.channels.list.iter() {
+            layout.push((line_bytes, channel.sample_type));
+            line_bytes += width * channel.sample_type.bytes_per_sample();
+        }
+        let label = match &header.own_attributes.layer_name {
+            Some(name) => format!(" of part {index} (\"{name}\")"),
+            None if index > 0 => format!(" of part {index}"),
+            None => String::new(),
         };
-        let rows = lines.min(height - index * lines);
-        let expected = rows * line_bytes;
-        let pooled = || inflaters.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+        Part {
+            width,
+            lines: header.compression.scan_lines_per_block(),
+            top: header.own_attributes.layer_position.y(),
+            layout,
+            line_bytes,
+            routes: (0..targets).map(|_| Vec::new()).collect(),
+            blocks: Vec::new(),
+            label,
+        }
+    }
+}
+
+/// What decoding a block needs besides the block.
+struct BlockDecoder<'a> {
+    file: &'a Path,
+    width: usize,
+    height: usize,
+    strides: &'a [usize],
+    pool: &'a std::sync::Mutex<Vec<Inflater>>,
+    /// The most channels a target takes from one part.
+    most: usize,
+}
+
+impl BlockDecoder<'_> {
+    /// Decodes block `index` of `part` into `outputs`, each target's rows of the block.
+    fn decode(
+        &self,
+        part: &Part,
+        index: usize,
+        block: Option<Vec<u8>>,
+        outputs: Vec<&mut [f32]>,
+    ) -> Result<(), SceneError> {
+        let (width, lines) = (self.width, part.lines);
+        let damaged = |what: &str| SceneError::Image {
+            file: self.file.to_path_buf(),
+            message: format!("the block at line {}{} {what}; write or copy it again", index * lines, part.label),
+        };
+        let Some(block) = block else {
+            return Err(damaged("is missing"));
+        };
+        let rows = lines.min(self.height - index * lines);
+        let expected = rows * part.line_bytes;
+        let pooled = || self.pool.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
         let mut inflater = pooled().pop().unwrap_or_default();
         let split = if block.len() == expected {
             Split::Raw(&block)
         } else {
             let Some(inflated) = inflater.inflate(&block, expected) else {
-                return Err(SceneError::Image {
-                    file: file.to_path_buf(),
-                    message: format!("the block at line {} does not decompress; write or copy it again", index * lines),
-                });
+                return Err(damaged("does not decompress"));
             };
             unpredict(inflated);
             Split::Halves(inflated)
@@ -282,7 +383,7 @@ pub fn read_into(file: &Path, what: &str, bytes: &[u8], targets: &mut [Target]) 
         // Intel Xeon, a 960x540 transfer frame is read into a spare in 27 to 32 ms, where
         // it took 30 to 38 ms (two alternating runs, medians of 9); on 2 threads as before.
         let mut per_line: Vec<Vec<&mut [f32]>> = (0..rows).map(|_| Vec::with_capacity(outputs.len())).collect();
-        for (out, &stride) in outputs.into_iter().zip(&strides) {
+        for (out, &stride) in outputs.into_iter().zip(self.strides) {
             for (slot, line) in per_line.iter_mut().zip(out.chunks_mut(width * stride)) {
                 slot.push(line);
             }
@@ -290,13 +391,16 @@ pub fn read_into(file: &Path, what: &str, bytes: &[u8], targets: &mut [Target]) 
         // A tile of the line at a time: each channel's samples converted, then written into
         // the tile's pixels ([`scatter`]); the scratch made once per task rayon splits off,
         // not per line.
-        let scratch = || (vec![0.0f32; most * TILE], [f16::ZERO; TILE]);
+        let scratch = || (vec![0.0f32; self.most * TILE], [f16::ZERO; TILE]);
         per_line.into_par_iter().enumerate().for_each_init(scratch, |(samples, halves), (row, mut outputs)| {
             for x in (0..width).step_by(TILE) {
                 let n = TILE.min(width - x);
-                for ((to_target, out), &stride) in routes.iter().zip(outputs.iter_mut()).zip(&strides) {
+                for ((to_target, out), &stride) in part.routes.iter().zip(outputs.iter_mut()).zip(self.strides) {
+                    if to_target.is_empty() {
+                        continue;
+                    }
                     for (route, samples) in to_target.iter().zip(samples.chunks_exact_mut(TILE)) {
-                        let at = row * line_bytes + route.at + x * route.kind.bytes_per_sample();
+                        let at = row * part.line_bytes + route.at + x * route.kind.bytes_per_sample();
                         split.samples(at, route.kind, &mut halves[..n], &mut samples[..n]);
                     }
                     scatter(to_target, samples, &mut out[x * stride..(x + n) * stride], stride);
@@ -305,8 +409,7 @@ pub fn read_into(file: &Path, what: &str, bytes: &[u8], targets: &mut [Target]) 
         });
         pooled().push(inflater);
         Ok(())
-    };
-    compressed.into_par_iter().zip(per_block).enumerate().try_for_each(decode)
+    }
 }
 
 /// Writes a tile's samples (route `k`'s run from `samples[k * TILE]`) into its pixels of
@@ -421,23 +524,51 @@ impl Split<'_> {
                     *o = from_bits(kind, u32::from_le_bytes([b[0], b[1], b[2], b[3]]));
                 }
             }
-            // A half's low byte is even, its high byte odd: each is a run of one half.
+            // A sample's low bytes are even, its high bytes odd: put back in order.
             (Split::Halves(bytes), ExrSampleType::F16) => {
                 let (even, odd) = bytes.split_at(bytes.len().div_ceil(2));
                 let (low, high) = (&even[at / 2..at / 2 + n], &odd[at / 2..at / 2 + n]);
-                for ((h, &l), &u) in halves.iter_mut().zip(low).zip(high) {
-                    *h = f16::from_bits(u16::from(l) | u16::from(u) << 8);
+                interleave(low, high, bytemuck::cast_slice_mut(halves));
+                for h in halves.iter_mut() {
+                    *h = f16::from_bits(u16::from_le(h.to_bits()));
                 }
                 halves.convert_to_f32_slice(out);
             }
             (Split::Halves(bytes), _) => {
                 let (even, odd) = bytes.split_at(bytes.len().div_ceil(2));
                 let (low, high) = (&even[at / 2..at / 2 + 2 * n], &odd[at / 2..at / 2 + 2 * n]);
-                for ((o, l), u) in out.iter_mut().zip(low.chunks_exact(2)).zip(high.chunks_exact(2)) {
-                    *o = from_bits(kind, u32::from_le_bytes([l[0], u[0], l[1], u[1]]));
+                interleave(low, high, bytemuck::cast_slice_mut(out));
+                for o in out.iter_mut() {
+                    *o = from_bits(kind, u32::from_le(o.to_bits()));
                 }
             }
         }
+    }
+}
+
+/// `low[i]` and `high[i]` as bytes `2i` and `2i + 1` of `out`: a decoded block's split
+/// bytes back in the order of its samples, 16 pairs at a time in SSE2 (part of x86-64),
+/// which took a fifth of a G-buffer's read one byte at a time.
+fn interleave(low: &[u8], high: &[u8], out: &mut [u8]) {
+    let n = out.len() / 2;
+    let (low, high) = (&low[..n], &high[..n]);
+    let mut i = 0;
+    #[cfg(target_arch = "x86_64")]
+    while i + 16 <= n {
+        use std::arch::x86_64::*;
+        // SAFETY: SSE2 is part of x86-64; each load reads 16 bytes and each store writes
+        // 16, all bounds-checked.
+        unsafe {
+            let l = _mm_loadu_si128(low[i..i + 16].as_ptr().cast());
+            let h = _mm_loadu_si128(high[i..i + 16].as_ptr().cast());
+            _mm_storeu_si128(out[2 * i..2 * i + 16].as_mut_ptr().cast(), _mm_unpacklo_epi8(l, h));
+            _mm_storeu_si128(out[2 * i + 16..2 * i + 32].as_mut_ptr().cast(), _mm_unpackhi_epi8(l, h));
+        }
+        i += 16;
+    }
+    for j in i..n {
+        out[2 * j] = low[j];
+        out[2 * j + 1] = high[j];
     }
 }
 
@@ -498,6 +629,7 @@ fn unpredict_sse2(bytes: &mut [u8], running: u8) -> u8 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::scene::exr_read::ChannelFile;
 
     #[test]
     fn half_max_is_the_largest_finite_half() {
@@ -648,15 +780,18 @@ mod tests {
         let bytes = bytes.into_inner();
         let meta = exr::meta::MetaData::read_from_buffered(std::io::Cursor::new(&bytes), false).unwrap();
         assert!(decodes(&meta.headers[0]));
+        let file = Path::new("part.exr");
+        let blocks = || ChannelFile::new(file, "a test part", bytes.clone(), &meta, "A").unwrap();
+        assert!(matches!(blocks(), ChannelFile::Blocks { .. }));
         let mut pixels = vec![0.0f32; 3 * width * height];
         let names = [("A", 1), ("R", 2), ("Z.V", 0)].map(|(n, k)| (n.to_string(), k)).to_vec();
         let mut targets = [Target { values: &mut pixels, stride: 3, channels: names }];
-        read_into(Path::new("part.exr"), "a test part", &bytes, &mut targets).unwrap();
+        blocks().fill(file, "a test part", &mut targets).unwrap();
         for (i, pixel) in pixels.as_chunks::<3>().0.iter().enumerate() {
             assert_eq!(pixel.map(f32::to_bits), [ramp[i], noise[i], halves[i]].map(f32::to_bits), "pixel {i}");
         }
         let mut missing = [Target { values: &mut pixels, stride: 3, channels: vec![("G".into(), 0)] }];
-        let error = read_into(Path::new("part.exr"), "a test part", &bytes, &mut missing).unwrap_err().to_string();
+        let error = blocks().fill(file, "a test part", &mut missing).unwrap_err().to_string();
         assert!(error.contains("part.exr") && error.contains("\"G\""), "{error}");
     }
 }

@@ -14,7 +14,8 @@
 //!   pixels are not checked (their position and normal are never read).
 
 use super::error::SceneError;
-use super::exr_read::ExrChannels;
+use super::exr_read::ChannelFile;
+use super::exr_zip::Target;
 use super::Material;
 use serde::Deserialize;
 use std::collections::BTreeMap;
@@ -117,33 +118,41 @@ impl GBuffer {
 
     /// Reads and validates a G-buffer file.
     pub fn read(file: &Path, names: &ChannelNames, materials: &BTreeMap<u32, Material>) -> Result<GBuffer, SceneError> {
-        let mut exr = ExrChannels::read(file, "a G-buffer")?;
-        exr.use_size_of(&names.position[0]);
-        let (width, height) = (exr.width, exr.height);
-        let take3 = |exr: &mut ExrChannels, n: &[String; 3]| -> Result<Vec<[f32; 3]>, SceneError> {
-            let x = exr.take(file, &n[0])?;
-            let y = exr.take(file, &n[1])?;
-            let z = exr.take(file, &n[2])?;
-            Ok((0..x.len()).map(|i| [x[i], y[i], z[i]]).collect())
+        const WHAT: &str = "a G-buffer";
+        let channels = ChannelFile::read(file, WHAT, &names.position[0])?;
+        let (width, height) = channels.size();
+        let n = width * height;
+        let has_uv = names.uv_required || channels.has(&names.uv[0]) || channels.has(&names.uv[1]);
+        let index_name =
+            names.material_index.iter().find(|name| channels.has(name)).unwrap_or(&names.material_index[0]);
+        let object_name = match names.object_index.iter().find(|name| channels.has(name)) {
+            None if names.object_index_required => Some(&names.object_index[0]),
+            found => found,
         };
-        let position = take3(&mut exr, &names.position)?;
-        let normal = take3(&mut exr, &names.normal)?;
-        let uv = if names.uv_required || exr.has(&names.uv[0]) || exr.has(&names.uv[1]) {
-            let u = exr.take(file, &names.uv[0])?;
-            let v = exr.take(file, &names.uv[1])?;
-            Some(u.iter().zip(&v).map(|(&u, &v)| [u, v]).collect())
-        } else {
-            None
-        };
-        let index_name = names.material_index.iter().find(|n| exr.has(n)).unwrap_or(&names.material_index[0]).clone();
-        let raw_index = exr.take(file, &index_name)?;
-        let object_name = names.object_index.iter().find(|n| exr.has(n));
-        let raw_object = match object_name {
-            Some(name) => Some(exr.take(file, &name.clone())?),
-            None if names.object_index_required => Some(exr.take(file, &names.object_index[0])?),
-            None => None,
-        };
-        let object = raw_object.map(|raw| whole_indices(file, &raw, width, "object index")).transpose()?;
+        let (mut position, mut normal) = (vec![[0.0f32; 3]; n], vec![[0.0f32; 3]; n]);
+        let mut uv = vec![[0.0f32; 2]; if has_uv { n } else { 0 }];
+        let mut raw_index = vec![0.0f32; n];
+        let mut raw_object = vec![0.0f32; if object_name.is_some() { n } else { 0 }];
+        let in_order = |channel_names: &[String]| channel_names.iter().cloned().zip(0..).collect::<Vec<_>>();
+        let mut targets = vec![
+            Target { values: position.as_flattened_mut(), stride: 3, channels: in_order(&names.position) },
+            Target { values: normal.as_flattened_mut(), stride: 3, channels: in_order(&names.normal) },
+        ];
+        if has_uv {
+            targets.push(Target { values: uv.as_flattened_mut(), stride: 2, channels: in_order(&names.uv) });
+        }
+        targets.push(Target {
+            values: &mut raw_index,
+            stride: 1,
+            channels: in_order(std::slice::from_ref(index_name)),
+        });
+        if let Some(name) = object_name {
+            targets.push(Target { values: &mut raw_object, stride: 1, channels: in_order(std::slice::from_ref(name)) });
+        }
+        channels.fill(file, WHAT, &mut targets)?;
+        let uv = has_uv.then_some(uv);
+        let object =
+            object_name.is_some().then(|| whole_indices(file, &raw_object, width, "object index")).transpose()?;
 
         let mut material = Vec::with_capacity(raw_index.len());
         for (i, &value) in raw_index.iter().enumerate() {

@@ -28,17 +28,17 @@ impl HeightMap {
         let name = match channel {
             Some(c) => c.to_string(),
             None => {
-                if exr.names.len() != 1 {
+                if exr.directory.names.len() != 1 {
                     return Err(SceneError::invalid(
                         file,
                         format!(
                             "the height map has {} channels ({}); name one with \"channel\" in the heightfield object",
-                            exr.names.len(),
-                            exr.names.join(", ")
+                            exr.directory.names.len(),
+                            exr.directory.names.join(", ")
                         ),
                     ));
                 }
-                exr.names[0].clone()
+                exr.directory.names[0].clone()
             }
         };
         exr.use_size_of(&name);

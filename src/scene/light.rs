@@ -149,20 +149,20 @@ impl EnvironmentMap {
         let names: [String; 3] = if exr.has("R") && exr.has("G") && exr.has("B") {
             ["R".into(), "G".into(), "B".into()]
         } else {
-            let prefixes: Vec<&str> = exr.names.iter().filter_map(|n| n.strip_suffix(".R")).collect();
+            let prefixes: Vec<&str> = exr.directory.names.iter().filter_map(|n| n.strip_suffix(".R")).collect();
             let with_rgb: Vec<&str> =
                 prefixes.into_iter().filter(|p| exr.has(&format!("{p}.G")) && exr.has(&format!("{p}.B"))).collect();
             match with_rgb.as_slice() {
                 [p] => [format!("{p}.R"), format!("{p}.G"), format!("{p}.B")],
-                [] if exr.names.len() == 1 => {
-                    let n = exr.names[0].clone();
+                [] if exr.directory.names.len() == 1 => {
+                    let n = exr.directory.names[0].clone();
                     [n.clone(), n.clone(), n]
                 }
                 _ => {
                     return Err(SceneError::MissingChannel {
                         file: file.to_path_buf(),
                         channel: "R\", \"G\", \"B".into(),
-                        found: exr.names.clone(),
+                        found: exr.directory.names.clone(),
                     })
                 }
             }
