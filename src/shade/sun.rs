@@ -91,6 +91,10 @@ pub struct DiskDirections {
     by_axis: [[f64; DISK_DIRECTIONS]; 3],
     /// Angular radius of the patch each direction stands for.
     pub patch: f64,
+    /// The least `w . axis` and the largest `|w - (w . axis) axis|` over the directions:
+    /// what bounds their height above a tangent plane ([`Self::clear_of_tangent`]).
+    least_along: f64,
+    most_across: f64,
     /// Unit xy of the axis's azimuth (for the horizon), `None` for an axis at the zenith
     /// or nadir, where every azimuth's horizon is the same to the disk.
     pub azimuth: Option<[f64; 2]>,
@@ -153,6 +157,15 @@ impl DiskDirections {
             directions,
             by_axis: std::array::from_fn(|k| directions.map(|w| w[k])),
             patch: patch_radius(half_angle),
+            least_along: directions.iter().map(|&w| dot(w, axis)).fold(f64::INFINITY, f64::min),
+            most_across: directions
+                .iter()
+                .map(|&w| {
+                    let along = dot(w, axis);
+                    let across = [0, 1, 2].map(|k| w[k] - along * axis[k]);
+                    dot(across, across).sqrt()
+                })
+                .fold(0.0, f64::max),
             azimuth: (horizontal > 1e-9).then(|| [axis[0] / horizontal, axis[1] / horizontal]),
             reach: f64::INFINITY,
             band: std::sync::OnceLock::new(),
@@ -207,13 +220,30 @@ impl DiskDirections {
     /// behind the surface): [`Self::visibility`] is then 0 without a march.
     pub fn hidden_by_planes(&self, planes: Planes, p: [f64; 3], n: [f64; 3]) -> bool {
         let ground = planes.ground.is_some_and(|z| super::kernel::above_ground(p, z));
+        if !ground && (!planes.tangent || self.clear_of_tangent(n)) {
+            return false;
+        }
         self.directions.iter().all(|&w| self.plane_share(planes.tangent, ground, n, w) >= 1.0)
+    }
+
+    /// Whether every direction lies more than a patch above the tangent plane of normal
+    /// `n`, which then covers none of any patch: `w . n >= (w . axis)(n . axis) - |w_perp|
+    /// |n_perp|`, with 1e-9 of margin, far above the rounding of a dot product. Most lit
+    /// pixels are so, and their planes' shares are then 0 without a test per direction.
+    fn clear_of_tangent(&self, n: [f64; 3]) -> bool {
+        const MARGIN: f64 = 1e-9;
+        let along = dot(n, self.axis);
+        let across = (dot(n, n) - along * along).max(0.0).sqrt();
+        along >= 0.0 && self.least_along * along - self.most_across * across >= self.patch + MARGIN
     }
 
     /// The share of each direction's patch that `planes` cover.
     fn plane_shares(&self, planes: Planes, p: [f64; 3], n: [f64; 3]) -> [f64; DISK_DIRECTIONS] {
         let ground = planes.ground.is_some_and(|z| super::kernel::above_ground(p, z));
         let mut blocked = [0.0f64; DISK_DIRECTIONS];
+        if !ground && (!planes.tangent || self.clear_of_tangent(n)) {
+            return blocked;
+        }
         for (b, &w) in blocked.iter_mut().zip(&self.directions) {
             *b = self.plane_share(planes.tangent, ground, n, w);
         }
@@ -431,8 +461,16 @@ impl SunDisk {
         lobe: impl Fn(f64) -> f64,
         axis: [f64; 3],
     ) -> [f64; 3] {
-        let mean = self.disk.directions.iter().zip(visibility).map(|(w, v)| v * lobe(dot(axis, *w))).sum::<f64>()
-            / DISK_DIRECTIONS as f64;
+        // Four running sums, directions `4i + k` in sum `k`: four chains of additions the
+        // processor overlaps, where one chain of 32 was two fifths of a turned Sun lamp's
+        // lobes. The same sum to rounding.
+        let mut sums = [0.0f64; 4];
+        for (four, v) in self.disk.directions.chunks_exact(4).zip(visibility.chunks_exact(4)) {
+            for k in 0..4 {
+                sums[k] += v[k] * lobe(dot(axis, four[k]));
+            }
+        }
+        let mean = ((sums[0] + sums[1]) + (sums[2] + sums[3])) / DISK_DIRECTIONS as f64;
         self.disk_integral.map(|c| c * mean)
     }
 }
@@ -461,6 +499,46 @@ pub fn cap_overlap(a: f64, b: f64, gamma: f64) -> f64 {
 mod tests {
     use super::*;
     use crate::scene::Sphere;
+
+    /// Where [`DiskDirections::clear_of_tangent`] holds, the tangent plane covers none of
+    /// any direction's patch, so the planes' shares are the 0 of a test per direction, to
+    /// the bit: disks 0.3 to 20 deg wide at 7 axes, normals on a sphere of directions and
+    /// 1e-6 off unit length; it holds for most normals, and fails only within a quarter of
+    /// the disk's half-angle of where the nearest patch touches the plane.
+    #[test]
+    fn a_disk_clear_of_the_tangent_plane_is_not_tested_per_direction() {
+        let (mut clear, mut tested) = (0, 0);
+        for degrees in [0.3, 2.0, 20.0] {
+            let half_angle = f64::to_radians(degrees);
+            for axis in [[0.0, 0.0, 1.0], [0.6, 0.0, 0.8], [0.0, -0.28, 0.96], [0.48, 0.64, 0.6], [1.0, 0.0, 0.0]]
+                .into_iter()
+                .chain([[0.3f64, -0.4, 0.2], [-0.5, 0.1, 0.02]].map(|v| v.map(|c| c / dot(v, v).sqrt())))
+            {
+                let disk = DiskDirections::new(axis, half_angle);
+                for k in 0..2000 {
+                    // A spiral over the sphere, then the length off 1 by up to 1e-6.
+                    let z = 1.0 - 2.0 * (k as f64 + 0.5) / 2000.0;
+                    let phi = k as f64 * 2.399_963;
+                    let r = (1.0 - z * z).sqrt() * (1.0 + 1e-6 * ((k % 3) as f64 - 1.0));
+                    let n = [r * phi.cos(), r * phi.sin(), z];
+                    let shares = disk.directions.map(|w| disk.plane_share(true, false, n, w));
+                    if disk.clear_of_tangent(n) {
+                        clear += 1;
+                        assert!(shares.iter().all(|s| s.to_bits() == 0), "{degrees} deg, axis {axis:?}, n {n:?}");
+                        let planes = Planes { tangent: true, ground: None };
+                        assert_eq!(disk.plane_shares(planes, [0.0; 3], n).map(f64::to_bits), shares.map(f64::to_bits));
+                    } else {
+                        tested += 1;
+                        // Not clear: some direction lies within a patch and a quarter of the
+                        // disk's half-angle of the plane.
+                        let lowest = disk.directions.iter().map(|&w| dot(w, n)).fold(f64::INFINITY, f64::min);
+                        assert!(lowest < disk.patch + 0.25 * half_angle, "{degrees} deg, n {n:?}: {lowest}");
+                    }
+                }
+            }
+        }
+        assert!(clear > tested / 2 && tested > 1000, "{clear} clear, {tested} tested");
+    }
 
     /// A disk's visibility over a height field, the march told the disk's band of
     /// elevations ([`DiskDirections::horizon_band`]), equals it from the whole horizon to
