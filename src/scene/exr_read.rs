@@ -104,15 +104,20 @@ impl ExrChannels {
     /// Reads every channel of every part. The size of every part is checked against the
     /// limits before its pixels are allocated.
     pub fn read(file: &Path, what: &str) -> Result<Self, SceneError> {
-        let meta = exr::meta::MetaData::read_from_file(file, false).map_err(|e| exr_error(file, what, e))?;
-        check_parts(file, &meta.headers)?;
+        let (bytes, meta) = read_with_headers(file, what)?;
+        Self::decode(file, what, &bytes, &meta.headers)
+    }
+
+    /// Every channel of `file`, read as `bytes`, whose parts' headers are `headers`.
+    fn decode(file: &Path, what: &str, bytes: &[u8], headers: &[Header]) -> Result<Self, SceneError> {
+        check_parts(file, headers)?;
         let image = read()
             .no_deep_data()
             .largest_resolution_level()
             .all_channels()
             .all_layers()
             .all_attributes()
-            .from_file(file)
+            .from_buffered(std::io::Cursor::new(bytes))
             .map_err(|e| exr_error(file, what, e))?;
         // The crate reads a layer per header and a channel per entry of its list, in order.
         let sizes: Vec<(usize, usize)> = image.layer_data.iter().map(|layer| (layer.size.0, layer.size.1)).collect();
@@ -122,7 +127,7 @@ impl ExrChannels {
             .map(|layer| layer.channel_data.list.into_iter().map(|channel| channel.sample_data).collect())
             .collect();
         let (width, height) = sizes.first().copied().unwrap_or_default();
-        Ok(ExrChannels { width, height, directory: ChannelDirectory::new(&meta.headers), data, sizes })
+        Ok(ExrChannels { width, height, directory: ChannelDirectory::new(headers), data, sizes })
     }
 
     pub fn has(&self, name: &str) -> bool {
@@ -155,6 +160,14 @@ impl ExrChannels {
             (self.width, self.height) = self.sizes[at.part];
         }
     }
+}
+
+/// `file`'s bytes and its headers.
+pub(crate) fn read_with_headers(file: &Path, what: &str) -> Result<(Vec<u8>, exr::meta::MetaData), SceneError> {
+    let bytes = std::fs::read(file).map_err(|e| SceneError::io(file, what, e))?;
+    let meta = exr::meta::MetaData::read_from_buffered(std::io::Cursor::new(&bytes), false)
+        .map_err(|e| exr_error(file, what, e))?;
+    Ok((bytes, meta))
 }
 
 /// Refuses a file with no parts, a part too large to allocate, or deep data.
@@ -194,16 +207,20 @@ fn samples_to_f32(samples: &FlatSamples, first: usize, out: &mut [f32]) {
 /// Blender's G-buffers in its default ZIP), through [`ExrChannels`] otherwise (tiles,
 /// other compressions). Only the parts holding a channel taken are decoded.
 pub(crate) enum ChannelFile {
-    Blocks { bytes: Vec<u8>, headers: Vec<Header>, directory: ChannelDirectory, size: (usize, usize) },
+    /// `part_sizes[p]` is part `p`'s width and height.
+    Blocks {
+        bytes: Vec<u8>,
+        part_sizes: Vec<(usize, usize)>,
+        directory: ChannelDirectory,
+        size: (usize, usize),
+    },
     Decoded(ExrChannels),
 }
 
 impl ChannelFile {
     /// Reads `file`, whose channels taken must all have the size of `size_of`'s part.
     pub fn read(file: &Path, what: &str, size_of: &str) -> Result<Self, SceneError> {
-        let bytes = std::fs::read(file).map_err(|e| SceneError::io(file, what, e))?;
-        let meta = exr::meta::MetaData::read_from_buffered(std::io::Cursor::new(&bytes), false)
-            .map_err(|e| exr_error(file, what, e))?;
+        let (bytes, meta) = read_with_headers(file, what)?;
         Self::new(file, what, bytes, &meta, size_of)
     }
 
@@ -217,8 +234,7 @@ impl ChannelFile {
         size_of: &str,
     ) -> Result<Self, SceneError> {
         if !meta.headers.iter().all(exr_zip::decodes) {
-            drop(bytes);
-            let mut exr = ExrChannels::read(file, what)?;
+            let mut exr = ExrChannels::decode(file, what, &bytes, &meta.headers)?;
             exr.use_size_of(size_of);
             return Ok(Self::Decoded(exr));
         }
@@ -240,9 +256,9 @@ impl ChannelFile {
             });
         }
         let directory = ChannelDirectory::new(&meta.headers);
-        let sized = directory.find(size_of).map_or(0, |at| at.part);
-        let size = (meta.headers[sized].layer_size.0, meta.headers[sized].layer_size.1);
-        Ok(Self::Blocks { bytes, headers: meta.headers.to_vec(), directory, size })
+        let part_sizes: Vec<(usize, usize)> = meta.headers.iter().map(|h| (h.layer_size.0, h.layer_size.1)).collect();
+        let size = part_sizes[directory.find(size_of).map_or(0, |at| at.part)];
+        Ok(Self::Blocks { bytes, part_sizes, directory, size })
     }
 
     pub fn size(&self) -> (usize, usize) {
@@ -264,13 +280,13 @@ impl ChannelFile {
     /// lacks, or whose part is of another size, is an error naming it.
     pub fn fill(self, file: &Path, what: &str, targets: &mut [exr_zip::Target]) -> Result<(), SceneError> {
         match self {
-            Self::Blocks { bytes, headers, directory, size } => {
+            Self::Blocks { bytes, part_sizes, directory, size } => {
                 let mut parts = Vec::new();
                 for target in targets.iter() {
                     let mut found = Vec::new();
                     for (name, _) in &target.channels {
                         let at = directory.find(name).ok_or_else(|| directory.missing(file, name))?;
-                        let part = (headers[at.part].layer_size.0, headers[at.part].layer_size.1);
+                        let part = part_sizes[at.part];
                         if part != size {
                             return Err(size_mismatch(file, name, part, size));
                         }

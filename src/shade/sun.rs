@@ -220,7 +220,7 @@ impl DiskDirections {
     /// behind the surface): [`Self::visibility`] is then 0 without a march.
     pub fn hidden_by_planes(&self, planes: Planes, p: [f64; 3], n: [f64; 3]) -> bool {
         let ground = planes.ground.is_some_and(|z| super::kernel::above_ground(p, z));
-        if !ground && (!planes.tangent || self.clear_of_tangent(n)) {
+        if self.planes_cover_nothing(planes.tangent, ground, n) {
             return false;
         }
         self.directions.iter().all(|&w| self.plane_share(planes.tangent, ground, n, w) >= 1.0)
@@ -237,11 +237,18 @@ impl DiskDirections {
         along >= 0.0 && self.least_along * along - self.most_across * across >= self.patch + MARGIN
     }
 
+    /// Whether the planes counted (the tangent plane of normal `n` where `tangent`, the
+    /// ground where `ground`) cover none of any direction's patch, known without a test
+    /// per direction: no ground, and no tangent plane or one the disk is clear of.
+    fn planes_cover_nothing(&self, tangent: bool, ground: bool, n: [f64; 3]) -> bool {
+        !ground && (!tangent || self.clear_of_tangent(n))
+    }
+
     /// The share of each direction's patch that `planes` cover.
     fn plane_shares(&self, planes: Planes, p: [f64; 3], n: [f64; 3]) -> [f64; DISK_DIRECTIONS] {
         let ground = planes.ground.is_some_and(|z| super::kernel::above_ground(p, z));
         let mut blocked = [0.0f64; DISK_DIRECTIONS];
-        if !ground && (!planes.tangent || self.clear_of_tangent(n)) {
+        if self.planes_cover_nothing(planes.tangent, ground, n) {
             return blocked;
         }
         for (b, &w) in blocked.iter_mut().zip(&self.directions) {

@@ -2,7 +2,7 @@
 //! them back (the table in the [module doc](super)).
 
 use super::lobe_code;
-use crate::scene::exr_read::ChannelFile;
+use crate::scene::exr_read::{read_with_headers, ChannelFile};
 use crate::scene::exr_zip::Target;
 use crate::scene::output::{OutputChannel, SampleType};
 use crate::scene::{LightSource, SceneError};
@@ -544,9 +544,7 @@ impl TransferFrame {
     /// 4), and freshly allocated each of their 37,000 pages faults as it is first written.
     pub fn read_reusing(file: &Path, spare: Option<TransferFrame>) -> Result<TransferFrame, SceneError> {
         const WHAT: &str = "a frame with transfer layers";
-        let bytes = std::fs::read(file).map_err(|e| SceneError::io(file, WHAT, e))?;
-        let meta = exr::meta::MetaData::read_from_buffered(std::io::Cursor::new(&bytes), false)
-            .map_err(|e| crate::scene::error::exr_error(file, WHAT, e))?;
+        let (bytes, meta) = read_with_headers(file, WHAT)?;
         let header = header_of(file, &meta)?;
         let channels = ChannelFile::new(file, WHAT, bytes, &meta, "sh_diffuse_0.R")?;
         let (width, height) = channels.size();
