@@ -760,7 +760,7 @@ impl HorizonPyramid {
     ) {
         assert_eq!(points.len(), out.len(), "horizons_against: one answer per point");
         let marchable = |p: &[f64; 3]| !self.steps.is_empty() && p.iter().chain(&dir).all(|v| v.is_finite());
-        let receiver = |p: &[f64; 3]| {
+        let receiver_of = |p: &[f64; 3]| {
             let (x, y) = (p[0], p[1]);
             (x, y, (p[2] - self.height_at(x, y)).max(0.0))
         };
@@ -778,14 +778,22 @@ impl HorizonPyramid {
             };
             let lane_band = [outwards(band.below, true), outwards(band.above, false)];
             let within = self.steps_within(reach);
-            let mut eight = [lanes::AlongReceiver { x: 0.0, y: 0.0, above: 0.0, taken: 0 }; 8];
+            let mut eight = [[0.0f64; 3]; 8];
             let mut slots = [usize::MAX; 8];
             let mut filled = 0;
-            let flush = |eight: &[lanes::AlongReceiver], slots: &[usize], out: &mut [HorizonAgainst]| {
-                let mut tangents = [0.0f32; 8];
+            let flush = |eight: &[[f64; 3]], slots: &[usize], out: &mut [HorizonAgainst]| {
+                let mut receivers = [lanes::AlongReceiver { x: 0.0, y: 0.0, above: 0.0, taken: 0 }; 8];
                 // SAFETY: `in_lanes` means `lanes::available` held when the pyramid was
-                // built, and each `taken` is a step count.
-                unsafe { lanes::tangents_along(self, eight, dir, lane_band, &mut tangents) };
+                // built; the points are finite.
+                if !unsafe { lanes::along_receivers(self, eight, dir, within, &mut receivers) } {
+                    for (receiver, p) in receivers.iter_mut().zip(eight) {
+                        let (x, y, above) = receiver_of(p);
+                        *receiver = lanes::AlongReceiver { x, y, above, taken: self.steps_marched(x, y, dir, within) };
+                    }
+                }
+                let mut tangents = [0.0f32; 8];
+                // SAFETY: as above, and each `taken` is a step count.
+                unsafe { lanes::tangents_along(self, &receivers[..eight.len()], dir, lane_band, &mut tangents) };
                 for (&slot, tangent) in slots.iter().zip(tangents) {
                     out[slot] = band.against(f64::from(tangent));
                 }
@@ -795,8 +803,7 @@ impl HorizonPyramid {
                     out[k] = HorizonAgainst::At(0.0);
                     continue;
                 }
-                let (x, y, above) = receiver(p);
-                eight[filled] = lanes::AlongReceiver { x, y, above, taken: self.steps_marched(x, y, dir, within) };
+                eight[filled] = *p;
                 slots[filled] = k;
                 filled += 1;
                 if filled == 8 {
@@ -812,7 +819,7 @@ impl HorizonPyramid {
         for (p, out) in points.iter().zip(out) {
             *out = match marchable(p) {
                 true => {
-                    let (x, y, above) = receiver(p);
+                    let (x, y, above) = receiver_of(p);
                     self.march(x, y, above, &mut ReceiverTerms::new(), dir, reach, band)
                 }
                 false => HorizonAgainst::At(0.0),
@@ -1100,6 +1107,117 @@ mod lanes {
         pub y: f64,
         pub above: f64,
         pub taken: usize,
+    }
+
+    /// The receivers of [`tangents_along`] at up to eight finite `points` marched along
+    /// `dir` over at most the first `within` steps: each one's height above the level-0
+    /// surface ([`HorizonPyramid::height_at`]'s bilinear read, at least 0) and its step
+    /// count ([`HorizonPyramid::steps_marched`]'s), four points per instruction in f64 with
+    /// the scalar code's operations in its order, so the same bits. The per-point reads
+    /// and step searches were a tenth of a turn of the Sun-lamp scene's lamps. False,
+    /// `out` unset, where a grid coordinate is not a number (an extent of zero width),
+    /// which the scalar code then reads.
+    ///
+    /// # Safety
+    /// The processor has AVX2 and FMA (no fused operation is used).
+    #[target_feature(enable = "avx2,fma")]
+    pub unsafe fn along_receivers(
+        pyramid: &HorizonPyramid,
+        points: &[[f64; 3]],
+        dir: [f64; 2],
+        within: usize,
+        out: &mut [AlongReceiver; 8],
+    ) -> bool {
+        let Some(&last_point) = points.last() else { return true };
+        let level = &pyramid.levels[0];
+        let samples = [level.columns, level.rows];
+        let zero = _mm256_setzero_pd();
+        // Halves of four points, those past the last repeating it: one for a single
+        // point (a shade marches each pixel's own).
+        let halves = points.len().div_ceil(4).min(2);
+        let point = |k: usize| *points.get(k).unwrap_or(&last_point);
+        let coordinate = |half: usize, axis: usize| {
+            let at = |lane: usize| point(4 * half + lane)[axis];
+            _mm256_set_pd(at(3), at(2), at(1), at(0))
+        };
+        let mut heights = [zero; 2];
+        let mut t_far = [zero; 2];
+        for half in 0..halves {
+            let xy = [coordinate(half, 0), coordinate(half, 1)];
+            // Per axis, each point's cell and its fraction (`grid_coordinate`, `cell`).
+            let mut cells = [(zero, zero); 2];
+            for axis in 0..2 {
+                let n = samples[axis];
+                if n <= 1 {
+                    continue;
+                }
+                let last = _mm256_set1_pd((n - 1) as f64);
+                let (min, max) = (pyramid.min[axis], pyramid.max[axis]);
+                let unclamped = _mm256_mul_pd(
+                    _mm256_div_pd(_mm256_sub_pd(xy[axis], _mm256_set1_pd(min)), _mm256_set1_pd(max - min)),
+                    last,
+                );
+                // `clamp(0, last)`: each operand order returns what `f64::clamp` does,
+                // a -0 and a NaN included.
+                let grid = _mm256_min_pd(last, _mm256_max_pd(zero, unclamped));
+                if _mm256_movemask_pd(_mm256_cmp_pd::<_CMP_UNORD_Q>(grid, grid)) != 0 {
+                    return false;
+                }
+                // `floor as usize`, at most `n - 2`, as a float (+0 for -0).
+                let index = _mm256_add_pd(_mm256_min_pd(_mm256_set1_pd((n - 2) as f64), _mm256_floor_pd(grid)), zero);
+                cells[axis] = (index, _mm256_sub_pd(grid, index));
+            }
+            // The four samples about each point, by row and column.
+            let (mut columns, mut rows) = ([0.0f64; 4], [0.0f64; 4]);
+            _mm256_storeu_pd(columns.as_mut_ptr(), cells[0].0);
+            _mm256_storeu_pd(rows.as_mut_ptr(), cells[1].0);
+            let mut corners = [[0.0f64; 4]; 4];
+            for lane in 0..4 {
+                let (i0, j0) = (columns[lane] as usize, rows[lane] as usize);
+                let (i1, j1) = ((i0 + 1).min(samples[0] - 1), (j0 + 1).min(samples[1] - 1));
+                let h = |i: usize, j: usize| f64::from(level.heights[j * samples[0] + i]);
+                [corners[0][lane], corners[1][lane], corners[2][lane], corners[3][lane]] =
+                    [h(i0, j0), h(i1, j0), h(i0, j1), h(i1, j1)];
+            }
+            let [h00, h10, h01, h11] = corners.map(|c| _mm256_loadu_pd(c.as_ptr()));
+            let (fx, fy) = (cells[0].1, cells[1].1);
+            let bottom = _mm256_add_pd(h00, _mm256_mul_pd(fx, _mm256_sub_pd(h10, h00)));
+            let top = _mm256_add_pd(h01, _mm256_mul_pd(fx, _mm256_sub_pd(h11, h01)));
+            heights[half] = _mm256_add_pd(bottom, _mm256_mul_pd(fy, _mm256_sub_pd(top, bottom)));
+            // `far_distance`: `dir` is every point's, so its signs are too.
+            for axis in (0..2).filter(|&axis| samples[axis] > 1) {
+                let edge = match dir[axis] {
+                    d if d > 0.0 => pyramid.max[axis],
+                    d if d < 0.0 => pyramid.min[axis],
+                    _ => continue,
+                };
+                let t = _mm256_div_pd(_mm256_sub_pd(_mm256_set1_pd(edge), xy[axis]), _mm256_set1_pd(dir[axis]));
+                t_far[half] = _mm256_max_pd(t, t_far[half]);
+            }
+        }
+        // The steps no farther than `t_far` (they lie in order of distance), counted.
+        let mut before_far = [zero; 2];
+        let farthest = _mm256_max_pd(t_far[0], t_far[1]);
+        for step in &pyramid.steps[..within] {
+            let distance = _mm256_set1_pd(step.distance);
+            if _mm256_movemask_pd(_mm256_cmp_pd::<_CMP_LE_OQ>(distance, farthest)) == 0 {
+                break;
+            }
+            for half in 0..halves {
+                let within_far = _mm256_and_pd(_mm256_cmp_pd::<_CMP_LE_OQ>(distance, t_far[half]), _mm256_set1_pd(1.0));
+                before_far[half] = _mm256_add_pd(before_far[half], within_far);
+            }
+        }
+        let (mut counts, mut lifted) = ([0.0f64; 8], [0.0f64; 8]);
+        for half in 0..halves {
+            _mm256_storeu_pd(counts[4 * half..].as_mut_ptr(), before_far[half]);
+            _mm256_storeu_pd(lifted[4 * half..].as_mut_ptr(), heights[half]);
+        }
+        for (lane, (receiver, p)) in out.iter_mut().zip(points).enumerate() {
+            let taken = (counts[lane] as usize + 1).min(within);
+            *receiver = AlongReceiver { x: p[0], y: p[1], above: (p[2] - lifted[lane]).max(0.0), taken };
+        }
+        true
     }
 
     /// The horizon tangents of up to eight `receivers` along one azimuth `dir`, one
@@ -1874,6 +1992,49 @@ mod tests {
         assert!(below > 0 && above > 0 && at > 0, "below {below}, above {above}, at {at}");
         assert!(worst < 1e-5, "worst horizon difference {worst} rad");
         eprintln!("worst horizon difference between one azimuth's lanes and the f64 march: {worst:.1e} rad");
+    }
+
+    /// The receivers of one azimuth's lanes, four points per instruction, against the
+    /// scalar height read and step search, bit for bit: points on, above, outside and at
+    /// the edges of a bumpy field and of a field of one row, groups of one to eight, 26
+    /// azimuths (the axes among them, where `dir` has a zero) and three reaches.
+    #[test]
+    fn the_lanes_receivers_are_the_scalar_ones() {
+        let (bumpy, mut points) = bumpy_field_and_points();
+        if !bumpy.in_lanes {
+            eprintln!("skipped: the processor lacks AVX2 or FMA");
+            return;
+        }
+        points.extend([[-4.0, -3.0, 50.0], [5.0, 3.0, 49.0], [5.0, -3.0, 60.0], [-4.0, 3.0, 0.0], [0.5, 0.0, 1e6]]);
+        let row: Vec<f32> = (0..23).map(|i| (0.4 * i as f32).sin() + 0.1 * i as f32).collect();
+        let one_row = HeightField::new(row, 23, 1, [-2.0, 1.0], [3.0, 2.0]).unwrap();
+        let one_row = HorizonPyramid::new(&one_row, HorizonSettings::default()).unwrap();
+        let mut compared = 0;
+        for pyramid in [&bumpy, &one_row] {
+            let azimuths = (0..24).map(|k| (k as f64 * std::f64::consts::TAU / 24.0 + 0.1).sin_cos());
+            let dirs: Vec<[f64; 2]> = azimuths.map(|(s, c)| [c, s]).chain([[1.0, 0.0], [0.0, -1.0]]).collect();
+            for dir in dirs {
+                for reach in [f64::INFINITY, 2.0, 0.3] {
+                    let within = pyramid.steps_within(reach);
+                    for count in 1..=8 {
+                        for group in points.chunks(count) {
+                            let mut got = [lanes::AlongReceiver { x: 0.0, y: 0.0, above: -1.0, taken: 0 }; 8];
+                            // SAFETY: the pyramid marches in lanes, so the processor has AVX2 and FMA.
+                            assert!(unsafe { lanes::along_receivers(pyramid, group, dir, within, &mut got) });
+                            for (p, got) in group.iter().zip(&got) {
+                                let above = (p[2] - pyramid.height_at(p[0], p[1])).max(0.0);
+                                let taken = pyramid.steps_marched(p[0], p[1], dir, within);
+                                assert_eq!((got.x, got.y), (p[0], p[1]));
+                                assert_eq!(got.above.to_bits(), above.to_bits(), "{p:?} {dir:?}");
+                                assert_eq!(got.taken, taken, "{p:?} {dir:?} {reach}");
+                                compared += 1;
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        assert!(compared > 10_000, "{compared} receivers compared");
     }
 
     /// The eight-lane march (where the processor has AVX2) against the f64 march, azimuth by

@@ -131,7 +131,8 @@ impl BlockerTree {
     }
 
     /// Calls `see` with every sphere that may block some direction of the cone of unit
-    /// axis `axis` and half-angle `half_angle` from `p` (a sun's disk), never a cluster:
+    /// axis `axis` from `p` (a sun's disk), `cone` the sine and cosine of its half-angle
+    /// (a disk's own, computed once per sun), never a cluster:
     /// sharp lights need the spheres themselves. A subtree is skipped when its bounds lie
     /// wholly behind the tangent plane of `n` or wholly outside the cone. The receiver's own
     /// spheres follow the same rule as [`Self::visit`].
@@ -141,10 +142,9 @@ impl BlockerTree {
         n: [f64; 3],
         object: u32,
         axis: [f64; 3],
-        half_angle: f64,
+        [sin_half, cos_half]: [f64; 2],
         see: impl FnMut(&Sphere),
     ) {
-        let (sin_half, cos_half) = half_angle.sin_cos();
         self.walk(p, n, object, see, |node, d| {
             let r = node.bounds.radius;
             let squared = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];

@@ -91,6 +91,9 @@ pub struct DiskDirections {
     by_axis: [[f64; DISK_DIRECTIONS]; 3],
     /// Angular radius of the patch each direction stands for.
     pub patch: f64,
+    /// The sine and cosine of `half_angle + patch`, the cone the blockers are culled
+    /// against ([`BlockerTree::visit_cone`]).
+    cone: [f64; 2],
     /// The least `w . axis` and the largest `|w - (w . axis) axis|` over the directions:
     /// what bounds their height above a tangent plane ([`Self::clear_of_tangent`]).
     least_along: f64,
@@ -124,6 +127,8 @@ pub struct DiskShape {
     pub half_angle: f64,
     /// `(sin theta cos phi, sin theta sin phi, cos theta)` of each direction.
     local: [[f64; 3]; DISK_DIRECTIONS],
+    /// [`DiskDirections::cone`]: a sun's is computed once, not per pixel.
+    cone: [f64; 2],
 }
 
 impl DiskShape {
@@ -135,7 +140,8 @@ impl DiskShape {
             let sin_theta = (1.0 - cos_theta * cos_theta).max(0.0).sqrt();
             [sin_theta * cos_phi, sin_theta * sin_phi, cos_theta]
         });
-        Self { half_angle, local }
+        let (sin_cone, cos_cone) = (half_angle + patch_radius(half_angle)).sin_cos();
+        Self { half_angle, local, cone: [sin_cone, cos_cone] }
     }
 }
 
@@ -157,6 +163,7 @@ impl DiskDirections {
             directions,
             by_axis: std::array::from_fn(|k| directions.map(|w| w[k])),
             patch: patch_radius(half_angle),
+            cone: shape.cone,
             least_along: directions.iter().map(|&w| dot(w, axis)).fold(f64::INFINITY, f64::min),
             most_across: directions
                 .iter()
@@ -223,7 +230,7 @@ impl DiskDirections {
         if self.planes_cover_nothing(planes.tangent, ground, n) {
             return false;
         }
-        self.directions.iter().all(|&w| self.plane_share(planes.tangent, ground, n, w) >= 1.0)
+        self.shares_of_planes(planes.tangent, ground, n).iter().all(|&share| share >= 1.0)
     }
 
     /// Whether every direction lies more than a patch above the tangent plane of normal
@@ -247,27 +254,30 @@ impl DiskDirections {
     /// The share of each direction's patch that `planes` cover.
     fn plane_shares(&self, planes: Planes, p: [f64; 3], n: [f64; 3]) -> [f64; DISK_DIRECTIONS] {
         let ground = planes.ground.is_some_and(|z| super::kernel::above_ground(p, z));
-        let mut blocked = [0.0f64; DISK_DIRECTIONS];
         if self.planes_cover_nothing(planes.tangent, ground, n) {
-            return blocked;
+            return [0.0; DISK_DIRECTIONS];
         }
-        for (b, &w) in blocked.iter_mut().zip(&self.directions) {
-            *b = self.plane_share(planes.tangent, ground, n, w);
-        }
-        blocked
+        self.shares_of_planes(planes.tangent, ground, n)
     }
 
-    /// The share of direction `w`'s patch that the tangent plane (where `tangent`) and the
-    /// ground (where `ground`) cover, the larger.
-    #[inline(always)]
-    fn plane_share(&self, tangent: bool, ground: bool, n: [f64; 3], w: [f64; 3]) -> f64 {
-        let covered = |sin_x: f64| (0.5 + sin_x / (2.0 * self.patch)).clamp(0.0, 1.0);
-        let by_tangent = if tangent { 0.0f64.max(covered(-dot(n, w))) } else { 0.0 };
-        if ground {
-            by_tangent.max(covered(-w[2]))
-        } else {
-            by_tangent
-        }
+    /// The share of each direction's patch that the tangent plane of normal `n` (where
+    /// `tangent`) and the ground (where `ground`) cover, the larger: four directions per
+    /// instruction where the processor has AVX2 ([`four_directions_at_once`]).
+    fn shares_of_planes(&self, tangent: bool, ground: bool, n: [f64; 3]) -> [f64; DISK_DIRECTIONS] {
+        let (by_axis, two_patches) = (&self.by_axis, 2.0 * self.patch);
+        four_directions_at_once(
+            #[inline(always)]
+            || {
+                let covered = |sin_x: f64| (0.5 + sin_x / two_patches).clamp(0.0, 1.0);
+                let mut shares = [0.0f64; DISK_DIRECTIONS];
+                for (i, share) in shares.iter_mut().enumerate() {
+                    let along = n[0] * by_axis[0][i] + n[1] * by_axis[1][i] + n[2] * by_axis[2][i];
+                    let by_tangent = if tangent { 0.0f64.max(covered(-along)) } else { 0.0 };
+                    *share = if ground { by_tangent.max(covered(-by_axis[2][i])) } else { by_tangent };
+                }
+                shares
+            },
+        )
     }
 
     /// The elevations between which the height field's horizon changes the disk's
@@ -326,7 +336,7 @@ impl DiskDirections {
             }
         }
         if let Some(tree) = blockers {
-            tree.visit_cone(p, n, object, self.axis, self.half_angle + self.patch, |sphere| {
+            tree.visit_cone(p, n, object, self.axis, self.cone, |sphere| {
                 let d = [0, 1, 2].map(|k| sphere.center[k] - p[k]);
                 let distance = dot(d, d).sqrt();
                 if !(distance > 0.0)
@@ -349,51 +359,46 @@ impl DiskDirections {
     }
 }
 
-/// Raises each direction's blocked share to what a cap about unit `axis` of half-angle
-/// with sine and cosine `cap` covers of its patch (module doc): the signed angle `x = cap -
-/// angle` from the cap's boundary, by its sine, without inverse trigonometry; below `-pi/2`
-/// it is far outside. The directions are given by coordinate, `by_axis[k][i]`; where the
-/// processor has AVX2, the same loop compiled for it (four directions per instruction,
-/// the same operations in the same order).
-fn cover_by_cap(
-    by_axis: &[[f64; DISK_DIRECTIONS]; 3],
-    axis: [f64; 3],
-    cap: [f64; 2],
-    two_patches: f64,
-    blocked: &mut [f64; DISK_DIRECTIONS],
-) {
-    #[inline(always)]
-    fn each(
-        by_axis: &[[f64; DISK_DIRECTIONS]; 3],
-        axis: [f64; 3],
-        [sin_cap, cos_cap]: [f64; 2],
-        two_patches: f64,
-        blocked: &mut [f64; DISK_DIRECTIONS],
-    ) {
-        for i in 0..DISK_DIRECTIONS {
-            let cos_a = axis[0] * by_axis[0][i] + axis[1] * by_axis[1][i] + axis[2] * by_axis[2][i];
-            let sin_a = (1.0 - cos_a * cos_a).max(0.0).sqrt();
-            let cos_x = cos_cap * cos_a + sin_cap * sin_a;
-            let share = (0.5 + (sin_cap * cos_a - cos_cap * sin_a) / two_patches).clamp(0.0, 1.0);
-            blocked[i] = blocked[i].max(if cos_x < 0.0 { 0.0 } else { share });
-        }
-    }
+/// `work` over a disk's directions, compiled for AVX2 where the processor has it: the same
+/// operations in the same order, so the same bits, four directions per instruction.
+#[inline(always)]
+fn four_directions_at_once<R>(work: impl FnOnce() -> R) -> R {
     #[cfg(target_arch = "x86_64")]
     if *crate::x86::AVX2 {
         #[target_feature(enable = "avx2")]
-        unsafe fn avx2(
-            by_axis: &[[f64; DISK_DIRECTIONS]; 3],
-            axis: [f64; 3],
-            cap: [f64; 2],
-            two_patches: f64,
-            blocked: &mut [f64; DISK_DIRECTIONS],
-        ) {
-            each(by_axis, axis, cap, two_patches, blocked)
+        unsafe fn avx2<R>(work: impl FnOnce() -> R) -> R {
+            work()
         }
         // SAFETY: the processor has AVX2.
-        return unsafe { avx2(by_axis, axis, cap, two_patches, blocked) };
+        return unsafe { avx2(work) };
     }
-    each(by_axis, axis, cap, two_patches, blocked)
+    work()
+}
+
+/// Raises each direction's blocked share to what a cap about unit `axis` of half-angle
+/// with sine and cosine `cap` covers of its patch (module doc): the signed angle `x = cap -
+/// angle` from the cap's boundary, by its sine, without inverse trigonometry; below `-pi/2`
+/// it is far outside. The directions are given by coordinate, `by_axis[k][i]`, four per
+/// instruction where the processor has AVX2 ([`four_directions_at_once`]).
+fn cover_by_cap(
+    by_axis: &[[f64; DISK_DIRECTIONS]; 3],
+    axis: [f64; 3],
+    [sin_cap, cos_cap]: [f64; 2],
+    two_patches: f64,
+    blocked: &mut [f64; DISK_DIRECTIONS],
+) {
+    four_directions_at_once(
+        #[inline(always)]
+        || {
+            for i in 0..DISK_DIRECTIONS {
+                let cos_a = axis[0] * by_axis[0][i] + axis[1] * by_axis[1][i] + axis[2] * by_axis[2][i];
+                let sin_a = (1.0 - cos_a * cos_a).max(0.0).sqrt();
+                let cos_x = cos_cap * cos_a + sin_cap * sin_a;
+                let share = (0.5 + (sin_cap * cos_a - cos_cap * sin_a) / two_patches).clamp(0.0, 1.0);
+                blocked[i] = blocked[i].max(if cos_x < 0.0 { 0.0 } else { share });
+            }
+        },
+    )
 }
 
 /// How a disk's horizon is marched ([`HorizonPyramid::horizon_against`]'s arguments but
@@ -470,13 +475,23 @@ impl SunDisk {
     ) -> [f64; 3] {
         // Four running sums, directions `4i + k` in sum `k`: four chains of additions the
         // processor overlaps, where one chain of 32 was two fifths of a turned Sun lamp's
-        // lobes. The same sum to rounding.
-        let mut sums = [0.0f64; 4];
-        for (four, v) in self.disk.directions.chunks_exact(4).zip(visibility.chunks_exact(4)) {
-            for k in 0..4 {
-                sums[k] += v[k] * lobe(dot(axis, four[k]));
-            }
-        }
+        // lobes, and four directions per instruction where it has AVX2. The same sum to
+        // rounding.
+        let by_axis = &self.disk.by_axis;
+        let sums = four_directions_at_once(
+            #[inline(always)]
+            || {
+                let mut sums = [0.0f64; 4];
+                for four in (0..DISK_DIRECTIONS).step_by(4) {
+                    for (k, sum) in sums.iter_mut().enumerate() {
+                        let i = four + k;
+                        let z = axis[0] * by_axis[0][i] + axis[1] * by_axis[1][i] + axis[2] * by_axis[2][i];
+                        *sum += visibility[i] * lobe(z);
+                    }
+                }
+                sums
+            },
+        );
         let mean = ((sums[0] + sums[1]) + (sums[2] + sums[3])) / DISK_DIRECTIONS as f64;
         self.disk_integral.map(|c| c * mean)
     }
@@ -505,7 +520,77 @@ pub fn cap_overlap(a: f64, b: f64, gamma: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::logsh::Lobe;
     use crate::scene::Sphere;
+    use crate::shade::glossy::SharpLobe;
+
+    /// The share of direction `w`'s patch that the tangent plane of `n` (where `tangent`)
+    /// and the ground (where `ground`) cover, the larger, for one direction as the module
+    /// doc gives it: what [`DiskDirections::shares_of_planes`] computes four at a time.
+    fn share_of_direction(disk: &DiskDirections, tangent: bool, ground: bool, n: [f64; 3], w: [f64; 3]) -> f64 {
+        let covered = |sin_x: f64| (0.5 + sin_x / (2.0 * disk.patch)).clamp(0.0, 1.0);
+        let by_tangent = if tangent { 0.0f64.max(covered(-dot(n, w))) } else { 0.0 };
+        if ground {
+            by_tangent.max(covered(-w[2]))
+        } else {
+            by_tangent
+        }
+    }
+
+    /// The planes' shares and a disk's lobes, computed four directions at a time, are the
+    /// sums of the directions one at a time, bit for bit (the same operations in the same
+    /// order): disks of three widths at five axes, normals and lobe axes on a spiral over
+    /// the sphere, visibilities spread over [0, 1], the cosine lobe and a narrow GGX one.
+    #[test]
+    fn four_directions_at_once_are_one_at_a_time() {
+        let light = |direction: [f64; 3], half_angle: f64| SunLight {
+            direction,
+            half_angle,
+            strength: 3.0,
+            color: [1.0, 0.5, 0.25],
+        };
+        let glossy = SharpLobe::Ggx { alpha: 0.05 };
+        let lobes: [&dyn Fn(f64) -> f64; 2] = [&|z| Lobe::Diffuse.value(z), &|z| 0.7 * glossy.value(z)];
+        let mut lit = 0;
+        for degrees in [0.3, 2.0, 20.0] {
+            for axis in [[0.0, 0.0, 1.0], [0.6, 0.0, 0.8], [0.0, -0.28, 0.96], [0.48, 0.64, 0.6], [1.0, 0.0, 0.0]] {
+                let sun = SunDisk::new(&light(axis, f64::to_radians(degrees)));
+                let disk = &sun.disk;
+                for k in 0..500 {
+                    let z = 1.0 - 2.0 * (k as f64 + 0.5) / 500.0;
+                    let phi = k as f64 * 2.399_963;
+                    let r = (1.0 - z * z).sqrt();
+                    let n = [r * phi.cos(), r * phi.sin(), z];
+                    for (tangent, ground) in [(true, false), (false, true), (true, true)] {
+                        let one_at_a_time = disk.directions.map(|w| share_of_direction(disk, tangent, ground, n, w));
+                        let at_once = disk.shares_of_planes(tangent, ground, n);
+                        assert_eq!(
+                            at_once.map(f64::to_bits),
+                            one_at_a_time.map(f64::to_bits),
+                            "{degrees} deg, n {n:?}"
+                        );
+                    }
+                    let visibility: [f64; DISK_DIRECTIONS] = std::array::from_fn(|i| ((i * 7 + k) % 11) as f64 / 10.0);
+                    for lobe in lobes {
+                        let mut sums = [0.0f64; 4];
+                        for (i, w) in disk.directions.iter().enumerate() {
+                            sums[i % 4] += visibility[i] * lobe(dot(n, *w));
+                        }
+                        let mean = ((sums[0] + sums[1]) + (sums[2] + sums[3])) / DISK_DIRECTIONS as f64;
+                        let one_at_a_time = sun.disk_integral.map(|c| c * mean);
+                        let at_once = sun.reflected(&visibility, lobe, n);
+                        assert_eq!(
+                            at_once.map(f64::to_bits),
+                            one_at_a_time.map(f64::to_bits),
+                            "{degrees} deg, n {n:?}"
+                        );
+                        lit += usize::from(mean > 0.0);
+                    }
+                }
+            }
+        }
+        assert!(lit > 5000, "{lit} lobes lit");
+    }
 
     /// Where [`DiskDirections::clear_of_tangent`] holds, the tangent plane covers none of
     /// any direction's patch, so the planes' shares are the 0 of a test per direction, to
@@ -528,7 +613,7 @@ mod tests {
                     let phi = k as f64 * 2.399_963;
                     let r = (1.0 - z * z).sqrt() * (1.0 + 1e-6 * ((k % 3) as f64 - 1.0));
                     let n = [r * phi.cos(), r * phi.sin(), z];
-                    let shares = disk.directions.map(|w| disk.plane_share(true, false, n, w));
+                    let shares = disk.directions.map(|w| share_of_direction(&disk, true, false, n, w));
                     if disk.clear_of_tangent(n) {
                         clear += 1;
                         assert!(shares.iter().all(|s| s.to_bits() == 0), "{degrees} deg, axis {axis:?}, n {n:?}");
