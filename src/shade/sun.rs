@@ -237,11 +237,15 @@ impl DiskDirections {
     /// `n`, which then covers none of any patch: `w . n >= (w . axis)(n . axis) - |w_perp|
     /// |n_perp|`, with 1e-9 of margin, far above the rounding of a dot product. Most lit
     /// pixels are so, and their planes' shares are then 0 without a test per direction.
+    /// Compared squared, both sides nonnegative, without the square root of `|n_perp|`.
     fn clear_of_tangent(&self, n: [f64; 3]) -> bool {
         const MARGIN: f64 = 1e-9;
         let along = dot(n, self.axis);
-        let across = (dot(n, n) - along * along).max(0.0).sqrt();
-        along >= 0.0 && self.least_along * along - self.most_across * across >= self.patch + MARGIN
+        let across_squared = (dot(n, n) - along * along).max(0.0);
+        let clearance = self.least_along * along - (self.patch + MARGIN);
+        along >= 0.0
+            && clearance >= 0.0
+            && clearance * clearance >= self.most_across * self.most_across * across_squared
     }
 
     /// Whether the planes counted (the tangent plane of normal `n` where `tangent`, the

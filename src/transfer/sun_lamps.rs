@@ -420,12 +420,12 @@ fn move_lamps<T: Real>(
             })
             .collect();
         let horizons = pyramid.map(|pyramid| chunk_horizons(pyramid, &disks, &sources));
-        for (i, source) in sources.into_iter().enumerate() {
+        for (i, source) in sources.iter().enumerate() {
             let (d, s, rd, rs) = (&mut diffuse[i], &mut specular[i], rendered_diffuse[i], rendered_specular[i]);
-            match source {
-                PixelSource::Surface { point, tint } => {
+            match *source {
+                PixelSource::Surface { ref point, tint } => {
                     let known = horizons.as_ref().map(|h| &h[i * disks.len()..(i + 1) * disks.len()]);
-                    if let Some((lit_d, lit_s)) = kernel.sun_lamps_lit(occluders, &point, &disks, known) {
+                    if let Some((lit_d, lit_s)) = kernel.sun_lamps_lit(occluders, point, &disks, known) {
                         moved(d, rd, tint, lit_d);
                         moved(s, rs, tint, lit_s);
                     }
