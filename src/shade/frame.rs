@@ -70,9 +70,10 @@ pub fn check_frame(scene: &Scene, frame: &Frame) -> Result<(), ShadeError> {
     // 0.3 ms of each turn of the Sun-lamp scene's lamps (320x180, no water).
     let has = |kind: fn(&Material) -> bool| scene.materials.values().any(kind);
     let (water, phong) = (has(|m| matches!(m, Material::Water { .. })), has(|m| matches!(m, Material::Phong { .. })));
-    let water_pixels = match water {
-        true => g.material.iter().filter(|&&m| matches!(scene.materials.get(&m), Some(Material::Water { .. }))).count(),
-        false => 0,
+    let water_pixels = if water {
+        g.material.iter().filter(|&&m| matches!(scene.materials.get(&m), Some(Material::Water { .. }))).count()
+    } else {
+        0
     };
     if water_pixels > 0 && frame.reflection.is_none() {
         return Err(ShadeError::WaterWithoutReflection { file, count: water_pixels });

@@ -926,7 +926,7 @@ impl<T: Real> ShadingKernel<T> {
         // view, which a diffuse material does not read (a square root and three divisions
         // a pixel, 3 % of a turn of the Sun-lamp scene's lamps).
         let glossy_axis = phong.map(|_| reflect_view(point.view_origin, point.position, n));
-        let sharp = glossy_axis.and_then(|_| self.materials.get(&point.material)?.sharp.as_ref());
+        let sharp = phong.and_then(|_| self.materials.get(&point.material)?.sharp.as_ref());
         let sharp_albedo = sharp.zip(glossy_axis).map(|(sharp, axis)| albedo_lookup(&sharp.albedo, dot(axis, n)));
         // Disk `k`'s diffuse and glossy radiance, `None` where it is wholly hidden (every
         // term is then 0, the lobes being finite: the same bits as adding them). The disks

@@ -275,7 +275,7 @@ impl DiskDirections {
                 let covered = |sin_x: f64| (0.5 + sin_x / two_patches).clamp(0.0, 1.0);
                 let mut shares = [0.0f64; DISK_DIRECTIONS];
                 for (i, share) in shares.iter_mut().enumerate() {
-                    let along = n[0] * by_axis[0][i] + n[1] * by_axis[1][i] + n[2] * by_axis[2][i];
+                    let along = along_direction(by_axis, i, n);
                     let by_tangent = if tangent { 0.0f64.max(covered(-along)) } else { 0.0 };
                     *share = if ground { by_tangent.max(covered(-by_axis[2][i])) } else { by_tangent };
                 }
@@ -395,7 +395,7 @@ fn cover_by_cap(
         #[inline(always)]
         || {
             for i in 0..DISK_DIRECTIONS {
-                let cos_a = axis[0] * by_axis[0][i] + axis[1] * by_axis[1][i] + axis[2] * by_axis[2][i];
+                let cos_a = along_direction(by_axis, i, axis);
                 let sin_a = (1.0 - cos_a * cos_a).max(0.0).sqrt();
                 let cos_x = cos_cap * cos_a + sin_cap * sin_a;
                 let share = (0.5 + (sin_cap * cos_a - cos_cap * sin_a) / two_patches).clamp(0.0, 1.0);
@@ -403,6 +403,13 @@ fn cover_by_cap(
             }
         },
     )
+}
+
+/// The dot product of `v` with direction `i` of a disk given by coordinate
+/// (`by_axis[k][i]`), in the order each of its readers summed it before (the same bits).
+#[inline(always)]
+fn along_direction(by_axis: &[[f64; DISK_DIRECTIONS]; 3], i: usize, v: [f64; 3]) -> f64 {
+    v[0] * by_axis[0][i] + v[1] * by_axis[1][i] + v[2] * by_axis[2][i]
 }
 
 /// How a disk's horizon is marched ([`HorizonPyramid::horizon_against`]'s arguments but
@@ -489,7 +496,7 @@ impl SunDisk {
                 for four in (0..DISK_DIRECTIONS).step_by(4) {
                     for (k, sum) in sums.iter_mut().enumerate() {
                         let i = four + k;
-                        let z = axis[0] * by_axis[0][i] + axis[1] * by_axis[1][i] + axis[2] * by_axis[2][i];
+                        let z = along_direction(by_axis, i, axis);
                         *sum += visibility[i] * lobe(z);
                     }
                 }
