@@ -348,7 +348,7 @@ pub enum SunLamps {
 
 #[derive(Args, Debug)]
 pub struct ViewArgs {
-    /// Directory of frames rendered with `logsh render --transfer`.
+    /// Directory of frames rendered with `logsh render --transfer`; frames written into it while the server runs join the page's list at its end.
     pub dir: PathBuf,
     /// Port on 127.0.0.1 (0: any free port, printed on start).
     #[arg(long, default_value_t = 8642)]

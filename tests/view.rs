@@ -206,6 +206,32 @@ fn the_server_answers_the_page_and_a_frames_data() {
     let notes = meta["notes"].to_string();
     assert!(notes.contains("no wipe against Cycles") && notes.contains("is 8x8, the frame 240x135"), "{notes}");
     assert!(notes.contains("Standard view transform") && notes.contains("view_lut.exr"), "{notes}");
+    // Frames written while the server runs (a sequence still rendering) are listed after
+    // those found at start, which keep their indices, even where a name sorts first; a
+    // frame asked for past the list is looked for; one removed stays listed and says so.
+    // The Cycles render written beside the frames above holds no transfer: not a frame.
+    std::fs::copy(again.join("render.0001.exr"), frames.join("render.0000.exr")).unwrap();
+    let (_, names) = server.request("GET", "/frames.json");
+    assert_eq!(serde_json::from_slice::<Vec<String>>(&names).unwrap(), ["render.0001.exr", "render.0000.exr"]);
+    assert_eq!(server.request("GET", "/frame/1/meta.json").0, 200);
+    std::fs::copy(again.join("render.0001.exr"), frames.join("render.0002.exr")).unwrap();
+    let (status, meta) = server.request("GET", "/frame/2/meta.json");
+    assert_eq!(status, 200, "{}", String::from_utf8_lossy(&meta));
+    let (status, body) = server.request("GET", "/frame/3/meta.json");
+    assert_eq!(
+        (status, String::from_utf8_lossy(&body).as_ref()),
+        (404, "no frame 3: the directory has 3, numbered 0 to 2")
+    );
+    std::fs::remove_file(frames.join("render.0001.exr")).unwrap();
+    let (status, body) = server.request("GET", "/frame/0/meta.json");
+    let body = String::from_utf8_lossy(&body);
+    assert_eq!(status, 500, "{body}");
+    assert!(body.contains("render.0001.exr"), "the missing frame named: {body}");
+    let (_, names) = server.request("GET", "/frames.json");
+    assert_eq!(
+        serde_json::from_slice::<Vec<String>>(&names).unwrap(),
+        ["render.0001.exr", "render.0000.exr", "render.0002.exr"]
+    );
     server.stop();
 }
 

@@ -6,7 +6,7 @@
 //! | path | body |
 //! |---|---|
 //! | `/` | the page (`page.html`: canvas, sliders, the relight in JavaScript) |
-//! | `/frames.json` | the frames of the directory: file names |
+//! | `/frames.json` | the frames of the directory: file names, those found at start sorted, then those written since appended ([`Viewer::listed`]) |
 //! | `/frame/<i>/meta.json` | size (of a preview at most 1920x1080: [`PREVIEW_SIZE`]), order, the light's SH vector, the lobes, the layout of the next two |
 //! | `/frame/<i>/pixels.bin` | the transfer layers, little-endian f32, one array after another |
 //! | `/frame/<i>/maps.bin` | the maps the glossy lookups read ([`RelightLight::sampled_maps`]), then the scene's view transform LUT ([`crate::scene::view`]) |
@@ -44,7 +44,11 @@ const PAGE: &str = include_str!("page.html");
 
 /// What `logsh view` serves.
 pub struct Viewer {
-    frames: Vec<PathBuf>,
+    /// The directory served.
+    dir: PathBuf,
+    /// Its frames with transfer layers, each at the index it was first listed at
+    /// ([`Self::listed`]).
+    frames: Mutex<Vec<PathBuf>>,
     /// The bodies of the frames last asked for (at most [`KEPT_FRAMES`]), newest last.
     built: Mutex<Vec<(FrameStamp, Arc<FrameBodies>)>>,
     /// When the page's benchmark started ([`PAGE`]'s `?bench=N`).
@@ -141,14 +145,7 @@ impl SunLamps {
 impl Viewer {
     /// The frames of `dir` that hold transfer layers, by file name.
     pub fn new(dir: &Path) -> Result<Self> {
-        let entries =
-            std::fs::read_dir(dir).with_context(|| format!("{}: cannot list the directory", dir.display()))?;
-        let mut frames: Vec<PathBuf> = entries
-            .filter_map(|e| e.ok().map(|e| e.path()))
-            .filter(|p| p.extension().is_some_and(|e| e.eq_ignore_ascii_case("exr")))
-            .filter(|p| has_transfer(p))
-            .collect();
-        frames.sort();
+        let frames = frames_in(dir, &[]).with_context(|| format!("{}: cannot list the directory", dir.display()))?;
         if frames.is_empty() {
             return Err(anyhow!(
                 "{}: no frames with transfer layers; render them with `logsh render --transfer --out {}`",
@@ -156,7 +153,40 @@ impl Viewer {
                 dir.display()
             ));
         }
-        Ok(Self { frames, built: Mutex::new(Vec::new()), bench: Mutex::new(None), building: Mutex::new(()) })
+        Ok(Self {
+            dir: dir.to_path_buf(),
+            frames: Mutex::new(frames),
+            built: Mutex::new(Vec::new()),
+            bench: Mutex::new(None),
+            building: Mutex::new(()),
+        })
+    }
+
+    /// The frames as the directory holds them now: those listed before, each at its index
+    /// (one since removed stays listed, and reading it says it is gone), then those
+    /// written since, sorted by name. A render writing a sequence into the directory
+    /// while the page is open adds its frames at the end, where a page loaded again finds
+    /// them, and never moves a frame a page has asked for. A directory that cannot be
+    /// listed now leaves the list as it was.
+    fn listed(&self) -> Vec<PathBuf> {
+        let mut frames = self.frames.lock().unwrap_or_else(|p| p.into_inner());
+        if let Ok(new) = frames_in(&self.dir, &frames) {
+            frames.extend(new);
+        }
+        frames.clone()
+    }
+
+    /// The file of frame `index`, listing the directory again if it is past the frames
+    /// listed so far; or how many there are.
+    fn frame_file(&self, index: usize) -> std::result::Result<PathBuf, usize> {
+        let known = self.frames.lock().unwrap_or_else(|p| p.into_inner()).get(index).cloned();
+        match known {
+            Some(file) => Ok(file),
+            None => {
+                let frames = self.listed();
+                frames.get(index).cloned().ok_or(frames.len())
+            }
+        }
     }
 
     /// Listens on 127.0.0.1:`port` (0: any free port) and serves until the process ends;
@@ -228,7 +258,7 @@ impl Viewer {
             "/" | "/index.html" => Response::ok("text/html; charset=utf-8", PAGE.as_bytes().to_vec()),
             "/frames.json" => {
                 let names: Vec<String> = self
-                    .frames
+                    .listed()
                     .iter()
                     .map(|f| f.file_name().unwrap_or_default().to_string_lossy().into_owned())
                     .collect();
@@ -241,14 +271,19 @@ impl Viewer {
                 else {
                     return Response::error(404, "no such page");
                 };
-                let Some(index) = index.parse::<usize>().ok().filter(|&i| i < self.frames.len()) else {
-                    let count = self.frames.len();
-                    return Response::error(
-                        404,
-                        &format!("no frame {index}: the directory has {count}, numbered 0 to {}", count - 1),
-                    );
+                let Ok(number) = index.parse::<usize>() else {
+                    return Response::error(404, &format!("no frame {index}: frames are numbered from 0"));
                 };
-                let bodies = match self.bodies(index) {
+                let file = match self.frame_file(number) {
+                    Ok(file) => file,
+                    Err(count) => {
+                        return Response::error(
+                            404,
+                            &format!("no frame {index}: the directory has {count}, numbered 0 to {}", count - 1),
+                        )
+                    }
+                };
+                let bodies = match self.bodies(number, &file) {
                     Ok(bodies) => bodies,
                     Err(e) => return Response::error(500, &format!("{e:#}")),
                 };
@@ -279,9 +314,8 @@ impl Viewer {
 
     /// Frame `index`'s responses, built on its first request and kept while it is among
     /// the last [`KEPT_FRAMES`] asked for (a 960 x 540 frame's are about 140 MB).
-    fn bodies(&self, index: usize) -> Result<Arc<FrameBodies>> {
+    fn bodies(&self, index: usize, file: &Path) -> Result<Arc<FrameBodies>> {
         let built = || self.built.lock().unwrap_or_else(|p| p.into_inner());
-        let file = &self.frames[index];
         // A frame written again since (rendered anew) is read again.
         let stamp = FrameStamp::of(index, file);
         let unchanged = |bodies: &FrameBodies| bodies.cycles_files.iter().all(|(path, was)| written(path) == *was);
@@ -345,6 +379,19 @@ impl FrameStamp {
 
 /// How many frames' responses the server keeps.
 const KEPT_FRAMES: usize = 2;
+
+/// The EXR files of `dir` that hold transfer layers, sorted by name, but those in `listed`.
+fn frames_in(dir: &Path, listed: &[PathBuf]) -> std::io::Result<Vec<PathBuf>> {
+    let listed: std::collections::HashSet<&PathBuf> = listed.iter().collect();
+    let mut frames: Vec<PathBuf> = std::fs::read_dir(dir)?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|e| e.eq_ignore_ascii_case("exr")))
+        .filter(|p| !listed.contains(p))
+        .filter(|p| has_transfer(p))
+        .collect();
+    frames.sort();
+    Ok(frames)
+}
 
 /// Whether `file`'s header says it holds transfer layers.
 fn has_transfer(file: &Path) -> bool {
