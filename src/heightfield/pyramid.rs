@@ -690,11 +690,10 @@ impl HorizonPyramid {
     fn horizon_tangents_in_lanes(&self, p: [f64; 3], out: &mut [f64]) -> bool {
         let w = self.settings.directions;
         assert!(out.len() >= w, "horizon_elevations: out has {} slots but W = {}", out.len(), w);
-        if self.steps.is_empty() || !p.iter().all(|v| v.is_finite()) {
+        if !self.marchable(&p) {
             return false;
         }
-        let (x, y) = (p[0], p[1]);
-        let above = (p[2] - self.height_at(x, y)).max(0.0);
+        let (x, y, above) = self.receiver_of(&p);
         // SAFETY: `lanes::available` checked the processor's features and the levels'
         // sizes when the pyramid was built.
         unsafe { lanes::horizons(self, x, y, above, &mut out[..w]) };
@@ -706,12 +705,11 @@ impl HorizonPyramid {
         let w = self.settings.directions;
         assert!(out.len() >= w, "horizon_elevations: out has {} slots but W = {}", out.len(), w);
         let out = &mut out[..w];
-        if self.steps.is_empty() || !p.iter().all(|v| v.is_finite()) {
+        if !self.marchable(&p) {
             out.fill(0.0);
             return;
         }
-        let (x, y) = (p[0], p[1]);
-        let above = (p[2] - self.height_at(x, y)).max(0.0);
+        let (x, y, above) = self.receiver_of(&p);
 
         // Receiver term f_L(x) of SN08 Eq. 2, once per level, shared by all azimuths.
         let mut receiver = ReceiverTerms::new();
@@ -759,11 +757,7 @@ impl HorizonPyramid {
         out: &mut [HorizonAgainst],
     ) {
         assert_eq!(points.len(), out.len(), "horizons_against: one answer per point");
-        let marchable = |p: &[f64; 3]| !self.steps.is_empty() && p.iter().chain(&dir).all(|v| v.is_finite());
-        let receiver_of = |p: &[f64; 3]| {
-            let (x, y) = (p[0], p[1]);
-            (x, y, (p[2] - self.height_at(x, y)).max(0.0))
-        };
+        let marchable = |p: &[f64; 3]| dir.iter().all(|v| v.is_finite()) && self.marchable(p);
         #[cfg(target_arch = "x86_64")]
         if self.in_lanes {
             // The band's bounds rounded outwards to f32, so that a lane that stops at one
@@ -787,7 +781,7 @@ impl HorizonPyramid {
                 // built; the points are finite.
                 if !unsafe { lanes::along_receivers(self, eight, dir, within, &mut receivers) } {
                     for (receiver, p) in receivers.iter_mut().zip(eight) {
-                        let (x, y, above) = receiver_of(p);
+                        let (x, y, above) = self.receiver_of(p);
                         *receiver = lanes::AlongReceiver { x, y, above, taken: self.steps_marched(x, y, dir, within) };
                     }
                 }
@@ -819,12 +813,26 @@ impl HorizonPyramid {
         for (p, out) in points.iter().zip(out) {
             *out = match marchable(p) {
                 true => {
-                    let (x, y, above) = receiver_of(p);
+                    let (x, y, above) = self.receiver_of(p);
                     self.march(x, y, above, &mut ReceiverTerms::new(), dir, reach, band)
                 }
                 false => HorizonAgainst::At(0.0),
             };
         }
+    }
+
+    /// Whether a march from `p` reads the pyramid: every query answers a point it does not
+    /// (non-finite, or an empty step table) as unoccluded.
+    fn marchable(&self, p: &[f64; 3]) -> bool {
+        !self.steps.is_empty() && p.iter().all(|v| v.is_finite())
+    }
+
+    /// A query point as a march takes it: its ground position and its height above the
+    /// level-0 surface, 0 for a point below it (paper 000 Section 4.1's receivers above
+    /// the terrain).
+    fn receiver_of(&self, p: &[f64; 3]) -> (f64, f64, f64) {
+        let (x, y) = (p[0], p[1]);
+        (x, y, (p[2] - self.height_at(x, y)).max(0.0))
     }
 
     /// How many steps lie within `reach` (the steps lie in order of distance).
