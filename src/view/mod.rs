@@ -417,10 +417,17 @@ fn cycles_render(file: &Path, frame: &TransferFrame) -> (Option<Vec<[f32; 3]>>, 
 }
 
 /// Where the Cycles render of `frame` (read from `file`) is looked for, in order:
-/// `cycles.NNNN.exr` beside the frame, then in the scene directory it was rendered from.
+/// `cycles.NNNN.exr` beside the frame, then in the scene directory it was rendered from;
+/// never the frame itself (a frame with transfer layers written under that name is a
+/// frame, not its own wipe).
 fn cycles_candidates(file: &Path, frame: &TransferFrame) -> Vec<PathBuf> {
     let name = format!("cycles.{:04}.exr", frame.header.frame);
-    file.parent().map(|d| d.join(&name)).into_iter().chain([frame.header.scene.join(&name)]).collect()
+    let itself = |candidate: &PathBuf| match (candidate.canonicalize(), file.canonicalize()) {
+        (Ok(a), Ok(b)) => a == b,
+        _ => candidate == file,
+    };
+    let beside = file.parent().map(|d| d.join(&name));
+    beside.into_iter().chain([frame.header.scene.join(&name)]).filter(|candidate| !itself(candidate)).collect()
 }
 
 /// The largest frame the page is sent whole: a larger one is sent as every `stride`-th
@@ -574,6 +581,20 @@ impl Response {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A frame with transfer layers written as `cycles.NNNN.exr` is not its own wipe; beside
+    /// another frame of that number, it is that frame's.
+    #[test]
+    fn a_frame_named_as_a_cycles_render_is_not_its_own_wipe() {
+        let (dir, transfer, _) = crate::transfer::relit_dunes();
+        let named = dir.path().join(format!("cycles.{:04}.exr", transfer.header.frame));
+        std::fs::copy(dir.path().join("transfer.exr"), &named).unwrap();
+        // The scene was written into the same directory: both places are the frame.
+        assert_eq!(transfer.header.scene.canonicalize().ok(), dir.path().canonicalize().ok());
+        assert_eq!(cycles_candidates(&named, &transfer), Vec::<PathBuf>::new());
+        let beside = cycles_candidates(&dir.path().join("transfer.exr"), &transfer);
+        assert_eq!(beside.first(), Some(&named), "{beside:?}");
+    }
 
     /// A frame larger than the preview's size is sent as every `stride`-th pixel of every
     /// `stride`-th row, each layer's values those of its pixel; one within it, whole.
