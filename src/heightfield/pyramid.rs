@@ -410,6 +410,138 @@ impl PaddedLevel {
     }
 }
 
+/// How steeply any read of the levels the step table reads can rise
+/// ([`HorizonPyramid::steepest_climb`]).
+#[derive(Clone, Debug)]
+struct ClimbBound {
+    /// Slopes `[along x, along y]` per world unit such that a read's rise along a unit
+    /// azimuth `d` is at most the largest `a |d_x| + b |d_y|` of them ([`slopes_by_bucket`],
+    /// reduced to the corners of their upper-right hull).
+    corners: Vec<[f64; 2]>,
+    /// At least the rounding of a step tangent, in the lanes' f32 (far more than the f64
+    /// march's), the largest over the levels: 64 ulp of a level's relief for the reads'
+    /// sums, and 8 ulp of its grid coordinates' size times its steepest differences for
+    /// where they read, over its nearest step.
+    rounding: f64,
+}
+
+impl ClimbBound {
+    /// The bound of `levels` as the step table `steps` reads them, `peaks` their lowest
+    /// and highest samples.
+    fn new(levels: &[PyramidLevel], peaks: &[[f64; 2]], steps: &[MarchStep]) -> Self {
+        let per_level: Vec<(Vec<[f64; 2]>, f64)> = levels
+            .par_iter()
+            .enumerate()
+            .filter_map(|(l, level)| {
+                let nearest = steps.iter().filter(|step| step.level == l).map(|step| step.inv_distance);
+                let inv_distance = nearest.reduce(f64::max)?;
+                let (slopes, steepest) = slopes_by_bucket(level);
+                let [low, high] = peaks[l];
+                let coordinates = level.columns.max(level.rows) as f64;
+                let ulps = 64.0 * (high - low) + 8.0 * coordinates * (steepest[0] + steepest[1]);
+                Some((upper_right_corners(slopes), f64::from(f32::EPSILON) * ulps * inv_distance))
+            })
+            .collect();
+        let rounding = per_level.iter().map(|(_, rounding)| *rounding).fold(0.0, f64::max);
+        let corners = upper_right_corners(per_level.into_iter().flat_map(|(corners, _)| corners).collect());
+        Self { corners, rounding }
+    }
+}
+
+/// How many slopes along x a level's cells are gathered into ([`slopes_by_bucket`]).
+const SLOPE_BUCKETS: usize = 4096;
+
+/// Per cell `(i, j)` of `level` (reads at grid coordinates in `[i, i + 1) x [j, j + 1)`),
+/// the largest differences between neighbouring samples among those its reads weigh, along
+/// x and along y, per world unit: a bicubic B-spline read's derivative along x is a convex
+/// combination of the 3x4 x-differences of its 4x4 taps (a quadratic B-spline's weights
+/// times a cubic's), so it is at most the largest of them, and the same along y; a
+/// bilinear read's are among them. Taps past the edges repeat the edge samples, as the
+/// reads' do. The cells are gathered by their slope along x into [`SLOPE_BUCKETS`], each
+/// the largest of both slopes of its cells (so at least each of them, and at most 1/4095
+/// of the steepest along x above); with the level's largest differences along x and y.
+fn slopes_by_bucket(level: &PyramidLevel) -> (Vec<[f64; 2]>, [f64; 2]) {
+    let (columns, rows) = (level.columns, level.rows);
+    let height = |i: usize, j: usize| f64::from(level.heights[j * columns + i]);
+    // Each sample's difference to the next along x and along y (0 past the edge).
+    let mut next = [vec![0.0f64; columns * rows], vec![0.0f64; columns * rows]];
+    for j in 0..rows {
+        for i in 0..columns {
+            if i + 1 < columns {
+                next[0][j * columns + i] = (height(i + 1, j) - height(i, j)).abs();
+            }
+            if j + 1 < rows {
+                next[1][j * columns + i] = (height(i, j + 1) - height(i, j)).abs();
+            }
+        }
+    }
+    let steepest = next.each_ref().map(|differences| differences.iter().copied().fold(0.0, f64::max));
+    fn row(values: &[f64], columns: usize, j: usize) -> &[f64] {
+        &values[j * columns..(j + 1) * columns]
+    }
+    let clamped = |j: isize, n: usize| j.clamp(0, n as isize - 1) as usize;
+    // The largest over a cell's taps: along the difference's own axis taps `k - 1` to `k +
+    // 1` (none past the edge), along the other taps `k - 1` to `k + 2` (clamped to it).
+    let mut along_x = vec![0.0f64; columns * rows];
+    let mut along_y = vec![0.0f64; columns * rows];
+    let mut own = vec![0.0f64; columns];
+    for j in 0..rows {
+        let cells = &mut along_x[j * columns..(j + 1) * columns];
+        for t in j as isize - 1..=j as isize + 2 {
+            for (cell, &d) in cells.iter_mut().zip(row(&next[0], columns, clamped(t, rows))) {
+                *cell = cell.max(d);
+            }
+        }
+        let spread = cells.to_vec();
+        for (i, cell) in cells.iter_mut().enumerate() {
+            *cell = spread[i.saturating_sub(1)..(i + 2).min(columns)].iter().copied().fold(0.0, f64::max);
+        }
+        own.fill(0.0);
+        for t in j.saturating_sub(1)..(j + 2).min(rows) {
+            for (o, &d) in own.iter_mut().zip(row(&next[1], columns, t)) {
+                *o = o.max(d);
+            }
+        }
+        for (i, cell) in along_y[j * columns..(j + 1) * columns].iter_mut().enumerate() {
+            *cell = (i as isize - 1..=i as isize + 2).map(|t| own[clamped(t, columns)]).fold(0.0, f64::max);
+        }
+    }
+    let per_unit = level.spacing.map(|spacing| if spacing > 0.0 { 1.0 / spacing } else { 0.0 });
+    let widest = steepest[0] * per_unit[0];
+    let mut buckets = vec![[0.0f64; 2]; SLOPE_BUCKETS];
+    for (&a, &b) in along_x.iter().zip(&along_y) {
+        let [a, b] = [a * per_unit[0], b * per_unit[1]];
+        let k = if widest > 0.0 { ((a / widest) * (SLOPE_BUCKETS - 1) as f64) as usize } else { 0 };
+        let bucket = &mut buckets[k.min(SLOPE_BUCKETS - 1)];
+        *bucket = [bucket[0].max(a), bucket[1].max(b)];
+    }
+    (buckets, steepest)
+}
+
+/// The points of `points` (nonnegative) that can be the largest `a x + b y` for some `x,
+/// y >= 0`: those no other point dominates, then the corners of their hull, by `a`
+/// decreasing.
+fn upper_right_corners(mut points: Vec<[f64; 2]>) -> Vec<[f64; 2]> {
+    points.sort_by(|p, q| q[0].total_cmp(&p[0]).then(q[1].total_cmp(&p[1])));
+    let mut corners: Vec<[f64; 2]> = Vec::new();
+    for p in points {
+        if corners.last().is_some_and(|last| p[1] <= last[1]) {
+            continue;
+        }
+        // A corner on or inside the segment from the one before it to `p` is never the
+        // largest alone.
+        while let [.., o, m] = corners[..] {
+            let cross = (m[0] - o[0]) * (p[1] - o[1]) - (m[1] - o[1]) * (p[0] - o[0]);
+            if cross > 0.0 {
+                break;
+            }
+            corners.pop();
+        }
+        corners.push(p);
+    }
+    corners
+}
+
 /// One march step in the lanes' f32 terms (`lanes`), from its [`MarchStep`].
 #[derive(Clone, Copy, Debug)]
 struct LaneStep {
@@ -486,6 +618,9 @@ pub struct HorizonPyramid {
     /// each step's level's relief (highest less lowest sample) over its distance, the
     /// largest from `j` on, with [`CEILING_MARGIN`].
     relief_ceilings: Vec<f64>,
+    /// How steeply the reads of the levels the step table reads rise: what
+    /// [`Self::steepest_climb`] bounds every step's tangent by.
+    climbs: ClimbBound,
     /// Whether [`Self::horizon_elevations`] marches in AVX2 lanes (`lanes`): decided once,
     /// when the pyramid is built.
     in_lanes: bool,
@@ -563,6 +698,7 @@ impl HorizonPyramid {
             Vec::new()
         };
         let (steps, directions) = (plan.steps.clone(), plan.directions.clone());
+        let climbs = ClimbBound::new(&levels, &peaks, &steps);
         let lane_steps = if in_lanes {
             steps
                 .iter()
@@ -601,6 +737,7 @@ impl HorizonPyramid {
             peaks,
             level_ends,
             relief_ceilings,
+            climbs,
             in_lanes,
             padded,
             lane_steps,
@@ -758,6 +895,14 @@ impl HorizonPyramid {
     ) {
         assert_eq!(points.len(), out.len(), "horizons_against: one answer per point");
         let marchable = |p: &[f64; 3]| dir.iter().all(|v| v.is_finite()) && self.marchable(p);
+        // No step can rise to the band's foot from any receiver: each horizon is below it,
+        // as the march would find (a sun over a field gentler than its elevation).
+        if self.steepest_climb(dir) < band.below {
+            for (p, out) in points.iter().zip(out) {
+                *out = if marchable(p) { HorizonAgainst::Below } else { HorizonAgainst::At(0.0) };
+            }
+            return;
+        }
         #[cfg(target_arch = "x86_64")]
         if self.in_lanes {
             // The band's bounds rounded outwards to f32, so that a lane that stops at one
@@ -819,6 +964,23 @@ impl HorizonPyramid {
                 false => HorizonAgainst::At(0.0),
             };
         }
+    }
+
+    /// At least the tangent of every step along the unit azimuth `dir` from any receiver, on
+    /// the field or above it: a step's climb is its level's read less the receiver's read
+    /// of that level and its height above the surface, and a read rises along `dir` at
+    /// most by its cell's slopes weighted by `|dir|` ([`slopes_by_bucket`]; clamping to the
+    /// field's edges only shortens the way), so by the steepest cell's. With the rounding
+    /// of the tangents ([`ClimbBound`]). Where it is below a sun's disk, the field casts
+    /// no shadow on it. The Sun-lamp scene's field (256x256) climbs at most 0.39, 0.49 and
+    /// 0.43 along its lamp and the two added in the README's "Several Sun lamps", turned 75
+    /// deg (elevations 50, 35 and 25 deg, 2 deg disks whose feet are at tangents 1.15, 0.67
+    /// and 0.44); the largest differences of each level along x and along y, of any two
+    /// cells, would give 0.44, 0.57 and 0.50.
+    pub fn steepest_climb(&self, dir: [f64; 2]) -> f64 {
+        let rise = |[a, b]: &[f64; 2]| a * dir[0].abs() + b * dir[1].abs();
+        let steepest = self.climbs.corners.iter().map(rise).fold(0.0, f64::max);
+        steepest + 1e-6 * steepest + self.climbs.rounding
     }
 
     /// Whether a march from `p` reads the pyramid: every query answers a point it does not
@@ -1830,6 +1992,11 @@ mod tests {
     /// One azimuth's march reading every step and every receiver term: what the march's
     /// early stops must give, to the bit.
     fn march_every_step(pyramid: &HorizonPyramid, p: [f64; 3], dir: [f64; 2], reach: f64) -> f64 {
+        every_step_tangent(pyramid, p, dir, reach).atan().max(0.0)
+    }
+
+    /// The largest tangent of [`march_every_step`]'s steps.
+    fn every_step_tangent(pyramid: &HorizonPyramid, p: [f64; 3], dir: [f64; 2], reach: f64) -> f64 {
         let (x, y) = (p[0], p[1]);
         let above = (p[2] - pyramid.height_at(x, y)).max(0.0);
         let t_far = pyramid.far_distance(x, y, dir);
@@ -1845,7 +2012,7 @@ mod tests {
                 break;
             }
         }
-        max_tan.atan().max(0.0)
+        max_tan
     }
 
     /// A pyramid of a bumpy field 50 above zero, and 61 points on it, just above it, above
@@ -1908,6 +2075,130 @@ mod tests {
             }
         }
         assert!(below > 0 && above > 0 && at > 0, "below {below}, above {above}, at {at}");
+    }
+
+    /// Per cell of `level`, the largest differences between neighbouring samples of its
+    /// 4x4 taps along x and along y per world unit, taps past the edges repeating the
+    /// edge samples, one cell and tap at a time: what [`slopes_by_bucket`] gathers.
+    fn cell_slopes(level: &PyramidLevel) -> Vec<[f64; 2]> {
+        let (columns, rows) = (level.columns, level.rows);
+        let at = |i: isize, j: isize| {
+            let (i, j) = (i.clamp(0, columns as isize - 1) as usize, j.clamp(0, rows as isize - 1) as usize);
+            f64::from(level.heights[j * columns + i])
+        };
+        let per_unit = level.spacing.map(|spacing| if spacing > 0.0 { 1.0 / spacing } else { 0.0 });
+        let mut slopes = Vec::with_capacity(columns * rows);
+        for j in 0..rows as isize {
+            for i in 0..columns as isize {
+                let (mut along_x, mut along_y) = (0.0f64, 0.0f64);
+                for tap_j in j - 1..=j + 2 {
+                    for tap_i in i - 1..=i + 1 {
+                        along_x = along_x.max((at(tap_i + 1, tap_j) - at(tap_i, tap_j)).abs());
+                    }
+                }
+                for tap_i in i - 1..=i + 2 {
+                    for tap_j in j - 1..=j + 1 {
+                        along_y = along_y.max((at(tap_i, tap_j + 1) - at(tap_i, tap_j)).abs());
+                    }
+                }
+                slopes.push([along_x * per_unit[0], along_y * per_unit[1]]);
+            }
+        }
+        slopes
+    }
+
+    /// No step climbs more steeply than [`HorizonPyramid::steepest_climb`] says: the f64
+    /// march's and the lanes' tangents over every step, from points on, just above, above
+    /// and outside a bumpy field, a gentle one and a plane rising 0.4 along x and 0.25 along
+    /// y, 24 azimuths. On the plane the bound is tight (the steepest step within 10 % of it
+    /// where the azimuth climbs both axes; the coarser levels' edges climb a little more
+    /// steeply than the plane). Where the bound lies below a band's foot,
+    /// `horizons_against` answers `Below` without a march, and the f64 march, stops and
+    /// all, finds the horizon there too (below the foot or at it, which hide none of a disk
+    /// alike).
+    #[test]
+    fn no_step_climbs_more_steeply_than_the_levels_slopes() {
+        let (columns, rows) = (45, 31);
+        let (min, max) = ([-4.0, -3.0], [5.0, 3.0]);
+        fn bumps(x: f32, y: f32) -> f32 {
+            1.5 * (0.6 * x).sin() * (0.35 * y).cos() + 0.8 * (0.21 * x + 0.13 * y).sin()
+        }
+        // A field's heights by sample column and row (9/44 apart along x, 6/30 along y).
+        type Heights = fn(f32, f32) -> f32;
+        let fields: [(&str, Heights, f64); 3] = [
+            ("bumpy", |x, y| bumps(x, y) + 50.0, f64::INFINITY),
+            ("gentle", |x, y| 0.05 * bumps(x, y) + 50.0, 0.3),
+            ("plane", |x, y| 0.4 * (9.0 / 44.0) * x + 0.25 * (6.0 / 30.0) * y + 50.0, 0.65 + 1e-3),
+        ];
+        let mut answered_early = 0;
+        for (name, height, steepest) in fields {
+            let heights = (0..columns * rows).map(|i| height((i % columns) as f32, (i / columns) as f32)).collect();
+            let field = HeightField::new(heights, columns, rows, min, max).unwrap();
+            let pyramid = HorizonPyramid::new(&field, HorizonSettings::default()).unwrap();
+            let points: Vec<[f64; 3]> = (0..61)
+                .map(|i| {
+                    let (x, y) = (-4.5 + 0.17 * i as f64, -3.2 + 0.61 * ((i * 7) % 11) as f64);
+                    [x, y, field.height_at(x, y) + [0.0, 0.02, 0.3, 1.5][i % 4]]
+                })
+                .collect();
+            for k in 0..24 {
+                let dir = (k as f64 * std::f64::consts::TAU / 24.0 + 0.1).sin_cos();
+                let dir = [dir.1, dir.0];
+                let bound = pyramid.steepest_climb(dir);
+                assert!(bound < steepest, "{name}: climbs {bound} along {dir:?}");
+                // The hull's corners give the steepest cell of any level read, within the
+                // buckets' width.
+                let read = |l: usize| pyramid.steps.iter().any(|step| step.level == l);
+                let cells = pyramid
+                    .levels
+                    .iter()
+                    .enumerate()
+                    .filter(|&(l, _)| read(l))
+                    .flat_map(|(_, level)| cell_slopes(level));
+                let steepest_cell = cells.map(|[a, b]| a * dir[0].abs() + b * dir[1].abs()).fold(0.0, f64::max);
+                let rounding = pyramid.climbs.rounding;
+                assert!(
+                    steepest_cell + rounding <= bound,
+                    "{name} {dir:?}: a cell climbs {steepest_cell}, above {bound}"
+                );
+                assert!(
+                    bound <= steepest_cell * (1.0 + 1e-6) + rounding + 1e-12,
+                    "{name} {dir:?}: {bound} for {steepest_cell}"
+                );
+                let mut steepest_step = f64::NEG_INFINITY;
+                for &p in &points {
+                    let marched = every_step_tangent(&pyramid, p, dir, f64::INFINITY);
+                    assert!(marched <= bound, "{name} {p:?} {dir:?}: a step climbs {marched}, above {bound}");
+                    steepest_step = steepest_step.max(marched);
+                    #[cfg(target_arch = "x86_64")]
+                    if pyramid.in_lanes {
+                        let above = (p[2] - pyramid.height_at(p[0], p[1])).max(0.0);
+                        let taken = pyramid.steps_marched(p[0], p[1], dir, pyramid.steps.len());
+                        let receiver = lanes::AlongReceiver { x: p[0], y: p[1], above, taken };
+                        // SAFETY: the pyramid marches in lanes, so the processor has AVX2 and FMA.
+                        let lane = f64::from(unsafe { lanes::every_step_along(&pyramid, receiver, dir) });
+                        assert!(lane <= bound, "{name} {p:?} {dir:?}: a lane's step climbs {lane}, above {bound}");
+                    }
+                }
+                if name == "plane" && dir[0] > 0.0 && dir[1] > 0.0 {
+                    assert!(steepest_step >= 0.9 * bound, "{dir:?}: {steepest_step} against {bound}");
+                }
+                let band = ElevationBand { below: bound * (1.0 + 1e-9), above: f64::INFINITY };
+                let mut early = vec![HorizonAgainst::At(-1.0); points.len()];
+                pyramid.horizons_against(&points, dir, f64::INFINITY, band, &mut early);
+                assert!(early.iter().all(|&h| h == HorizonAgainst::Below), "{name} {dir:?}: {early:?}");
+                for &p in &points {
+                    let lift = (p[2] - pyramid.height_at(p[0], p[1])).max(0.0);
+                    match pyramid.march(p[0], p[1], lift, &mut ReceiverTerms::new(), dir, f64::INFINITY, band) {
+                        HorizonAgainst::Below => {}
+                        HorizonAgainst::At(horizon) => assert!(horizon.tan() <= band.below, "{name} {p:?} {dir:?}"),
+                        HorizonAgainst::Above => panic!("{name} {p:?} {dir:?}: marched above the band"),
+                    }
+                }
+                answered_early += 1;
+            }
+        }
+        assert_eq!(answered_early, 72);
     }
 
     /// `next_up` steps to the adjacent f32: above `x`, with nothing between.
