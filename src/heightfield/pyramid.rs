@@ -87,6 +87,7 @@
 
 use super::{bilinear, HeightField, HeightFieldError};
 use rayon::prelude::*;
+use std::sync::OnceLock;
 
 /// Most pyramid levels a query supports (the per-query cache of receiver heights is
 /// a stack array of this size, so queries never allocate).
@@ -619,8 +620,9 @@ pub struct HorizonPyramid {
     /// largest from `j` on, with [`CEILING_MARGIN`].
     relief_ceilings: Vec<f64>,
     /// How steeply the reads of the levels the step table reads rise: what
-    /// [`Self::steepest_climb`] bounds every step's tangent by.
-    climbs: ClimbBound,
+    /// [`Self::steepest_climb`] bounds every step's tangent by, made at its first call (a
+    /// frame with no sun does not pay for it).
+    climbs: OnceLock<ClimbBound>,
     /// Whether [`Self::horizon_elevations`] marches in AVX2 lanes (`lanes`): decided once,
     /// when the pyramid is built.
     in_lanes: bool,
@@ -698,7 +700,6 @@ impl HorizonPyramid {
             Vec::new()
         };
         let (steps, directions) = (plan.steps.clone(), plan.directions.clone());
-        let climbs = ClimbBound::new(&levels, &peaks, &steps);
         let lane_steps = if in_lanes {
             steps
                 .iter()
@@ -737,7 +738,7 @@ impl HorizonPyramid {
             peaks,
             level_ends,
             relief_ceilings,
-            climbs,
+            climbs: OnceLock::new(),
             in_lanes,
             padded,
             lane_steps,
@@ -978,9 +979,10 @@ impl HorizonPyramid {
     /// and 0.44); the largest differences of each level along x and along y, of any two
     /// cells, would give 0.44, 0.57 and 0.50.
     pub fn steepest_climb(&self, dir: [f64; 2]) -> f64 {
+        let climbs = self.climbs.get_or_init(|| ClimbBound::new(&self.levels, &self.peaks, &self.steps));
         let rise = |[a, b]: &[f64; 2]| a * dir[0].abs() + b * dir[1].abs();
-        let steepest = self.climbs.corners.iter().map(rise).fold(0.0, f64::max);
-        steepest + 1e-6 * steepest + self.climbs.rounding
+        let steepest = climbs.corners.iter().map(rise).fold(0.0, f64::max);
+        steepest + 1e-6 * steepest + climbs.rounding
     }
 
     /// Whether a march from `p` reads the pyramid: every query answers a point it does not
@@ -2156,7 +2158,7 @@ mod tests {
                     .filter(|&(l, _)| read(l))
                     .flat_map(|(_, level)| cell_slopes(level));
                 let steepest_cell = cells.map(|[a, b]| a * dir[0].abs() + b * dir[1].abs()).fold(0.0, f64::max);
-                let rounding = pyramid.climbs.rounding;
+                let rounding = pyramid.climbs.get().expect("made by steepest_climb").rounding;
                 assert!(
                     steepest_cell + rounding <= bound,
                     "{name} {dir:?}: a cell climbs {steepest_cell}, above {bound}"
