@@ -485,7 +485,7 @@ fn slopes_by_bucket(level: &PyramidLevel) -> (Vec<[f64; 2]>, [f64; 2]) {
     // 1` (none past the edge), along the other taps `k - 1` to `k + 2` (clamped to it).
     let mut along_x = vec![0.0f64; columns * rows];
     let mut along_y = vec![0.0f64; columns * rows];
-    let mut own = vec![0.0f64; columns];
+    let (mut own, mut spread) = (vec![0.0f64; columns], vec![0.0f64; columns]);
     for j in 0..rows {
         let cells = &mut along_x[j * columns..(j + 1) * columns];
         for t in j as isize - 1..=j as isize + 2 {
@@ -493,7 +493,7 @@ fn slopes_by_bucket(level: &PyramidLevel) -> (Vec<[f64; 2]>, [f64; 2]) {
                 *cell = cell.max(d);
             }
         }
-        let spread = cells.to_vec();
+        spread.copy_from_slice(cells);
         for (i, cell) in cells.iter_mut().enumerate() {
             *cell = spread[i.saturating_sub(1)..(i + 2).min(columns)].iter().copied().fold(0.0, f64::max);
         }
@@ -897,8 +897,10 @@ impl HorizonPyramid {
         assert_eq!(points.len(), out.len(), "horizons_against: one answer per point");
         let marchable = |p: &[f64; 3]| dir.iter().all(|v| v.is_finite()) && self.marchable(p);
         // No step can rise to the band's foot from any receiver: each horizon is below it,
-        // as the march would find (a sun over a field gentler than its elevation).
-        if self.steepest_climb(dir) < band.below {
+        // as the march would find (a sun over a field gentler than its elevation). The
+        // bound is at least 0, so a foot at or below the horizon (the environment's whole
+        // band, a sun on the horizon) neither asks for it nor makes it.
+        if band.below > 0.0 && self.steepest_climb(dir) < band.below {
             for (p, out) in points.iter().zip(out) {
                 *out = if marchable(p) { HorizonAgainst::Below } else { HorizonAgainst::At(0.0) };
             }
