@@ -896,11 +896,7 @@ impl HorizonPyramid {
     ) {
         assert_eq!(points.len(), out.len(), "horizons_against: one answer per point");
         let marchable = |p: &[f64; 3]| dir.iter().all(|v| v.is_finite()) && self.marchable(p);
-        // No step can rise to the band's foot from any receiver: each horizon is below it,
-        // as the march would find (a sun over a field gentler than its elevation). The
-        // bound is at least 0, so a foot at or below the horizon (the environment's whole
-        // band, a sun on the horizon) neither asks for it nor makes it.
-        if band.below > 0.0 && self.steepest_climb(dir) < band.below {
+        if !self.may_rise_into(dir, band) {
             for (p, out) in points.iter().zip(out) {
                 *out = if marchable(p) { HorizonAgainst::Below } else { HorizonAgainst::At(0.0) };
             }
@@ -967,6 +963,17 @@ impl HorizonPyramid {
                 false => HorizonAgainst::At(0.0),
             };
         }
+    }
+
+    /// Whether a horizon marched along the unit azimuth `dir` may reach `band`: not where
+    /// no step can rise to its foot from any receiver ([`Self::steepest_climb`]), and
+    /// [`Self::horizons_against`] then answers without marching: each horizon is below the
+    /// band, as the march would find (a sun over a field gentler than its elevation), and
+    /// `At(0.0)` off the field. The bound is at least 0, so a foot at or below the horizon
+    /// (the environment's whole band, a sun on the horizon) neither asks for it nor makes
+    /// it.
+    pub fn may_rise_into(&self, dir: [f64; 2], band: ElevationBand) -> bool {
+        !(band.below > 0.0 && self.steepest_climb(dir) < band.below)
     }
 
     /// At least the tangent of every step along the unit azimuth `dir` from any receiver, on

@@ -939,20 +939,20 @@ impl<T: Real> ShadingKernel<T> {
                 (None, Some(pyramid)) => DiskHorizon::Marched(pyramid),
                 (None, None) => DiskHorizon::None,
             };
-            let v = sun.visibility(occluders.blockers, horizon, self.ground, point.position, n, point.object);
-            if v.iter().all(|&v| v == 0.0) {
+            let seen = sun.seen(occluders.blockers, horizon, self.ground, point.position, n, point.object);
+            if seen.is_dark() {
                 return None;
             }
-            let d = sun.reflected(&v, |z| Lobe::Diffuse.value(z), n);
+            let d = sun.diffuse_reflected(&seen, n);
             // The lobe widened by the disk's patch ([`SharpLobe::widened`]).
             let g = phong.zip(glossy_axis).map(|((_, exponent), axis)| match (sharp, sharp_albedo) {
                 (Some(sharp), Some(a)) => {
                     let lobe = sharp.lobe.widened(sun.disk.patch);
-                    sun.reflected(&v, |z| a * lobe.value(z), axis)
+                    sun.reflected_seen(&seen, |z| a * lobe.value(z), axis)
                 }
                 _ => {
                     let lobe = SharpLobe::Phong { exponent: f64::from(exponent) }.widened(sun.disk.patch);
-                    sun.reflected(&v, |z| lobe.value(z), axis)
+                    sun.reflected_seen(&seen, |z| lobe.value(z), axis)
                 }
             });
             Some((d, g))

