@@ -225,6 +225,19 @@ pub(crate) fn glossy_map(light: &Light) -> Option<(Cow<'_, EnvironmentMap>, f32)
     }
 }
 
+/// What a pass over a frame's pixels knows of a sun's occluders at one pixel before
+/// shading it, found with the pixels beside it ([`ShadingKernel::sun_lamps_lit`]).
+#[derive(Clone, Copy, Debug)]
+pub struct KnownAlongSun {
+    /// The height field's horizon along the sun, marched with the other pixels
+    /// ([`HorizonPyramid::horizons_against`], the same bits); `None` to march it here.
+    pub horizon: Option<HorizonAgainst>,
+    /// Whether a blocker may reach the sun's disk from the pixel
+    /// ([`DiskDirections::blockers_may_reach`]): where none can, the pixel does not walk
+    /// the blockers, whose walk would see none.
+    pub blockers: bool,
+}
+
 /// What occludes a frame: its sphere blockers and its height-field pyramid.
 #[derive(Clone, Copy)]
 pub struct Occluders<'a> {
@@ -910,7 +923,7 @@ impl<T: Real> ShadingKernel<T> {
         material: &Material,
         suns: &[SunDisk],
         lamps: bool,
-        known: Option<&[HorizonAgainst]>,
+        known: Option<&[KnownAlongSun]>,
     ) -> (SharpLit, SharpLit) {
         let (mut diffuse, mut glossy) = ([0.0f64; 3], [0.0f64; 3]);
         let dark = ([0.0; 3], [0.0; 3]);
@@ -933,13 +946,16 @@ impl<T: Real> ShadingKernel<T> {
         // are lent, not moved: a disk is 1.7 KB, and moving the suns through an iterator
         // of owned and lent disks copied each twice per pixel.
         let reflected = |k: usize, sun: &SunDisk| {
-            // The suns' horizons marched already with the frame's other pixels, where given.
-            let horizon = match (known.and_then(|known| known.get(k)), occluders.horizons) {
-                (Some(&against), _) => DiskHorizon::Known(against),
+            // The suns' horizons marched already with the frame's other pixels, where given,
+            // and the blockers left out where none can reach the disk.
+            let known = known.and_then(|known| known.get(k));
+            let horizon = match (known.and_then(|known| known.horizon), occluders.horizons) {
+                (Some(against), _) => DiskHorizon::Known(against),
                 (None, Some(pyramid)) => DiskHorizon::Marched(pyramid),
                 (None, None) => DiskHorizon::None,
             };
-            let seen = sun.seen(occluders.blockers, horizon, self.ground, point.position, n, point.object);
+            let blockers = occluders.blockers.filter(|_| known.is_none_or(|known| known.blockers));
+            let seen = sun.seen(blockers, horizon, self.ground, point.position, n, point.object);
             if seen.is_dark() {
                 return None;
             }

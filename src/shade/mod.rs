@@ -22,7 +22,7 @@ pub mod sun;
 pub use compositing::ShadedPasses;
 pub use cpu::{shade_frame, shade_frame_passes, shade_frame_timed};
 pub use frame::{pixel_source, pixel_work, work_of, PixelSource, PixelWork, ShadeError, ShadedFrame};
-pub use kernel::{CapSums, Caps, Exponentiator, Occluders, PixelPasses, ShadingKernel, SurfacePoint};
+pub use kernel::{CapSums, Caps, Exponentiator, KnownAlongSun, Occluders, PixelPasses, ShadingKernel, SurfacePoint};
 pub use plan::{FrameContents, FramePlan, PlannedKernel, Terrain};
 pub use resolve::{PixelFilter, Resolve, Resolving};
 pub use settings::{default_epsilon, GlossyMethod, LightWindow, Precision, Quality, SettingsError, ShadingSettings};

@@ -297,6 +297,13 @@ impl DiskDirections {
         self.azimuth.map(|azimuth| MarchAlong { azimuth, horizontal_reach, band: self.horizon_band() })
     }
 
+    /// Whether a blocker of `tree` may reach the disk's cone from some receiver within
+    /// `spread` of `q` ([`BlockerTree::cone_may_reach`]): where none can, the blockers
+    /// change no visibility there.
+    pub fn blockers_may_reach(&self, tree: &BlockerTree, q: [f64; 3], spread: f64) -> bool {
+        tree.cone_may_reach(q, spread, self.axis, self.cone)
+    }
+
     /// [`Self::visibility`] with the height field's horizon from `horizon` (marched here,
     /// or marched already with the other pixels of a frame:
     /// [`HorizonPyramid::horizons_against`], the same bits), told as [`DiskSeen`]: a disk

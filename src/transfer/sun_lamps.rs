@@ -21,9 +21,12 @@ use crate::heightfield::{HorizonAgainst, HorizonPyramid};
 use crate::scene::light::{euler_xyz, rotate};
 use crate::scene::{Frame, HeightMap, Scene, SceneError, SunLight};
 use crate::sh::Real;
+use crate::shade::blocker_tree::BlockerTree;
 use crate::shade::frame::suns_along;
 use crate::shade::sun::{Planes, SunDisk};
-use crate::shade::{pixel_source, FramePlan, Occluders, PixelSource, PlannedKernel, ShadingKernel, ShadingSettings};
+use crate::shade::{
+    pixel_source, FramePlan, KnownAlongSun, Occluders, PixelSource, PlannedKernel, ShadingKernel, ShadingSettings,
+};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::borrow::Cow;
@@ -391,7 +394,8 @@ struct Lamps<'a> {
 const CHUNK: usize = 256;
 
 /// `lamps += turned - rendered` per pixel of `lamps`, the lamps `turned` shaded by
-/// `kernel`, `plan`'s frame's, its height field's pyramid `pyramid`.
+/// `kernel`, `plan`'s frame's, its height field's pyramid `pyramid`, a chunk of pixels at a
+/// time ([`chunk_known`]).
 fn move_lamps<T: Real>(
     kernel: &ShadingKernel<T>,
     plan: &FramePlan,
@@ -419,13 +423,13 @@ fn move_lamps<T: Real>(
                 pixel_source(&plan.scene.materials, plan.frame, i % width, i / width)
             })
             .collect();
-        let horizons = pyramid.map(|pyramid| chunk_horizons(pyramid, &disks, &sources));
+        let known = chunk_known(pyramid, blockers, &disks, &sources);
         for (i, source) in sources.iter().enumerate() {
             let (d, s, rd, rs) = (&mut diffuse[i], &mut specular[i], rendered_diffuse[i], rendered_specular[i]);
             match *source {
                 PixelSource::Surface { ref point, tint } => {
-                    let known = horizons.as_ref().map(|h| &h[i * disks.len()..(i + 1) * disks.len()]);
-                    if let Some((lit_d, lit_s)) = kernel.sun_lamps_lit(occluders, point, &disks, known) {
+                    let known = &known[i * disks.len()..(i + 1) * disks.len()];
+                    if let Some((lit_d, lit_s)) = kernel.sun_lamps_lit(occluders, point, &disks, Some(known)) {
                         moved(d, rd, tint, lit_d);
                         moved(s, rs, tint, lit_s);
                     }
@@ -437,14 +441,49 @@ fn move_lamps<T: Real>(
     });
 }
 
-/// Each of `sources`' horizons along each of `disks` (pixel first, disk second), marched
-/// together where the pixel is a surface that its tangent plane does not wholly hide the
-/// disk from; the rest are not read
-/// ([`crate::shade::sun::DiskDirections::seen_against`] returns first). Where the field
-/// cannot rise to a disk, every surface's horizon is answered without a march, and the
-/// tangent plane is not asked (6 to 7 % of a turn of the Sun-lamp scene's three lamps).
-fn chunk_horizons(pyramid: &HorizonPyramid, disks: &[SunDisk], sources: &[PixelSource]) -> Vec<HorizonAgainst> {
-    let mut horizons = vec![HorizonAgainst::Below; sources.len() * disks.len()];
+/// Pixels whose receivers are bounded together, in a chunk's order, to ask whether a
+/// blocker can reach each disk from any of them ([`chunk_known`]): 16 consecutive pixels
+/// of a row leave 88 % of the Sun-lamp scene's three turned lamps' walks of the blockers
+/// out, against 72 % for 64 and 92 % for 4.
+const GROUP: usize = 16;
+
+/// What is known of each of `disks`' occluders at each of `sources` (pixel first, disk
+/// second) before it is shaded ([`KnownAlongSun`]), found with the pixels beside it:
+///
+/// - the height field's horizon, marched together where the pixel is a surface that its
+///   tangent plane does not wholly hide the disk from (the rest are not read:
+///   [`crate::shade::sun::DiskDirections::seen_against`] returns first); where the field
+///   cannot rise to a disk, every surface's horizon is answered without a march, and the
+///   tangent plane is not asked (6 to 7 % of a turn of the Sun-lamp scene's three lamps);
+/// - whether a blocker can reach the disk from any surface of a [`GROUP`] of pixels,
+///   bounded by a ball (most groups of the Sun-lamp scene see none).
+fn chunk_known(
+    pyramid: Option<&HorizonPyramid>,
+    blockers: Option<&BlockerTree>,
+    disks: &[SunDisk],
+    sources: &[PixelSource],
+) -> Vec<KnownAlongSun> {
+    let unknown = KnownAlongSun { horizon: pyramid.map(|_| HorizonAgainst::Below), blockers: blockers.is_some() };
+    let mut known = vec![unknown; sources.len() * disks.len()];
+    if let Some(tree) = blockers {
+        for (g, group) in sources.chunks(GROUP).enumerate() {
+            let points: Vec<[f64; 3]> = group
+                .iter()
+                .filter_map(|source| match source {
+                    PixelSource::Surface { point, .. } => Some(point.position),
+                    _ => None,
+                })
+                .collect();
+            let Some((centre, spread)) = bounding_ball(&points) else { continue };
+            for (s, disk) in disks.iter().enumerate() {
+                let reaches = disk.disk.blockers_may_reach(tree, centre, spread);
+                for i in g * GROUP..g * GROUP + group.len() {
+                    known[i * disks.len() + s].blockers = reaches;
+                }
+            }
+        }
+    }
+    let Some(pyramid) = pyramid else { return known };
     let tangent = Planes { tangent: true, ground: None };
     for (s, disk) in disks.iter().enumerate() {
         let Some(along) = disk.disk.march_band() else { continue };
@@ -458,11 +497,31 @@ fn chunk_horizons(pyramid: &HorizonPyramid, disks: &[SunDisk], sources: &[PixelS
                 }
             }
         }
-        let mut marched = vec![HorizonAgainst::Below; points.len()];
-        pyramid.horizons_against(&points, along.azimuth, along.horizontal_reach, along.band, &mut marched);
-        for (i, against) in at.into_iter().zip(marched) {
-            horizons[i * disks.len() + s] = against;
+        let mut horizons = vec![HorizonAgainst::Below; points.len()];
+        pyramid.horizons_against(&points, along.azimuth, along.horizontal_reach, along.band, &mut horizons);
+        for (i, against) in at.into_iter().zip(horizons) {
+            known[i * disks.len() + s].horizon = Some(against);
         }
     }
-    horizons
+    known
+}
+
+/// A ball holding `points` (the centre of their bounding box, and the farthest from it),
+/// `None` for no points or a point not finite.
+fn bounding_ball(points: &[[f64; 3]]) -> Option<([f64; 3], f64)> {
+    if points.iter().flatten().any(|c| !c.is_finite()) {
+        return None;
+    }
+    let first = *points.first()?;
+    let (mut low, mut high) = (first, first);
+    for p in points {
+        for k in 0..3 {
+            low[k] = low[k].min(p[k]);
+            high[k] = high[k].max(p[k]);
+        }
+    }
+    let centre = [0, 1, 2].map(|k| 0.5 * (low[k] + high[k]));
+    let distance = |p: &[f64; 3]| (0..3).map(|k| (p[k] - centre[k]).powi(2)).sum::<f64>().sqrt();
+    let spread = points.iter().map(distance).fold(0.0, f64::max);
+    Some((centre, spread))
 }

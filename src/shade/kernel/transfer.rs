@@ -11,10 +11,9 @@
 //! relight leaves where it was, kept as radiance.
 
 use super::{
-    as_f32_array, occlusion_ratio, open_lit, visibility_ratio, Caps, OccluderSet, Occluders, PixelPasses,
-    ShadingKernel, SurfacePoint,
+    as_f32_array, occlusion_ratio, open_lit, visibility_ratio, Caps, KnownAlongSun, OccluderSet, Occluders,
+    PixelPasses, ShadingKernel, SurfacePoint,
 };
-use crate::heightfield::HorizonAgainst;
 use crate::scene::Material;
 use crate::sh::{coefficient_count, Real, MAX_COEFFICIENTS};
 use crate::shade::glossy::SharpLobe;
@@ -118,18 +117,18 @@ impl<T: Real> ShadingKernel<T> {
     /// [`shade_transfer`](Self::shade_transfer) shades the scene's Sun lamps into
     /// `lamps_*` (here without the point lamps); `None` where `shade_transfer` is dark (a
     /// material the kernel does not know). `suns` need not be the kernel's: a relight
-    /// turns the lamps it was built with. `horizons`, where given, holds each sun's
-    /// horizon at `point`, marched with the frame's other pixels
-    /// ([`crate::heightfield::HorizonPyramid::horizons_against`]; the same bits).
+    /// turns the lamps it was built with. `known`, where given, holds what the frame's
+    /// pass found of each sun's occluders at `point` with the pixels beside it (its
+    /// horizon, whether a blocker can reach it; the same bits).
     pub fn sun_lamps_lit(
         &self,
         occluders: Occluders,
         point: &SurfacePoint,
         suns: &[SunDisk],
-        horizons: Option<&[HorizonAgainst]>,
+        known: Option<&[KnownAlongSun]>,
     ) -> Option<([f32; 3], [f32; 3])> {
         let lobes = self.materials.get(&point.material)?;
-        Some(self.sharp_lit(occluders, point, &lobes.material, suns, false, horizons).0)
+        Some(self.sharp_lit(occluders, point, &lobes.material, suns, false, known).0)
     }
 
     /// The transfer of `point` (module doc), and its passes as
