@@ -559,7 +559,7 @@ impl SunDisk {
     /// [`Self::reflected_seen`] of the cosine lobe about the receiver's normal `n`. An
     /// open disk lies wholly above the tangent plane, where the lobe is linear in `n . w`:
     /// its mean over the directions is its value at their mean, one dot product where
-    /// [`Self::reflected`] takes 32, equal to rounding (1e-15 relative).
+    /// [`Self::reflected`] takes 32, equal to rounding (within 1e-14 relative, tested).
     pub fn diffuse_reflected(&self, seen: &DiskSeen, n: [f64; 3]) -> [f64; 3] {
         match seen {
             DiskSeen::Open => {
@@ -736,10 +736,6 @@ mod tests {
         assert!(clear > tested / 2 && tested > 1000, "{clear} clear, {tested} tested");
     }
 
-    /// A disk's visibility over a height field, the march told the disk's band of
-    /// elevations ([`DiskDirections::horizon_band`]), equals it from the whole horizon to
-    /// the bit: disks from 2 to 85 deg high, 0.3 to 20 deg wide, on and above a bumpy
-    /// field, tilted normals included.
     /// An open disk's cosine lobe is its value at the directions' mean
     /// ([`SunDisk::diffuse_reflected`]): every direction of an open disk lies above the
     /// tangent plane, and the closed form is the per-direction mean to 1e-14 relative, on
@@ -783,6 +779,10 @@ mod tests {
         assert!(open > 3000 && partial > 100, "{open} open, {partial} partial");
     }
 
+    /// A disk's visibility over a height field, the march told the disk's band of
+    /// elevations ([`DiskDirections::horizon_band`]), equals it from the whole horizon to
+    /// the bit: disks from 2 to 85 deg high, 0.3 to 20 deg wide, on and above a bumpy
+    /// field, tilted normals included.
     #[test]
     fn the_horizon_band_changes_no_visibility() {
         use crate::heightfield::{HeightField, HorizonSettings};
