@@ -19,17 +19,19 @@
 use super::layers::{TransferFrame, TransferHeader};
 use crate::heightfield::{HorizonAgainst, HorizonPyramid};
 use crate::scene::light::{euler_xyz, rotate};
-use crate::scene::{Frame, HeightMap, Scene, SceneError, SunLight};
+use crate::scene::{Frame, HeightMap, Material, Scene, SceneError, SunLight};
 use crate::sh::Real;
 use crate::shade::blocker_tree::BlockerTree;
 use crate::shade::frame::suns_along;
 use crate::shade::sun::{Planes, SunDisk};
 use crate::shade::{
     pixel_source, FramePlan, KnownAlongSun, Occluders, PixelSource, PlannedKernel, ShadingKernel, ShadingSettings,
+    Terrain,
 };
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::borrow::Cow;
+use std::collections::BTreeMap;
 use std::path::Path;
 use std::sync::{Arc, Mutex};
 
@@ -49,11 +51,15 @@ pub struct SunLampTurn {
 }
 
 /// A frame's Sun lamps made ready to turn ([`SunLampTurn::prepare`]): its frame of the
-/// scene read and checked against what the frame records, and its height field's pyramid
-/// filtered, which every turn of the frame shares (the viewer's turns of one frame).
+/// scene read and checked against what the frame records, its kernel and blockers'
+/// hierarchy planned, and its height field's pyramid filtered, which every turn of the
+/// frame shares (the viewer's turns of one frame). A turn planned the frame again, 0.07
+/// ms of the Sun-lamp scene's 3.7 ms turn on one thread.
 pub struct SunLampFrame {
     /// The frame of the scene, its point lamps taken out.
     scene_frame: Frame,
+    kernel: Arc<PlannedKernel>,
+    blockers: BlockerTree,
     pyramid: Option<Arc<HorizonPyramid>>,
 }
 
@@ -169,30 +175,26 @@ impl SunLampTurn {
             }
         }
         scene_frame.points.clear();
-        let pyramid = match &scene_frame.height_map {
-            Some(map) => Some(self.pyramid_of(&scene_frame, map, file)?),
-            None => None,
+        let plan = self.plan(&scene_frame, file)?;
+        let pyramid = match (&scene_frame.height_map, &plan.terrain) {
+            (Some(map), Some(terrain)) => Some(self.pyramid_of(map, terrain, &plan.settings)),
+            _ => None,
         };
-        Ok(SunLampFrame { scene_frame, pyramid })
+        let (kernel, blockers) = (plan.kernel.clone(), plan.blockers);
+        Ok(SunLampFrame { scene_frame, kernel, blockers, pyramid })
     }
 
-    /// The filtered pyramid of `scene_frame`'s height map `map`: the last frame's where the
-    /// map is the same (the scene's one map for all frames), else filtered anew.
-    fn pyramid_of(
-        &self,
-        scene_frame: &Frame,
-        map: &Arc<HeightMap>,
-        file: &Path,
-    ) -> Result<Arc<HorizonPyramid>, SceneError> {
+    /// The filtered pyramid of a frame's height map `map`, planned as `terrain`: the last
+    /// frame's where the map is the same (the scene's one map for all frames), else
+    /// filtered anew.
+    fn pyramid_of(&self, map: &Arc<HeightMap>, terrain: &Terrain, settings: &ShadingSettings) -> Arc<HorizonPyramid> {
         let mut last = self.pyramid.lock().unwrap_or_else(|p| p.into_inner());
         if let Some((_, pyramid)) = last.as_ref().filter(|(built, _)| Arc::ptr_eq(built, map)) {
-            return Ok(pyramid.clone());
+            return pyramid.clone();
         }
-        let plan = self.plan(scene_frame, file)?;
-        let terrain = plan.terrain.as_ref().expect("a frame with a height map has terrain");
-        let pyramid = Arc::new(terrain.horizon_pyramid(&plan.settings));
+        let pyramid = Arc::new(terrain.horizon_pyramid(settings));
         *last = Some((map.clone(), pyramid.clone()));
-        Ok(pyramid)
+        pyramid
     }
 
     /// The frame's kernel with the lamps as rendered and no point lamp, which the frames
@@ -228,7 +230,6 @@ impl SunLampTurn {
         pixels: Option<&[usize]>,
     ) -> Result<[Vec<[f32; 3]>; 2], SceneError> {
         let scene_frame = &prepared.scene_frame;
-        let plan = self.plan(scene_frame, file)?;
         // Whole turns taken out first, exactly, as for the map ([`super::RelightOptions::source`]).
         let turn = euler_xyz([0.0, 0.0, (degrees % 360.0).to_radians()]);
         let turned: Vec<SunLight> =
@@ -257,10 +258,15 @@ impl SunLampTurn {
             specular: &mut specular,
             rendered: [&rendered_diffuse, &rendered_specular],
         };
-        let pyramid = prepared.pyramid.as_deref();
-        match plan.kernel.as_ref() {
-            PlannedKernel::F32(kernel) => move_lamps(kernel, &plan, pyramid, &turned, lamps),
-            PlannedKernel::F64(kernel) => move_lamps(kernel, &plan, pyramid, &turned, lamps),
+        let shaded = Shaded {
+            materials: &self.scene.materials,
+            frame: scene_frame,
+            blockers: &prepared.blockers,
+            pyramid: prepared.pyramid.as_deref(),
+        };
+        match prepared.kernel.as_ref() {
+            PlannedKernel::F32(kernel) => move_lamps(kernel, shaded, &turned, lamps),
+            PlannedKernel::F64(kernel) => move_lamps(kernel, shaded, &turned, lamps),
         }
         Ok([diffuse, specular])
     }
@@ -393,18 +399,22 @@ struct Lamps<'a> {
 /// time ([`HorizonPyramid::horizons_against`]) before each is shaded.
 const CHUNK: usize = 256;
 
+/// What a frame's Sun lamps are shaded from beside its kernel: the scene's materials, the
+/// frame of the scene, its blockers' hierarchy and its height field's pyramid.
+#[derive(Clone, Copy)]
+struct Shaded<'a> {
+    materials: &'a BTreeMap<u32, Material>,
+    frame: &'a Frame,
+    blockers: &'a BlockerTree,
+    pyramid: Option<&'a HorizonPyramid>,
+}
+
 /// `lamps += turned - rendered` per pixel of `lamps`, the lamps `turned` shaded by
-/// `kernel`, `plan`'s frame's, its height field's pyramid `pyramid`, a chunk of pixels at a
-/// time ([`chunk_known`]).
-fn move_lamps<T: Real>(
-    kernel: &ShadingKernel<T>,
-    plan: &FramePlan,
-    pyramid: Option<&HorizonPyramid>,
-    turned: &[SunLight],
-    lamps: Lamps,
-) {
+/// `kernel` from `shaded`, a chunk of pixels at a time ([`chunk_known`]).
+fn move_lamps<T: Real>(kernel: &ShadingKernel<T>, shaded: Shaded, turned: &[SunLight], lamps: Lamps) {
     let disks: Vec<SunDisk> = turned.iter().map(SunDisk::new).collect();
-    let blockers = (!plan.blockers.is_empty()).then_some(&plan.blockers);
+    let blockers = (!shaded.blockers.is_empty()).then_some(shaded.blockers);
+    let pyramid = shaded.pyramid;
     let occluders = Occluders { blockers, horizons: pyramid };
     // The tinted turned light in place of the rendered (tinted when written).
     let moved = |lamps: &mut [f32; 3], rendered: [f32; 3], tint: [f32; 3], turned: [f32; 3]| {
@@ -420,7 +430,7 @@ fn move_lamps<T: Real>(
         let sources: Vec<PixelSource> = (c * CHUNK..c * CHUNK + diffuse.len())
             .map(|k| {
                 let i = pixels.map_or(k, |pixels| pixels[k]);
-                pixel_source(&plan.scene.materials, plan.frame, i % width, i / width)
+                pixel_source(shaded.materials, shaded.frame, i % width, i / width)
             })
             .collect();
         let known = chunk_known(pyramid, blockers, &disks, &sources);
