@@ -656,10 +656,7 @@ mod tests {
                 let sun = SunDisk::new(&light(axis, f64::to_radians(degrees)));
                 let disk = &sun.disk;
                 for k in 0..500 {
-                    let z = 1.0 - 2.0 * (k as f64 + 0.5) / 500.0;
-                    let phi = k as f64 * 2.399_963;
-                    let r = (1.0 - z * z).sqrt();
-                    let n = [r * phi.cos(), r * phi.sin(), z];
+                    let n = spiral_normal(k, 500, 1.0);
                     for (tangent, ground) in [(true, false), (false, true), (true, true)] {
                         let one_at_a_time = disk.directions.map(|w| share_of_direction(disk, tangent, ground, n, w));
                         let at_once = disk.shares_of_planes(tangent, ground, n);
@@ -698,6 +695,15 @@ mod tests {
             .chain([[0.3f64, -0.4, 0.2], [-0.5, 0.1, 0.02]].map(|v| v.map(|c| c / dot(v, v).sqrt())))
     }
 
+    /// Normal `k` of `count` on a spiral over the sphere, its distance from the z axis
+    /// times `stretch` (1 for unit length).
+    fn spiral_normal(k: usize, count: usize, stretch: f64) -> [f64; 3] {
+        let z = 1.0 - 2.0 * (k as f64 + 0.5) / count as f64;
+        let phi = k as f64 * 2.399_963;
+        let r = (1.0 - z * z).sqrt() * stretch;
+        [r * phi.cos(), r * phi.sin(), z]
+    }
+
     /// Where [`DiskDirections::clear_of_tangent`] holds, the tangent plane covers none of
     /// any direction's patch, so the planes' shares are the 0 of a test per direction, to
     /// the bit: disks 0.3 to 20 deg wide at 7 axes, normals on a sphere of directions and
@@ -712,10 +718,7 @@ mod tests {
                 let disk = DiskDirections::new(axis, half_angle);
                 for k in 0..2000 {
                     // A spiral over the sphere, then the length off 1 by up to 1e-6.
-                    let z = 1.0 - 2.0 * (k as f64 + 0.5) / 2000.0;
-                    let phi = k as f64 * 2.399_963;
-                    let r = (1.0 - z * z).sqrt() * (1.0 + 1e-6 * ((k % 3) as f64 - 1.0));
-                    let n = [r * phi.cos(), r * phi.sin(), z];
+                    let n = spiral_normal(k, 2000, 1.0 + 1e-6 * ((k % 3) as f64 - 1.0));
                     let shares = disk.directions.map(|w| share_of_direction(&disk, true, false, n, w));
                     if disk.clear_of_tangent(n) {
                         clear += 1;
