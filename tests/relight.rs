@@ -36,6 +36,15 @@ fn write_frame(file: &Path, channels: &HashMap<String, Vec<f32>>, header: &str) 
     logsh::scene::output::write_exr_layers(file, 96, 54, &list, &[("logshTransfer", header.to_string())]).unwrap();
 }
 
+/// The `logshTransfer` header of `file` as its text.
+fn header_text(file: &Path) -> String {
+    let attributes = exr::meta::MetaData::read_from_file(file, false).unwrap().headers[0].own_attributes.other.clone();
+    match &attributes[&exr::meta::attribute::Text::from("logshTransfer")] {
+        exr::meta::attribute::AttributeValue::Text(t) => t.to_string(),
+        other => panic!("{other:?}"),
+    }
+}
+
 /// The synthetic dune scene (height field, blockers, water, a Phong sphere, a sky map).
 fn dunes(dir: &Path) -> PathBuf {
     let scene = synth::example("dunes", ExampleOptions { width: 96, height: 54, ..Default::default() }).unwrap();
@@ -441,6 +450,13 @@ fn sun_lamps_turn_the_same_from_a_frame_read_once() {
         run(&[&["render", path(scene), "--out", path(&transfer), "--frames", "1-2"], &common[..]].concat());
         let files = [1, 2].map(|n| transfer.join(format!("render.{n:04}.exr")));
         let frames = files.clone().map(|f| TransferFrame::read(&f).unwrap());
+        let sectors = logsh::heightfield::HORIZON_SECTORS;
+        for frame in &frames {
+            let horizons = frame.horizons.as_ref().expect("the horizons of a frame whose Sun lamp the field shadows");
+            assert_eq!(horizons.len(), frame.width * frame.height * sectors, "{name}: a value per sector and pixel");
+            let found = horizons.iter().filter(|t| t.is_finite()).count();
+            assert!(found > horizons.len() / 2, "{name}: {found} of {} horizons found", horizons.len());
+        }
         let turn = SunLampTurn::new(&frames[0].header, &files[0]).unwrap();
         for (frame, file) in frames.iter().zip(&files) {
             let prepared = turn.prepare(frame, file).unwrap();
@@ -452,6 +468,12 @@ fn sun_lamps_turn_the_same_from_a_frame_read_once() {
                 };
                 assert!(bits(&once) == bits(&fresh), "{name}, frame {}, {degrees} deg", frame.header.frame);
                 assert!(once[0] != frame.lamps_diffuse, "{name}: the lamp must turn");
+                // Without the horizons the render found, every pixel's horizon is marched:
+                // the same bits (those horizons only answer pixels the march would find below
+                // the lamp).
+                let marched = TransferFrame { horizons: None, ..frame.clone() };
+                let every = turn.turned_prepared(&prepared, &marched, file, degrees).unwrap();
+                assert!(bits(&once) == bits(&every), "{name}, marched, frame {}, {degrees} deg", frame.header.frame);
                 // At some pixels alone (the viewer's preview of a wide frame): theirs.
                 let pixels: Vec<usize> = (0..frame.width * frame.height).rev().step_by(7).collect();
                 let at = turn.turned_at(&prepared, frame, file, degrees, Some(&pixels)).unwrap();
@@ -659,12 +681,7 @@ fn bad_relight_inputs_are_refused_with_the_file_named() {
     // A transfer file whose layers were cut: a missing channel is named.
     let mut cut = channels(&frame);
     cut.retain(|name, _| !name.starts_with("sh_unoccluded"));
-    let attributes =
-        exr::meta::MetaData::read_from_file(&frame, false).unwrap().headers[0].own_attributes.other.clone();
-    let text = match &attributes[&exr::meta::attribute::Text::from("logshTransfer")] {
-        exr::meta::attribute::AttributeValue::Text(t) => t.to_string(),
-        other => panic!("{other:?}"),
-    };
+    let text = header_text(&frame);
     let broken = dir.path().join("broken.exr");
     write_frame(&broken, &cut, &text);
     assert_fails_naming(&["relight", path(&broken), "--out", o], &["broken.exr", "sh_unoccluded_0.R"]);
@@ -973,6 +990,7 @@ fn assert_same_frame(a: &TransferFrame, b: &TransferFrame, what: &str) {
     assert_eq!(bits(&a.glossy_lobe), bits(&b.glossy_lobe), "{what}: glossy_lobe");
     assert_eq!(bits(a.glossy_weight.as_flattened()), bits(b.glossy_weight.as_flattened()), "{what}: glossy_weight");
     assert_eq!(bits(&a.alpha), bits(&b.alpha), "{what}: A");
+    assert_eq!(optional(&a.horizons), optional(&b.horizons), "{what}: horizon");
 }
 
 /// `frame`'s memory as a spare for [`TransferFrame::read_reusing`], every value NaN and
@@ -986,7 +1004,7 @@ fn poisoned(mut frame: TransferFrame, scale: f64) -> TransferFrame {
     for layer in [&mut frame.diffuse, &mut frame.unoccluded, &mut frame.glossy_lobe, &mut frame.alpha] {
         poison(layer, scale, nan);
     }
-    for layer in [&mut frame.heightfield, &mut frame.blockers, &mut frame.specular] {
+    for layer in [&mut frame.heightfield, &mut frame.blockers, &mut frame.specular, &mut frame.horizons] {
         match layer.as_mut() {
             Some(values) if scale > 0.0 => poison(values, scale, nan),
             _ => *layer = None,
@@ -1034,6 +1052,7 @@ fn a_transfer_frame_reads_the_same_in_any_exr_layout() {
     let written = TransferFrame::read(&file).unwrap();
     let lit = written.sun_lamps_diffuse.as_ref().expect("the Sun lamp's layer").iter().filter(|c| c[0] > 0.01);
     assert!(lit.count() > 100, "the Sun lamp lights the frame");
+    assert!(written.horizons.is_some(), "the horizons the Sun lamp's turns are bounded by");
     let image = exr::prelude::read()
         .no_deep_data()
         .largest_resolution_level()
@@ -1092,4 +1111,44 @@ fn a_transfer_frame_reads_the_same_in_any_exr_layout() {
     let Err(error) = TransferFrame::read(&inflated) else { panic!("16384 x 16384 pixels read from a small file") };
     let error = error.to_string();
     assert!(error.contains("inflated.exr") && error.contains("cannot fit"), "{error}");
+
+    // Horizons that cannot bound a turned lamp's: below 0 or not a number, the channel and
+    // pixel named; one of the sectors missing; horizons in a frame that lists no Sun lamp.
+    let text = header_text(&file);
+    for (value, said) in [(-0.5f32, "-0.5"), (f32::NAN, "NaN")] {
+        let mut wrong = channels(&file);
+        wrong.get_mut("horizon.3").expect("four sectors")[100] = value;
+        let bad = dir.path().join("bad horizon.exr");
+        write_frame(&bad, &wrong, &text);
+        let Err(error) = TransferFrame::read(&bad) else { panic!("a horizon of {said} is read") };
+        let error = error.to_string();
+        assert!(
+            error.contains("bad horizon.exr")
+                && error.contains(&format!("channel horizon.3 is {said} at pixel (4, 1)")),
+            "{error}"
+        );
+    }
+    let mut cut = channels(&file);
+    cut.remove("horizon.3");
+    let short = dir.path().join("short.exr");
+    write_frame(&short, &cut, &text);
+    let Err(error) = TransferFrame::read(&short) else { panic!("three of four sectors are read") };
+    let error = error.to_string();
+    assert!(error.contains("short.exr") && error.contains("horizon.3"), "{error}");
+    let mut header: serde_json::Value = serde_json::from_str(&text).unwrap();
+    header["sun_lamps"] = serde_json::json!([]);
+    header["sun_lamp_inputs"] = serde_json::Value::Null;
+    let mut unlit = channels(&file);
+    unlit.retain(|name, _| !name.starts_with("sun_lamps_"));
+    let stray = dir.path().join("stray.exr");
+    write_frame(&stray, &unlit, &header.to_string());
+    let Err(error) = TransferFrame::read(&stray) else { panic!("horizons without a Sun lamp are read") };
+    let error = error.to_string();
+    assert!(
+        error.contains("stray.exr") && error.contains("horizon channels where its header lists no Sun lamp"),
+        "{error}"
+    );
+    unlit.retain(|name, _| !name.starts_with("horizon."));
+    write_frame(&stray, &unlit, &header.to_string());
+    assert!(TransferFrame::read(&stray).unwrap().horizons.is_none(), "a frame without a Sun lamp reads");
 }

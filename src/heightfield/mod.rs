@@ -40,8 +40,8 @@ mod pyramid;
 mod reference;
 
 pub use pyramid::{
-    decimation_taps, ElevationBand, HorizonAgainst, HorizonPyramid, HorizonSettings, LevelReconstruction, MarchStep,
-    PyramidLevel, PyramidPlan, ScaleMax, MAX_LEVELS, MAX_STEPS,
+    decimation_taps, ElevationBand, HorizonAgainst, HorizonPyramid, HorizonSettings, HorizonsBetween,
+    LevelReconstruction, MarchStep, PyramidLevel, PyramidPlan, ScaleMax, HORIZON_SECTORS, MAX_LEVELS, MAX_STEPS,
 };
 pub use reference::{brute_force_horizon, horizon_reaches, horizon_reaches_within};
 

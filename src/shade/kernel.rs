@@ -507,7 +507,7 @@ impl<T: Real> ShadingKernel<T> {
     /// would clamp the overlap twice (`eps^2`), which paper 000 Section 4.2 warns about and
     /// which measurably brightens unoccluded terrain (1.06 instead of 1.03 at order 4).
     pub fn add_visibility(&self, occluders: Occluders, p: [f64; 3], n: [f64; 3], object: u32, acc: &mut [T]) {
-        self.add_visibility_parts(occluders, p, n, object, Caps::Walk, acc, None);
+        self.add_visibility_parts(occluders, p, n, object, Caps::Walk, acc, None, None);
     }
 
     /// [`Self::sum_caps`] of the points to shade among `work` (a row's pixels), in their
@@ -556,7 +556,11 @@ impl<T: Real> ShadingKernel<T> {
 
     /// [`add_visibility`](Self::add_visibility), and into `occlusion` when given, the part
     /// the specular occlusion reads ([`super::glossy`]): the height field (unfolded) and
-    /// the blockers, without the tangent plane and the ground plane.
+    /// the blockers, without the tangent plane and the ground plane. Where the height
+    /// field's horizons are marched and `horizons_found` is given, the highest tangent of
+    /// each sector of their azimuths goes into it, rounded up to f32
+    /// ([`HorizonPyramid::sector_maxima`](crate::heightfield::HorizonPyramid::sector_maxima):
+    /// what a relight's turned Sun lamps are bounded by); it is left as it is otherwise.
     #[allow(clippy::too_many_arguments)]
     pub(crate) fn add_visibility_parts(
         &self,
@@ -567,6 +571,7 @@ impl<T: Real> ShadingKernel<T> {
         caps: Caps,
         acc: &mut [T],
         mut occlusion: Option<&mut [T]>,
+        horizons_found: Option<&mut [f32]>,
     ) {
         let order = self.order;
         let nt = n.map(T::of);
@@ -591,6 +596,9 @@ impl<T: Real> ShadingKernel<T> {
             // (`banded_slice_of_tangents`).
             let mut horizons = [0.0f64; MAX_DIRECTIONS];
             pyramid.horizon_tangents(p, &mut horizons[..directions]);
+            if let Some(found) = horizons_found {
+                pyramid.sector_maxima(&horizons[..directions], found);
+            }
             // Eight azimuths at a time: their slices, then their part of the turn.
             const RUN: usize = 8;
             let mut slices = [T::zero(); RUN * crate::sh::MAX_ORDER];
@@ -719,7 +727,8 @@ impl<T: Real> ShadingKernel<T> {
                 let spheres_only = Occluders { blockers: occluders.blockers, horizons: None };
                 let mut blockers = [T::zero(); MAX_COEFFICIENTS];
                 let (p, n) = (point.position, point.normal);
-                self.add_visibility_parts(spheres_only, p, n, point.object, caps, &mut blockers[..count], None);
+                let blockers_only = &mut blockers[..count];
+                self.add_visibility_parts(spheres_only, p, n, point.object, caps, blockers_only, None, None);
                 let mut heightfield = [T::zero(); MAX_COEFFICIENTS];
                 for i in 0..count {
                     heightfield[i] = full[i] - blockers[i] + unoccluded[i];
@@ -736,7 +745,7 @@ impl<T: Real> ShadingKernel<T> {
     /// surface material here: the caller shades the reflected point instead.
     /// `caps`: where its sphere caps come from.
     pub fn shade(&self, occluders: Occluders, point: &SurfacePoint, caps: Caps) -> [f32; 3] {
-        let Some((visibility, occlusion)) = self.surface_visibility(occluders, point, caps) else {
+        let Some((visibility, occlusion)) = self.surface_visibility(occluders, point, caps, None) else {
             return [0.0; 3];
         };
         let lobes = &self.materials[&point.material];
@@ -747,12 +756,14 @@ impl<T: Real> ShadingKernel<T> {
 
     /// The log visibility of a surface point, and that of its specular occlusion where
     /// its material has a prefiltered glossy term whose occlusion log-SH gives (in part);
-    /// `None` for an unknown material.
+    /// `None` for an unknown material. The horizons marched, into `horizons_found` where
+    /// given ([`Self::add_visibility_parts`]).
     pub(crate) fn surface_visibility(
         &self,
         occluders: Occluders,
         point: &SurfacePoint,
         caps: Caps,
+        horizons_found: Option<&mut [f32]>,
     ) -> Option<([T; MAX_COEFFICIENTS], [T; MAX_COEFFICIENTS])> {
         let count = coefficient_count(self.order);
         let mut visibility = [T::zero(); MAX_COEFFICIENTS];
@@ -767,6 +778,7 @@ impl<T: Real> ShadingKernel<T> {
             caps,
             &mut visibility[..count],
             sharp.then_some(&mut occlusion[..count]),
+            horizons_found,
         );
         lobes.map(|_| (visibility, occlusion))
     }

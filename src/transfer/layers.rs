@@ -2,6 +2,7 @@
 //! them back (the table in the [module doc](super)).
 
 use super::lobe_code;
+use crate::heightfield::HORIZON_SECTORS;
 use crate::scene::exr_read::{read_with_headers, ChannelFile};
 use crate::scene::exr_zip::Target;
 use crate::scene::output::{OutputChannel, SampleType};
@@ -251,6 +252,14 @@ pub struct TransferFrame {
     pub glossy_weight: Vec<[f32; 2]>,
     /// 1 where a surface was shaded, 0 on the background (the beauty's alpha).
     pub alpha: Vec<f32>,
+    /// Per pixel, the height field's highest horizon tangent in each sector of the W
+    /// azimuths of the render's settings
+    /// ([`HorizonPyramid::sector_maxima`](crate::heightfield::HorizonPyramid::sector_maxima),
+    /// as half floats at least those marched; infinite where none was), in frames whose Sun
+    /// lamps a height field may shadow: what bounds the turned lamps' horizons
+    /// ([`super::SunLampTurn`]). `None` in other frames and in files written before it was
+    /// kept.
+    pub horizons: Option<Vec<f32>>,
     /// The G-buffer's world position and normal (`P`, `N`), passed through (shared with
     /// the passes relit from it).
     pub position: std::sync::Arc<[[f32; 3]]>,
@@ -289,6 +298,8 @@ pub struct TransferRow<'a> {
     glossy_direction: &'a mut [[f32; 3]],
     glossy_weight: &'a mut [[f32; 2]],
     alpha: &'a mut [f32],
+    /// One value per sector and pixel.
+    horizons: Option<&'a mut [f32]>,
 }
 
 impl TransferRow<'_> {
@@ -360,18 +371,26 @@ impl TransferRow<'_> {
             _ => [0.0; 2],
         };
         self.alpha[x] = alpha;
+        if let Some(layer) = &mut self.horizons {
+            let sectors = layer.len() / self.alpha.len();
+            for (kept, &tangent) in layer[x * sectors..(x + 1) * sectors].iter_mut().zip(&point.horizons) {
+                *kept = half_at_least(tangent);
+            }
+        }
     }
 }
 
 impl TransferFrame {
     /// A frame of `width` x `height` with the optional layers the frame has, every value
-    /// zero, to write pixels into row by row ([`rows_mut`](Self::rows_mut)).
+    /// zero (the horizons infinite, `horizon_sectors` per pixel where not 0), to write
+    /// pixels into row by row ([`rows_mut`](Self::rows_mut)).
     pub fn new(
         width: usize,
         height: usize,
         header: TransferHeader,
         heightfield_and_blockers: bool,
         phong: bool,
+        horizon_sectors: usize,
     ) -> Self {
         let n = width * height;
         let coefficients = n * coefficient_count(header.sh.order);
@@ -396,6 +415,7 @@ impl TransferFrame {
             glossy_direction: vec![[0.0; 3]; n],
             glossy_weight: vec![[0.0; 2]; n],
             alpha: vec![0.0; n],
+            horizons: (horizon_sectors > 0).then(|| vec![f32::INFINITY; n * horizon_sectors]),
             position: std::sync::Arc::from([]),
             normal: std::sync::Arc::from([]),
         }
@@ -432,6 +452,8 @@ impl TransferFrame {
         let mut glossy_direction = self.glossy_direction.chunks_mut(width);
         let mut glossy_weight = self.glossy_weight.chunks_mut(width);
         let mut alpha = self.alpha.chunks_mut(width);
+        let sectors = self.horizons.as_ref().map_or(0, |layer| layer.len() / (width * self.height).max(1));
+        let mut horizons = self.horizons.as_deref_mut().map(|layer| layer.chunks_mut((width * sectors).max(1)));
         let row = "every layer has a row per row of the frame";
         (0..self.height)
             .map(|_| TransferRow {
@@ -451,6 +473,7 @@ impl TransferFrame {
                 glossy_direction: glossy_direction.next().expect(row),
                 glossy_weight: glossy_weight.next().expect(row),
                 alpha: alpha.next().expect(row),
+                horizons: horizons.as_mut().map(|rows| rows.next().expect(row)),
             })
             .collect()
     }
@@ -496,6 +519,12 @@ impl TransferFrame {
         {
             if let Some(values) = values {
                 channels.extend(OutputChannel::layer(layer, &rgb, values.as_flattened(), colour));
+            }
+        }
+        if let Some(values) = &self.horizons {
+            let sectors = values.len() / self.alpha.len().max(1);
+            for (k, name) in horizon_channels(sectors).into_iter().enumerate() {
+                channels.push(OutputChannel::interleaved(name, SampleType::Half, values, sectors, k));
             }
         }
         channels
@@ -573,8 +602,20 @@ impl TransferFrame {
                  where it does",
             ));
         }
+        let horizon_sectors = match (channels.has(&horizon_channels(1)[0]), &header.settings) {
+            (false, _) => 0,
+            (true, Some(settings)) if header.heightfield && !header.sun_lamps.is_empty() => {
+                HORIZON_SECTORS.min(settings.horizon.directions)
+            }
+            (true, _) => {
+                return Err(SceneError::invalid(
+                    file,
+                    "holds horizon channels where its header lists no Sun lamp over a height field, or no settings",
+                ))
+            }
+        };
         // Every value is written by `fill` below, so a spare's old values are left in place.
-        let mut spare = spare.unwrap_or_else(|| TransferFrame::new(0, 0, header.clone(), false, false));
+        let mut spare = spare.unwrap_or_else(|| TransferFrame::new(0, 0, header.clone(), false, false, 0));
         let sh_layer = |layer: &mut Option<Vec<f32>>, present: bool| {
             present.then(|| sized(layer.take().unwrap_or_default(), n * count))
         };
@@ -596,6 +637,8 @@ impl TransferFrame {
         let mut glossy_lobe = sized(spare.glossy_lobe, n);
         let mut glossy_weight = sized(spare.glossy_weight, n);
         let mut alpha = sized(spare.alpha, n);
+        let mut horizons =
+            (horizon_sectors > 0).then(|| sized(spare.horizons.unwrap_or_default(), n * horizon_sectors));
         let (position_values, normal_values) = (
             std::sync::Arc::get_mut(&mut position).expect("unshared"),
             std::sync::Arc::get_mut(&mut normal).expect("unshared"),
@@ -640,6 +683,10 @@ impl TransferFrame {
                 targets.push(Target { values: values.as_flattened_mut(), stride: 3, channels: named(name, &rgb) });
             }
         }
+        if let Some(values) = &mut horizons {
+            let names = horizon_channels(horizon_sectors).into_iter().enumerate().map(|(k, name)| (name, k));
+            targets.push(Target { values, stride: horizon_sectors, channels: names.collect() });
+        }
         channels.fill(file, WHAT, &mut targets)?;
         drop(targets);
         let lobes = header.lobes.len();
@@ -660,6 +707,24 @@ impl TransferFrame {
         }
         if specular.is_none() && glossy_lobe.par_iter().any(|&c| c >= lobe_code::SH) {
             return Err(SceneError::invalid(file, "its pixels read sh_specular, which it does not hold"));
+        }
+        // A horizon bounds a turned lamp's shadow: one below 0 or not a number would
+        // bound it wrongly (infinite bounds nothing, and is kept where none was marched).
+        // Checked a chunk at a time, as the finite values below, then found.
+        let at_least_zero = |v: &[f32]| v.par_chunks(1 << 14).all(|c| c.iter().fold(true, |all, x| all & (*x >= 0.0)));
+        let below_zero = horizons.as_ref().filter(|values| !at_least_zero(values));
+        if let Some(i) = below_zero.and_then(|values| values.iter().position(|v| !(*v >= 0.0))) {
+            let (pixel, k) = (i / horizon_sectors, i % horizon_sectors);
+            return Err(SceneError::invalid(
+                file,
+                format!(
+                    "channel {} is {} at pixel ({}, {}), where a horizon tangent is at least 0",
+                    horizon_channels(horizon_sectors)[k],
+                    horizons.as_ref().map_or(0.0, |values| values[i]),
+                    pixel % width,
+                    pixel / width
+                ),
+            ));
         }
         // Each chunk checked whole, which runs in vector lanes (one value at a time, this
         // check was a tenth of a sequence's relight).
@@ -731,10 +796,32 @@ impl TransferFrame {
             glossy_direction,
             glossy_weight,
             alpha,
+            horizons,
             position,
             normal,
         })
     }
+}
+
+/// The channels of `sectors` horizon tangents per pixel, `horizon.0` onwards.
+fn horizon_channels(sectors: usize) -> Vec<String> {
+    (0..sectors).map(|k| format!("horizon.{k}")).collect()
+}
+
+/// The least half float at or above `tangent` (`>= 0`), as an f32: a horizon kept in the
+/// file still bounds the one marched. Infinite for `NaN`, which bounds nothing.
+fn half_at_least(tangent: f32) -> f32 {
+    if tangent.is_nan() {
+        return f32::INFINITY;
+    }
+    let tangent = tangent.max(0.0);
+    let rounded = half::f16::from_f32(tangent);
+    if f32::from(rounded) >= tangent {
+        return f32::from(rounded);
+    }
+    // Past the nearest half, a positive finite one: the next half up (infinite past the
+    // largest).
+    f32::from(half::f16::from_bits(rounded.to_bits() + 1))
 }
 
 /// `v` at length `n`, its values left as they are, or `n` zeros where it holds fewer
@@ -754,4 +841,31 @@ fn unshared(mut shared: std::sync::Arc<[[f32; 3]]>, n: usize) -> std::sync::Arc<
         shared = std::iter::repeat_n([0.0f32; 3], n).collect();
     }
     shared
+}
+
+#[cfg(test)]
+mod tests {
+    use super::half_at_least;
+    use half::f16;
+
+    /// A horizon kept as a half is the least half at or above it, so it still bounds the
+    /// one marched: over every half and the f32s between, those past the largest half
+    /// infinite, NaN infinite, anything below 0 as 0.
+    #[test]
+    fn a_kept_horizon_is_the_least_half_at_or_above_it() {
+        for bits in 0..0x7c00u16 {
+            let half = f32::from(f16::from_bits(bits));
+            let next = f32::from(f16::from_bits(bits + 1));
+            assert_eq!(half_at_least(half), half, "a half is kept as it is");
+            for between in [half + (next - half) * 0.25, half + (next - half) * 0.5, half + (next - half) * 0.75] {
+                if between > half && between < next {
+                    assert_eq!(half_at_least(between), next, "{between} between {half} and {next}");
+                }
+            }
+        }
+        assert_eq!(half_at_least(65504.5), f32::INFINITY);
+        assert_eq!(half_at_least(f32::INFINITY), f32::INFINITY);
+        assert_eq!(half_at_least(f32::NAN), f32::INFINITY);
+        assert_eq!(half_at_least(-0.25), 0.0);
+    }
 }

@@ -3,6 +3,7 @@
 
 use super::layers::{PixelTransfer, PrefilteredLobe, ShConvention, TransferFrame, TransferHeader};
 use super::SunLampInputs;
+use crate::heightfield::{HorizonPyramid, ScaleMax};
 use crate::scene::{Frame, Scene};
 use crate::sh::Real;
 use crate::shade::compositing::{assemble, Pixel, ShadedPasses};
@@ -66,7 +67,12 @@ fn walk<T: Real>(kernel: &ShadingKernel<T>, occluders: Occluders, plan: &FramePl
     let phong = plan.contents.phong;
     let scene_suns = frame.suns.len();
     // Each row's transfer is written in place, into layers allocated once.
-    let mut transfer = TransferFrame::new(g.width, g.height, header, both, phong);
+    // The horizons marched bound those of the Sun lamps a relight turns, in frames whose
+    // lamps the height field may shadow ([`crate::heightfield::HorizonsBetween`]).
+    let bounding =
+        |pyramid: &&HorizonPyramid| !header.sun_lamps.is_empty() && pyramid.settings().scale_max == ScaleMax::Steps;
+    let horizon_sectors = occluders.horizons.filter(bounding).map_or(0, HorizonPyramid::horizon_sectors);
+    let mut transfer = TransferFrame::new(g.width, g.height, header, both, phong, horizon_sectors);
     let lobes = transfer.lobe_indices();
     let rows: Vec<Vec<Pixel>> = transfer
         .rows_mut()

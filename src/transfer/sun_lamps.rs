@@ -252,12 +252,14 @@ impl SunLampTurn {
         }
         let [diffuse, specular, rendered_diffuse, rendered_specular] = layers.map(|layer| taken(layer, pixels));
         let (mut diffuse, mut specular) = (diffuse.into_owned(), specular.into_owned());
+        let sectors = prepared.pyramid.as_ref().map_or(0, |pyramid| pyramid.horizon_sectors());
         let lamps = Lamps {
             width: frame.width,
             pixels,
             diffuse: &mut diffuse,
             specular: &mut specular,
             rendered: [&rendered_diffuse, &rendered_specular],
+            horizons: frame.horizons.as_deref().filter(|layer| layer.len() == frame.width * frame.height * sectors),
         };
         let shaded = Shaded {
             materials: &self.scene.materials,
@@ -387,13 +389,15 @@ pub fn describe_sun_lamps(lamps: &[[f64; 2]]) -> String {
 }
 
 /// A frame's `lamps_*` layers and its `sun_lamps_*` (`rendered`, diffuse and specular),
-/// at every pixel, rows of `width`, or at `pixels` alone.
+/// at every pixel, rows of `width`, or at `pixels` alone; its `horizon` layer where it
+/// holds one for the pyramid's sectors of azimuths (every pixel's).
 struct Lamps<'a> {
     width: usize,
     pixels: Option<&'a [usize]>,
     diffuse: &'a mut [[f32; 3]],
     specular: &'a mut [[f32; 3]],
     rendered: [&'a [[f32; 3]]; 2],
+    horizons: Option<&'a [f32]>,
 }
 
 /// Pixels shaded together: their horizons along each turned lamp are marched eight at a
@@ -423,18 +427,21 @@ fn move_lamps<T: Real>(kernel: &ShadingKernel<T>, shaded: Shaded, turned: &[SunL
             lamps[k] = (lamps[k] - rendered[k] + tint[k] * turned[k]).max(0.0);
         }
     };
-    let (width, pixels) = (lamps.width, lamps.pixels);
+    let (width, pixels, horizons) = (lamps.width, lamps.pixels, lamps.horizons);
+    let sectors = pyramid.map_or(0, |pyramid| pyramid.horizon_sectors());
     let [rendered_diffuse, rendered_specular] = lamps.rendered;
     let chunks = lamps.diffuse.par_chunks_mut(CHUNK).zip(lamps.specular.par_chunks_mut(CHUNK));
     let rendered = rendered_diffuse.par_chunks(CHUNK).zip(rendered_specular.par_chunks(CHUNK));
     chunks.zip(rendered).enumerate().for_each(|(c, ((diffuse, specular), (rendered_diffuse, rendered_specular)))| {
-        let sources: Vec<PixelSource> = (c * CHUNK..c * CHUNK + diffuse.len())
-            .map(|k| {
-                let i = pixels.map_or(k, |pixels| pixels[k]);
-                pixel_source(shaded.materials, shaded.frame, i % width, i / width)
-            })
-            .collect();
-        let known = chunk_known(pyramid, blockers, &disks, &sources);
+        let indices: Vec<usize> =
+            (c * CHUNK..c * CHUNK + diffuse.len()).map(|k| pixels.map_or(k, |pixels| pixels[k])).collect();
+        let sources: Vec<PixelSource> =
+            indices.iter().map(|&i| pixel_source(shaded.materials, shaded.frame, i % width, i / width)).collect();
+        let found: Vec<&[f32]> = match horizons {
+            Some(layer) => indices.iter().map(|&i| &layer[i * sectors..(i + 1) * sectors]).collect(),
+            None => Vec::new(),
+        };
+        let known = chunk_known(pyramid, blockers, &disks, &sources, &found);
         for (i, source) in sources.iter().enumerate() {
             let (d, s, rd, rs) = (&mut diffuse[i], &mut specular[i], rendered_diffuse[i], rendered_specular[i]);
             match *source {
@@ -461,8 +468,11 @@ const GROUP: usize = 16;
 /// What is known of each of `disks`' occluders at each of `sources` (pixel first, disk
 /// second) before it is shaded ([`KnownAlongSun`]), found with the pixels beside it:
 ///
-/// - the height field's horizon, marched together where the pixel is a surface that its
-///   tangent plane does not wholly hide the disk from (the rest are not read:
+/// - the height field's horizon, below the disk where the horizons its render found at
+///   the pixel (`found`, per source where given) bound it there
+///   ([`crate::heightfield::HorizonsBetween`]: the same answer the march gives), else
+///   marched together where the pixel is a surface that its tangent plane does not
+///   wholly hide the disk from (the rest are not read:
 ///   [`crate::shade::sun::DiskDirections::seen_against`] returns first); where the field
 ///   cannot rise to a disk, every surface's horizon is answered without a march, and the
 ///   tangent plane is not asked (6 to 7 % of a turn of the Sun-lamp scene's three lamps);
@@ -473,6 +483,7 @@ fn chunk_known(
     blockers: Option<&BlockerTree>,
     disks: &[SunDisk],
     sources: &[PixelSource],
+    found: &[&[f32]],
 ) -> Vec<KnownAlongSun> {
     let unknown = KnownAlongSun { horizon: pyramid.map(|_| HorizonAgainst::Below), blockers: blockers.is_some() };
     let mut known = vec![unknown; sources.len() * disks.len()];
@@ -499,9 +510,15 @@ fn chunk_known(
     for (s, disk) in disks.iter().enumerate() {
         let Some(along) = disk.disk.march_band() else { continue };
         let marched = pyramid.may_rise_into(along.azimuth, along.band);
+        let between = (marched && !found.is_empty()).then(|| pyramid.horizons_between(along.azimuth)).flatten();
         let (mut points, mut at) = (Vec::with_capacity(sources.len()), Vec::with_capacity(sources.len()));
         for (i, source) in sources.iter().enumerate() {
             if let PixelSource::Surface { point, .. } = source {
+                // Below the disk's foot, a horizon hides none of it (`ElevationBand`).
+                if between.as_ref().is_some_and(|b| b.tangent_at_most(point.position, found[i]) < along.band.below) {
+                    known[i * disks.len() + s].horizon = Some(HorizonAgainst::Below);
+                    continue;
+                }
                 if !marched || !disk.disk.hidden_by_planes(tangent, point.position, point.normal) {
                     points.push(point.position);
                     at.push(i);

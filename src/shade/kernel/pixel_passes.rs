@@ -70,7 +70,7 @@ impl<T: Real> ShadingKernel<T> {
     pub fn shade_passes(&self, occluders: Occluders, point: &SurfacePoint, caps: Caps) -> PixelPasses {
         let count = coefficient_count(self.order);
         let (p, n) = (point.position, point.normal);
-        let Some((full, occlusion)) = self.surface_visibility(occluders, point, caps) else {
+        let Some((full, occlusion)) = self.surface_visibility(occluders, point, caps, None) else {
             return PixelPasses::UNSHADED;
         };
         let lobes = &self.materials[&point.material];

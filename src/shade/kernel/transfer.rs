@@ -14,6 +14,7 @@ use super::{
     as_f32_array, occlusion_ratio, open_lit, visibility_ratio, Caps, KnownAlongSun, OccluderSet, Occluders,
     PixelPasses, ShadingKernel, SurfacePoint,
 };
+use crate::heightfield::HORIZON_SECTORS;
 use crate::scene::Material;
 use crate::sh::{coefficient_count, Real, MAX_COEFFICIENTS};
 use crate::shade::glossy::SharpLobe;
@@ -59,6 +60,10 @@ pub struct PointTransfer {
     /// The Sun lamps' part of `lamps_*` (what a relight that turns them takes out).
     pub sun_lamps_diffuse: [f32; 3],
     pub sun_lamps_specular: [f32; 3],
+    /// The height field's highest horizon tangent in each sector of the W azimuths,
+    /// rounded up, where they were marched (infinite otherwise): what bounds the horizons
+    /// of the Sun lamps a relight turns ([`crate::heightfield::HorizonsBetween`]).
+    pub horizons: [f32; HORIZON_SECTORS],
 }
 
 impl PointTransfer {
@@ -76,6 +81,7 @@ impl PointTransfer {
         lamps_specular: [0.0; 3],
         sun_lamps_diffuse: [0.0; 3],
         sun_lamps_specular: [0.0; 3],
+        horizons: [f32::INFINITY; HORIZON_SECTORS],
     };
 }
 
@@ -150,7 +156,8 @@ impl<T: Real> ShadingKernel<T> {
         let count = coefficient_count(self.order);
         let (p, n) = (point.position, point.normal);
         let dark = (PixelPasses::UNSHADED, PointTransfer::DARK);
-        let Some((full, occlusion)) = self.surface_visibility(occluders, point, caps) else {
+        let mut horizons = [f32::INFINITY; HORIZON_SECTORS];
+        let Some((full, occlusion)) = self.surface_visibility(occluders, point, caps, Some(&mut horizons)) else {
             return dark;
         };
         let lobes = &self.materials[&point.material];
@@ -165,7 +172,7 @@ impl<T: Real> ShadingKernel<T> {
                 .each_ref()
                 .map(|l| l.iter().zip(&t[..count]).map(|(a, b)| a.to_f32().unwrap_or(0.0) * b).sum::<f32>().max(0.0))
         };
-        let mut out = PointTransfer { albedo, specular_colour, ..PointTransfer::DARK };
+        let mut out = PointTransfer { albedo, specular_colour, horizons, ..PointTransfer::DARK };
         self.transfer(&full, &self.diffuse, n, &mut out.diffuse);
         let none = Occluders { blockers: None, horizons: None };
         let mut unoccluded = [T::zero(); MAX_COEFFICIENTS];
