@@ -1039,7 +1039,8 @@ impl HorizonPyramid {
     /// 0.43 along its lamp and the two added in the README's "Several Sun lamps", turned 75
     /// deg (elevations 50, 35 and 25 deg, 2 deg disks whose feet are at tangents 1.15, 0.67
     /// and 0.44); the largest differences of each level along x and along y, of any two
-    /// cells, would give 0.44, 0.57 and 0.50.
+    /// cells, would give 0.44, 0.57 and 0.50. For a `dir` of another length, the bound is
+    /// that length times the unit one's, with the same rounding ([`HorizonsBetween`]).
     pub fn steepest_climb(&self, dir: [f64; 2]) -> f64 {
         let climbs = self.climbs.get_or_init(|| ClimbBound::new(&self.levels, &self.peaks, &self.steps));
         let rise = |[a, b]: &[f64; 2]| a * dir[0].abs() + b * dir[1].abs();
@@ -1055,16 +1056,14 @@ impl HorizonPyramid {
         if self.settings.scale_max != ScaleMax::Steps || self.steps.is_empty() || !dir.iter().all(|v| v.is_finite()) {
             return None;
         }
-        let climbs = self.climbs.get_or_init(|| ClimbBound::new(&self.levels, &self.peaks, &self.steps));
         let mut margins = vec![f64::INFINITY; self.horizon_sectors()];
         for (k, u) in self.directions.iter().enumerate() {
-            let difference = [dir[0] - u[0], dir[1] - u[1]];
-            let rise = |[a, b]: &[f64; 2]| a * difference[0].abs() + b * difference[1].abs();
-            let steepest = climbs.corners.iter().map(rise).fold(0.0, f64::max);
             let margin = &mut margins[self.sector_of(k)];
-            *margin = margin.min(steepest + 1e-6 * steepest + 2.0 * climbs.rounding);
+            *margin = margin.min(self.steepest_climb([dir[0] - u[0], dir[1] - u[1]]));
         }
-        Some(HorizonsBetween { margins })
+        // `steepest_climb` holds the rounding of one march's tangent; this, the other's.
+        let rounding = self.climbs.get().map_or(f64::INFINITY, |climbs| climbs.rounding);
+        Some(HorizonsBetween { margins: margins.into_iter().map(|margin| margin + rounding).collect() })
     }
 
     /// How many sectors of the W azimuths a relight keeps a pixel's horizons in

@@ -711,8 +711,7 @@ impl TransferFrame {
         // A horizon bounds a turned lamp's shadow: one below 0 or not a number would
         // bound it wrongly (infinite bounds nothing, and is kept where none was marched).
         // Checked a chunk at a time, as the finite values below, then found.
-        let at_least_zero = |v: &[f32]| v.par_chunks(1 << 14).all(|c| c.iter().fold(true, |all, x| all & (*x >= 0.0)));
-        let below_zero = horizons.as_ref().filter(|values| !at_least_zero(values));
+        let below_zero = horizons.as_ref().filter(|values| !every_value(values, |x| x >= 0.0));
         if let Some(i) = below_zero.and_then(|values| values.iter().position(|v| !(*v >= 0.0))) {
             let (pixel, k) = (i / horizon_sectors, i % horizon_sectors);
             return Err(SceneError::invalid(
@@ -726,9 +725,7 @@ impl TransferFrame {
                 ),
             ));
         }
-        // Each chunk checked whole, which runs in vector lanes (one value at a time, this
-        // check was a tenth of a sequence's relight).
-        let finite = |v: &[f32]| v.par_chunks(1 << 14).all(|c| c.iter().fold(true, |all, x| all & x.is_finite()));
+        let finite = |v: &[f32]| every_value(v, f32::is_finite);
         let all_finite = finite(&diffuse)
             && finite(&unoccluded)
             && [&heightfield, &blockers, &specular].iter().all(|l| l.as_ref().is_none_or(|v| finite(v)))
@@ -801,6 +798,13 @@ impl TransferFrame {
             normal,
         })
     }
+}
+
+/// Whether `test` holds for every one of `values`: each chunk checked whole, which runs
+/// in vector lanes (one value at a time, the finite check was a tenth of a sequence's
+/// relight, and the horizons' check 4.7 ms of a 12 ms read).
+fn every_value(values: &[f32], test: impl Fn(f32) -> bool + Sync) -> bool {
+    values.par_chunks(1 << 14).all(|chunk| chunk.iter().fold(true, |all, &x| all & test(x)))
 }
 
 /// The channels of `sectors` horizon tangents per pixel, `horizon.0` onwards.

@@ -17,7 +17,7 @@
 //! that mirrors a Sun lamp is read along its mirror direction, as the render reads it.
 
 use super::layers::{TransferFrame, TransferHeader};
-use crate::heightfield::{HorizonAgainst, HorizonPyramid};
+use crate::heightfield::{HorizonAgainst, HorizonPyramid, HorizonsBetween};
 use crate::scene::light::{euler_xyz, rotate};
 use crate::scene::{Frame, HeightMap, Material, Scene, SceneError, SunLight};
 use crate::sh::Real;
@@ -429,6 +429,16 @@ fn move_lamps<T: Real>(kernel: &ShadingKernel<T>, shaded: Shaded, turned: &[SunL
     };
     let (width, pixels, horizons) = (lamps.width, lamps.pixels, lamps.horizons);
     let sectors = pyramid.map_or(0, |pyramid| pyramid.horizon_sectors());
+    // Per disk, what the render's horizons bound along it, made once for every chunk:
+    // where the frame keeps them and the field may rise into the disk.
+    let between: Vec<Option<HorizonsBetween>> = disks
+        .iter()
+        .map(|disk| {
+            let (pyramid, along) = (pyramid?, disk.disk.march_band()?);
+            let marched = horizons.is_some() && pyramid.may_rise_into(along.azimuth, along.band);
+            marched.then(|| pyramid.horizons_between(along.azimuth)).flatten()
+        })
+        .collect();
     let [rendered_diffuse, rendered_specular] = lamps.rendered;
     let chunks = lamps.diffuse.par_chunks_mut(CHUNK).zip(lamps.specular.par_chunks_mut(CHUNK));
     let rendered = rendered_diffuse.par_chunks(CHUNK).zip(rendered_specular.par_chunks(CHUNK));
@@ -441,7 +451,7 @@ fn move_lamps<T: Real>(kernel: &ShadingKernel<T>, shaded: Shaded, turned: &[SunL
             Some(layer) => indices.iter().map(|&i| &layer[i * sectors..(i + 1) * sectors]).collect(),
             None => Vec::new(),
         };
-        let known = chunk_known(pyramid, blockers, &disks, &sources, &found);
+        let known = chunk_known(pyramid, blockers, &disks, &sources, &found, &between);
         for (i, source) in sources.iter().enumerate() {
             let (d, s, rd, rs) = (&mut diffuse[i], &mut specular[i], rendered_diffuse[i], rendered_specular[i]);
             match *source {
@@ -469,8 +479,8 @@ const GROUP: usize = 16;
 /// second) before it is shaded ([`KnownAlongSun`]), found with the pixels beside it:
 ///
 /// - the height field's horizon, below the disk where the horizons its render found at
-///   the pixel (`found`, per source where given) bound it there
-///   ([`crate::heightfield::HorizonsBetween`]: the same answer the march gives), else
+///   the pixel (`found`, per source where given) bound it there (`between`, per disk:
+///   [`HorizonsBetween`], the same answer the march gives), else
 ///   marched together where the pixel is a surface that its tangent plane does not
 ///   wholly hide the disk from (the rest are not read:
 ///   [`crate::shade::sun::DiskDirections::seen_against`] returns first); where the field
@@ -484,6 +494,7 @@ fn chunk_known(
     disks: &[SunDisk],
     sources: &[PixelSource],
     found: &[&[f32]],
+    between: &[Option<HorizonsBetween>],
 ) -> Vec<KnownAlongSun> {
     let unknown = KnownAlongSun { horizon: pyramid.map(|_| HorizonAgainst::Below), blockers: blockers.is_some() };
     let mut known = vec![unknown; sources.len() * disks.len()];
@@ -510,12 +521,11 @@ fn chunk_known(
     for (s, disk) in disks.iter().enumerate() {
         let Some(along) = disk.disk.march_band() else { continue };
         let marched = pyramid.may_rise_into(along.azimuth, along.band);
-        let between = (marched && !found.is_empty()).then(|| pyramid.horizons_between(along.azimuth)).flatten();
         let (mut points, mut at) = (Vec::with_capacity(sources.len()), Vec::with_capacity(sources.len()));
         for (i, source) in sources.iter().enumerate() {
             if let PixelSource::Surface { point, .. } = source {
                 // Below the disk's foot, a horizon hides none of it (`ElevationBand`).
-                if between.as_ref().is_some_and(|b| b.tangent_at_most(point.position, found[i]) < along.band.below) {
+                if between[s].as_ref().is_some_and(|b| b.tangent_at_most(point.position, found[i]) < along.band.below) {
                     known[i * disks.len() + s].horizon = Some(HorizonAgainst::Below);
                     continue;
                 }
