@@ -1117,24 +1117,24 @@ fn a_transfer_frame_reads_the_same_in_any_exr_layout() {
     let text = header_text(&file);
     for (value, said) in [(-0.5f32, "-0.5"), (f32::NAN, "NaN")] {
         let mut wrong = channels(&file);
-        wrong.get_mut("horizon.3").expect("four sectors")[100] = value;
+        wrong.get_mut("horizon.7").expect("eight sectors")[100] = value;
         let bad = dir.path().join("bad horizon.exr");
         write_frame(&bad, &wrong, &text);
         let Err(error) = TransferFrame::read(&bad) else { panic!("a horizon of {said} is read") };
         let error = error.to_string();
         assert!(
             error.contains("bad horizon.exr")
-                && error.contains(&format!("channel horizon.3 is {said} at pixel (4, 1)")),
+                && error.contains(&format!("channel horizon.7 is {said} at pixel (4, 1)")),
             "{error}"
         );
     }
     let mut cut = channels(&file);
-    cut.remove("horizon.3");
+    cut.remove("horizon.7");
     let short = dir.path().join("short.exr");
     write_frame(&short, &cut, &text);
-    let Err(error) = TransferFrame::read(&short) else { panic!("three of four sectors are read") };
+    let Err(error) = TransferFrame::read(&short) else { panic!("seven of eight sectors are read") };
     let error = error.to_string();
-    assert!(error.contains("short.exr") && error.contains("horizon.3"), "{error}");
+    assert!(error.contains("short.exr") && error.contains("horizon.7"), "{error}");
     let mut header: serde_json::Value = serde_json::from_str(&text).unwrap();
     header["sun_lamps"] = serde_json::json!([]);
     header["sun_lamp_inputs"] = serde_json::Value::Null;

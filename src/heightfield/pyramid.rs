@@ -603,11 +603,12 @@ impl ReceiverTerms {
 
 /// How many sectors of azimuths a relight keeps a pixel's horizons in, each the highest
 /// of its azimuths' ([`HorizonPyramid::sector_maxima`]; fewer where W is smaller). A
-/// relight pays for each kept value in reading the frame (all 16 of the default W made the
-/// three-lamp Sun-lamp scene's read 15.0 to 15.9 ms against 11.3 to 11.8 ms, 2 cores; four
-/// cost nothing measurable), and four answer almost as many of a turn's pixels as sixteen
+/// relight pays for each kept value in reading the frame: all 16 of the default W made the
+/// three-lamp Sun-lamp scene's read 15.0 to 15.9 ms against 11.3 to 11.8 ms (2 cores);
+/// eight, 12.45 to 13.2 ms against 12.3 to 12.5 ms for four. Eight answer most of what
+/// sixteen do where the lamps are low, where four leave up to 1.6 times as many marches
 /// ([`HorizonsBetween`]).
-pub const HORIZON_SECTORS: usize = 4;
+pub const HORIZON_SECTORS: usize = 8;
 
 /// A bound on the horizon along one azimuth `u` from the horizons found at the W azimuths
 /// `u_k` ([`HorizonPyramid::horizons_between`]), kept as the highest of each sector of
@@ -628,10 +629,10 @@ pub const HORIZON_SECTORS: usize = 4;
 /// steps, which the lanes find to the bit), and so at most a sector's highest `t_k` plus
 /// the least `c(u - u_k)` of its azimuths; the bound is the least of those, with twice
 /// the f32 rounding of a tangent ([`ClimbBound::rounding`]) for the two marches'
-/// arithmetic. The Sun-lamp scene's three turned lamps (2 deg disks at 50, 35 and 25 deg)
-/// over its field, W = 16, turned 20, 150 and 250 deg: 95 to 97 % of the pixels a turn
-/// marched are answered from four sectors (98 to 100 % from all sixteen azimuths, 89 to
-/// 97 % from one).
+/// arithmetic. Of the pixels a turn would march over the Sun-lamp scene's field (W =
+/// 16), turned 20, 150 and 250 deg, eight sectors answer 97 to 100 % for its three lamps
+/// (2 deg disks at 50, 35 and 25 deg; as four do, and sixteen 98 to 100 %), and 76 to 89
+/// % for the three lowered to 15, 20 and 12 deg (four 62 to 82 %, sixteen 84 to 92 %).
 #[derive(Clone, Debug)]
 pub struct HorizonsBetween {
     /// Per sector, the least `c(u - u_k)` of its azimuths, with its margins.

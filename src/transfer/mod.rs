@@ -22,7 +22,7 @@
 //! | `glossy_lobe.V` | float | what the glossy term reads: 0 nothing, 1 the light itself (mirror, background), 2 `sh_specular`, `3 + j` the header's prefiltered lobe `j` |
 //! | `glossy_direction.{X,Y,Z}` | float | the direction it reads along: the mirrored view, or the camera ray |
 //! | `glossy_weight.{X,Y}` | colour | prefiltered lobes: `A share cone` and `A (1 - share)` |
-//! | `horizon.0` to `horizon.3` | half | the height field's highest horizon tangent over each quarter of the W azimuths `2 pi k / W` (`k W / 4` the quarter), rounded up, infinite where none was marched ([`crate::heightfield::HorizonPyramid::sector_maxima`]); only in frames with a Sun lamp and a height field |
+//! | `horizon.0` to `horizon.7` | half | the height field's highest horizon tangent over each eighth of the W azimuths `2 pi k / W` (`k S / W` the sector, `S = min(8, W)` of them), rounded up, infinite where none was marched ([`crate::heightfield::HorizonPyramid::sector_maxima`]); only in frames with a Sun lamp and a height field |
 //!
 //! `D` is the diffuse lobe about the normal, `V` the log visibility, `T` the tangent and
 //! ground planes alone. Relit, per pixel and colour channel, with `L` the light's SH vector:
@@ -53,7 +53,7 @@
 //!
 //! Per pixel at order `n`, in half floats: `n^2` per transfer layer (diffuse, unoccluded,
 //! specular with a Phong material, heightfield and blockers with both occluders), 14
-//! colour values and 4 floats, and 6 colour values more with a Sun lamp, with 4 halves
+//! colour values and 4 floats, and 6 colour values more with a Sun lamp, with 8 halves
 //! more where a height field may shadow it. At order 4 with everything but a Sun lamp,
 //! `5 x 16 x 2 + 14 x 2 + 4 x 4 = 204` bytes, 106 MB uncompressed at 960 x 540 before ZIP;
 //! a diffuse scene of spheres only, `2 x 16 x 2 + 44 = 108` bytes.
