@@ -488,6 +488,30 @@ fn sun_lamps_turn_the_same_from_a_frame_read_once() {
     }
 }
 
+/// A frame keeps the horizons its render found only where the height field may shadow a
+/// Sun lamp at some turn (`HorizonPyramid::may_rise_at_any_azimuth`): a lamp at 75 deg,
+/// whose foot the dunes climb to at no azimuth, leaves them out (a relight reads less and
+/// marches nothing), the same lamp at 15 deg keeps them, and both turn.
+#[test]
+fn horizons_are_kept_where_a_turned_lamp_may_be_shadowed() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = dunes(dir.path());
+    for (elevation, kept) in [(75.0f64, false), (15.0, true)] {
+        let (sin_e, cos_e) = elevation.to_radians().sin_cos();
+        let lights =
+            serde_json::json!([{"type": "sun", "direction": [cos_e, 0.0, sin_e], "angle": 2.0, "strength": 3.0}]);
+        support::sharp::load_with_lights(&scene, lights).unwrap();
+        let out = dir.path().join(format!("lamp at {elevation}"));
+        let common = ["--frames", "1", "--sharp-lights", "off", "--progress", "none", "--device", "cpu"];
+        run(&[&["render", path(&scene), "--out", path(&out), "--transfer"], &common[..]].concat());
+        let file = out.join("render.0001.exr");
+        let frame = TransferFrame::read(&file).unwrap();
+        assert_eq!(frame.horizons.is_some(), kept, "the horizons of a lamp at {elevation} deg");
+        let turned = SunLampTurn::new(&frame.header, &file).unwrap().turned_lamps(&frame, &file, 120.0).unwrap();
+        assert!(turned[0] != frame.lamps_diffuse, "the lamp at {elevation} deg must turn");
+    }
+}
+
 /// Under a constant light, `--light-rotation` turns only the Sun lamps; a relight of a
 /// frame rendered turned starts from that turn (the header's `light_turn`), so it turns
 /// the lamp on from where the render left it, each frame of one relight from its own.
@@ -1036,14 +1060,14 @@ fn poisoned(mut frame: TransferFrame, scale: f64) -> TransferFrame {
 /// through the crate's decoder. All read the same, afresh or into the memory of the frame
 /// read before (as `logsh relight` reads a sequence), whatever that held: NaN, fewer or
 /// more pixels, layers missing; passes that still share that frame's `P` keep it. A
-/// damaged block is an error naming the file. The scene has a Sun lamp, so every layer
-/// is in the frame.
+/// damaged block is an error naming the file. The scene has a Sun lamp low enough for
+/// the dunes to shadow at some turn, so every layer is in the frame.
 #[test]
 fn a_transfer_frame_reads_the_same_in_any_exr_layout() {
     use exr::prelude::{Blocks, Compression, ReadChannels, ReadLayers, WritableImage};
     let dir = tempfile::tempdir().unwrap();
     let scene = dunes(dir.path());
-    let sun = serde_json::json!([{"type": "sun", "direction": [0.5, 0.5, 0.7], "angle": 2.0, "strength": 2.0}]);
+    let sun = serde_json::json!([{"type": "sun", "direction": [0.65, 0.65, 0.35], "angle": 2.0, "strength": 2.0}]);
     support::sharp::load_with_lights(&scene, sun).unwrap();
     let transfer = dir.path().join("transfer");
     let args = ["--frames", "1", "--order", "3", "--progress", "none"];
@@ -1117,24 +1141,66 @@ fn a_transfer_frame_reads_the_same_in_any_exr_layout() {
     let text = header_text(&file);
     for (value, said) in [(-0.5f32, "-0.5"), (f32::NAN, "NaN")] {
         let mut wrong = channels(&file);
-        wrong.get_mut("horizon.7").expect("eight sectors")[100] = value;
+        wrong.get_mut("horizon.15").expect("sixteen sectors")[100] = value;
         let bad = dir.path().join("bad horizon.exr");
         write_frame(&bad, &wrong, &text);
         let Err(error) = TransferFrame::read(&bad) else { panic!("a horizon of {said} is read") };
         let error = error.to_string();
         assert!(
             error.contains("bad horizon.exr")
-                && error.contains(&format!("channel horizon.7 is {said} at pixel (4, 1)")),
+                && error.contains(&format!("channel horizon.15 is {said} at pixel (4, 1)")),
             "{error}"
         );
     }
     let mut cut = channels(&file);
-    cut.remove("horizon.7");
+    cut.remove("horizon.15");
     let short = dir.path().join("short.exr");
     write_frame(&short, &cut, &text);
-    let Err(error) = TransferFrame::read(&short) else { panic!("seven of eight sectors are read") };
+    let Err(error) = TransferFrame::read(&short) else { panic!("fifteen of sixteen sectors are read") };
     let error = error.to_string();
-    assert!(error.contains("short.exr") && error.contains("horizon.7"), "{error}");
+    assert!(error.contains("short.exr") && error.contains("horizon.15"), "{error}");
+    for sectors in [0u64, 17, 1 << 40] {
+        let mut header: serde_json::Value = serde_json::from_str(&text).unwrap();
+        header["horizon_sectors"] = serde_json::json!(sectors);
+        write_frame(&short, &channels(&file), &header.to_string());
+        let Err(error) = TransferFrame::read(&short) else { panic!("{sectors} sectors are read") };
+        let error = error.to_string();
+        assert!(error.contains("short.exr") && error.contains(&format!("{sectors} sectors, not 1 to")), "{error}");
+    }
+
+    // A file that does not record its sectors (written before sixteen were kept) keeps
+    // quarters or eighths: the highest of each run of four or two azimuths. It reads as
+    // many as it holds, and its Sun lamp turns with them to the bits of a turn that
+    // marches every pixel. Sixteen channels unrecorded are no layout such a file had.
+    let mut unrecorded: serde_json::Value = serde_json::from_str(&text).unwrap();
+    unrecorded.as_object_mut().unwrap().remove("horizon_sectors").expect("the sectors recorded");
+    let earlier = dir.path().join("unrecorded.exr");
+    for kept in [4, 8] {
+        let mut runs = channels(&file);
+        let sixteen: Vec<Vec<f32>> = (0..16).map(|k| runs.remove(&format!("horizon.{k}")).unwrap()).collect();
+        for (sector, run) in sixteen.chunks(16 / kept).enumerate() {
+            let highest = (0..run[0].len()).map(|i| run.iter().map(|k| k[i]).fold(f32::NEG_INFINITY, f32::max));
+            runs.insert(format!("horizon.{sector}"), highest.collect());
+        }
+        write_frame(&earlier, &runs, &unrecorded.to_string());
+        let frame = TransferFrame::read(&earlier).unwrap();
+        assert_eq!(frame.horizon_sectors(), kept, "an unrecorded layer's sectors");
+        let turn = SunLampTurn::new(&frame.header, &earlier).unwrap();
+        let prepared = turn.prepare(&frame, &earlier).unwrap();
+        let marched = TransferFrame { horizons: None, ..frame.clone() };
+        for degrees in [40.0, 200.0] {
+            let [bounded, every] = [&frame, &marched].map(|frame| {
+                let turned = turn.turned_prepared(&prepared, frame, &earlier, degrees).unwrap();
+                turned.iter().flatten().flatten().map(|v| v.to_bits()).collect::<Vec<u32>>()
+            });
+            assert!(bounded == every, "turned {degrees} deg with {kept} sectors unrecorded");
+        }
+    }
+    write_frame(&earlier, &channels(&file), &unrecorded.to_string());
+    let Err(error) = TransferFrame::read(&earlier) else { panic!("sixteen sectors unrecorded are read") };
+    let error = error.to_string();
+    assert!(error.contains("unrecorded.exr") && error.contains("holds 16 horizon channels"), "{error}");
+
     let mut header: serde_json::Value = serde_json::from_str(&text).unwrap();
     header["sun_lamps"] = serde_json::json!([]);
     header["sun_lamp_inputs"] = serde_json::Value::Null;
@@ -1144,11 +1210,12 @@ fn a_transfer_frame_reads_the_same_in_any_exr_layout() {
     write_frame(&stray, &unlit, &header.to_string());
     let Err(error) = TransferFrame::read(&stray) else { panic!("horizons without a Sun lamp are read") };
     let error = error.to_string();
-    assert!(
-        error.contains("stray.exr") && error.contains("horizon channels where its header lists no Sun lamp"),
-        "{error}"
-    );
+    assert!(error.contains("stray.exr") && error.contains("where its header lists no Sun lamp"), "{error}");
     unlit.retain(|name, _| !name.starts_with("horizon."));
+    write_frame(&stray, &unlit, &header.to_string());
+    let Err(error) = TransferFrame::read(&stray) else { panic!("sectors recorded without a Sun lamp are read") };
+    assert!(error.to_string().contains("records their sectors"), "{error}");
+    header.as_object_mut().unwrap().remove("horizon_sectors");
     write_frame(&stray, &unlit, &header.to_string());
     assert!(TransferFrame::read(&stray).unwrap().horizons.is_none(), "a frame without a Sun lamp reads");
 }

@@ -601,14 +601,15 @@ impl ReceiverTerms {
     }
 }
 
-/// How many sectors of azimuths a relight keeps a pixel's horizons in, each the highest
-/// of its azimuths' ([`HorizonPyramid::sector_maxima`]; fewer where W is smaller). A
-/// relight pays for each kept value in reading the frame: all 16 of the default W made the
-/// three-lamp Sun-lamp scene's read 15.0 to 15.9 ms against 11.3 to 11.8 ms (2 cores);
-/// eight, 12.45 to 13.2 ms against 12.3 to 12.5 ms for four. Eight answer most of what
-/// sixteen do where the lamps are low, where four leave up to 1.6 times as many marches
-/// ([`HorizonsBetween`]).
-pub const HORIZON_SECTORS: usize = 8;
+/// How many sectors of azimuths a render keeps a pixel's horizons in for a relight, each
+/// the highest of its azimuths' ([`HorizonPyramid::sector_maxima`]; fewer where W is
+/// smaller): at the default W, each azimuth's own. Of the pixels a turn of the Sun-lamp
+/// scene's three lamps lowered to 15, 20 and 12 deg would march, sixteen answer 84 to 92
+/// %, eight 76 to 89 % and four 62 to 82 % ([`HorizonsBetween`]); a pixel reads only the
+/// sectors that can answer ([`HorizonsUnder`]), so more cost a relight only in reading the
+/// frame (the three lamps' at their default heights in 12.0 to 13.3 ms against 10.9 to
+/// 11.5 ms for four, 2 cores).
+pub const HORIZON_SECTORS: usize = 16;
 
 /// A bound on the horizon along one azimuth `u` from the horizons found at the W azimuths
 /// `u_k` ([`HorizonPyramid::horizons_between`]), kept as the highest of each sector of
@@ -630,9 +631,9 @@ pub const HORIZON_SECTORS: usize = 8;
 /// the least `c(u - u_k)` of its azimuths; the bound is the least of those, with twice
 /// the f32 rounding of a tangent ([`ClimbBound::rounding`]) for the two marches'
 /// arithmetic. Of the pixels a turn would march over the Sun-lamp scene's field (W =
-/// 16), turned 20, 150 and 250 deg, eight sectors answer 97 to 100 % for its three lamps
-/// (2 deg disks at 50, 35 and 25 deg; as four do, and sixteen 98 to 100 %), and 76 to 89
-/// % for the three lowered to 15, 20 and 12 deg (four 62 to 82 %, sixteen 84 to 92 %).
+/// 16), sixteen sectors answer 98 to 100 % for its three lamps (2 deg disks at 50, 35
+/// and 25 deg) turned 20, 150 and 250 deg (four 97 to 100 %), and 84 to 92 % for the
+/// three lowered to 15, 20 and 12 deg turned 20, 75, 150 and 250 deg (four 62 to 82 %).
 #[derive(Clone, Debug)]
 pub struct HorizonsBetween {
     /// Per sector, the least `c(u - u_k)` of its azimuths, with its margins.
@@ -652,6 +653,40 @@ impl HorizonsBetween {
         let at_least_zero = |t: f32| if t.is_nan() { f64::INFINITY } else { f64::from(t.max(0.0)) };
         let each = found.iter().zip(&self.margins).map(|(&t, margin)| at_least_zero(t) + margin);
         each.fold(f64::INFINITY, f64::min)
+    }
+
+    /// The sectors that can bound a horizon below `foot`, those whose margin is: a
+    /// sector's bound is its margin plus a tangent `>= 0`, so no other can. A turn asks
+    /// whether [`Self::tangent_at_most`] is below a lamp's foot at every pixel, and of the
+    /// W = 16 sectors one to six can answer it for the Sun-lamp scene's lamps (the
+    /// azimuths nearest the lamp's; one or two for the lowest lamps).
+    pub fn under(&self, foot: f64) -> HorizonsUnder {
+        let sectors = self.margins.iter().enumerate().filter(|&(_, &margin)| margin < foot);
+        HorizonsUnder { foot, count: self.margins.len(), sectors: sectors.map(|(s, &margin)| (s, margin)).collect() }
+    }
+}
+
+/// Whether the horizons found at a receiver bound its horizon along an azimuth below a
+/// foot ([`HorizonsBetween::under`]).
+#[derive(Clone, Debug)]
+pub struct HorizonsUnder {
+    foot: f64,
+    /// How many sectors a receiver's horizons hold.
+    count: usize,
+    /// The sectors whose margin is below the foot, with it.
+    sectors: Vec<(usize, f64)>,
+}
+
+impl HorizonsUnder {
+    /// [`HorizonsBetween::tangent_at_most`]`(p, found) < foot`, read from the sectors that
+    /// can make it so (the same answer: a value that is not a number bounds nothing).
+    pub fn holds(&self, p: [f64; 3], found: &[f32]) -> bool {
+        if found.len() != self.count || !p.iter().all(|v| v.is_finite()) {
+            return false;
+        }
+        let below =
+            |&(s, margin): &(usize, f64)| !found[s].is_nan() && f64::from(found[s].max(0.0)) + margin < self.foot;
+        self.sectors.iter().any(below)
     }
 }
 
@@ -1030,6 +1065,15 @@ impl HorizonPyramid {
         !(band.below > 0.0 && self.steepest_climb(dir) < band.below)
     }
 
+    /// Whether a horizon marched along any azimuth may reach `band` ([`Self::may_rise_into`]
+    /// for some unit azimuth): a Sun lamp turned about the vertical keeps its band, so
+    /// where this is false no turn of it marches the field. Each corner's `a |d_x| + b
+    /// |d_y|` is at most `hypot(a, b)` over unit `d` (Cauchy-Schwarz), with the same
+    /// margins as [`Self::steepest_climb`].
+    pub fn may_rise_at_any_azimuth(&self, band: ElevationBand) -> bool {
+        !(band.below > 0.0 && self.climb_bound(|[a, b]| a.hypot(*b)) < band.below)
+    }
+
     /// At least the tangent of every step along the unit azimuth `dir` from any receiver, on
     /// the field or above it: a step's climb is its level's read less the receiver's read
     /// of that level and its height above the surface, and a read rises along `dir` at
@@ -1043,23 +1087,30 @@ impl HorizonPyramid {
     /// cells, would give 0.44, 0.57 and 0.50. For a `dir` of another length, the bound is
     /// that length times the unit one's, with the same rounding ([`HorizonsBetween`]).
     pub fn steepest_climb(&self, dir: [f64; 2]) -> f64 {
+        self.climb_bound(|[a, b]| a * dir[0].abs() + b * dir[1].abs())
+    }
+
+    /// The largest `rise` of the climb bound's corners ([`ClimbBound`]), with a relative
+    /// margin of 1e-6 for its rounding and the rounding of the tangents.
+    fn climb_bound(&self, rise: impl Fn(&[f64; 2]) -> f64) -> f64 {
         let climbs = self.climbs.get_or_init(|| ClimbBound::new(&self.levels, &self.peaks, &self.steps));
-        let rise = |[a, b]: &[f64; 2]| a * dir[0].abs() + b * dir[1].abs();
         let steepest = climbs.corners.iter().map(rise).fold(0.0, f64::max);
         steepest + 1e-6 * steepest + climbs.rounding
     }
 
     /// What the horizons a shade found at a receiver ([`Self::horizon_tangents`], kept as
-    /// [`Self::sector_maxima`]) bound along the unit azimuth `dir` ([`HorizonsBetween`]):
-    /// `None` where the horizon is the B-spline over scale (not the steps' maximum), `dir`
-    /// is not finite or the step table is empty.
-    pub fn horizons_between(&self, dir: [f64; 2]) -> Option<HorizonsBetween> {
-        if self.settings.scale_max != ScaleMax::Steps || self.steps.is_empty() || !dir.iter().all(|v| v.is_finite()) {
+    /// the highest of each of `sectors` runs of azimuths, [`Self::sector_maxima`]) bound
+    /// along the unit azimuth `dir` ([`HorizonsBetween`]): `None` where the horizon is the
+    /// B-spline over scale (not the steps' maximum), `dir` is not finite, the step table
+    /// is empty or `sectors` is not 1 to W.
+    pub fn horizons_between(&self, dir: [f64; 2], sectors: usize) -> Option<HorizonsBetween> {
+        let (steps, finite) = (self.settings.scale_max == ScaleMax::Steps, dir.iter().all(|v| v.is_finite()));
+        if !steps || self.steps.is_empty() || !finite || !(1..=self.directions.len()).contains(&sectors) {
             return None;
         }
-        let mut margins = vec![f64::INFINITY; self.horizon_sectors()];
+        let mut margins = vec![f64::INFINITY; sectors];
         for (k, u) in self.directions.iter().enumerate() {
-            let margin = &mut margins[self.sector_of(k)];
+            let margin = &mut margins[self.sector_of(k, sectors)];
             *margin = margin.min(self.steepest_climb([dir[0] - u[0], dir[1] - u[1]]));
         }
         // `steepest_climb` holds the rounding of one march's tangent; this, the other's.
@@ -1073,10 +1124,10 @@ impl HorizonPyramid {
         HORIZON_SECTORS.min(self.directions.len())
     }
 
-    /// The sector of azimuth `k`: `k S / W` of `S` sectors, each a run of neighbouring
+    /// The sector of azimuth `k`: `k S / W` of `S = sectors`, each a run of neighbouring
     /// azimuths.
-    fn sector_of(&self, k: usize) -> usize {
-        k * self.horizon_sectors() / self.directions.len()
+    fn sector_of(&self, k: usize, sectors: usize) -> usize {
+        k * sectors / self.directions.len()
     }
 
     /// The highest of each sector's horizon `tangents` (W of them, [`Self::horizon_tangents`]),
@@ -1084,7 +1135,7 @@ impl HorizonPyramid {
     pub fn sector_maxima(&self, tangents: &[f64], out: &mut [f32]) {
         let mut highest = [f64::NEG_INFINITY; HORIZON_SECTORS];
         for (k, &tangent) in tangents.iter().enumerate().take(self.directions.len()) {
-            let sector = &mut highest[self.sector_of(k)];
+            let sector = &mut highest[self.sector_of(k, self.horizon_sectors())];
             // NaN kept (`f64::max` would drop it), where it bounds nothing.
             *sector = if tangent.is_nan() || sector.is_nan() { f64::NAN } else { sector.max(tangent) };
         }
@@ -2254,7 +2305,9 @@ mod tests {
     /// and outside a bumpy field, a gentle one and a plane rising 0.4 along x and 0.25 along
     /// y, 24 azimuths. On the plane the bound is tight (the steepest step within 10 % of it
     /// where the azimuth climbs both axes; the coarser levels' edges climb a little more
-    /// steeply than the plane). Where the bound lies below a band's foot,
+    /// steeply than the plane), and the bound over every azimuth
+    /// ([`HorizonPyramid::may_rise_at_any_azimuth`]) is at least each one's and below the
+    /// same ceilings. Where the bound lies below a band's foot,
     /// `horizons_against` answers `Below` without a march, and the f64 march, stops and
     /// all, finds the horizon there too (below the foot or at it, which hide none of a disk
     /// alike).
@@ -2309,6 +2362,12 @@ mod tests {
                 if name == "plane" && dir[0] > 0.0 && dir[1] > 0.0 {
                     assert!(steepest_step >= 0.9 * bound, "{dir:?}: {steepest_step} against {bound}");
                 }
+                // Any azimuth's bound is at least this one's, and within the field's ceiling.
+                let any_azimuth = pyramid.climb_bound(|[a, b]| a.hypot(*b));
+                assert!(bound <= any_azimuth && any_azimuth < steepest, "{name} {dir:?}: {bound}, {any_azimuth}");
+                let foot = |below: f64| ElevationBand { below, above: f64::INFINITY };
+                assert!(pyramid.may_rise_at_any_azimuth(foot(bound)), "{name} {dir:?}");
+                assert!(!pyramid.may_rise_at_any_azimuth(foot(any_azimuth * (1.0 + 1e-9))), "{name}");
                 let band = ElevationBand { below: bound * (1.0 + 1e-9), above: f64::INFINITY };
                 let mut early = vec![HorizonAgainst::At(-1.0); points.len()];
                 pyramid.horizons_against(&points, dir, f64::INFINITY, band, &mut early);
@@ -2334,8 +2393,10 @@ mod tests {
     /// march against a band whose foot is the bound finds the horizon at or below it. On
     /// the gentle field (climbing at most 0.3, every azimuth within 11.25 deg of one of the
     /// W) the bound is within 0.25 of the steepest step (0.064 from all sixteen azimuths).
-    /// A point that is not finite, horizons of another count, one not a number and the
-    /// B-spline over scale bound nothing; a sector with a horizon not a number keeps it.
+    /// Kept as quarters (frames written before sixteen sectors), they bound it too. A point
+    /// that is not finite, horizons of another count, one not a number and the B-spline
+    /// over scale bound nothing, nor do 0 sectors or more than W; a sector with a horizon
+    /// not a number keeps it.
     #[test]
     fn the_horizons_found_bound_those_between_their_azimuths() {
         for (name, scale) in [("bumpy", 1.0f32), ("gentle", 0.05)] {
@@ -2347,7 +2408,8 @@ mod tests {
             for k in 0..48 {
                 let dir = (k as f64 * std::f64::consts::TAU / 48.0 + 0.05).sin_cos();
                 let dir = [dir.1, dir.0];
-                let between = pyramid.horizons_between(dir).expect("the steps' maximum");
+                let between = pyramid.horizons_between(dir, sectors).expect("the steps' maximum");
+                let between_quarters = pyramid.horizons_between(dir, 4).expect("four sectors of sixteen");
                 let mut bounds = Vec::with_capacity(points.len());
                 for &p in &points {
                     let mut tangents = [0.0f64; 64];
@@ -2358,9 +2420,21 @@ mod tests {
                         assert!(f64::from(found[k * sectors / w]) >= tangent, "{name} {p:?}: sector of azimuth {k}");
                     }
                     let bound = between.tangent_at_most(p, &found);
+                    // At the bound, just above it (the next f64, the bound being > 0), and two feet.
+                    for foot in [bound, f64::from_bits(bound.to_bits() + 1), 0.3, 0.0] {
+                        assert_eq!(between.under(foot).holds(p, &found), bound < foot, "{name} {p:?}: {foot}");
+                    }
                     let marched = every_step_tangent(&pyramid, p, dir, f64::INFINITY);
                     assert!(marched <= bound, "{name} {p:?} {dir:?}: a step climbs {marched}, above {bound}");
                     loosest = loosest.max(bound - marched.max(0.0));
+                    // Kept as quarters, as frames were before sixteen sectors: the highest of
+                    // each run of four azimuths bounds the march too, less tightly.
+                    let quarters: Vec<f32> = found
+                        .chunks(sectors / 4)
+                        .map(|run| run.iter().copied().fold(f32::NEG_INFINITY, f32::max))
+                        .collect();
+                    let by_quarters = between_quarters.tangent_at_most(p, &quarters);
+                    assert!(marched <= by_quarters && bound <= by_quarters, "{name} {p:?} {dir:?}: {by_quarters}");
                     #[cfg(target_arch = "x86_64")]
                     if pyramid.in_lanes {
                         let lane = lanes_every_step(&pyramid, p, dir, pyramid.steps.len());
@@ -2380,7 +2454,7 @@ mod tests {
             if name == "gentle" {
                 assert!(loosest < 0.25, "the gentle field's bound is {loosest} above a horizon");
             }
-            let between = pyramid.horizons_between([1.0, 0.0]).unwrap();
+            let between = pyramid.horizons_between([1.0, 0.0], sectors).unwrap();
             let (p, flat) = (points[0], vec![0.0f32; sectors]);
             assert!(between.tangent_at_most(p, &flat).is_finite());
             assert_eq!(between.tangent_at_most([f64::NAN, 0.0, 0.0], &flat), f64::INFINITY);
@@ -2388,12 +2462,18 @@ mod tests {
             let mut not_a_number = flat.clone();
             not_a_number.fill(f32::NAN);
             assert_eq!(between.tangent_at_most(p, &not_a_number), f64::INFINITY);
+            let under = between.under(f64::INFINITY);
+            assert!(under.holds(p, &flat) && !under.holds(p, &flat[1..]) && !under.holds(p, &not_a_number));
+            assert!(!under.holds([f64::NAN, 0.0, 0.0], &flat));
             let mut kept = vec![0.0f32; sectors];
             let first_not_a_number: Vec<f64> = (0..w).map(|k| if k == 0 { f64::NAN } else { 0.1 }).collect();
             pyramid.sector_maxima(&first_not_a_number, &mut kept);
             assert!(kept[0].is_nan() && kept[1..].iter().all(|&t| t >= 0.1), "{kept:?}");
             let bspline = HorizonSettings { scale_max: ScaleMax::BSpline, ..HorizonSettings::default() };
-            assert!(HorizonPyramid::new(&field, bspline).unwrap().horizons_between([1.0, 0.0]).is_none());
+            assert!(HorizonPyramid::new(&field, bspline).unwrap().horizons_between([1.0, 0.0], sectors).is_none());
+            assert!(
+                pyramid.horizons_between([1.0, 0.0], 0).is_none() && pyramid.horizons_between([1.0, 0.0], 17).is_none()
+            );
         }
     }
 

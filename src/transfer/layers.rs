@@ -2,7 +2,6 @@
 //! them back (the table in the [module doc](super)).
 
 use super::lobe_code;
-use crate::heightfield::HORIZON_SECTORS;
 use crate::scene::exr_read::{read_with_headers, ChannelFile};
 use crate::scene::exr_zip::Target;
 use crate::scene::output::{OutputChannel, SampleType};
@@ -110,7 +109,17 @@ pub struct TransferHeader {
     /// written before it was recorded.
     #[serde(default)]
     pub light_file_crc: Option<u32>,
+    /// How many sectors of azimuths the `horizon` layer keeps per pixel
+    /// ([`crate::heightfield::HorizonPyramid::horizon_sectors`]) where the frame holds it;
+    /// `None` without the layer, and in files written before the count was recorded
+    /// ([`UNRECORDED_SECTORS`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub horizon_sectors: Option<usize>,
 }
+
+/// The sectors the `horizon` layer kept before its header recorded them: quarters, then
+/// eighths of the W azimuths (or W where fewer), known by how many channels it holds.
+pub const UNRECORDED_SECTORS: [usize; 2] = [4, 8];
 
 /// Most prefiltered lobes a frame may list (one per Phong material).
 pub const MAX_LOBES: usize = 1024;
@@ -434,9 +443,14 @@ impl TransferFrame {
         self.header.lobes.iter().enumerate().map(|(j, lobe)| (lobe.material, j)).collect()
     }
 
+    /// How many sectors of azimuths the `horizon` layer keeps per pixel, 0 without it.
+    pub fn horizon_sectors(&self) -> usize {
+        self.horizons.as_ref().map_or(0, |layer| layer.len() / (self.width * self.height).max(1))
+    }
+
     /// The frame's rows, each to write its pixels into (in parallel).
     pub fn rows_mut(&mut self) -> Vec<TransferRow<'_>> {
-        let (width, count) = (self.width.max(1), self.count());
+        let (width, count, sectors) = (self.width.max(1), self.count(), self.horizon_sectors());
         let sh = width * count;
         let (mut diffuse, mut unoccluded) = (self.diffuse.chunks_mut(sh), self.unoccluded.chunks_mut(sh));
         let mut heightfield = self.heightfield.as_deref_mut().map(|layer| layer.chunks_mut(sh));
@@ -452,7 +466,6 @@ impl TransferFrame {
         let mut glossy_direction = self.glossy_direction.chunks_mut(width);
         let mut glossy_weight = self.glossy_weight.chunks_mut(width);
         let mut alpha = self.alpha.chunks_mut(width);
-        let sectors = self.horizons.as_ref().map_or(0, |layer| layer.len() / (width * self.height).max(1));
         let mut horizons = self.horizons.as_deref_mut().map(|layer| layer.chunks_mut((width * sectors).max(1)));
         let row = "every layer has a row per row of the frame";
         (0..self.height)
@@ -602,15 +615,42 @@ impl TransferFrame {
                  where it does",
             ));
         }
-        let horizon_sectors = match (channels.has(&horizon_channels(1)[0]), &header.settings) {
-            (false, _) => 0,
-            (true, Some(settings)) if header.heightfield && !header.sun_lamps.is_empty() => {
-                HORIZON_SECTORS.min(settings.horizon.directions)
+        // The sectors the header records (a missing channel is then named below), or in
+        // a file that holds the layer without recording them, its channels if they are as
+        // many as such a file kept.
+        let horizon_sectors = match (channels.has(&horizon_channels(1)[0]), header.horizon_sectors, &header.settings) {
+            (false, None, _) => 0,
+            (_, recorded, Some(settings)) if header.heightfield && !header.sun_lamps.is_empty() => {
+                let azimuths = settings.horizon.directions;
+                let held = || (0..=azimuths).take_while(|k| channels.has(&format!("horizon.{k}"))).count();
+                match recorded {
+                    Some(sectors) if (1..=azimuths).contains(&sectors) => sectors,
+                    Some(sectors) => {
+                        return Err(SceneError::invalid(
+                            file,
+                            format!("keeps its horizons in {sectors} sectors, not 1 to its {azimuths} azimuths"),
+                        ))
+                    }
+                    None => match held() {
+                        held if UNRECORDED_SECTORS.iter().any(|&kept| held == kept.min(azimuths)) => held,
+                        held => {
+                            return Err(SceneError::invalid(
+                                file,
+                                format!(
+                                    "holds {held} horizon channels from horizon.0 without recording its sectors, \
+                                     where such a file kept {} of its {azimuths} azimuths",
+                                    UNRECORDED_SECTORS.map(|kept| kept.min(azimuths).to_string()).join(" or ")
+                                ),
+                            ))
+                        }
+                    },
+                }
             }
-            (true, _) => {
+            _ => {
                 return Err(SceneError::invalid(
                     file,
-                    "holds horizon channels where its header lists no Sun lamp over a height field, or no settings",
+                    "holds horizon channels, or records their sectors, where its header lists no Sun lamp over a \
+                     height field, or no settings",
                 ))
             }
         };

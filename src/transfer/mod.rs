@@ -22,7 +22,7 @@
 //! | `glossy_lobe.V` | float | what the glossy term reads: 0 nothing, 1 the light itself (mirror, background), 2 `sh_specular`, `3 + j` the header's prefiltered lobe `j` |
 //! | `glossy_direction.{X,Y,Z}` | float | the direction it reads along: the mirrored view, or the camera ray |
 //! | `glossy_weight.{X,Y}` | colour | prefiltered lobes: `A share cone` and `A (1 - share)` |
-//! | `horizon.0` to `horizon.7` | half | the height field's highest horizon tangent over each eighth of the W azimuths `2 pi k / W` (`k S / W` the sector, `S = min(8, W)` of them), rounded up, infinite where none was marched ([`crate::heightfield::HorizonPyramid::sector_maxima`]); only in frames with a Sun lamp and a height field |
+//! | `horizon.0` to `horizon.<S-1>` | half | the height field's highest horizon tangent over each of `S` sectors of the W azimuths `2 pi k / W` (`k S / W` the sector; `S = min(16, W)`, each azimuth's own by default, recorded in the header; 4 or 8 in files that do not record it, as many as they hold), rounded up, infinite where none was marched ([`crate::heightfield::HorizonPyramid::sector_maxima`]); only in frames whose height field may shadow a Sun lamp at some turn ([`crate::heightfield::HorizonPyramid::may_rise_at_any_azimuth`]) |
 //!
 //! `D` is the diffuse lobe about the normal, `V` the log visibility, `T` the tangent and
 //! ground planes alone. Relit, per pixel and colour channel, with `L` the light's SH vector:
@@ -47,16 +47,17 @@
 //! frame was shaded with (map file, strength, Mapping rotation, turn), the window, whether
 //! the ground plane hides the lower hemisphere, the prefiltered lobes, the scene's Sun
 //! lamps as rendered (azimuth and elevation), the render's `--light-rotation` and its
-//! shading settings, and checksums of what the Sun lamps were shaded from.
+//! shading settings, checksums of what the Sun lamps were shaded from, and the `horizon`
+//! layer's sectors.
 //!
 //! # Size
 //!
 //! Per pixel at order `n`, in half floats: `n^2` per transfer layer (diffuse, unoccluded,
 //! specular with a Phong material, heightfield and blockers with both occluders), 14
-//! colour values and 4 floats, and 6 colour values more with a Sun lamp, with 8 halves
-//! more where a height field may shadow it. At order 4 with everything but a Sun lamp,
-//! `5 x 16 x 2 + 14 x 2 + 4 x 4 = 204` bytes, 106 MB uncompressed at 960 x 540 before ZIP;
-//! a diffuse scene of spheres only, `2 x 16 x 2 + 44 = 108` bytes.
+//! colour values and 4 floats, and 6 colour values more with a Sun lamp, with 16 halves
+//! more where a height field may shadow it at some turn. At order 4 with everything but a
+//! Sun lamp, `5 x 16 x 2 + 14 x 2 + 4 x 4 = 204` bytes, 106 MB uncompressed at 960 x 540
+//! before ZIP; a diffuse scene of spheres only, `2 x 16 x 2 + 44 = 108` bytes.
 //!
 //! # What a relight cannot keep
 //!

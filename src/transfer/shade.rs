@@ -4,10 +4,11 @@
 use super::layers::{PixelTransfer, PrefilteredLobe, ShConvention, TransferFrame, TransferHeader};
 use super::SunLampInputs;
 use crate::heightfield::{HorizonPyramid, ScaleMax};
-use crate::scene::{Frame, Scene};
+use crate::scene::{Frame, Scene, SunLight};
 use crate::sh::Real;
 use crate::shade::compositing::{assemble, Pixel, ShadedPasses};
 use crate::shade::frame::mirrored_suns;
+use crate::shade::sun::SunDisk;
 use crate::shade::{
     pixel_source, work_of, FramePlan, Occluders, PixelSource, PixelWork, PlannedKernel, ShadeError, ShadingKernel,
     ShadingSettings,
@@ -56,6 +57,7 @@ fn header<T: Real>(kernel: &ShadingKernel<T>, plan: &FramePlan) -> TransferHeade
         sun_lamp_inputs: (!plan.frame.suns.is_empty()).then(|| SunLampInputs::of(plan.scene, plan.frame)),
         view: plan.scene.view.absolute_spec(&plan.scene.dir),
         light_file_crc: plan.frame.light_file_crc,
+        horizon_sectors: None,
     }
 }
 
@@ -68,10 +70,16 @@ fn walk<T: Real>(kernel: &ShadingKernel<T>, occluders: Occluders, plan: &FramePl
     let scene_suns = frame.suns.len();
     // Each row's transfer is written in place, into layers allocated once.
     // The horizons marched bound those of the Sun lamps a relight turns, in frames whose
-    // lamps the height field may shadow ([`crate::heightfield::HorizonsBetween`]).
-    let bounding =
-        |pyramid: &&HorizonPyramid| !header.sun_lamps.is_empty() && pyramid.settings().scale_max == ScaleMax::Steps;
+    // lamps the height field may shadow at some turn ([`crate::heightfield::HorizonsBetween`]).
+    let shadowed = |pyramid: &HorizonPyramid, sun: &SunLight| {
+        let along = SunDisk::new(sun).disk.march_band();
+        along.is_some_and(|along| pyramid.may_rise_at_any_azimuth(along.band))
+    };
+    let bounding = |pyramid: &&HorizonPyramid| {
+        pyramid.settings().scale_max == ScaleMax::Steps && frame.suns.iter().any(|sun| shadowed(pyramid, sun))
+    };
     let horizon_sectors = occluders.horizons.filter(bounding).map_or(0, HorizonPyramid::horizon_sectors);
+    let header = TransferHeader { horizon_sectors: (horizon_sectors > 0).then_some(horizon_sectors), ..header };
     let mut transfer = TransferFrame::new(g.width, g.height, header, both, phong, horizon_sectors);
     let lobes = transfer.lobe_indices();
     let rows: Vec<Vec<Pixel>> = transfer

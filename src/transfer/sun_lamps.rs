@@ -17,7 +17,7 @@
 //! that mirrors a Sun lamp is read along its mirror direction, as the render reads it.
 
 use super::layers::{TransferFrame, TransferHeader};
-use crate::heightfield::{HorizonAgainst, HorizonPyramid, HorizonsBetween};
+use crate::heightfield::{HorizonAgainst, HorizonPyramid, HorizonsUnder};
 use crate::scene::light::{euler_xyz, rotate};
 use crate::scene::{Frame, HeightMap, Material, Scene, SceneError, SunLight};
 use crate::sh::Real;
@@ -252,14 +252,13 @@ impl SunLampTurn {
         }
         let [diffuse, specular, rendered_diffuse, rendered_specular] = layers.map(|layer| taken(layer, pixels));
         let (mut diffuse, mut specular) = (diffuse.into_owned(), specular.into_owned());
-        let sectors = prepared.pyramid.as_ref().map_or(0, |pyramid| pyramid.horizon_sectors());
         let lamps = Lamps {
             width: frame.width,
             pixels,
             diffuse: &mut diffuse,
             specular: &mut specular,
             rendered: [&rendered_diffuse, &rendered_specular],
-            horizons: frame.horizons.as_deref().filter(|layer| layer.len() == frame.width * frame.height * sectors),
+            horizons: frame.horizons.as_deref().map(|layer| (layer, frame.horizon_sectors())),
         };
         let shaded = Shaded {
             materials: &self.scene.materials,
@@ -390,14 +389,14 @@ pub fn describe_sun_lamps(lamps: &[[f64; 2]]) -> String {
 
 /// A frame's `lamps_*` layers and its `sun_lamps_*` (`rendered`, diffuse and specular),
 /// at every pixel, rows of `width`, or at `pixels` alone; its `horizon` layer where it
-/// holds one for the pyramid's sectors of azimuths (every pixel's).
+/// holds one (every pixel's), with its sectors of azimuths.
 struct Lamps<'a> {
     width: usize,
     pixels: Option<&'a [usize]>,
     diffuse: &'a mut [[f32; 3]],
     specular: &'a mut [[f32; 3]],
     rendered: [&'a [[f32; 3]]; 2],
-    horizons: Option<&'a [f32]>,
+    horizons: Option<(&'a [f32], usize)>,
 }
 
 /// Pixels shaded together: their horizons along each turned lamp are marched eight at a
@@ -427,16 +426,17 @@ fn move_lamps<T: Real>(kernel: &ShadingKernel<T>, shaded: Shaded, turned: &[SunL
             lamps[k] = (lamps[k] - rendered[k] + tint[k] * turned[k]).max(0.0);
         }
     };
-    let (width, pixels, horizons) = (lamps.width, lamps.pixels, lamps.horizons);
-    let sectors = pyramid.map_or(0, |pyramid| pyramid.horizon_sectors());
-    // Per disk, what the render's horizons bound along it, made once for every chunk:
-    // where the frame keeps them and the field may rise into the disk.
-    let between: Vec<Option<HorizonsBetween>> = disks
+    let (width, pixels) = (lamps.width, lamps.pixels);
+    let (horizons, sectors) = lamps.horizons.map_or((None, 0), |(layer, sectors)| (Some(layer), sectors));
+    // Per disk, whether the render's horizons bound a pixel's below its foot, made once
+    // for every chunk: where the frame keeps them and the field may rise into the disk.
+    let under: Vec<Option<HorizonsUnder>> = disks
         .iter()
         .map(|disk| {
             let (pyramid, along) = (pyramid?, disk.disk.march_band()?);
             let marched = horizons.is_some() && pyramid.may_rise_into(along.azimuth, along.band);
-            marched.then(|| pyramid.horizons_between(along.azimuth)).flatten()
+            let between = marched.then(|| pyramid.horizons_between(along.azimuth, sectors)).flatten();
+            between.map(|between| between.under(along.band.below))
         })
         .collect();
     let [rendered_diffuse, rendered_specular] = lamps.rendered;
@@ -451,7 +451,7 @@ fn move_lamps<T: Real>(kernel: &ShadingKernel<T>, shaded: Shaded, turned: &[SunL
             Some(layer) => indices.iter().map(|&i| &layer[i * sectors..(i + 1) * sectors]).collect(),
             None => Vec::new(),
         };
-        let known = chunk_known(pyramid, blockers, &disks, &sources, &found, &between);
+        let known = chunk_known(pyramid, blockers, &disks, &sources, &found, &under);
         for (i, source) in sources.iter().enumerate() {
             let (d, s, rd, rs) = (&mut diffuse[i], &mut specular[i], rendered_diffuse[i], rendered_specular[i]);
             match *source {
@@ -479,8 +479,8 @@ const GROUP: usize = 16;
 /// second) before it is shaded ([`KnownAlongSun`]), found with the pixels beside it:
 ///
 /// - the height field's horizon, below the disk where the horizons its render found at
-///   the pixel (`found`, per source where given) bound it there (`between`, per disk:
-///   [`HorizonsBetween`], the same answer the march gives), else
+///   the pixel (`found`, per source where given) bound it there (`under`, per disk:
+///   [`crate::heightfield::HorizonsBetween`], the same answer the march gives), else
 ///   marched together where the pixel is a surface that its tangent plane does not
 ///   wholly hide the disk from (the rest are not read:
 ///   [`crate::shade::sun::DiskDirections::seen_against`] returns first); where the field
@@ -494,7 +494,7 @@ fn chunk_known(
     disks: &[SunDisk],
     sources: &[PixelSource],
     found: &[&[f32]],
-    between: &[Option<HorizonsBetween>],
+    under: &[Option<HorizonsUnder>],
 ) -> Vec<KnownAlongSun> {
     let unknown = KnownAlongSun { horizon: pyramid.map(|_| HorizonAgainst::Below), blockers: blockers.is_some() };
     let mut known = vec![unknown; sources.len() * disks.len()];
@@ -525,7 +525,7 @@ fn chunk_known(
         for (i, source) in sources.iter().enumerate() {
             if let PixelSource::Surface { point, .. } = source {
                 // Below the disk's foot, a horizon hides none of it (`ElevationBand`).
-                if between[s].as_ref().is_some_and(|b| b.tangent_at_most(point.position, found[i]) < along.band.below) {
+                if under[s].as_ref().is_some_and(|under| under.holds(point.position, found[i])) {
                     known[i * disks.len() + s].horizon = Some(HorizonAgainst::Below);
                     continue;
                 }
