@@ -646,12 +646,10 @@ impl HorizonsBetween {
     /// infinite where `p` is not finite (a march answers it as unoccluded) or `found` is
     /// not one value per sector.
     pub fn tangent_at_most(&self, p: [f64; 3], found: &[f32]) -> f64 {
-        if found.len() != self.margins.len() || !p.iter().all(|v| v.is_finite()) {
+        if !bounds_at(p, found, self.margins.len()) {
             return f64::INFINITY;
         }
-        // A value that is not a number bounds nothing (`f32::max` would make it 0).
-        let at_least_zero = |t: f32| if t.is_nan() { f64::INFINITY } else { f64::from(t.max(0.0)) };
-        let each = found.iter().zip(&self.margins).map(|(&t, margin)| at_least_zero(t) + margin);
+        let each = found.iter().zip(&self.margins).map(|(&t, &margin)| sector_bound(t, margin));
         each.fold(f64::INFINITY, f64::min)
     }
 
@@ -681,12 +679,24 @@ impl HorizonsUnder {
     /// [`HorizonsBetween::tangent_at_most`]`(p, found) < foot`, read from the sectors that
     /// can make it so (the same answer: a value that is not a number bounds nothing).
     pub fn holds(&self, p: [f64; 3], found: &[f32]) -> bool {
-        if found.len() != self.count || !p.iter().all(|v| v.is_finite()) {
-            return false;
-        }
-        let below =
-            |&(s, margin): &(usize, f64)| !found[s].is_nan() && f64::from(found[s].max(0.0)) + margin < self.foot;
-        self.sectors.iter().any(below)
+        bounds_at(p, found, self.count)
+            && self.sectors.iter().any(|&(s, margin)| sector_bound(found[s], margin) < self.foot)
+    }
+}
+
+/// Whether the horizons `found` at `p` bound anything: `p` finite (a march answers it as
+/// unoccluded) and one value per sector of `count`.
+fn bounds_at(p: [f64; 3], found: &[f32], count: usize) -> bool {
+    found.len() == count && p.iter().all(|v| v.is_finite())
+}
+
+/// A sector's bound from its highest tangent `t`: `max(t, 0)` plus its `margin`, infinite
+/// for a `t` that is not a number, which bounds nothing (`f32::max` would make it 0).
+fn sector_bound(t: f32, margin: f64) -> f64 {
+    if t.is_nan() {
+        f64::INFINITY
+    } else {
+        f64::from(t.max(0.0)) + margin
     }
 }
 

@@ -391,8 +391,8 @@ impl TransferRow<'_> {
 
 impl TransferFrame {
     /// A frame of `width` x `height` with the optional layers the frame has, every value
-    /// zero (the horizons infinite, `horizon_sectors` per pixel where not 0), to write
-    /// pixels into row by row ([`rows_mut`](Self::rows_mut)).
+    /// zero (the horizons infinite, `horizon_sectors` per pixel where not 0, which its
+    /// header records), to write pixels into row by row ([`rows_mut`](Self::rows_mut)).
     pub fn new(
         width: usize,
         height: usize,
@@ -408,7 +408,7 @@ impl TransferFrame {
         Self {
             width,
             height,
-            header,
+            header: TransferHeader { horizon_sectors: (horizon_sectors > 0).then_some(horizon_sectors), ..header },
             diffuse: vec![0.0; coefficients],
             unoccluded: vec![0.0; coefficients],
             heightfield: layer(heightfield_and_blockers),
@@ -535,7 +535,7 @@ impl TransferFrame {
             }
         }
         if let Some(values) = &self.horizons {
-            let sectors = values.len() / self.alpha.len().max(1);
+            let sectors = self.horizon_sectors();
             for (k, name) in horizon_channels(sectors).into_iter().enumerate() {
                 channels.push(OutputChannel::interleaved(name, SampleType::Half, values, sectors, k));
             }
@@ -618,11 +618,11 @@ impl TransferFrame {
         // The sectors the header records (a missing channel is then named below), or in
         // a file that holds the layer without recording them, its channels if they are as
         // many as such a file kept.
-        let horizon_sectors = match (channels.has(&horizon_channels(1)[0]), header.horizon_sectors, &header.settings) {
+        let horizon_sectors = match (channels.has(&horizon_channel(0)), header.horizon_sectors, &header.settings) {
             (false, None, _) => 0,
             (_, recorded, Some(settings)) if header.heightfield && !header.sun_lamps.is_empty() => {
                 let azimuths = settings.horizon.directions;
-                let held = || (0..=azimuths).take_while(|k| channels.has(&format!("horizon.{k}"))).count();
+                let held = || (0..=azimuths).take_while(|&k| channels.has(&horizon_channel(k))).count();
                 match recorded {
                     Some(sectors) if (1..=azimuths).contains(&sectors) => sectors,
                     Some(sectors) => {
@@ -847,9 +847,14 @@ fn every_value(values: &[f32], test: impl Fn(f32) -> bool + Sync) -> bool {
     values.par_chunks(1 << 14).all(|chunk| chunk.iter().fold(true, |all, &x| all & test(x)))
 }
 
+/// The channel of sector `k`'s horizon tangents, `horizon.k`.
+fn horizon_channel(k: usize) -> String {
+    format!("horizon.{k}")
+}
+
 /// The channels of `sectors` horizon tangents per pixel, `horizon.0` onwards.
 fn horizon_channels(sectors: usize) -> Vec<String> {
-    (0..sectors).map(|k| format!("horizon.{k}")).collect()
+    (0..sectors).map(horizon_channel).collect()
 }
 
 /// The least half float at or above `tangent` (`>= 0`), as an f32: a horizon kept in the

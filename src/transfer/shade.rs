@@ -79,7 +79,6 @@ fn walk<T: Real>(kernel: &ShadingKernel<T>, occluders: Occluders, plan: &FramePl
         pyramid.settings().scale_max == ScaleMax::Steps && frame.suns.iter().any(|sun| shadowed(pyramid, sun))
     };
     let horizon_sectors = occluders.horizons.filter(bounding).map_or(0, HorizonPyramid::horizon_sectors);
-    let header = TransferHeader { horizon_sectors: (horizon_sectors > 0).then_some(horizon_sectors), ..header };
     let mut transfer = TransferFrame::new(g.width, g.height, header, both, phong, horizon_sectors);
     let lobes = transfer.lobe_indices();
     let rows: Vec<Vec<Pixel>> = transfer
