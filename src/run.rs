@@ -265,7 +265,8 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
 
 /// `logsh render`.
 pub fn render(args: &crate::cli::RenderArgs) -> Result<()> {
-    use crate::render::{check_outputs, progress::reporter, render_sequence, FrameStatus, SequenceOptions};
+    use crate::render::progress::{reporter, Command};
+    use crate::render::{check_outputs, render_sequence, FrameStatus, SequenceOptions};
     let settings = args.shading.settings()?;
     if args.threads == Some(0) {
         return Err(anyhow!("--threads 0: give at least 1, or leave it out for one thread per core"));
@@ -361,7 +362,7 @@ pub fn render(args: &crate::cli::RenderArgs) -> Result<()> {
         .num_threads(args.threads.unwrap_or(0))
         .build()
         .context("cannot start the worker threads")?;
-    let mut progress = reporter(args.progress);
+    let mut progress = reporter(args.progress, Command::Render);
     let started = Instant::now();
     let outcomes = pool.install(|| {
         eprintln!("render: shading on {}", executor.describe());
@@ -382,7 +383,7 @@ pub fn render(args: &crate::cli::RenderArgs) -> Result<()> {
     let list: Vec<String> = failed
         .iter()
         .map(|o| match &o.status {
-            FrameStatus::Failed { error } => format!("  frame {}: {error}", o.frame),
+            FrameStatus::Failed { error } => format!("  {}: {error}", o.label()),
             _ => unreachable!("filtered on failures"),
         })
         .collect();
@@ -408,6 +409,8 @@ pub fn info(args: &crate::cli::InfoArgs) -> Result<()> {
 /// `logsh relight`.
 pub fn relight(args: &crate::cli::RelightArgs) -> Result<()> {
     use crate::cli::SunLamps;
+    use crate::render::progress::{reporter, Command, Progress};
+    use crate::render::{FrameOutcome, FrameStatus};
     use crate::scene::ViewTransform;
     use crate::shade::ShadedPasses;
     use crate::transfer::{
@@ -431,8 +434,11 @@ pub fn relight(args: &crate::cli::RelightArgs) -> Result<()> {
     // Scenes whose scene.json does not read, which name no file: nothing is written into
     // their folders.
     let mut unread = Vec::new();
-    for file in &args.frames {
+    // Each frame's number, where its header reads, as its reports give it.
+    let mut numbers: Vec<Option<i64>> = vec![None; args.frames.len()];
+    for (number, file) in numbers.iter_mut().zip(&args.frames) {
         let Ok(header) = TransferFrame::read_header(file) else { continue };
+        *number = Some(header.frame);
         if let crate::scene::LightSource::Environment { file, .. } = &header.light {
             inputs.extend(canonical(file));
         }
@@ -477,6 +483,11 @@ pub fn relight(args: &crate::cli::RelightArgs) -> Result<()> {
     }
     let _out = CreatedDirectory::new(&args.out)?;
     let started = Instant::now();
+    let total = args.frames.len();
+    let mut progress = reporter(args.progress, Command::Relight);
+    progress.start(total);
+    // Each frame's outcome once reported.
+    let mut outcomes: Vec<Option<FrameOutcome>> = vec![None; total];
     let mut light: Option<RelightLight> = None;
     let mut warned = std::collections::HashSet::new();
     let (mut warned_of_lamps, mut warned_of_view) = (false, false);
@@ -486,10 +497,12 @@ pub fn relight(args: &crate::cli::RelightArgs) -> Result<()> {
     // at most two frames' transfer layers in memory). A frame that fails stops the
     // sequence once the frames before it are written; the first failure is reported.
     // Each frame is read into the memory of the one relit before it, and relit into that
-    // of the passes written before it (`read_reusing`, `relight_reusing`).
-    let reading = std::thread::scope(|threads| -> Result<f64> {
+    // of the passes written before it (`read_reusing`, `relight_reusing`). A frame is
+    // reported once written, from this thread, as `render` reports.
+    let (reading, relit, written) = std::thread::scope(|threads| {
         let (read_tx, read_rx) = std::sync::mpsc::sync_channel(0);
-        let (write_tx, write_rx) = std::sync::mpsc::sync_channel::<(usize, ShadedPasses, ViewTransform, String)>(0);
+        let (write_tx, write_rx) = std::sync::mpsc::sync_channel::<Relit>(0);
+        let (done_tx, done_rx) = std::sync::mpsc::channel::<(usize, FrameOutcome)>();
         let (spare_frame_tx, spare_frame_rx) = std::sync::mpsc::channel::<TransferFrame>();
         let (spare_passes_tx, spare_passes_rx) = std::sync::mpsc::channel::<ShadedPasses>();
         let reader = threads.spawn(move || {
@@ -497,34 +510,51 @@ pub fn relight(args: &crate::cli::RelightArgs) -> Result<()> {
             for file in &args.frames {
                 let t = Instant::now();
                 let frame = TransferFrame::read_reusing(file, spare_frame_rx.try_recv().ok());
-                reading += t.elapsed().as_secs_f64();
-                if read_tx.send(frame).is_err() {
+                let seconds = t.elapsed().as_secs_f64();
+                reading += seconds;
+                if read_tx.send((frame, seconds)).is_err() {
                     break;
                 }
             }
             reading
         });
         let writer = threads.spawn(move || -> Result<()> {
-            for (k, passes, view, description) in write_rx {
-                let (exr, png, json) = &outputs[k];
-                crate::render::write_passes(exr, &passes, args.colour_type)?;
-                output::write_png_preview(png, passes.width, passes.height, &passes.beauty, &view)?;
-                output::write_text(json, &description)?;
+            for Relit { index, frame, passes, view, description, seconds } in write_rx {
+                let (exr, png, json) = &outputs[index];
+                let t = Instant::now();
+                let written = crate::render::write_passes(exr, &passes, args.colour_type)
+                    .and_then(|()| output::write_png_preview(png, passes.width, passes.height, &passes.beauty, &view))
+                    .and_then(|()| output::write_text(json, &description));
+                let status = match &written {
+                    Ok(()) => FrameStatus::Done {
+                        seconds: seconds + t.elapsed().as_secs_f64(),
+                        outputs: vec![exr.clone(), png.clone(), json.clone()],
+                    },
+                    Err(e) => FrameStatus::Failed { error: format!("{e:#}") },
+                };
+                let input = Some(args.frames[index].clone());
+                done_tx.send((index, FrameOutcome { frame: Some(frame), input, status })).ok();
+                written?;
                 // The relight may have finished: then the passes are dropped here.
                 spare_passes_tx.send(passes).ok();
             }
             Ok(())
         });
+        let mut report = |(index, outcome): (usize, FrameOutcome), progress: &mut dyn Progress| {
+            progress.frame_finished(&outcome, index, total);
+            outcomes[index] = Some(outcome);
+        };
         let mut at = 0;
-        let relit = || -> Result<()> {
-            for (k, (file, frame)) in args.frames.iter().zip(read_rx).enumerate() {
+        let mut relit = || -> Result<()> {
+            for (k, (file, (frame, read_seconds))) in args.frames.iter().zip(&read_rx).enumerate() {
                 at = k;
                 let mut frame = frame?;
+                progress.frame_started(frame.header.frame, k);
                 let t = Instant::now();
                 let source = options.source(&frame.header);
                 if !light.as_ref().is_some_and(|l| l.serves(&source, &frame.header)) {
                     let built = RelightLight::new(source, &frame.header, file)?;
-                    warn_of_suns_in_sh(&built, &mut warned);
+                    warn_of_suns_in_sh(&built, &mut warned, progress.as_mut());
                     light = Some(built);
                 }
                 options.check_rendered_map(light.as_ref().expect("built above"), &frame.header, file)?;
@@ -533,7 +563,8 @@ pub fn relight(args: &crate::cli::RelightArgs) -> Result<()> {
                     match args.sun_lamps {
                         SunLamps::Keep if !warned_of_lamps => {
                             warned_of_lamps = true;
-                            warn_of_sun_lamps(file, &frame.header.sun_lamps, options.rotation);
+                            let warning = sun_lamps_kept(file, &frame.header.sun_lamps, options.rotation);
+                            progress.notice(&warning);
                         }
                         SunLamps::Keep => {}
                         SunLamps::Turn => {
@@ -550,40 +581,69 @@ pub fn relight(args: &crate::cli::RelightArgs) -> Result<()> {
                     }
                 }
                 let light = light.as_ref().expect("built above");
-                let t = Instant::now();
+                let r = Instant::now();
                 let passes = relight_reusing(&frame, light, spare_passes_rx.try_recv().ok());
-                relighting += t.elapsed().as_secs_f64();
+                relighting += r.elapsed().as_secs_f64();
                 let (view, standard) = ViewTransform::for_preview(frame.header.view.as_ref(), file);
                 if let Some(reason) = standard.filter(|_| !warned_of_view) {
                     warned_of_view = true;
-                    eprintln!("relight: {}: {reason}", file.display());
+                    progress.notice(&format!("relight: {}: {reason}", file.display()));
                 }
                 let description =
                     serde_json::to_string_pretty(&light.description(options.turn_beyond_render()))? + "\n";
-                if write_tx.send((k, passes, view, description)).is_err() {
+                let seconds = read_seconds + t.elapsed().as_secs_f64();
+                let number = frame.header.frame;
+                if write_tx.send(Relit { index: k, frame: number, passes, view, description, seconds }).is_err() {
                     break;
                 }
                 // The reader may have finished: then the frame is dropped here.
                 spare_frame_tx.send(frame).ok();
+                while let Ok(done) = done_rx.try_recv() {
+                    report(done, progress.as_mut());
+                }
             }
             Ok(())
         };
-        // A failure names the frames it leaves out.
-        let relit = relit().map_err(|e| {
-            let left: Vec<String> = args.frames[at + 1..].iter().map(|f| f.display().to_string()).collect();
-            match left.len() {
-                0 => e,
-                n => anyhow!(
-                    "{e:#}; the relight stops there, and {n} frame(s) after it are not relit: {}",
-                    left.join(", ")
-                ),
-            }
-        });
+        let relit = relit().map_err(|e| (at, e));
+        // The reader stops at its next frame, the writer after its last.
+        drop(read_rx);
         drop(write_tx);
         let written = writer.join().expect("the writer does not panic");
+        for done in done_rx {
+            report(done, progress.as_mut());
+        }
         let reading = reader.join().expect("the reader does not panic");
-        // The writer's failure is of an earlier frame than the relight's.
-        written.and(relit).map(|()| reading)
+        (reading, relit, written)
+    });
+    // The relight's failure, then the frames it stops before, are reported in order after
+    // the frames written.
+    let relit = relit.map_err(|(at, e)| {
+        let status = FrameStatus::Failed { error: format!("{e:#}") };
+        let outcome = FrameOutcome { frame: numbers[at], input: Some(args.frames[at].clone()), status };
+        progress.frame_finished(&outcome, at, total);
+        outcomes[at] = Some(outcome);
+        e
+    });
+    for (k, outcome) in outcomes.iter_mut().enumerate().filter(|(_, o)| o.is_none()) {
+        let stopped =
+            FrameOutcome { frame: numbers[k], input: Some(args.frames[k].clone()), status: FrameStatus::Stopped };
+        progress.frame_finished(&stopped, k, total);
+        *outcome = Some(stopped);
+    }
+    let outcomes: Vec<FrameOutcome> = outcomes.into_iter().flatten().collect();
+    progress.finish(&outcomes);
+    // The writer's failure is of an earlier frame than the relight's; a failure names the
+    // frames it leaves out.
+    written.and(relit).map_err(|e| {
+        let stopped: Vec<String> =
+            outcomes.iter().filter(|o| matches!(o.status, FrameStatus::Stopped)).map(FrameOutcome::label).collect();
+        match stopped.len() {
+            0 => e,
+            n => anyhow!(
+                "{e:#}; the relight stops there, and {n} frame(s) after it are not relit: {}",
+                stopped.join(", ")
+            ),
+        }
     })?;
     let (count, elapsed) = (args.frames.len(), started.elapsed().as_secs_f64());
     let per_frame = |seconds: f64| 1e3 * seconds / count as f64;
@@ -610,6 +670,7 @@ pub fn relight(args: &crate::cli::RelightArgs) -> Result<()> {
 fn warn_of_suns_in_sh(
     light: &crate::transfer::RelightLight,
     warned: &mut std::collections::HashSet<std::path::PathBuf>,
+    progress: &mut dyn crate::render::progress::Progress,
 ) {
     let crate::scene::LightSource::Environment { file, .. } = &light.source else {
         return;
@@ -618,13 +679,13 @@ fn warn_of_suns_in_sh(
         return;
     }
     for (sun, share) in light.suns_in_sh() {
-        eprintln!(
+        progress.notice(&format!(
             "relight: {} holds a sun ({}), which a relight keeps in SH with the rest of the map: its shadows \
              come out soft, where `logsh render` (--sharp-lights auto) shades them sharp; for sharp shadows, \
              render the frame again (`logsh render --light-rotation DEG` turns its light)",
             file.display(),
             describe_sun(&sun, share)
-        );
+        ));
     }
 }
 
@@ -649,19 +710,31 @@ impl Drop for CreatedDirectory<'_> {
     }
 }
 
-/// Says that a relight turning the map by `degrees` with `--sun-lamps keep` keeps the Sun
-/// lamps `sun_lamps` (azimuth and elevation, as rendered in `file`) where `logsh render
-/// --light-rotation` would turn them; once per sequence.
-fn warn_of_sun_lamps(file: &Path, sun_lamps: &[[f64; 2]], degrees: f64) {
+/// What a relight turning the map by `degrees` with `--sun-lamps keep` says of the Sun
+/// lamps `sun_lamps` (azimuth and elevation, as rendered in `file`), which it keeps where
+/// `logsh render --light-rotation` would turn them; once per sequence.
+fn sun_lamps_kept(file: &Path, sun_lamps: &[[f64; 2]], degrees: f64) -> String {
     let (lamp, stays, its) =
         if sun_lamps.len() > 1 { ("Sun lamps", "stay", "their") } else { ("Sun lamp", "stays", "its") };
-    eprintln!(
+    format!(
         "relight: {}: the scene's {lamp} ({}) {stays} as rendered, with {its} shadows (--sun-lamps keep): the \
          relight turns the map alone, where `logsh render --light-rotation {degrees}` and `logsh relight \
          --sun-lamps turn` turn Sun lamps with it and move their shadows",
         file.display(),
         crate::transfer::describe_sun_lamps(sun_lamps),
-    );
+    )
+}
+
+/// A relit frame on its way to `logsh relight`'s writer: its index in the command's
+/// frames, its number, its passes, its preview's view transform, its light's description
+/// (`<frame>.light.json`), and the seconds it took to read and relight.
+struct Relit {
+    index: usize,
+    frame: i64,
+    passes: crate::shade::ShadedPasses,
+    view: crate::scene::ViewTransform,
+    description: String,
+    seconds: f64,
 }
 
 /// `logsh view`.

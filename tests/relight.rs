@@ -670,6 +670,38 @@ fn bad_relight_inputs_are_refused_with_the_file_named() {
         &["b.exr", "ends early", "1 frame(s) after it are not relit", "c.exr"],
     );
     assert!(stopped.join("a.exr").is_file() && !stopped.join("c.exr").exists());
+    // The same sequence as JSON lines on stdout, as `render --progress json` reports: each
+    // frame by its file and header's number, relit, failed or stopped, then the tally.
+    let reported = sequence.join("reported");
+    let args = ["relight", path(&a), path(&b), path(&c), "--out", path(&reported)];
+    let output = logsh().args(args).args(["--progress", "json"]).output().unwrap();
+    assert_eq!(output.status.code(), Some(1), "{}", String::from_utf8_lossy(&output.stderr));
+    let events: Vec<serde_json::Value> =
+        String::from_utf8_lossy(&output.stdout).lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    assert_eq!(events[0], serde_json::json!({"event": "start", "frames": 3}));
+    let frames: Vec<(&str, &str, usize)> = events
+        .iter()
+        .filter(|e| e["event"] == "frame")
+        .map(|e| (e["input"].as_str().unwrap(), e["status"].as_str().unwrap(), e["index"].as_u64().unwrap() as usize))
+        .collect();
+    assert_eq!(frames, [(path(&a), "relit", 0), (path(&b), "failed", 1), (path(&c), "stopped", 2)]);
+    let [relit, failed, left] = [1, 2, 3].map(|k| &events[k]);
+    assert_eq!((relit["frame"].as_i64(), left["frame"].as_i64()), (Some(1), Some(1)), "the headers' frame numbers");
+    assert!(failed["error"].as_str().unwrap().contains("ends early"), "{failed}");
+    let outputs: Vec<&str> = relit["outputs"].as_array().unwrap().iter().map(|o| o.as_str().unwrap()).collect();
+    assert_eq!(outputs, ["a.exr", "a.png", "a.light.json"].map(|name| reported.join(name)).each_ref().map(|p| path(p)));
+    assert!(relit["seconds"].as_f64().unwrap() > 0.0);
+    assert_eq!(
+        events[4],
+        serde_json::json!({"event": "done", "relit": 1, "failed": [path(&b)], "stopped": [path(&c)]})
+    );
+    assert_eq!(events.len(), 5);
+    // As plain lines on stderr, with the error after them.
+    let output = logsh().args(args).args(["--progress", "lines"]).output().unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    for line in ["relighting 3 frame(s)", "a.exr (1/3) relit in", "b.exr (2/3) FAILED", "c.exr (3/3) not relit"] {
+        assert!(stderr.contains(line), "{line:?} not in {stderr}");
+    }
     // Refused as typed, as clap refuses a value (exit 2): past an f32 too, which read as
     // infinity and was refused as "inf".
     for strength in ["-1", "1e39", "nan"] {

@@ -60,20 +60,44 @@ pub struct SequenceOptions {
 /// What became of one frame.
 #[derive(Clone, Debug)]
 pub enum FrameStatus {
-    Rendered { seconds: f64, outputs: Vec<PathBuf> },
-    Skipped { outputs: Vec<PathBuf> },
-    Failed { error: String },
+    /// Rendered (relit), in `seconds` of reading, shading (relighting) and writing.
+    Done {
+        seconds: f64,
+        outputs: Vec<PathBuf>,
+    },
+    /// Left as it was: its outputs were complete (`--skip-existing`).
+    Skipped {
+        outputs: Vec<PathBuf>,
+    },
+    Failed {
+        error: String,
+    },
+    /// Not reached: a relight stops at its first failed frame.
+    Stopped,
 }
 
 #[derive(Clone, Debug)]
 pub struct FrameOutcome {
-    pub frame: i64,
+    /// The frame's number: the scene's, or the one a relit frame's header records (`None`
+    /// where it does not read).
+    pub frame: Option<i64>,
+    /// The file a relight read the frame from (a render reads its frames from a scene).
+    pub input: Option<PathBuf>,
     pub status: FrameStatus,
 }
 
 impl FrameOutcome {
     pub fn failed(&self) -> bool {
         matches!(self.status, FrameStatus::Failed { .. })
+    }
+
+    /// How reports name the frame: by its file where it was read from one, else by number.
+    pub fn label(&self) -> String {
+        match (&self.input, self.frame) {
+            (Some(input), _) => input.display().to_string(),
+            (None, Some(frame)) => format!("frame {frame}"),
+            (None, None) => "a frame".into(),
+        }
     }
 }
 
@@ -156,7 +180,7 @@ pub fn render_sequence(
                     Shaded::Passes(shaded) => {
                         let started = Instant::now();
                         match guarded(|| write_frame(scene, job.frame, options, &job.outputs, &shaded)) {
-                            Ok(()) => FrameStatus::Rendered {
+                            Ok(()) => FrameStatus::Done {
                                 seconds: job.seconds + started.elapsed().as_secs_f64(),
                                 outputs: job.outputs.to_vec(),
                             },
@@ -164,7 +188,7 @@ pub fn render_sequence(
                         }
                     }
                 };
-                if done_tx.send((job.index, FrameOutcome { frame: job.frame, status })).is_err() {
+                if done_tx.send((job.index, FrameOutcome { frame: Some(job.frame), input: None, status })).is_err() {
                     break;
                 }
             }

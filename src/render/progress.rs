@@ -1,12 +1,17 @@
-//! How `logsh render` reports progress: a bar on a terminal, one line per frame in logs,
-//! JSON lines for farm managers and scripts, or nothing.
+//! How `logsh render` and `logsh relight` report progress: a bar on a terminal, one line
+//! per frame in logs, JSON lines for farm managers and scripts, or nothing.
 //!
 //! JSON lines go to standard output, one object per line: `{"event": "start", "frames":
 //! N}`, then per frame `{"event": "frame", "frame": F, "index": I, "total": N, "status":
 //! "rendered" | "skipped" | "failed", "seconds": S, "outputs": [...], "error": "..."}`
 //! (`error` only when failed), and last `{"event": "done", "rendered": R, "skipped": K,
-//! "failed": [F, ...]}`. Everything else goes to standard error, notices included (a
-//! frame shaded on the CPU by the fall-back of `--device auto`), in every mode.
+//! "failed": [F, ...]}`. A relight's frame events add `"input"` (the frame's file; `frame`
+//! is the number its header records, `null` where it does not read), its statuses are
+//! `"relit"`, `"failed"` and `"stopped"` (not relit: a frame before it failed, which stops
+//! a relight), and its last event is `{"event": "done", "relit": R, "failed": [FILE],
+//! "stopped": [FILE, ...]}`. Everything else goes to standard error, notices included (a
+//! frame shaded on the CPU by the fall-back of `--device auto`, a relight's warnings), in
+//! every mode.
 
 use super::{FrameOutcome, FrameStatus};
 use clap::ValueEnum;
@@ -30,6 +35,31 @@ pub enum ProgressMode {
     None,
 }
 
+/// The command whose frames are reported, which words the reports.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Command {
+    Render,
+    Relight,
+}
+
+impl Command {
+    /// What it does to a frame, as under way.
+    fn doing(self) -> &'static str {
+        match self {
+            Command::Render => "rendering",
+            Command::Relight => "relighting",
+        }
+    }
+
+    /// What it has done to a frame: the status of a frame done.
+    fn done(self) -> &'static str {
+        match self {
+            Command::Render => "rendered",
+            Command::Relight => "relit",
+        }
+    }
+}
+
 /// Receives the events of a sequence, in order, from one thread.
 pub trait Progress: Send {
     fn start(&mut self, total: usize);
@@ -40,21 +70,24 @@ pub trait Progress: Send {
     fn finish(&mut self, outcomes: &[FrameOutcome]);
 }
 
-/// The reporter for `mode`.
-pub fn reporter(mode: ProgressMode) -> Box<dyn Progress> {
+/// The reporter for `mode`, wording the frames of `command`.
+pub fn reporter(mode: ProgressMode, command: Command) -> Box<dyn Progress> {
     match mode {
-        ProgressMode::Auto | ProgressMode::Bar if std::io::stderr().is_terminal() => Box::new(Bar::default()),
-        ProgressMode::Auto | ProgressMode::Bar | ProgressMode::Lines => Box::new(Lines),
-        ProgressMode::Json => Box::new(Json),
+        ProgressMode::Auto | ProgressMode::Bar if std::io::stderr().is_terminal() => {
+            Box::new(Bar { command, bar: None })
+        }
+        ProgressMode::Auto | ProgressMode::Bar | ProgressMode::Lines => Box::new(Lines(command)),
+        ProgressMode::Json => Box::new(Json(command)),
         ProgressMode::None => Box::new(Silent),
     }
 }
 
-fn describe(outcome: &FrameOutcome) -> String {
+fn describe(outcome: &FrameOutcome, command: Command) -> String {
     match &outcome.status {
-        FrameStatus::Rendered { seconds, outputs } => {
+        FrameStatus::Done { seconds, outputs } => {
             format!(
-                "rendered in {seconds:.2} s: {}",
+                "{} in {seconds:.2} s: {}",
+                command.done(),
                 outputs.first().map(|p| p.display().to_string()).unwrap_or_default()
             )
         }
@@ -65,18 +98,19 @@ fn describe(outcome: &FrameOutcome) -> String {
             )
         }
         FrameStatus::Failed { error } => format!("FAILED: {error}"),
+        FrameStatus::Stopped => format!("not {}: a frame before it failed", command.done()),
     }
 }
 
-struct Lines;
+struct Lines(Command);
 
 impl Progress for Lines {
     fn start(&mut self, total: usize) {
-        eprintln!("rendering {total} frame(s)");
+        eprintln!("{} {total} frame(s)", self.0.doing());
     }
     fn frame_started(&mut self, _: i64, _: usize) {}
     fn frame_finished(&mut self, outcome: &FrameOutcome, index: usize, total: usize) {
-        eprintln!("frame {} ({}/{total}) {}", outcome.frame, index + 1, describe(outcome));
+        eprintln!("{} ({}/{total}) {}", outcome.label(), index + 1, describe(outcome, self.0));
     }
     fn notice(&mut self, message: &str) {
         eprintln!("{message}");
@@ -84,8 +118,8 @@ impl Progress for Lines {
     fn finish(&mut self, _: &[FrameOutcome]) {}
 }
 
-#[derive(Default)]
 struct Bar {
+    command: Command,
     bar: Option<ProgressBar>,
 }
 
@@ -105,8 +139,8 @@ impl Progress for Bar {
     }
     fn frame_finished(&mut self, outcome: &FrameOutcome, _: usize, _: usize) {
         if let Some(bar) = &self.bar {
-            if let FrameStatus::Failed { .. } = outcome.status {
-                bar.println(format!("frame {} {}", outcome.frame, describe(outcome)));
+            if let FrameStatus::Failed { .. } | FrameStatus::Stopped = outcome.status {
+                bar.println(format!("{} {}", outcome.label(), describe(outcome, self.command)));
             }
             bar.inc(1);
         }
@@ -124,7 +158,7 @@ impl Progress for Bar {
     }
 }
 
-struct Json;
+struct Json(Command);
 
 fn emit(value: serde_json::Value) {
     let mut out = std::io::stdout().lock();
@@ -140,9 +174,12 @@ impl Progress for Json {
     fn frame_started(&mut self, _: i64, _: usize) {}
     fn frame_finished(&mut self, outcome: &FrameOutcome, index: usize, total: usize) {
         let mut event = json!({"event": "frame", "frame": outcome.frame, "index": index, "total": total});
+        if let Some(input) = &outcome.input {
+            event["input"] = json!(input);
+        }
         match &outcome.status {
-            FrameStatus::Rendered { seconds, outputs } => {
-                event["status"] = json!("rendered");
+            FrameStatus::Done { seconds, outputs } => {
+                event["status"] = json!(self.0.done());
                 event["seconds"] = json!(seconds);
                 event["outputs"] = json!(outputs);
             }
@@ -154,6 +191,7 @@ impl Progress for Json {
                 event["status"] = json!("failed");
                 event["error"] = json!(error);
             }
+            FrameStatus::Stopped => event["status"] = json!("stopped"),
         }
         emit(event);
     }
@@ -162,14 +200,30 @@ impl Progress for Json {
     }
     fn finish(&mut self, outcomes: &[FrameOutcome]) {
         let count = |f: fn(&FrameStatus) -> bool| outcomes.iter().filter(|o| f(&o.status)).count();
-        let failed: Vec<i64> =
-            outcomes.iter().filter(|o| matches!(o.status, FrameStatus::Failed { .. })).map(|o| o.frame).collect();
-        emit(json!({
-            "event": "done",
-            "rendered": count(|s| matches!(s, FrameStatus::Rendered { .. })),
-            "skipped": count(|s| matches!(s, FrameStatus::Skipped { .. })),
-            "failed": failed,
-        }));
+        // A render's frames by number, a relight's by file.
+        let named = |f: fn(&FrameStatus) -> bool| -> Vec<serde_json::Value> {
+            outcomes
+                .iter()
+                .filter(|o| f(&o.status))
+                .map(|o| o.input.as_ref().map_or_else(|| json!(o.frame), |input| json!(input)))
+                .collect()
+        };
+        let failed = named(|s| matches!(s, FrameStatus::Failed { .. }));
+        let done = count(|s| matches!(s, FrameStatus::Done { .. }));
+        emit(match self.0 {
+            Command::Render => json!({
+                "event": "done",
+                "rendered": done,
+                "skipped": count(|s| matches!(s, FrameStatus::Skipped { .. })),
+                "failed": failed,
+            }),
+            Command::Relight => json!({
+                "event": "done",
+                "relit": done,
+                "failed": failed,
+                "stopped": named(|s| matches!(s, FrameStatus::Stopped)),
+            }),
+        });
     }
 }
 
