@@ -64,7 +64,7 @@ fn main() -> anyhow::Result<()> {
     let mut args = std::env::args().skip(1);
     let (mut rotation, mut repeats, mut scenes) = (0.0f64, 3usize, Vec::new());
     let mut device = DeviceChoice::Cpu;
-    let (mut relight_threads, mut fresh_passes, mut keep_sun_lamps) = (None, false, false);
+    let (mut relight_threads, mut fresh_passes, mut keep_sun_lamps, mut sharp_suns) = (None, false, false, false);
     while let Some(a) = args.next() {
         match a.as_str() {
             "--rotation" => rotation = args.next().expect("--rotation DEG").parse()?,
@@ -76,11 +76,12 @@ fn main() -> anyhow::Result<()> {
             "--relight-threads" => relight_threads = Some(args.next().expect("--relight-threads T").parse()?),
             "--fresh-passes" => fresh_passes = true,
             "--keep-sun-lamps" => keep_sun_lamps = true,
+            "--sharp-suns" => sharp_suns = true,
             _ => scenes.push(PathBuf::from(a)),
         }
     }
     let temp = tempfile::tempdir()?;
-    let settings = ShadingSettings { sharp_lights: false, ..ShadingSettings::default() };
+    let settings = ShadingSettings { sharp_lights: sharp_suns, ..ShadingSettings::default() };
     let executor = Executor::select(device, &settings)?;
     let pool = match relight_threads {
         Some(threads) => Some(rayon::ThreadPoolBuilder::new().num_threads(threads).build()?),
@@ -92,7 +93,8 @@ fn main() -> anyhow::Result<()> {
         pool.as_ref().map_or_else(rayon::current_num_threads, |p| p.current_num_threads()),
         if fresh_passes { "fresh" } else { "the previous relight's" }
     );
-    println!("| scene | size | vs shade, sharp lights off (mean / worst) | vs shade, sharp lights auto | vs Cycles: relit / shade auto | relight | shade | ratio | cold: relight / shade | ratio |");
+    let sharp = if sharp_suns { "auto" } else { "off" };
+    println!("| scene | size | vs shade, sharp lights {sharp} (mean / worst) | vs shade, sharp lights auto | vs Cycles: relit / shade auto | relight | shade | ratio | cold: relight / shade | ratio |");
     println!("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |");
     for dir in &scenes {
         let scene = Scene::load(dir)?;
@@ -102,9 +104,18 @@ fn main() -> anyhow::Result<()> {
         let file = temp.path().join("transfer.exr");
         logsh::render::write_passes_with_transfer(&file, &passes, &transfer, SampleType::Half)?;
         let mut transfer = TransferFrame::read(&file)?;
-        // The scene's Sun lamps turn with the map, shaded again per frame (`logsh relight
-        // --sun-lamps turn`): part of each relight's time, from the lamps as rendered.
-        let sun_lamps = (rotation != 0.0 && !transfer.header.sun_lamps.is_empty() && !keep_sun_lamps)
+        let options = RelightOptions { rotation, ..RelightOptions::default() };
+        let started = Instant::now();
+        let light = match sharp_suns {
+            true => RelightLight::with_sharp_suns(options.source(&transfer.header), &transfer.header, &file)?,
+            false => RelightLight::new(options.source(&transfer.header), &transfer.header, &file)?,
+        };
+        let building = started.elapsed().as_secs_f64();
+        // The scene's Sun lamps turn with the map, and the map's suns are shaded sharp,
+        // again per frame (`logsh relight --sun-lamps turn`, `--sharp-lights auto`): part
+        // of each relight's time, from the lamps as rendered.
+        let lamps_turned = rotation != 0.0 && !transfer.header.sun_lamps.is_empty() && !keep_sun_lamps;
+        let sun_lamps = (lamps_turned || !light.sharp_suns().is_empty())
             .then(|| SunLampTurn::new(&transfer.header, &file))
             .transpose()?;
         let rendered_lamps =
@@ -131,10 +142,6 @@ fn main() -> anyhow::Result<()> {
         }
         let shade_light = started.elapsed().as_secs_f64();
         let unoccluded = unoccluded_value(&turned_frame).expect("a map or constant light");
-        let options = RelightOptions { rotation, ..RelightOptions::default() };
-        let started = Instant::now();
-        let light = RelightLight::new(options.source(&transfer.header), &transfer.header, &file)?;
-        let building = started.elapsed().as_secs_f64();
         // The shade and the relight take turns, so that a slower spell of a shared
         // machine falls on both. Each timed run follows an untimed one of its own, which
         // leaves its data in the caches as reading its frame does in a sequence (a
@@ -162,7 +169,10 @@ fn main() -> anyhow::Result<()> {
                 }
                 let started = Instant::now();
                 if let (Some(turn), Some(prepared)) = (&sun_lamps, &prepared) {
-                    let turned = on_pool(pool.as_ref(), || turn.turned_prepared(prepared, &transfer, &file, rotation))?;
+                    let (degrees, suns) = (lamps_turned.then_some(rotation), light.sharp_suns());
+                    let turned = on_pool(pool.as_ref(), || {
+                        turn.sharp_lights_at(prepared, &transfer, &file, degrees, suns, None)
+                    })?;
                     [transfer.lamps_diffuse, transfer.lamps_specular] = turned;
                 }
                 relit = Some(on_pool(pool.as_ref(), || relight_reusing(&transfer, &light, spare)));

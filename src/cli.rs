@@ -337,6 +337,9 @@ pub struct RelightArgs {
     /// Storage of the colour passes and visibility terms (P and N are always float); half stops at 65504 rather than infinity.
     #[arg(long, value_enum, default_value_t = SampleType::Half)]
     pub colour_type: SampleType,
+    /// auto: as the frame was rendered (its --sharp-lights): the suns taken out of the map are shaded sharp again, with their shadows, from the scene it was rendered from (about a sun's share of a render); off: the whole map in SH, its suns' shadows soft, no scene read.
+    #[arg(long, value_enum, default_value_t = SharpLights::Auto)]
+    pub sharp_lights: SharpLights,
     /// Progress report: a bar on a terminal, plain lines in logs, JSON lines on stdout for scripts (as `render`'s).
     #[arg(long, value_enum, default_value_t = crate::render::progress::ProgressMode::Auto)]
     pub progress: crate::render::progress::ProgressMode,

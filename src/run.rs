@@ -408,13 +408,13 @@ pub fn info(args: &crate::cli::InfoArgs) -> Result<()> {
 
 /// `logsh relight`.
 pub fn relight(args: &crate::cli::RelightArgs) -> Result<()> {
-    use crate::cli::SunLamps;
+    use crate::cli::{SharpLights, SunLamps};
     use crate::render::progress::{reporter, Command, Progress};
     use crate::render::{FrameOutcome, FrameStatus};
     use crate::scene::ViewTransform;
     use crate::shade::ShadedPasses;
     use crate::transfer::{
-        offering_to_keep, relight_reusing, RelightLight, RelightOptions, SunLampTurn, TransferFrame,
+        offering_soft_suns, offering_to_keep, relight_reusing, RelightLight, RelightOptions, SunLampTurn, TransferFrame,
     };
     if args.out.exists() && !args.out.is_dir() {
         return Err(anyhow!("--out {}: exists and is not a directory", args.out.display()));
@@ -492,6 +492,8 @@ pub fn relight(args: &crate::cli::RelightArgs) -> Result<()> {
     let mut warned = std::collections::HashSet::new();
     let (mut warned_of_lamps, mut warned_of_view) = (false, false);
     let mut sun_lamps = None;
+    // Whether Sun lamps were turned, and a map's suns shaded, in any frame.
+    let mut shaded_again = [false; 2];
     let (mut building, mut relighting, mut shading_lamps) = (0.0, 0.0, 0.0);
     // The next frame is read and the last one written while a frame is relit (one each:
     // at most two frames' transfer layers in memory). A frame that fails stops the
@@ -552,33 +554,49 @@ pub fn relight(args: &crate::cli::RelightArgs) -> Result<()> {
                 progress.frame_started(frame.header.frame, k);
                 let t = Instant::now();
                 let source = options.source(&frame.header);
-                if !light.as_ref().is_some_and(|l| l.serves(&source, &frame.header)) {
-                    let built = RelightLight::new(source, &frame.header, file)?;
+                // The suns of the map shaded sharp where the render shaded them so.
+                let sharp = args.sharp_lights == SharpLights::Auto
+                    && frame.header.settings.is_some_and(|settings| settings.sharp_lights);
+                if !light.as_ref().is_some_and(|l| l.serves(&source, &frame.header, sharp)) {
+                    let built = if sharp {
+                        RelightLight::with_sharp_suns(source, &frame.header, file)?
+                    } else {
+                        RelightLight::new(source, &frame.header, file)?
+                    };
                     warn_of_suns_in_sh(&built, &mut warned, progress.as_mut());
                     light = Some(built);
                 }
                 options.check_rendered_map(light.as_ref().expect("built above"), &frame.header, file)?;
                 building += t.elapsed().as_secs_f64();
-                if options.rotation != 0.0 && !frame.header.sun_lamps.is_empty() {
-                    match args.sun_lamps {
-                        SunLamps::Keep if !warned_of_lamps => {
-                            warned_of_lamps = true;
-                            let warning = sun_lamps_kept(file, &frame.header.sun_lamps, options.rotation);
-                            progress.notice(&warning);
+                let turned = options.rotation != 0.0 && !frame.header.sun_lamps.is_empty();
+                if turned && args.sun_lamps == SunLamps::Keep && !warned_of_lamps {
+                    warned_of_lamps = true;
+                    progress.notice(&sun_lamps_kept(file, &frame.header.sun_lamps, options.rotation));
+                }
+                // The Sun lamps turned and the map's suns, shaded again from the scene.
+                let lamps_turned = turned && args.sun_lamps == SunLamps::Turn;
+                let suns = light.as_ref().expect("built above").sharp_suns();
+                if lamps_turned || !suns.is_empty() {
+                    let t = Instant::now();
+                    let offering = |e| {
+                        let e = if lamps_turned { offering_to_keep(e) } else { e };
+                        if suns.is_empty() {
+                            e
+                        } else {
+                            offering_soft_suns(e)
                         }
-                        SunLamps::Keep => {}
-                        SunLamps::Turn => {
-                            let t = Instant::now();
-                            let header = &frame.header;
-                            let key = (header.scene.clone(), header.light.clone(), header.light_turn, header.settings);
-                            if sun_lamps.as_ref().is_none_or(|(built, _)| *built != key) {
-                                sun_lamps = Some((key, SunLampTurn::new(header, file).map_err(offering_to_keep)?));
-                            }
-                            let (_, turn) = sun_lamps.as_ref().expect("built above");
-                            turn.apply(&mut frame, file, options.rotation).map_err(offering_to_keep)?;
-                            shading_lamps += t.elapsed().as_secs_f64();
-                        }
+                    };
+                    let header = &frame.header;
+                    let key = (header.scene.clone(), header.light.clone(), header.light_turn, header.settings);
+                    if sun_lamps.as_ref().is_none_or(|(built, _)| *built != key) {
+                        sun_lamps = Some((key, SunLampTurn::new(header, file).map_err(offering)?));
                     }
+                    let (_, turn) = sun_lamps.as_ref().expect("built above");
+                    let degrees = lamps_turned.then_some(options.rotation);
+                    turn.shade_again(&mut frame, file, degrees, suns).map_err(offering)?;
+                    shading_lamps += t.elapsed().as_secs_f64();
+                    shaded_again[0] |= lamps_turned;
+                    shaded_again[1] |= !suns.is_empty();
                 }
                 let light = light.as_ref().expect("built above");
                 let r = Instant::now();
@@ -647,10 +665,11 @@ pub fn relight(args: &crate::cli::RelightArgs) -> Result<()> {
     })?;
     let (count, elapsed) = (args.frames.len(), started.elapsed().as_secs_f64());
     let per_frame = |seconds: f64| 1e3 * seconds / count as f64;
-    let lamps = if sun_lamps.is_some() {
-        format!(", the Sun lamps turned {:.1} ms", per_frame(shading_lamps))
-    } else {
-        String::new()
+    let lamps = match shaded_again {
+        [false, false] => String::new(),
+        [true, false] => format!(", the Sun lamps turned {:.1} ms", per_frame(shading_lamps)),
+        [false, true] => format!(", the map's suns {:.1} ms", per_frame(shading_lamps)),
+        [true, true] => format!(", the Sun lamps turned and the map's suns {:.1} ms", per_frame(shading_lamps)),
     };
     eprintln!(
         "relit {count} frame(s) in {elapsed:.3} s, {:.3} s a frame (reading, relighting and writing overlap: \
@@ -680,9 +699,10 @@ fn warn_of_suns_in_sh(
     }
     for (sun, share) in light.suns_in_sh() {
         progress.notice(&format!(
-            "relight: {} holds a sun ({}), which a relight keeps in SH with the rest of the map: its shadows \
-             come out soft, where `logsh render` (--sharp-lights auto) shades them sharp; for sharp shadows, \
-             render the frame again (`logsh render --light-rotation DEG` turns its light)",
+            "relight: {} holds a sun ({}), which a relight keeps in SH with the rest of the map where its frame \
+             was rendered with --sharp-lights off or it is relit with it: its shadows come out soft, where \
+             --sharp-lights auto (the default of `logsh render` and `logsh relight`) shades it sharp from the \
+             scene",
             file.display(),
             describe_sun(&sun, share)
         ));

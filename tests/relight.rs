@@ -981,9 +981,9 @@ fn write_sunny_map(file: &Path) {
     });
 }
 
-/// A relight whose light holds a sun that a render would shade with sharp shadows says
-/// so, with where the sun is, since the relight keeps it in SH; the sample's sky, which
-/// holds none, draws no such word.
+/// A relight that keeps in SH a sun of its light that a render would shade with sharp
+/// shadows (`--sharp-lights off`) says so, with where the sun is; one that shades it sharp
+/// (the default), and the sample's sky, which holds none, draw no such word.
 #[test]
 fn a_sun_kept_in_sh_is_reported() {
     let dir = tempfile::tempdir().unwrap();
@@ -999,7 +999,7 @@ fn a_sun_kept_in_sh_is_reported() {
         assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
         String::from_utf8_lossy(&output.stderr).into_owned()
     };
-    let said = stderr(&["--light", path(&sunny)], "sunny");
+    let said = stderr(&["--light", path(&sunny), "--sharp-lights", "off"], "sunny");
     assert!(said.contains("sunny.exr holds a sun") && said.contains("a relight keeps in SH"), "{said}");
     let degrees = |after: &str| -> f64 {
         let rest = &said[said.find(after).unwrap_or_else(|| panic!("{after} in {said}")) + after.len()..];
@@ -1008,10 +1008,55 @@ fn a_sun_kept_in_sh_is_reported() {
     let (azimuth, elevation) = (degrees("azimuth "), degrees("elevation "));
     assert!((azimuth - 40.0).abs() < 3.0 && (elevation - 30.0).abs() < 3.0, "{said}");
     // Turned with the light: 40 + 90 deg.
-    let turned = stderr(&["--light", path(&sunny), "--light-rotation", "90"], "turned");
+    let turned = stderr(&["--light", path(&sunny), "--light-rotation", "90", "--sharp-lights", "off"], "turned");
     assert!(turned.contains("azimuth 13"), "{turned}");
+    let sharp = stderr(&["--light", path(&sunny)], "sharp");
+    assert!(!sharp.contains("holds a sun") && sharp.contains("the map's suns"), "{sharp}");
     let quiet = stderr(&[], "quiet");
-    assert!(!quiet.contains("holds a sun"), "{quiet}");
+    assert!(!quiet.contains("holds a sun") && !quiet.contains("the map's suns"), "{quiet}");
+}
+
+/// The suns a render takes out of its map (`--sharp-lights auto`, the default) a relight
+/// shades sharp again from the scene, as the render shades them: relit equals the
+/// default render of the turned light within the SH target, where holding them in SH
+/// (`--sharp-lights off`) is far from it. A relight that cannot read the scene says how
+/// to hold them in SH.
+#[test]
+fn a_map_sun_is_shaded_sharp_as_the_render_shades_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = dunes(dir.path());
+    write_sunny_map(&scene.join("sky.exr"));
+    let transfer = dir.path().join("transfer");
+    render_transfer(&scene, &transfer);
+    let frame = transfer.join("render.0001.exr");
+    for turn in [0.0, 70.0] {
+        let turn_arg = format!("{turn}");
+        let out = |name: &str| dir.path().join(format!("{name}-{turn}"));
+        let (shaded, relit, soft) = (out("shaded"), out("relit"), out("soft"));
+        let turned = ["--light-rotation", &turn_arg];
+        let render = ["render", path(&scene), "--out", path(&shaded), "--frames", "1", "--progress", "none"];
+        run(&[&render[..], &turned, &["--device", "cpu"]].concat());
+        run(&[&["relight", path(&frame), "--out", path(&relit)][..], &turned].concat());
+        run(&[&["relight", path(&frame), "--out", path(&soft), "--sharp-lights", "off"][..], &turned].concat());
+        let [shaded, relit, soft] = [shaded, relit, soft].map(|dir| dir.join("render.0001.exr"));
+        let what = format!("sunny dunes turned {turn}");
+        let worst = compare(&scene, turn, &relit, &shaded, &what);
+        assert!(worst <= RELIT_TOLERANCE, "{what}: relit differs from shaded by {worst}");
+        let apart = compare(&scene, turn, &soft, &shaded, &format!("{what}, the sun in SH"));
+        assert!(apart > 10.0 * RELIT_TOLERANCE, "{what}: the sun held in SH is only {apart} from the sharp one");
+    }
+    // Its scene gone, the map's suns cannot be shaded: the error says how to hold them in SH.
+    let sunny = dir.path().join("sunny.exr");
+    std::fs::copy(scene.join("sky.exr"), &sunny).unwrap();
+    std::fs::rename(&scene, dir.path().join("moved")).unwrap();
+    let light = ["--light", path(&sunny)];
+    let gone = dir.path().join("gone");
+    assert_fails_naming(
+        &[&["relight", path(&frame), "--out", path(&gone)][..], &light].concat(),
+        &["render.0001.exr", "cannot be read", "--sharp-lights off"],
+    );
+    let soft = dir.path().join("soft");
+    run(&[&["relight", path(&frame), "--out", path(&soft), "--sharp-lights", "off"][..], &light].concat());
 }
 
 /// Every field of two frames read from files, bit for bit.
@@ -1236,13 +1281,20 @@ fn a_transfer_frame_reads_the_same_in_any_exr_layout() {
     let mut header: serde_json::Value = serde_json::from_str(&text).unwrap();
     header["sun_lamps"] = serde_json::json!([]);
     header["sun_lamp_inputs"] = serde_json::Value::Null;
+    header["settings"]["sharp_lights"] = serde_json::json!(false);
     let mut unlit = channels(&file);
     unlit.retain(|name, _| !name.starts_with("sun_lamps_"));
     let stray = dir.path().join("stray.exr");
     write_frame(&stray, &unlit, &header.to_string());
     let Err(error) = TransferFrame::read(&stray) else { panic!("horizons without a Sun lamp are read") };
     let error = error.to_string();
-    assert!(error.contains("stray.exr") && error.contains("where its header lists no Sun lamp"), "{error}");
+    assert!(error.contains("stray.exr") && error.contains("lists no Sun lamp and no sharp lights"), "{error}");
+    // A render with sharp lights keeps them for the suns it takes out of a map.
+    let mut sharp = header.clone();
+    sharp["settings"]["sharp_lights"] = serde_json::json!(true);
+    write_frame(&stray, &unlit, &sharp.to_string());
+    assert!(TransferFrame::read(&stray).unwrap().horizons.is_some(), "the horizons of a map's suns are read");
+    write_frame(&stray, &unlit, &header.to_string());
     unlit.retain(|name, _| !name.starts_with("horizon."));
     write_frame(&stray, &unlit, &header.to_string());
     let Err(error) = TransferFrame::read(&stray) else { panic!("sectors recorded without a Sun lamp are read") };

@@ -620,7 +620,10 @@ impl TransferFrame {
         // many as such a file kept.
         let horizon_sectors = match (channels.has(&horizon_channel(0)), header.horizon_sectors, &header.settings) {
             (false, None, _) => 0,
-            (_, recorded, Some(settings)) if header.heightfield && !header.sun_lamps.is_empty() => {
+            // Sun lamps, or suns a render with sharp lights takes out of a map, over a field.
+            (_, recorded, Some(settings))
+                if header.heightfield && (!header.sun_lamps.is_empty() || settings.sharp_lights) =>
+            {
                 let azimuths = settings.horizon.directions;
                 let held = || (0..=azimuths).take_while(|&k| channels.has(&horizon_channel(k))).count();
                 match recorded {
@@ -649,8 +652,8 @@ impl TransferFrame {
             _ => {
                 return Err(SceneError::invalid(
                     file,
-                    "holds horizon channels, or records their sectors, where its header lists no Sun lamp over a \
-                     height field, or no settings",
+                    "holds horizon channels, or records their sectors, where its header lists no Sun lamp and no \
+                     sharp lights over a height field, or no settings",
                 ))
             }
         };

@@ -84,7 +84,9 @@ pub use layers::{
 pub(crate) use relight::relit_dunes;
 pub use relight::{relight, relight_reusing, RelightLight, RelightOptions, SampledMap, SAMPLED_MAP_WIDTH};
 pub use shade::shade_with_transfer;
-pub use sun_lamps::{describe_sun_lamps, offering_to_keep, SunLampFrame, SunLampInputs, SunLampTurn};
+pub use sun_lamps::{
+    describe_sun_lamps, offering_soft_suns, offering_to_keep, SunLampFrame, SunLampInputs, SunLampTurn,
+};
 
 /// `glossy_lobe` codes (module doc).
 pub mod lobe_code {

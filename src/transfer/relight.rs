@@ -107,10 +107,16 @@ fn blocks_of(sh: &[Vec<f32>; 3]) -> Blocks {
 }
 
 /// The light of a relight, ready for the pixels: its SH vector (windowed as the render's
-/// was) and its map prefiltered with each of the frame's glossy lobes.
+/// was) and its map prefiltered with each of the frame's glossy lobes; with sharp suns
+/// ([`Self::with_sharp_suns`]), those of the map's residual, the suns apart.
 pub struct RelightLight {
     pub source: LightSource,
+    /// The light whole, as the background and water's mirrors read it.
     light: Light,
+    /// The suns taken out of the map, as a render's `--sharp-lights auto` takes them
+    /// ([`crate::shade::sharp_lights`]), to be shaded per pixel; empty where the SH holds
+    /// the whole light.
+    sharp_suns: Vec<SunLight>,
     /// Per colour channel, `order^2` coefficients.
     sh: [Vec<f32>; 3],
     /// The same in [`Blocks`].
@@ -120,8 +126,9 @@ pub struct RelightLight {
     /// Per lobe of the header, the light convolved with its open lobe
     /// ([`open_light_blocks`]).
     open: Vec<Blocks>,
-    /// What it was built for, to be reused by the next frame of a sequence.
-    key: (usize, String, bool, Vec<super::layers::PrefilteredLobe>),
+    /// What it was built for, to be reused by the next frame of a sequence: the order, the
+    /// window, sky only, the lobes, and whether its suns are taken out.
+    key: (usize, String, bool, Vec<super::layers::PrefilteredLobe>, bool),
     /// The CRC-32 of its map's file as it was read ([`crate::scene::light::file_crc`]).
     map_crc: Option<u32>,
 }
@@ -130,6 +137,20 @@ impl RelightLight {
     /// Reads and projects `source` for frames of `header`'s convention and lobes; `frame`
     /// is the file `header` came from, named in its errors.
     pub fn new(source: LightSource, header: &TransferHeader, frame: &Path) -> Result<Self, SceneError> {
+        Self::build(source, header, frame, false)
+    }
+
+    /// [`Self::new`] with the suns of its map taken out as the render takes them
+    /// (`--sharp-lights auto`: the same decomposition of the same turned map), the SH
+    /// vector and the prefiltered maps made of the residual, as the render's are; the suns
+    /// ([`Self::sharp_suns`]) are then shaded from the scene
+    /// ([`super::SunLampTurn::shade_again`]). A light without a map, or a map without a
+    /// sun, is [`Self::new`]'s.
+    pub fn with_sharp_suns(source: LightSource, header: &TransferHeader, frame: &Path) -> Result<Self, SceneError> {
+        Self::build(source, header, frame, true)
+    }
+
+    fn build(source: LightSource, header: &TransferHeader, frame: &Path, sharp: bool) -> Result<Self, SceneError> {
         let order = header.sh.order;
         let mut map_crc = None;
         let light = match &source {
@@ -156,19 +177,34 @@ impl RelightLight {
         let window = LightWindow::from_str(&header.light_window, true).map_err(|_| {
             SceneError::invalid(frame, format!("its header names an unknown light window \"{}\"", header.light_window))
         })?;
-        let mut coefficients = light.sh_coefficients(order);
+        // What the SH and the glossy lobes hold: the residual where suns are taken out.
+        let (residual, sharp_suns) = match &light {
+            Light::Environment { map, strength } if sharp => {
+                let split = crate::shade::sharp_lights::extract_suns(map, *strength);
+                (Some(Light::Environment { map: split.residual, strength: *strength }), split.suns)
+            }
+            _ => (None, Vec::new()),
+        };
+        let held = residual.as_ref().filter(|_| !sharp_suns.is_empty()).unwrap_or(&light);
+        let mut coefficients = held.sh_coefficients(order);
         window.apply(order, &mut coefficients);
         let sh: [Vec<f32>; 3] = [0, 1, 2].map(|k| coefficients.iter().map(|c| c[k] as f32).collect());
         let blocks = blocks_of(&sh);
         let levels = (!header.lobes.is_empty())
-            .then(|| glossy_map(&light))
+            .then(|| glossy_map(held))
             .flatten()
             .map(|(map, strength)| MapLevels::new(&map, strength, header.sky_only));
         let prefiltered =
             header.lobes.iter().map(|lobe| levels.as_ref().map(|levels| levels.prefilter(lobe.lobe))).collect();
         let open = header.lobes.iter().map(|lobe| open_light_blocks(&sh, &lobe.open)).collect();
-        let key = (order, header.light_window.clone(), header.sky_only, header.lobes.clone());
-        Ok(Self { source, light, sh, blocks, prefiltered, open, key, map_crc })
+        let key = (order, header.light_window.clone(), header.sky_only, header.lobes.clone(), sharp);
+        Ok(Self { source, light, sharp_suns, sh, blocks, prefiltered, open, key, map_crc })
+    }
+
+    /// The suns taken out of its map, shaded per pixel from the scene, not by the SH
+    /// ([`Self::with_sharp_suns`]).
+    pub fn sharp_suns(&self) -> &[SunLight] {
+        &self.sharp_suns
     }
 
     /// The suns a render's `--sharp-lights auto` would take out of this light's map and
@@ -180,7 +216,7 @@ impl RelightLight {
     /// for it: 9 ms for that scene's 1024x512 map.
     pub fn suns_in_sh(&self) -> Vec<(SunLight, f64)> {
         match &self.light {
-            Light::Environment { map, strength } => {
+            Light::Environment { map, strength } if !self.key.4 => {
                 let split = crate::shade::sharp_lights::extract_suns(map, *strength);
                 split.suns.into_iter().zip(split.shares).collect()
             }
@@ -188,10 +224,11 @@ impl RelightLight {
         }
     }
 
-    /// Whether this light serves frames of `header` relit from `source`.
-    pub fn serves(&self, source: &LightSource, header: &TransferHeader) -> bool {
+    /// Whether this light serves frames of `header` relit from `source`, its suns taken
+    /// out where `sharp` ([`Self::with_sharp_suns`]).
+    pub fn serves(&self, source: &LightSource, header: &TransferHeader, sharp: bool) -> bool {
         self.source == *source
-            && self.key == (header.sh.order, header.light_window.clone(), header.sky_only, header.lobes.clone())
+            && self.key == (header.sh.order, header.light_window.clone(), header.sky_only, header.lobes.clone(), sharp)
     }
 }
 

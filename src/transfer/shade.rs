@@ -4,7 +4,7 @@
 use super::layers::{PixelTransfer, PrefilteredLobe, ShConvention, TransferFrame, TransferHeader};
 use super::SunLampInputs;
 use crate::heightfield::{HorizonPyramid, ScaleMax};
-use crate::scene::{Frame, Scene, SunLight};
+use crate::scene::{Frame, Light, Scene};
 use crate::sh::Real;
 use crate::shade::compositing::{assemble, Pixel, ShadedPasses};
 use crate::shade::frame::mirrored_suns;
@@ -54,7 +54,11 @@ fn header<T: Real>(kernel: &ShadingKernel<T>, plan: &FramePlan) -> TransferHeade
         sun_lamps: plan.frame.suns.iter().map(|sun| sun.azimuth_elevation()).collect(),
         light_turn: plan.scene.light_turn,
         settings: Some(plan.settings),
-        sun_lamp_inputs: (!plan.frame.suns.is_empty()).then(|| SunLampInputs::of(plan.scene, plan.frame)),
+        // What a relight shades its sharp lights again from: the Sun lamps, and the suns a
+        // render with sharp lights takes out of a map.
+        sun_lamp_inputs: (!plan.frame.suns.is_empty()
+            || plan.settings.sharp_lights && matches!(*plan.frame.light, Light::Environment { .. }))
+        .then(|| SunLampInputs::of(plan.scene, plan.frame)),
         view: plan.scene.view.absolute_spec(&plan.scene.dir),
         light_file_crc: plan.frame.light_file_crc,
         horizon_sectors: None,
@@ -69,14 +73,14 @@ fn walk<T: Real>(kernel: &ShadingKernel<T>, occluders: Occluders, plan: &FramePl
     let phong = plan.contents.phong;
     let scene_suns = frame.suns.len();
     // Each row's transfer is written in place, into layers allocated once.
-    // The horizons marched bound those of the Sun lamps a relight turns, in frames whose
-    // lamps the height field may shadow at some turn ([`crate::heightfield::HorizonsBetween`]).
-    let shadowed = |pyramid: &HorizonPyramid, sun: &SunLight| {
-        let along = SunDisk::new(sun).disk.march_band();
-        along.is_some_and(|along| pyramid.may_rise_at_any_azimuth(along.band))
+    // The horizons marched bound those of the Sun lamps a relight turns and of the suns it
+    // takes out of a map, in frames whose suns (the Sun lamps and the map's, as rendered)
+    // the height field may shadow at some turn ([`crate::heightfield::HorizonsBetween`]).
+    let shadowed = |pyramid: &HorizonPyramid, sun: &SunDisk| {
+        sun.disk.march_band().is_some_and(|along| pyramid.may_rise_at_any_azimuth(along.band))
     };
     let bounding = |pyramid: &&HorizonPyramid| {
-        pyramid.settings().scale_max == ScaleMax::Steps && frame.suns.iter().any(|sun| shadowed(pyramid, sun))
+        pyramid.settings().scale_max == ScaleMax::Steps && kernel.suns.iter().any(|sun| shadowed(pyramid, sun))
     };
     let horizon_sectors = occluders.horizons.filter(bounding).map_or(0, HorizonPyramid::horizon_sectors);
     let mut transfer = TransferFrame::new(g.width, g.height, header, both, phong, horizon_sectors);

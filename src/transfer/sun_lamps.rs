@@ -72,13 +72,13 @@ impl SunLampTurn {
         let Some(settings) = header.settings else {
             return Err(SceneError::invalid(
                 file,
-                "its header does not record the render's settings, which turning its Sun lamps needs: render it again with this logsh",
+                "its header does not record the render's settings, which shading its sharp lights again needs: render it again with this logsh",
             ));
         };
         let mut scene = Scene::load(&header.scene).map_err(|e| {
             SceneError::invalid(
                 file,
-                format!("its Sun lamps turn with the map and are shaded again from the scene it was rendered from, which cannot be read: {e}"),
+                format!("its sharp lights (its Sun lamps turned with the map, the suns taken out of its map) are shaded again from the scene it was rendered from, which cannot be read: {e}"),
             )
         })?;
         scene.turn_light(header.light_turn)?;
@@ -101,7 +101,24 @@ impl SunLampTurn {
     /// on top of the render's turn, and moves its `lamps_*` layers from the lamps as
     /// rendered (`sun_lamps_*`) to them.
     pub fn apply(&self, frame: &mut TransferFrame, file: &Path, degrees: f64) -> Result<(), SceneError> {
-        [frame.lamps_diffuse, frame.lamps_specular] = self.turned_lamps(frame, file, degrees)?;
+        self.shade_again(frame, file, Some(degrees), &[])
+    }
+
+    /// Shades again what of `frame`'s light (read from `file`) is sharp, from the scene:
+    /// its Sun lamps turned `degrees` beyond the render where given (else they stay as
+    /// rendered), and `suns`, the suns a render would take out of a relight's map
+    /// ([`super::RelightLight::sharp_suns`]; no layer holds them as rendered), which are
+    /// added to its `lamps_*` layers as the render adds them to its passes.
+    pub fn shade_again(
+        &self,
+        frame: &mut TransferFrame,
+        file: &Path,
+        degrees: Option<f64>,
+        suns: &[SunLight],
+    ) -> Result<(), SceneError> {
+        let prepared = self.prepare(frame, file)?;
+        [frame.lamps_diffuse, frame.lamps_specular] =
+            self.sharp_lights_at(&prepared, frame, file, degrees, suns, None)?;
         Ok(())
     }
 
@@ -126,7 +143,9 @@ impl SunLampTurn {
         let mut scene_frame = self.scene.frame(number).map_err(|e| {
             SceneError::invalid(
                 file,
-                format!("its Sun lamps are shaded again from frame {number} of its scene, which cannot be read: {e}"),
+                format!(
+                    "its sharp lights are shaded again from frame {number} of its scene, which cannot be read: {e}"
+                ),
             )
         })?;
         let g = &scene_frame.gbuffer;
@@ -167,7 +186,7 @@ impl SunLampTurn {
                 return Err(SceneError::invalid(
                     file,
                     format!(
-                        "its scene {} has changed since frame {} was rendered from it ({}), and its Sun lamps would be shaded again from that",
+                        "its scene {} has changed since frame {} was rendered from it ({}), and its sharp lights would be shaded again from that",
                         self.scene.dir.display(),
                         frame.header.frame,
                         changed.join(", ")
@@ -204,7 +223,7 @@ impl SunLampTurn {
     /// turned lamps are shaded through it.
     fn plan<'a>(&'a self, scene_frame: &'a Frame, file: &Path) -> Result<FramePlan<'a>, SceneError> {
         FramePlan::new(&self.scene, scene_frame, &self.settings)
-            .map_err(|e| SceneError::invalid(file, format!("its Sun lamps cannot be shaded again: {e}")))
+            .map_err(|e| SceneError::invalid(file, format!("its sharp lights cannot be shaded again: {e}")))
     }
 
     /// [`Self::turned_lamps`] of `prepared`, made ready from `frame` (of `file`) by
@@ -230,18 +249,45 @@ impl SunLampTurn {
         degrees: f64,
         pixels: Option<&[usize]>,
     ) -> Result<[Vec<[f32; 3]>; 2], SceneError> {
+        self.sharp_lights_at(prepared, frame, file, Some(degrees), &[], pixels)
+    }
+
+    /// The `lamps_*` layers of `frame` (read from `file`), made ready by
+    /// [`Self::prepare`], at `pixels` (or whole), with its Sun lamps turned `degrees` where
+    /// given and `suns` added ([`Self::shade_again`]).
+    pub fn sharp_lights_at(
+        &self,
+        prepared: &SunLampFrame,
+        frame: &TransferFrame,
+        file: &Path,
+        degrees: Option<f64>,
+        suns: &[SunLight],
+        pixels: Option<&[usize]>,
+    ) -> Result<[Vec<[f32; 3]>; 2], SceneError> {
         let scene_frame = &prepared.scene_frame;
         // Whole turns taken out first, exactly, as for the map ([`super::RelightOptions::source`]).
-        let turn = euler_xyz([0.0, 0.0, (degrees % 360.0).to_radians()]);
-        let turned: Vec<SunLight> =
-            scene_frame.suns.iter().map(|sun| SunLight { direction: rotate(&turn, sun.direction), ..*sun }).collect();
-        let (Some(rendered_diffuse), Some(rendered_specular)) = (&frame.sun_lamps_diffuse, &frame.sun_lamps_specular)
-        else {
-            return Err(SceneError::invalid(file, "holds no sun_lamps_diffuse and sun_lamps_specular to turn"));
+        let turned: Vec<SunLight> = match degrees {
+            Some(degrees) => {
+                let turn = euler_xyz([0.0, 0.0, (degrees % 360.0).to_radians()]);
+                scene_frame
+                    .suns
+                    .iter()
+                    .map(|sun| SunLight { direction: rotate(&turn, sun.direction), ..*sun })
+                    .collect()
+            }
+            None => Vec::new(),
         };
-        let layers = [&frame.lamps_diffuse, &frame.lamps_specular, rendered_diffuse, rendered_specular];
-        if let Some(&outside) = pixels.into_iter().flatten().find(|&&i| layers.iter().any(|layer| i >= layer.len())) {
-            return Err(SceneError::invalid(file, format!("has no pixel {outside} to turn its Sun lamps at")));
+        let rendered = match (degrees, &frame.sun_lamps_diffuse, &frame.sun_lamps_specular) {
+            (None, _, _) => None,
+            (Some(_), Some(diffuse), Some(specular)) => Some([diffuse, specular]),
+            (Some(_), _, _) => {
+                return Err(SceneError::invalid(file, "holds no sun_lamps_diffuse and sun_lamps_specular to turn"))
+            }
+        };
+        let layers = [&frame.lamps_diffuse, &frame.lamps_specular].into_iter().chain(rendered.into_iter().flatten());
+        let shortest = layers.map(Vec::len).min().unwrap_or(0);
+        if let Some(&outside) = pixels.into_iter().flatten().find(|&&i| i >= shortest) {
+            return Err(SceneError::invalid(file, format!("has no pixel {outside} to shade its sharp lights at")));
         }
         // The layers at `pixels`, or whole; the rendered ones are only read.
         fn taken<'a>(layer: &'a [[f32; 3]], pixels: Option<&[usize]>) -> Cow<'a, [[f32; 3]]> {
@@ -250,14 +296,15 @@ impl SunLampTurn {
                 None => Cow::Borrowed(layer),
             }
         }
-        let [diffuse, specular, rendered_diffuse, rendered_specular] = layers.map(|layer| taken(layer, pixels));
-        let (mut diffuse, mut specular) = (diffuse.into_owned(), specular.into_owned());
+        let mut diffuse = taken(&frame.lamps_diffuse, pixels).into_owned();
+        let mut specular = taken(&frame.lamps_specular, pixels).into_owned();
+        let rendered = rendered.map(|layers| layers.map(|layer| taken(layer, pixels)));
         let lamps = Lamps {
             width: frame.width,
             pixels,
             diffuse: &mut diffuse,
             specular: &mut specular,
-            rendered: [&rendered_diffuse, &rendered_specular],
+            rendered: rendered.as_ref().map(|[diffuse, specular]| [&diffuse[..], &specular[..]]),
             horizons: frame.horizons.as_deref().map(|layer| (layer, frame.horizon_sectors())),
         };
         let shaded = Shaded {
@@ -267,8 +314,8 @@ impl SunLampTurn {
             pyramid: prepared.pyramid.as_deref(),
         };
         match prepared.kernel.as_ref() {
-            PlannedKernel::F32(kernel) => move_lamps(kernel, shaded, &turned, lamps),
-            PlannedKernel::F64(kernel) => move_lamps(kernel, shaded, &turned, lamps),
+            PlannedKernel::F32(kernel) => move_lamps(kernel, shaded, &turned, suns, lamps),
+            PlannedKernel::F64(kernel) => move_lamps(kernel, shaded, &turned, suns, lamps),
         }
         Ok([diffuse, specular])
     }
@@ -377,6 +424,18 @@ pub fn offering_to_keep(error: SceneError) -> SceneError {
     }
 }
 
+/// `error` of a relight that shades the suns taken out of its map, with the flag that
+/// holds them in SH instead.
+pub fn offering_soft_suns(error: SceneError) -> SceneError {
+    match error {
+        SceneError::Invalid { file, message } => SceneError::Invalid {
+            file,
+            message: format!("{message}; relight with --sharp-lights off to hold the map's suns in SH (soft shadows)"),
+        },
+        other => other,
+    }
+}
+
 /// Sun lamps by azimuth and elevation, for a message.
 pub fn describe_sun_lamps(lamps: &[[f64; 2]]) -> String {
     if lamps.is_empty() {
@@ -395,7 +454,8 @@ struct Lamps<'a> {
     pixels: Option<&'a [usize]>,
     diffuse: &'a mut [[f32; 3]],
     specular: &'a mut [[f32; 3]],
-    rendered: [&'a [[f32; 3]]; 2],
+    /// The Sun lamps' part of `diffuse` and `specular` as rendered, where they turn.
+    rendered: Option<[&'a [[f32; 3]]; 2]>,
     horizons: Option<(&'a [f32], usize)>,
 }
 
@@ -413,10 +473,18 @@ struct Shaded<'a> {
     pyramid: Option<&'a HorizonPyramid>,
 }
 
-/// `lamps += turned - rendered` per pixel of `lamps`, the lamps `turned` shaded by
-/// `kernel` from `shaded`, a chunk of pixels at a time ([`chunk_known`]).
-fn move_lamps<T: Real>(kernel: &ShadingKernel<T>, shaded: Shaded, turned: &[SunLight], lamps: Lamps) {
-    let disks: Vec<SunDisk> = turned.iter().map(SunDisk::new).collect();
+/// `lamps += turned + suns - rendered` per pixel of `lamps`, the Sun lamps `turned` and
+/// the map's `suns` shaded by `kernel` from `shaded`, a chunk of pixels at a time
+/// ([`chunk_known`]). Water mirrors the Sun lamps alone (the map's suns are in the map
+/// it reads).
+fn move_lamps<T: Real>(
+    kernel: &ShadingKernel<T>,
+    shaded: Shaded,
+    turned: &[SunLight],
+    suns: &[SunLight],
+    lamps: Lamps,
+) {
+    let disks: Vec<SunDisk> = turned.iter().chain(suns).map(SunDisk::new).collect();
     let blockers = (!shaded.blockers.is_empty()).then_some(shaded.blockers);
     let pyramid = shaded.pyramid;
     let occluders = Occluders { blockers, horizons: pyramid };
@@ -439,10 +507,9 @@ fn move_lamps<T: Real>(kernel: &ShadingKernel<T>, shaded: Shaded, turned: &[SunL
             between.map(|between| between.under(along.band.below))
         })
         .collect();
-    let [rendered_diffuse, rendered_specular] = lamps.rendered;
+    let rendered = lamps.rendered;
     let chunks = lamps.diffuse.par_chunks_mut(CHUNK).zip(lamps.specular.par_chunks_mut(CHUNK));
-    let rendered = rendered_diffuse.par_chunks(CHUNK).zip(rendered_specular.par_chunks(CHUNK));
-    chunks.zip(rendered).enumerate().for_each(|(c, ((diffuse, specular), (rendered_diffuse, rendered_specular)))| {
+    chunks.enumerate().for_each(|(c, (diffuse, specular))| {
         let indices: Vec<usize> =
             (c * CHUNK..c * CHUNK + diffuse.len()).map(|k| pixels.map_or(k, |pixels| pixels[k])).collect();
         let sources: Vec<PixelSource> =
@@ -453,7 +520,8 @@ fn move_lamps<T: Real>(kernel: &ShadingKernel<T>, shaded: Shaded, turned: &[SunL
         };
         let known = chunk_known(pyramid, blockers, &disks, &sources, &found, &under);
         for (i, source) in sources.iter().enumerate() {
-            let (d, s, rd, rs) = (&mut diffuse[i], &mut specular[i], rendered_diffuse[i], rendered_specular[i]);
+            let [rd, rs] = rendered.map_or([[0.0; 3]; 2], |layers| layers.map(|layer| layer[c * CHUNK + i]));
+            let (d, s) = (&mut diffuse[i], &mut specular[i]);
             match *source {
                 PixelSource::Surface { ref point, tint } => {
                     let known = &known[i * disks.len()..(i + 1) * disks.len()];
