@@ -3,7 +3,7 @@
 //!
 //! ```text
 //! cargo run --release --example relight_accuracy -- [--rotation DEG] [--repeats N] [--device cpu|gpu|auto]
-//!     [--relight-threads T] [--fresh-passes] [--keep-sun-lamps] SCENE...
+//!     [--relight-threads T] [--fresh-passes] [--keep-sun-lamps] [--sharp-suns] SCENE...
 //! ```
 //!
 //! Per scene (its first frame): the transfer is rendered with `--sharp-lights off`,
@@ -29,6 +29,11 @@
 //! the frame was rendered from, its G-buffer read and checked against the header's record
 //! ([`SunLampTurn::prepare`]): like the shade's read of that same G-buffer, that read is
 //! not counted, and is printed apart (the median of `N` reads).
+//!
+//! `--sharp-suns` renders the transfer and shades with `--sharp-lights auto` instead, and
+//! relights as `logsh relight` does by default: the suns taken out of the turned map
+//! shaded again from the scene in each relight, counted, its residual in SH (the first
+//! column is then against the default shade).
 //!
 //! The shade runs where `--device` puts it (`cpu` by default; `logsh render`
 //! takes `auto`, a hardware GPU where there is one); the relight runs on the CPU, as `logsh

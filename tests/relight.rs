@@ -1038,6 +1038,16 @@ fn a_map_sun_is_shaded_sharp_as_the_render_shades_it() {
         run(&[&render[..], &turned, &["--device", "cpu"]].concat());
         run(&[&["relight", path(&frame), "--out", path(&relit)][..], &turned].concat());
         run(&[&["relight", path(&frame), "--out", path(&soft), "--sharp-lights", "off"][..], &turned].concat());
+        // light.json names the suns taken out, which its SH vector does not hold.
+        let suns = |dir: &Path| -> Vec<[f64; 2]> {
+            let text = std::fs::read_to_string(dir.join("render.0001.light.json")).unwrap();
+            let json: serde_json::Value = serde_json::from_str(&text).unwrap();
+            let sun = |s: &serde_json::Value| ["azimuth", "elevation"].map(|k| s[k].as_f64().unwrap());
+            json["sharp_suns"].as_array().unwrap().iter().map(sun).collect()
+        };
+        let [[azimuth, elevation]] = suns(&relit)[..] else { panic!("one sun taken out: {:?}", suns(&relit)) };
+        assert!((azimuth - (40.0 + turn)).abs() < 3.0 && (elevation - 30.0).abs() < 3.0, "{azimuth}, {elevation}");
+        assert!(suns(&soft).is_empty(), "held in SH, no sun is taken out");
         let [shaded, relit, soft] = [shaded, relit, soft].map(|dir| dir.join("render.0001.exr"));
         let what = format!("sunny dunes turned {turn}");
         let worst = compare(&scene, turn, &relit, &shaded, &what);

@@ -22,7 +22,7 @@
 //! | `glossy_lobe.V` | float | what the glossy term reads: 0 nothing, 1 the light itself (mirror, background), 2 `sh_specular`, `3 + j` the header's prefiltered lobe `j` |
 //! | `glossy_direction.{X,Y,Z}` | float | the direction it reads along: the mirrored view, or the camera ray |
 //! | `glossy_weight.{X,Y}` | colour | prefiltered lobes: `A share cone` and `A (1 - share)` |
-//! | `horizon.0` to `horizon.<S-1>` | half | the height field's highest horizon tangent over each of `S` sectors of the W azimuths `2 pi k / W` (`k S / W` the sector; `S = min(16, W)`, each azimuth's own by default, recorded in the header; 4 or 8 in files that do not record it, as many as they hold), rounded up, infinite where none was marched ([`crate::heightfield::HorizonPyramid::sector_maxima`]); only in frames whose height field may shadow a Sun lamp at some turn ([`crate::heightfield::HorizonPyramid::may_rise_at_any_azimuth`]) |
+//! | `horizon.0` to `horizon.<S-1>` | half | the height field's highest horizon tangent over each of `S` sectors of the W azimuths `2 pi k / W` (`k S / W` the sector; `S = min(16, W)`, each azimuth's own by default, recorded in the header; 4 or 8 in files that do not record it, as many as they hold), rounded up, infinite where none was marched ([`crate::heightfield::HorizonPyramid::sector_maxima`]); only in frames whose height field may shadow a Sun lamp, or a sun the render took out of its map, at some turn ([`crate::heightfield::HorizonPyramid::may_rise_at_any_azimuth`]) |
 //!
 //! `D` is the diffuse lobe about the normal, `V` the log visibility, `T` the tangent and
 //! ground planes alone. Relit, per pixel and colour channel, with `L` the light's SH vector:
@@ -59,13 +59,16 @@
 //! Sun lamp, `5 x 16 x 2 + 14 x 2 + 4 x 4 = 204` bytes, 106 MB uncompressed at 960 x 540
 //! before ZIP; a diffuse scene of spheres only, `2 x 16 x 2 + 44 = 108` bytes.
 //!
-//! # What a relight cannot keep
+//! # What a relight shades again
 //!
-//! The transfer holds the environment wholly in SH: a relight equals a shade with
-//! `--sharp-lights off`. Suns that a render took out of the map (`--sharp-lights auto`)
-//! come back as part of the SH light, with the soft shadows SH gives them; the scene's
-//! own Sun and point lamps stay as they were rendered (`lamps_*`), as `--light-rotation`
-//! leaves point lamps. A render's `--light-rotation` turns Sun lamps with the map; a
+//! The transfer holds the environment in SH: a relight with `--sharp-lights off` equals a
+//! shade with it. Suns that a render takes out of the map (`--sharp-lights auto`, the
+//! default) no layer holds: a default relight takes them out of its light with the
+//! render's decomposition, holds the residual in SH, and shades them again from the scene
+//! ([`RelightLight::with_sharp_suns`], [`SunLampTurn::shade_again`]), as the render does
+//! (4e-5 from the default render on the README's sunny dunes); held in SH they come back
+//! with the soft shadows SH gives them (0.054 there). The scene's own point lamps stay as
+//! they were rendered (`lamps_*`), as `--light-rotation` leaves them. A render's `--light-rotation` turns Sun lamps with the map; a
 //! relight does too by shading them again from the scene ([`SunLampTurn`], about a Sun
 //! lamp's share of a render; the `horizon` layer answers most pixels' horizons along the
 //! turned lamps without a march, [`crate::heightfield::HorizonsBetween`]), or keeps them

@@ -299,7 +299,9 @@ impl RelightLight {
     /// source, its turn about Z beyond the frame's rendered light (`--light-rotation`,
     /// whole turns taken out), and its SH vector, RGB per coefficient in the header's
     /// convention, which a compositor dots with the transfer layers after turning it back
-    /// by that turn (docs/compositing.md: an `sh` source records none of its own).
+    /// by that turn (docs/compositing.md: an `sh` source records none of its own); with
+    /// the suns taken out of its map ([`Self::sharp_suns`], their directions), the
+    /// residual's.
     pub fn description(&self, turned_from_frame: f64) -> serde_json::Value {
         // A map's path as text, made absolute (the file is read from anywhere): JSON holds
         // no path that is not Unicode, which is written with U+FFFD for what does not
@@ -318,8 +320,13 @@ impl RelightLight {
             "turned_from_frame": turned_from_frame,
             "order": self.key.0,
             "light_window": self.key.1,
-            // RGB per coefficient.
+            // RGB per coefficient: of the residual where suns were taken out.
             "sh": (0..self.sh[0].len()).map(|k| self.sh.each_ref().map(|channel| channel[k])).collect::<Vec<_>>(),
+            // The suns taken out and shaded sharp, which the SH vector does not hold.
+            "sharp_suns": self.sharp_suns.iter().map(|sun| {
+                let [azimuth, elevation] = sun.azimuth_elevation();
+                serde_json::json!({"azimuth": azimuth, "elevation": elevation})
+            }).collect::<Vec<_>>(),
         })
     }
 

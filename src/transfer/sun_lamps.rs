@@ -15,6 +15,11 @@
 //! which is the render's `lamps_*` under the turned light but for the half floats of the
 //! file (the Sun lamps as rendered cancel to their rounding, 2^-11 of their light). Water
 //! that mirrors a Sun lamp is read along its mirror direction, as the render reads it.
+//!
+//! The suns a render takes out of a map (`--sharp-lights auto`) are shaded the same way,
+//! from the relight's own light ([`super::RelightLight::sharp_suns`]), and added to
+//! `lamps_*`, as the render adds them to its passes; no layer holds them as rendered, and
+//! water reads them in the map it mirrors.
 
 use super::layers::{TransferFrame, TransferHeader};
 use crate::heightfield::{HorizonAgainst, HorizonPyramid, HorizonsUnder};
@@ -321,9 +326,9 @@ impl SunLampTurn {
     }
 }
 
-/// What a frame's Sun lamps are shaded from, each part as a CRC-32 of its values: the
-/// transfer header records them at render time, and a relight that turns the lamps
-/// shades them again only from a scene whose parts are the same (an edited lamp, material
+/// What a frame's Sun lamps, and the suns taken out of its map, are shaded from, each
+/// part as a CRC-32 of its values: the transfer header records them at render time, and
+/// a relight shades them again only from a scene whose parts are the same (an edited lamp, material
 /// or G-buffer would light the frame otherwise than its other layers do).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub struct SunLampInputs {
