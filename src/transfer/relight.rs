@@ -126,9 +126,10 @@ pub struct RelightLight {
     /// Per lobe of the header, the light convolved with its open lobe
     /// ([`open_light_blocks`]).
     open: Vec<Blocks>,
-    /// What it was built for, to be reused by the next frame of a sequence: the order, the
-    /// window, sky only, the lobes, and whether its suns are taken out.
-    key: (usize, String, bool, Vec<super::layers::PrefilteredLobe>, bool),
+    /// Whether the suns of its map are taken out ([`Self::with_sharp_suns`]).
+    sharp: bool,
+    /// What it was built for, to be reused by the next frame of a sequence.
+    key: (usize, String, bool, Vec<super::layers::PrefilteredLobe>),
     /// The CRC-32 of its map's file as it was read ([`crate::scene::light::file_crc`]).
     map_crc: Option<u32>,
 }
@@ -197,8 +198,8 @@ impl RelightLight {
         let prefiltered =
             header.lobes.iter().map(|lobe| levels.as_ref().map(|levels| levels.prefilter(lobe.lobe))).collect();
         let open = header.lobes.iter().map(|lobe| open_light_blocks(&sh, &lobe.open)).collect();
-        let key = (order, header.light_window.clone(), header.sky_only, header.lobes.clone(), sharp);
-        Ok(Self { source, light, sharp_suns, sh, blocks, prefiltered, open, key, map_crc })
+        let key = (order, header.light_window.clone(), header.sky_only, header.lobes.clone());
+        Ok(Self { source, light, sharp_suns, sh, blocks, prefiltered, open, sharp, key, map_crc })
     }
 
     /// The suns taken out of its map, shaded per pixel from the scene, not by the SH
@@ -209,14 +210,15 @@ impl RelightLight {
 
     /// The suns a render's `--sharp-lights auto` would take out of this light's map and
     /// shade with their own sharp shadows ([`crate::shade::sharp_lights`]), each with its
-    /// share of the map's power; empty for a light without a map. A relight holds them in
-    /// SH with the rest of the map, so their shadows come out soft: on the HDRI-sun scene
-    /// of the README the relit frame is 0.086 from Cycles against the render's 0.014.
-    /// The decomposition is the render's, so it costs what the render's first frame pays
-    /// for it: 9 ms for that scene's 1024x512 map.
+    /// share of the map's power, which this light holds in SH with the rest of the map;
+    /// empty for a light without a map or one that takes them out itself
+    /// ([`Self::with_sharp_suns`]). Held in SH their shadows come out soft: on the
+    /// HDRI-sun primitives of the README the relit frame is 0.090 from Cycles against the
+    /// render's 0.015. The decomposition is the render's, so it costs what the render's
+    /// first frame pays for it: 9 ms for a 1024x512 map.
     pub fn suns_in_sh(&self) -> Vec<(SunLight, f64)> {
         match &self.light {
-            Light::Environment { map, strength } if !self.key.4 => {
+            Light::Environment { map, strength } if !self.sharp => {
                 let split = crate::shade::sharp_lights::extract_suns(map, *strength);
                 split.suns.into_iter().zip(split.shares).collect()
             }
@@ -228,7 +230,8 @@ impl RelightLight {
     /// out where `sharp` ([`Self::with_sharp_suns`]).
     pub fn serves(&self, source: &LightSource, header: &TransferHeader, sharp: bool) -> bool {
         self.source == *source
-            && self.key == (header.sh.order, header.light_window.clone(), header.sky_only, header.lobes.clone(), sharp)
+            && self.sharp == sharp
+            && self.key == (header.sh.order, header.light_window.clone(), header.sky_only, header.lobes.clone())
     }
 }
 

@@ -328,8 +328,8 @@ impl SunLampTurn {
 
 /// What a frame's Sun lamps, and the suns taken out of its map, are shaded from, each
 /// part as a CRC-32 of its values: the transfer header records them at render time, and
-/// a relight shades them again only from a scene whose parts are the same (an edited lamp, material
-/// or G-buffer would light the frame otherwise than its other layers do).
+/// a relight shades them again only from a scene whose parts are the same (an edited
+/// lamp, material or G-buffer would light the frame otherwise than its other layers do).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub struct SunLampInputs {
     /// The Sun lamps as rendered: direction, angle, strength and colour.
@@ -512,9 +512,18 @@ fn move_lamps<T: Real>(
             between.map(|between| between.under(along.band.below))
         })
         .collect();
-    let rendered = lamps.rendered;
+    // Nothing to take out where the Sun lamps do not turn.
+    let unturned;
+    let [rendered_diffuse, rendered_specular] = match lamps.rendered {
+        Some(rendered) => rendered,
+        None => {
+            unturned = vec![[0.0f32; 3]; lamps.diffuse.len()];
+            [&unturned[..], &unturned[..]]
+        }
+    };
     let chunks = lamps.diffuse.par_chunks_mut(CHUNK).zip(lamps.specular.par_chunks_mut(CHUNK));
-    chunks.enumerate().for_each(|(c, (diffuse, specular))| {
+    let rendered = rendered_diffuse.par_chunks(CHUNK).zip(rendered_specular.par_chunks(CHUNK));
+    chunks.zip(rendered).enumerate().for_each(|(c, ((diffuse, specular), (rendered_diffuse, rendered_specular)))| {
         let indices: Vec<usize> =
             (c * CHUNK..c * CHUNK + diffuse.len()).map(|k| pixels.map_or(k, |pixels| pixels[k])).collect();
         let sources: Vec<PixelSource> =
@@ -525,8 +534,7 @@ fn move_lamps<T: Real>(
         };
         let known = chunk_known(pyramid, blockers, &disks, &sources, &found, &under);
         for (i, source) in sources.iter().enumerate() {
-            let [rd, rs] = rendered.map_or([[0.0; 3]; 2], |layers| layers.map(|layer| layer[c * CHUNK + i]));
-            let (d, s) = (&mut diffuse[i], &mut specular[i]);
+            let (d, s, rd, rs) = (&mut diffuse[i], &mut specular[i], rendered_diffuse[i], rendered_specular[i]);
             match *source {
                 PixelSource::Surface { ref point, tint } => {
                     let known = &known[i * disks.len()..(i + 1) * disks.len()];
