@@ -525,7 +525,8 @@ fn frame_bodies(
         "maps": map_layout,
         "cycles": cycles.is_some(),
         "view": {"exposure": view.exposure, "transparent": view.transparent, "lut": lut},
-        // The suns a render would shade sharp, which the page, as a relight, holds in SH.
+        // The suns a render, and `logsh relight`, would shade sharp, which the page holds
+        // in SH.
         "suns_in_sh": light.suns_in_sh().iter().map(|(sun, share)| {
             let [azimuth, elevation] = sun.azimuth_elevation();
             serde_json::json!({"azimuth": azimuth, "elevation": elevation, "share": share})
