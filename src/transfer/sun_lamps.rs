@@ -420,23 +420,19 @@ impl SunLampInputs {
 /// `error`, of [`SunLampTurn::new`] or [`SunLampTurn::apply`], with what `logsh relight`
 /// offers instead.
 pub fn offering_to_keep(error: SceneError) -> SceneError {
-    match error {
-        SceneError::Invalid { file, message } => SceneError::Invalid {
-            file,
-            message: format!("{message}; relight with --sun-lamps keep to leave the Sun lamps as rendered"),
-        },
-        other => other,
-    }
+    offering(error, "relight with --sun-lamps keep to leave the Sun lamps as rendered")
 }
 
 /// `error` of a relight that shades the suns taken out of its map, with the flag that
 /// holds them in SH instead.
 pub fn offering_soft_suns(error: SceneError) -> SceneError {
+    offering(error, "relight with --sharp-lights off to hold the map's suns in SH (soft shadows)")
+}
+
+/// `error` with `instead` after its message, where it names a file.
+fn offering(error: SceneError, instead: &str) -> SceneError {
     match error {
-        SceneError::Invalid { file, message } => SceneError::Invalid {
-            file,
-            message: format!("{message}; relight with --sharp-lights off to hold the map's suns in SH (soft shadows)"),
-        },
+        SceneError::Invalid { file, message } => SceneError::Invalid { file, message: format!("{message}; {instead}") },
         other => other,
     }
 }
