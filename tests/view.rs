@@ -77,18 +77,32 @@ fn run(args: &[&str]) {
 /// `gbuffers/cones` (whose directory holds a Cycles render) rendered with its transfer,
 /// under a map whose light comes mostly from a warm patch low in the south-east, so that
 /// turning it moves the shadows and reflections, and shown through a view transform's LUT;
-/// with the scene.json's `lights` set to `lights`.
-fn rendered_cones(dir: &Path, lights: serde_json::Value) -> PathBuf {
+/// with the scene.json's `lights` set to `lights`; where `sun`, the map holds a sun too,
+/// one texel bright at azimuth 120 deg, elevation 40 deg, most of its light.
+fn rendered_cones(dir: &Path, lights: serde_json::Value, sun: bool) -> PathBuf {
     let sample = Path::new(env!("CARGO_MANIFEST_DIR")).join("gbuffers/cones");
     let scene = dir.join("cones");
     support::copy_scene(&sample, &scene);
     let (width, height) = (128usize, 64usize);
     let mut rgb = [vec![0.0f32; width * height], vec![0.0f32; width * height], vec![0.0f32; width * height]];
+    let (azimuth, elevation) = (120f64.to_radians(), 40f64.to_radians());
+    let [u, v] = logsh::scene::light::direction_to_equirectangular([
+        elevation.cos() * azimuth.cos(),
+        elevation.cos() * azimuth.sin(),
+        elevation.sin(),
+    ]);
+    let sun_texel = sun.then_some((((1.0 - v) * height as f64) as usize, (u * width as f64) as usize));
     for row in 0..height {
         for column in 0..width {
             let patch = (40..52).contains(&column) && (20..28).contains(&row);
             let sky = 1.0 - row as f32 / height as f32;
-            let texel = if patch { [12.0, 7.0, 2.5] } else { [0.15 * sky, 0.25 * sky, 0.6 * sky] };
+            let texel = if sun_texel == Some((row, column)) {
+                [5e4, 4.6e4, 4e4]
+            } else if patch {
+                [12.0, 7.0, 2.5]
+            } else {
+                [0.15 * sky, 0.25 * sky, 0.6 * sky]
+            };
             for k in 0..3 {
                 rgb[k][row * width + column] = texel[k];
             }
@@ -145,7 +159,7 @@ fn rendered_cones(dir: &Path, lights: serde_json::Value) -> PathBuf {
 #[test]
 fn the_server_answers_the_page_and_a_frames_data() {
     let dir = tempfile::tempdir().unwrap();
-    let frames = rendered_cones(dir.path(), serde_json::json!([]));
+    let frames = rendered_cones(dir.path(), serde_json::json!([]), false);
     let server = Server::start(&frames);
     let (status, page) = server.request("GET", "/");
     assert_eq!(status, 200);
@@ -168,7 +182,12 @@ fn the_server_answers_the_page_and_a_frames_data() {
     assert_eq!(pixels.len() as u64, 4 * floats * 240 * 135, "every layer of the layout");
     let (_, cycles) = server.request("GET", "/frame/0/cycles.bin");
     assert_eq!(cycles.len(), 4 * 3 * 240 * 135);
-    assert_eq!(server.request("GET", "/frame/0/sun_lamps.bin?rotation=75").0, 404, "no Sun lamp to turn");
+    assert_eq!(meta["sharp_suns"], serde_json::json!([]), "nor a sun for the server to shade");
+    let (status, body) = server.request("GET", "/frame/0/sharp_lights.bin?rotation=75");
+    assert_eq!(
+        (status, String::from_utf8_lossy(&body).as_ref()),
+        (404, "this frame has no Sun lamp and its map no sun")
+    );
     let (status, body) = server.request("GET", "/frame/1/meta.json");
     assert_eq!(
         (status, String::from_utf8_lossy(&body).as_ref()),
@@ -254,7 +273,7 @@ fn a_directory_without_transfer_layers_is_refused() {
 fn a_refused_sun_lamp_turn_is_tried_again_and_first_turns_agree() {
     let dir = tempfile::tempdir().unwrap();
     let sun = serde_json::json!([{"type": "sun", "direction": [0.5, -0.5, 0.7], "angle": 1.0, "strength": 2.0}]);
-    let frames = rendered_cones(dir.path(), sun);
+    let frames = rendered_cones(dir.path(), sun, false);
     let description = dir.path().join("cones/scene.json");
     let original = std::fs::read_to_string(&description).unwrap();
     let meta = |server: &Server| -> serde_json::Value {
@@ -265,7 +284,7 @@ fn a_refused_sun_lamp_turn_is_tried_again_and_first_turns_agree() {
     let server = Server::start(&frames);
     let turns: Vec<_> = (0..12)
         .map(|_| {
-            let (address, path) = (server.address.clone(), "/frame/0/sun_lamps.bin?rotation=75");
+            let (address, path) = (server.address.clone(), "/frame/0/sharp_lights.bin?rotation=75");
             std::thread::spawn(move || Server::request_to(&address, "GET", path))
         })
         .collect();
@@ -277,21 +296,21 @@ fn a_refused_sun_lamp_turn_is_tried_again_and_first_turns_agree() {
     std::fs::rename(&description, dir.path().join("moved.json")).unwrap();
     let server = Server::start(&frames);
     assert!(meta(&server)["sun_lamps_kept"].as_str().unwrap().contains("cannot be read"));
-    assert_eq!(server.request("GET", "/frame/0/sun_lamps.bin?rotation=75").0, 409);
+    assert_eq!(server.request("GET", "/frame/0/sharp_lights.bin?rotation=75").0, 409);
     std::fs::rename(dir.path().join("moved.json"), &description).unwrap();
     assert_eq!(meta(&server)["sun_lamps_kept"], serde_json::Value::Null, "the scene put back");
-    assert!(server.request("GET", "/frame/0/sun_lamps.bin?rotation=75") == turned[0], "turned as before");
+    assert!(server.request("GET", "/frame/0/sharp_lights.bin?rotation=75") == turned[0], "turned as before");
     server.stop();
 
     // The lamp made stronger before the first turn: refused, then turned once put back.
     std::fs::write(&description, original.replace("\"strength\": 2.0", "\"strength\": 3.0")).unwrap();
     assert_ne!(std::fs::read_to_string(&description).unwrap(), original, "the lamp made stronger");
     let server = Server::start(&frames);
-    let (status, why) = server.request("GET", "/frame/0/sun_lamps.bin?rotation=75");
+    let (status, why) = server.request("GET", "/frame/0/sharp_lights.bin?rotation=75");
     assert_eq!(status, 500, "{}", String::from_utf8_lossy(&why));
     assert!(String::from_utf8_lossy(&why).contains("its Sun lamps' light"), "{}", String::from_utf8_lossy(&why));
     std::fs::write(&description, &original).unwrap();
-    assert!(server.request("GET", "/frame/0/sun_lamps.bin?rotation=75") == turned[0], "turned once put back");
+    assert!(server.request("GET", "/frame/0/sharp_lights.bin?rotation=75") == turned[0], "turned once put back");
     server.stop();
 }
 
@@ -375,7 +394,7 @@ fn status_line(browser: &Path, url: &str) -> String {
 }
 
 /// A frame rendered with a Sun lamp: turned in the page, the lamp turns with the map as
-/// `logsh relight` turns it (the server shades it again, `sun_lamps.bin`), and the status
+/// `logsh relight` turns it (the server shades it again, `sharp_lights.bin`), and the status
 /// line says so; unturned, it says nothing of it. Where the scene the frame was rendered
 /// from cannot be read, the lamp stays as rendered, and the status line says why.
 #[test]
@@ -385,7 +404,7 @@ fn the_page_turns_a_sun_lamp_with_the_map() {
     };
     let dir = tempfile::tempdir().unwrap();
     let sun = serde_json::json!([{"type": "sun", "direction": [0.5, -0.5, 0.7], "angle": 1.0, "strength": 2.0}]);
-    let frames = rendered_cones(dir.path(), sun);
+    let frames = rendered_cones(dir.path(), sun, false);
     let frame = frames.join("render.0001.exr");
     for (name, lamps) in [("turn", "turn"), ("keep", "keep")] {
         let out = dir.path().join(name);
@@ -397,13 +416,13 @@ fn the_page_turns_a_sun_lamp_with_the_map() {
     let (_, meta) = server.request("GET", "/frame/0/meta.json");
     let meta: serde_json::Value = serde_json::from_slice(&meta).unwrap();
     assert_eq!((&meta["sun_lamps"], &meta["sun_lamps_kept"]), (&serde_json::json!(1), &serde_json::Value::Null));
-    let (status, lamps) = server.request("GET", "/frame/0/sun_lamps.bin?rotation=75");
+    let (status, lamps) = server.request("GET", "/frame/0/sharp_lights.bin?rotation=75");
     assert_eq!((status, lamps.len()), (200, 4 * 6 * 240 * 135), "both lamps layers, RGB f32");
     // Turned again from the scene frame its first turn read: the same bits, and turned on.
-    assert!(server.request("GET", "/frame/0/sun_lamps.bin?rotation=75").1 == lamps, "turned 75 deg again");
-    assert!(server.request("GET", "/frame/0/sun_lamps.bin?rotation=40").1 != lamps, "turned 40 deg");
-    assert_eq!(server.request("GET", "/frame/0/sun_lamps.bin").0, 400, "no rotation");
-    assert_eq!(server.request("GET", "/frame/0/sun_lamps.bin?rotation=inf").0, 400);
+    assert!(server.request("GET", "/frame/0/sharp_lights.bin?rotation=75").1 == lamps, "turned 75 deg again");
+    assert!(server.request("GET", "/frame/0/sharp_lights.bin?rotation=40").1 != lamps, "turned 40 deg");
+    assert_eq!(server.request("GET", "/frame/0/sharp_lights.bin").0, 400, "no rotation");
+    assert_eq!(server.request("GET", "/frame/0/sharp_lights.bin?rotation=inf").0, 400);
     let url = format!("{}?rotation=75", server.address);
     let shot = screenshot(&browser, &url, 480, 400, &dir.path().join("turned.png"));
     let (to_turned, to_kept) = (difference(&shot, &preview("turn")), difference(&shot, &preview("keep")));
@@ -426,7 +445,7 @@ fn the_page_turns_a_sun_lamp_with_the_map() {
     let meta: serde_json::Value = serde_json::from_slice(&meta).unwrap();
     let why = meta["sun_lamps_kept"].as_str().expect("a reason").to_string();
     assert!(why.contains("cannot be read"), "{why}");
-    assert_eq!(server.request("GET", "/frame/0/sun_lamps.bin?rotation=75").0, 409);
+    assert_eq!(server.request("GET", "/frame/0/sharp_lights.bin?rotation=75").0, 409);
     let url = format!("{}?rotation=75", server.address);
     let kept = status_line(&browser, &url);
     println!("kept: {kept}");
@@ -437,13 +456,97 @@ fn the_page_turns_a_sun_lamp_with_the_map() {
     server.stop();
 }
 
+/// A frame whose map holds a sun, rendered with it taken out and shaded sharp (the
+/// default): the page shows it sharp as `logsh relight` does, turned with the map by the
+/// server (`sharp_lights.bin`) and scaled by the page's strength, and says so. Where the
+/// scene the frame was rendered from cannot be read, the page holds the sun in SH, as
+/// `logsh relight --sharp-lights off` does, and says why.
+#[test]
+fn the_page_shades_a_map_sun_sharp() {
+    let Some(browser) = required_browser("the_page_shades_a_map_sun_sharp") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let frames = rendered_cones(dir.path(), serde_json::json!([]), true);
+    let frame = frames.join("render.0001.exr");
+    for (name, sharp) in [("sharp", "auto"), ("soft", "off")] {
+        let turned = ["--light-rotation", "75", "--strength", "1.5", "--sharp-lights", sharp];
+        let out = dir.path().join(name);
+        run(&[&["relight", frame.to_str().unwrap()][..], &turned, &["--out", out.to_str().unwrap()]].concat());
+    }
+    let preview = |name: &str| image::open(dir.path().join(name).join("render.0001.png")).unwrap().to_rgba8();
+    let server = Server::start(&frames);
+    let meta = |server: &Server| -> serde_json::Value {
+        serde_json::from_slice(&server.request("GET", "/frame/0/meta.json").1).unwrap()
+    };
+    let shown = meta(&server);
+    let suns = shown["sharp_suns"].as_array().expect("the map's suns");
+    assert_eq!((suns.len(), &shown["suns_in_sh"]), (1, &serde_json::json!([])), "{shown}");
+    let azimuth = suns[0]["azimuth"].as_f64().unwrap();
+    assert!((azimuth - 120.0).abs() < 2.0, "the sun at azimuth {azimuth}");
+    let layers: Vec<&str> = shown["pixels"].as_array().unwrap().iter().map(|l| l["name"].as_str().unwrap()).collect();
+    assert!(layers.contains(&"suns_diffuse") && layers.contains(&"suns_specular"), "{layers:?}");
+    let (status, suns) = server.request("GET", "/frame/0/sharp_lights.bin?rotation=75");
+    assert_eq!((status, suns.len()), (200, 4 * 6 * 240 * 135), "the suns' two layers, RGB f32");
+    assert!(server.request("GET", "/frame/0/sharp_lights.bin?rotation=75").1 == suns, "turned 75 deg again");
+    assert!(server.request("GET", "/frame/0/sharp_lights.bin?rotation=40").1 != suns, "turned 40 deg");
+    let url = format!("{}?rotation=75&strength=1.5", server.address);
+    let shot = screenshot(&browser, &url, 480, 400, &dir.path().join("sharp.png"));
+    let (to_sharp, to_soft) = (difference(&shot, &preview("sharp")), difference(&shot, &preview("soft")));
+    println!("screenshot at 75 degrees: {to_sharp:.2} levels from logsh relight, {to_soft:.2} from the sun in SH");
+    assert!(to_sharp < 1.5, "the page differs from logsh relight by {to_sharp:.2} levels");
+    assert!(to_soft > 3.0 * to_sharp, "the page must shade the sun sharp: {to_soft:.2} from it held in SH");
+    let status = status_line(&browser, &url);
+    println!("sharp: {status}");
+    assert!(status.contains("the map's sun shaded sharp by logsh, turned with the map"), "{status}");
+    server.stop();
+
+    // The scene's description gone (its map stays): the sun held in SH, and said why.
+    let scene = dir.path().join("cones");
+    std::fs::rename(scene.join("scene.json"), scene.join("scene.json.moved")).unwrap();
+    let server = Server::start(&frames);
+    let held = meta(&server);
+    assert_eq!(
+        (held["sharp_suns"].as_array().map(Vec::len), held["suns_in_sh"].as_array().map(Vec::len)),
+        (Some(0), Some(1))
+    );
+    let why = held["suns_in_sh_why"].as_str().expect("a reason").to_string();
+    assert!(why.contains("cannot be read"), "{why}");
+    assert_eq!(server.request("GET", "/frame/0/sharp_lights.bin?rotation=75").0, 409);
+    let url = format!("{}?rotation=75&strength=1.5", server.address);
+    let status = status_line(&browser, &url);
+    println!("held: {status}");
+    assert!(status.contains("held in SH here, so soft shadows") && status.contains("cannot be read"), "{status}");
+    let shot = screenshot(&browser, &url, 480, 400, &dir.path().join("held.png"));
+    let to_soft = difference(&shot, &preview("soft"));
+    assert!(to_soft < 1.5, "the page differs from logsh relight --sharp-lights off by {to_soft:.2} levels");
+    // Put back: shaded sharp again.
+    std::fs::rename(scene.join("scene.json.moved"), scene.join("scene.json")).unwrap();
+    assert_eq!(meta(&server)["sharp_suns"].as_array().map(Vec::len), Some(1), "the scene put back");
+    server.stop();
+
+    // Rendered with the sun held in SH: the page holds it so, as `logsh relight` does.
+    let off = dir.path().join("off");
+    let render = ["render", scene.to_str().unwrap(), "--frames", "1", "--transfer", "--sharp-lights", "off"];
+    run(&[&render[..], &["--progress", "none", "--out", off.to_str().unwrap()]].concat());
+    let server = Server::start(&off);
+    let held = meta(&server);
+    assert_eq!(
+        (held["sharp_suns"].as_array().map(Vec::len), held["suns_in_sh"].as_array().map(Vec::len)),
+        (Some(0), Some(1))
+    );
+    assert!(held["suns_in_sh_why"].as_str().is_some_and(|why| why.contains("--sharp-lights off")), "{held}");
+    assert_eq!(server.request("GET", "/frame/0/sharp_lights.bin?rotation=75").0, 404, "nothing sharp to turn");
+    server.stop();
+}
+
 #[test]
 fn the_page_relights_in_a_headless_browser() {
     let Some(browser) = required_browser("the_page_relights_in_a_headless_browser") else {
         return;
     };
     let dir = tempfile::tempdir().unwrap();
-    let frames = rendered_cones(dir.path(), serde_json::json!([]));
+    let frames = rendered_cones(dir.path(), serde_json::json!([]), false);
     let frame = frames.join("render.0001.exr");
     for turn in ["0", "75"] {
         run(&[

@@ -419,6 +419,13 @@ impl SunLight {
         let [x, y, z] = self.direction;
         [y.atan2(x).to_degrees(), z.clamp(-1.0, 1.0).asin().to_degrees()]
     }
+
+    /// The sun turned `degrees` about Z, as `--light-rotation` turns the light (whole turns
+    /// taken out first, exactly).
+    pub fn turned(&self, degrees: f64) -> SunLight {
+        let turn = euler_xyz([0.0, 0.0, (degrees % 360.0).to_radians()]);
+        SunLight { direction: rotate(&turn, self.direction), ..*self }
+    }
 }
 
 /// A Blender Point lamp: a sphere of radius `radius` about `position` that emits `power`

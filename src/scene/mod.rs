@@ -764,9 +764,8 @@ impl Scene {
             self.light_spec = LightSpec::Sh(light::turned_sh(coefficients, degrees));
         }
         self.light_turn += degrees;
-        let turn = light::euler_xyz([0.0, 0.0, degrees.to_radians()]);
         for sun in &mut self.suns {
-            sun.direction = light::rotate(&turn, sun.direction);
+            *sun = sun.turned(degrees);
         }
         if self.static_light.is_some() {
             let (light, crc) = self.read_light(self.default_frame())?;

@@ -23,7 +23,6 @@
 
 use super::layers::{TransferFrame, TransferHeader};
 use crate::heightfield::{HorizonAgainst, HorizonPyramid, HorizonsUnder};
-use crate::scene::light::{euler_xyz, rotate};
 use crate::scene::{Frame, HeightMap, Material, Scene, SceneError, SunLight};
 use crate::sh::Real;
 use crate::shade::blocker_tree::BlockerTree;
@@ -269,17 +268,40 @@ impl SunLampTurn {
         suns: &[SunLight],
         pixels: Option<&[usize]>,
     ) -> Result<[Vec<[f32; 3]>; 2], SceneError> {
+        self.shaded_onto(prepared, frame, file, degrees, suns, pixels, true)
+    }
+
+    /// The light of `suns` alone (diffuse, specular), as [`Self::sharp_lights_at`] adds
+    /// it to `frame`'s `lamps_*` layers at `pixels` (or whole): `logsh view` scales it
+    /// with the map's strength, which the frame's lamps do not follow.
+    pub fn suns_at(
+        &self,
+        prepared: &SunLampFrame,
+        frame: &TransferFrame,
+        file: &Path,
+        suns: &[SunLight],
+        pixels: Option<&[usize]>,
+    ) -> Result<[Vec<[f32; 3]>; 2], SceneError> {
+        self.shaded_onto(prepared, frame, file, None, suns, pixels, false)
+    }
+
+    /// [`Self::sharp_lights_at`], onto `frame`'s `lamps_*` layers where `onto_lamps`, else
+    /// onto black.
+    #[allow(clippy::too_many_arguments)]
+    fn shaded_onto(
+        &self,
+        prepared: &SunLampFrame,
+        frame: &TransferFrame,
+        file: &Path,
+        degrees: Option<f64>,
+        suns: &[SunLight],
+        pixels: Option<&[usize]>,
+        onto_lamps: bool,
+    ) -> Result<[Vec<[f32; 3]>; 2], SceneError> {
         let scene_frame = &prepared.scene_frame;
         // Whole turns taken out first, exactly, as for the map ([`super::RelightOptions::source`]).
         let turned: Vec<SunLight> = match degrees {
-            Some(degrees) => {
-                let turn = euler_xyz([0.0, 0.0, (degrees % 360.0).to_radians()]);
-                scene_frame
-                    .suns
-                    .iter()
-                    .map(|sun| SunLight { direction: rotate(&turn, sun.direction), ..*sun })
-                    .collect()
-            }
+            Some(degrees) => scene_frame.suns.iter().map(|sun| sun.turned(degrees)).collect(),
             None => Vec::new(),
         };
         let rendered = match (degrees, &frame.sun_lamps_diffuse, &frame.sun_lamps_specular) {
@@ -301,8 +323,11 @@ impl SunLampTurn {
                 None => Cow::Borrowed(layer),
             }
         }
-        let mut diffuse = taken(&frame.lamps_diffuse, pixels).into_owned();
-        let mut specular = taken(&frame.lamps_specular, pixels).into_owned();
+        let onto = |layer: &[[f32; 3]]| match onto_lamps {
+            true => taken(layer, pixels).into_owned(),
+            false => vec![[0.0; 3]; pixels.map_or(layer.len(), <[usize]>::len)],
+        };
+        let (mut diffuse, mut specular) = (onto(&frame.lamps_diffuse), onto(&frame.lamps_specular));
         let rendered = rendered.map(|layers| layers.map(|layer| taken(layer, pixels)));
         let lamps = Lamps {
             width: frame.width,

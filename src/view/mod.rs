@@ -11,7 +11,7 @@
 //! | `/frame/<i>/pixels.bin` | the transfer layers, little-endian f32, one array after another |
 //! | `/frame/<i>/maps.bin` | the maps the glossy lookups read ([`RelightLight::sampled_maps`]), then the scene's view transform LUT ([`crate::scene::view`]) |
 //! | `/frame/<i>/cycles.bin` | the Cycles render of the frame as RGB f32, where one is found |
-//! | `/frame/<i>/sun_lamps.bin?rotation=DEG` | the `lamps_diffuse` then `lamps_specular` layers (RGB f32) with the scene's Sun lamps turned `DEG` about Z, shaded again as `logsh relight` shades them ([`SunLampTurn`]) |
+//! | `/frame/<i>/sharp_lights.bin?rotation=DEG` | the light turned `DEG` about Z, shaded again as `logsh relight` shades it ([`SunLampTurn`]), RGB f32: where the frame has Sun lamps, the `lamps_diffuse` then `lamps_specular` layers with them turned; then, where the page's light has suns taken out of its map (`sharp_suns`), their diffuse then specular light, turned |
 //! | `/bench/start`, `/bench/end?runs=N&what=W` | the page's `?bench=N` mode: the server prints the time between the two |
 //!
 //! The page takes its sliders' first values from its address: `?frame=I` (the index in
@@ -20,17 +20,28 @@
 //! time it (below).
 //!
 //! The page turns the light about Z by rotating its SH vector (exact, [`crate::sh::rotate_z`])
-//! and reading the maps along `Rz(-turn) R`; strength scales the environment, exposure
+//! and reading the maps along `Rz(-turn) R`; strength scales the environment (its
+//! suns shaded sharp included), exposure
 //! adds to the scene's, and the image is shown through the scene's view transform as the
 //! PNG previews are. It lights a frame once per turn and recombines it for the other
 //! sliders; while one is dragged, at one pixel in 2 x 2 or 4 x 4 (`?proxy=N` fixes the
 //! step), in full once it is let go. It is the relight of [`crate::transfer::relight`]
 //! but for the maps, read from grids at most [`crate::transfer::SAMPLED_MAP_WIDTH`] wide,
 //! and the open lobes' light, from a 64 x 32 grid: a preview, for which `logsh relight`
-//! gives the frame. A frame with Sun lamps, once its turn is let go, asks the server for
-//! them turned (`sun_lamps.bin`: the scene shaded again, a Sun lamp's share of a render)
-//! and shows them as rendered until they come, or where the scene cannot be read.
+//! gives the frame.
+//!
+//! The sharp lights are shaded by the server, as `logsh relight` shades them: the
+//! frame's Sun lamps, and the suns that a render under `--sharp-lights auto` (the
+//! default) takes out of its map, whose residual the page's SH vector and glossy maps
+//! then hold ([`RelightLight::with_sharp_suns`]). The map's suns come with the frame's
+//! layers at the render's turn (`suns_diffuse`, `suns_specular`), shaded at the shown
+//! pixels. Once a turn is let go, the page asks for them and the Sun lamps turned
+//! (`sharp_lights.bin`: the scene shaded again, a sun's share of a render) and shows
+//! them at the render's turn until they come. Where the scene cannot be read, the Sun
+//! lamps stay as rendered and the map's suns are held in SH (soft shadows, as
+//! `logsh relight --sharp-lights off` holds them), and the page says why.
 
+use crate::scene::SunLight;
 use crate::scene::ViewTransform;
 use crate::transfer::{RelightLight, RelightOptions, SunLampFrame, SunLampTurn, TransferFrame};
 use anyhow::{anyhow, Context, Result};
@@ -67,19 +78,24 @@ struct FrameBodies {
     /// The Cycles renders looked for and how each was written (or `None` for one not
     /// there): one added or written again is read.
     cycles_files: Vec<(PathBuf, Option<Written>)>,
-    /// What turns the frame's Sun lamps, where it has some.
-    sun_lamps: Option<SunLamps>,
+    /// What turns the frame's sharp lights, where it has Sun lamps or its map suns.
+    sharp: Option<SharpLights>,
 }
 
-/// A frame's Sun lamps, to be turned at the page's request (`sun_lamps.bin`).
-struct SunLamps {
+/// A frame's sharp lights, to be turned at the page's request (`sharp_lights.bin`): its
+/// Sun lamps, and the suns taken out of its map.
+struct SharpLights {
     file: PathBuf,
     /// The frame without its transfer and colour layers: its header and lamps.
     lamps: TransferFrame,
     /// The pixels the page shows ([`preview_pixels`]).
     shown: Vec<usize>,
-    /// The scene loaded to shade them, or why it cannot be (the page then keeps them as
-    /// rendered and says why; [`Viewer::bodies`] tries again at the frame's next request).
+    /// The suns taken out of the map at the render's turn, which the page's light does
+    /// not hold; empty where it holds them (`suns_in_sh`).
+    suns: Vec<SunLight>,
+    /// The scene loaded to shade them, or why it cannot be (the page then keeps the Sun
+    /// lamps as rendered, holds the map's suns in SH, and says why; [`Viewer::bodies`]
+    /// tries again at the frame's next request).
     turn: std::result::Result<Arc<SunLampTurn>, String>,
     /// The frame's scene frame, read and checked at its first turn, with the scene that
     /// read it, which the turns after it share: a turn of the Sun-lamp scene's frame
@@ -89,13 +105,16 @@ struct SunLamps {
     prepared: Mutex<Option<(Arc<SunLampTurn>, Arc<SunLampFrame>)>>,
 }
 
-impl SunLamps {
-    /// The lamps of `frame` (read from `file`), its other layers dropped, turned by `turn`.
+impl SharpLights {
+    /// The lamps of `frame` (read from `file`), its other layers dropped, and the map's
+    /// `suns`, turned by `turn`; `prepared` where the frame was made ready for it.
     fn new(
         file: &Path,
         mut frame: TransferFrame,
         shown: Vec<usize>,
+        suns: Vec<SunLight>,
         turn: std::result::Result<Arc<SunLampTurn>, String>,
+        prepared: Option<Arc<SunLampFrame>>,
     ) -> Self {
         frame.diffuse = Vec::new();
         frame.unoccluded = Vec::new();
@@ -105,16 +124,22 @@ impl SunLamps {
         frame.glossy_lobe = Vec::new();
         frame.glossy_direction = Vec::new();
         frame.glossy_weight = Vec::new();
-        Self { file: file.to_path_buf(), lamps: frame, shown, turn, prepared: Mutex::new(None) }
+        let prepared = turn.as_ref().ok().zip(prepared).map(|(turn, prepared)| (turn.clone(), prepared));
+        Self { file: file.to_path_buf(), lamps: frame, shown, suns, turn, prepared: Mutex::new(prepared) }
     }
 
-    /// `sun_lamps.bin` at `degrees` beyond the render's turn: the lamps' layers at the
-    /// shown pixels, diffuse then specular.
+    /// `sharp_lights.bin` at `degrees` beyond the render's turn, at the shown pixels: the
+    /// lamps' layers with the Sun lamps turned, where the frame has some, then the map's
+    /// suns' light turned, where the page's light does not hold them.
     fn turned(&self, degrees: f64) -> Response {
         let turn = match &self.turn {
             Ok(turn) => turn,
             Err(why) => return Response::error(409, why),
         };
+        let lamps = !self.lamps.header.sun_lamps.is_empty();
+        if !lamps && self.suns.is_empty() {
+            return Response::error(409, "the map's suns are held in SH here: they cannot be shaded from the scene");
+        }
         let (turn, prepared) = {
             let mut prepared = self.prepared.lock().unwrap_or_else(|p| p.into_inner());
             match prepared.as_ref() {
@@ -131,10 +156,17 @@ impl SunLamps {
             }
         };
         // Shaded at the shown pixels alone: one in `stride^2` of a frame wider than the
-        // preview.
-        match turn.turned_at(&prepared, &self.lamps, &self.file, degrees, Some(&self.shown)) {
+        // preview. The map's suns apart, which the page scales with its strength.
+        let (frame, file, shown) = (&self.lamps, &self.file, Some(&self.shown[..]));
+        let turned_suns: Vec<SunLight> = self.suns.iter().map(|sun| sun.turned(degrees)).collect();
+        let layers = lamps
+            .then(|| turn.turned_at(&prepared, frame, file, degrees, shown))
+            .into_iter()
+            .chain((!turned_suns.is_empty()).then(|| turn.suns_at(&prepared, frame, file, &turned_suns, shown)))
+            .collect::<std::result::Result<Vec<_>, _>>();
+        match layers {
             Ok(layers) => {
-                let values = layers.iter().flat_map(|layer| layer.as_flattened().iter().copied());
+                let values = layers.iter().flatten().flat_map(|layer| layer.as_flattened().iter().copied());
                 Response::ok("application/octet-stream", values.flat_map(f32::to_le_bytes).collect())
             }
             Err(e) => Response::error(500, &e.to_string()),
@@ -295,15 +327,15 @@ impl Viewer {
                         Some(rgb) => Response::ok("application/octet-stream", rgb.clone()),
                         None => Response::error(404, "no Cycles render of this frame"),
                     },
-                    "sun_lamps.bin" => {
+                    "sharp_lights.bin" => {
                         let rotation = query.split('&').find_map(|pair| pair.strip_prefix("rotation="));
-                        match (&bodies.sun_lamps, rotation.and_then(|r| r.parse::<f64>().ok())) {
-                            (None, _) => Response::error(404, "this frame has no Sun lamp"),
-                            (_, None) => Response::error(400, "sun_lamps.bin takes ?rotation=DEG"),
+                        match (&bodies.sharp, rotation.and_then(|r| r.parse::<f64>().ok())) {
+                            (None, _) => Response::error(404, "this frame has no Sun lamp and its map no sun"),
+                            (_, None) => Response::error(400, "sharp_lights.bin takes ?rotation=DEG"),
                             (_, Some(degrees)) if !degrees.is_finite() => {
                                 Response::error(400, "the rotation is not a number")
                             }
-                            (Some(lamps), Some(degrees)) => lamps.turned(degrees),
+                            (Some(sharp), Some(degrees)) => sharp.turned(degrees),
                         }
                     }
                     _ => Response::error(404, "no such page"),
@@ -320,9 +352,9 @@ impl Viewer {
         let stamp = FrameStamp::of(index, file);
         let unchanged = |bodies: &FrameBodies| bodies.cycles_files.iter().all(|(path, was)| written(path) == *was);
         let kept = || built().iter().find(|(kept, bodies)| *kept == stamp && unchanged(bodies)).map(|(_, b)| b.clone());
-        // Kept, unless its Sun lamps could not be turned and now can (the scene put back).
-        let current = |bodies: &FrameBodies| match &bodies.sun_lamps {
-            Some(SunLamps { turn: Err(_), lamps, .. }) => SunLampTurn::new(&lamps.header, file).is_err(),
+        // Kept, unless its sharp lights could not be shaded and now can (the scene put back).
+        let current = |bodies: &FrameBodies| match &bodies.sharp {
+            Some(SharpLights { turn: Err(_), lamps, .. }) => SunLampTurn::new(&lamps.header, file).is_err(),
             _ => true,
         };
         if let Some(bodies) = kept().filter(|bodies| current(bodies)) {
@@ -334,16 +366,51 @@ impl Viewer {
         }
         let frame = TransferFrame::read(file)?;
         let options = RelightOptions::default();
-        let light = RelightLight::new(options.source(&frame.header), &frame.header, file)?;
+        let source = options.source(&frame.header);
+        // The map's suns taken out where the render took them out, as `logsh relight`
+        // takes them out by default.
+        let sharp = frame.header.settings.is_some_and(|settings| settings.sharp_lights);
+        let mut light = match sharp {
+            true => RelightLight::with_sharp_suns(source.clone(), &frame.header, file)?,
+            false => RelightLight::new(source.clone(), &frame.header, file)?,
+        };
         options.check_rendered_map(&light, &frame.header, file)?;
         let (view, standard) = ViewTransform::for_preview(frame.header.view.as_ref(), file);
-        let turn = (!frame.header.sun_lamps.is_empty())
+        let lamps = !frame.header.sun_lamps.is_empty();
+        let turn = (lamps || !light.sharp_suns().is_empty())
             .then(|| SunLampTurn::new(&frame.header, file).map(Arc::new).map_err(|e| e.to_string()));
-        let kept = turn.as_ref().and_then(|turn| turn.as_ref().err().map(String::as_str));
-        let mut bodies = frame_bodies(file, &frame, &light, &view, PREVIEW_SIZE, kept, standard);
+        let (shown, ..) = preview_pixels(frame.width, frame.height, PREVIEW_SIZE);
+        // The map's suns at the render's turn, shaded at the shown pixels, or held in SH
+        // where the scene cannot shade them.
+        let mut suns = None;
+        let mut held = (!sharp).then(|| "as the frame was rendered, with --sharp-lights off".to_string());
+        if let Some(turn) = turn.as_ref().filter(|_| !light.sharp_suns().is_empty()) {
+            let shaded = turn.as_ref().map_err(Clone::clone).and_then(|turn| {
+                let prepared = turn.prepare(&frame, file).map_err(|e| e.to_string())?;
+                let layers = turn.suns_at(&prepared, &frame, file, light.sharp_suns(), Some(&shown));
+                Ok((Arc::new(prepared), layers.map_err(|e| e.to_string())?))
+            });
+            match shaded {
+                Ok(shaded) => suns = Some(shaded),
+                Err(why) => {
+                    eprintln!("view: {}: the map's suns are held in SH (soft shadows): {why}", file.display());
+                    held = Some(format!(
+                        "logsh relight shades the map's suns sharp from the scene, which fails here: {why}"
+                    ));
+                    light = RelightLight::new(source, &frame.header, file)?;
+                }
+            }
+        }
+        let shown_sharp = SharpShown {
+            lamps_kept: turn.as_ref().filter(|_| lamps).and_then(|turn| turn.as_ref().err().map(String::as_str)),
+            suns: suns.as_ref().map(|(_, layers)| layers),
+            suns_held: held.as_deref(),
+        };
+        let mut bodies = frame_bodies(file, &frame, &light, &view, PREVIEW_SIZE, shown_sharp, standard);
         if let Some(turn) = turn {
-            let (shown, ..) = preview_pixels(frame.width, frame.height, PREVIEW_SIZE);
-            bodies.sun_lamps = Some(SunLamps::new(file, frame, shown, turn));
+            let sharp_suns = light.sharp_suns().to_vec();
+            let prepared = suns.map(|(prepared, _)| prepared);
+            bodies.sharp = Some(SharpLights::new(file, frame, shown, sharp_suns, turn, prepared));
         }
         let bodies = Arc::new(bodies);
         let mut kept = built();
@@ -449,15 +516,27 @@ fn at_pixels<'a>(pixels: &'a [usize], values: &'a [f32], components: usize) -> i
     pixels.iter().flat_map(move |&i| values[i * components..(i + 1) * components].iter().copied())
 }
 
-/// The page's bodies of `frame`, within `size` ([`PREVIEW_SIZE`]); `sun_lamps_kept` says
-/// why the server cannot turn its Sun lamps, where it cannot.
+/// What the page is told of a frame's sharp lights beside its layers.
+#[derive(Clone, Copy, Default)]
+struct SharpShown<'a> {
+    /// Why the server cannot turn the frame's Sun lamps, where it cannot.
+    lamps_kept: Option<&'a str>,
+    /// The light of the suns taken out of the map (diffuse, specular) at the shown
+    /// pixels, where the server shades them.
+    suns: Option<&'a [Vec<[f32; 3]>; 2]>,
+    /// Why the light holds its map's suns in SH, where it holds some.
+    suns_held: Option<&'a str>,
+}
+
+/// The page's bodies of `frame`, within `size` ([`PREVIEW_SIZE`]), under `light`; with
+/// what `sharp` says of its sharp lights.
 fn frame_bodies(
     file: &Path,
     frame: &TransferFrame,
     light: &RelightLight,
     view: &ViewTransform,
     size: [usize; 2],
-    sun_lamps_kept: Option<&str>,
+    sharp: SharpShown,
     view_standard: Option<String>,
 ) -> FrameBodies {
     let (shown, [width, height], stride) = preview_pixels(frame.width, frame.height, size);
@@ -489,6 +568,11 @@ fn frame_bodies(
     put("glossy_lobe", 1, &mut sampled(&frame.glossy_lobe, 1));
     put("glossy_weight", 2, &mut sampled(frame.glossy_weight.as_flattened(), 2));
     put("alpha", 1, &mut sampled(&frame.alpha, 1));
+    // The map's suns, shaded at the shown pixels already.
+    if let Some([diffuse, specular]) = sharp.suns {
+        put("suns_diffuse", 3, &mut diffuse.as_flattened().iter().copied());
+        put("suns_specular", 3, &mut specular.as_flattened().iter().copied());
+    }
     let mut maps = Vec::new();
     let mut map_layout = Vec::new();
     for map in light.sampled_maps(frame.order()) {
@@ -525,20 +609,26 @@ fn frame_bodies(
         "maps": map_layout,
         "cycles": cycles.is_some(),
         "view": {"exposure": view.exposure, "transparent": view.transparent, "lut": lut},
-        // The suns a render, and `logsh relight`, would shade sharp, which the page holds
-        // in SH.
+        // The suns taken out of the map, shaded by the server (`suns_*` layers,
+        // `sharp_lights.bin`).
+        "sharp_suns": light.sharp_suns().iter().map(|sun| {
+            let [azimuth, elevation] = sun.azimuth_elevation();
+            serde_json::json!({"azimuth": azimuth, "elevation": elevation})
+        }).collect::<Vec<_>>(),
+        // The suns a render would take out of the map, which the page holds in SH, and why.
         "suns_in_sh": light.suns_in_sh().iter().map(|(sun, share)| {
             let [azimuth, elevation] = sun.azimuth_elevation();
             serde_json::json!({"azimuth": azimuth, "elevation": elevation, "share": share})
         }).collect::<Vec<_>>(),
+        "suns_in_sh_why": sharp.suns_held,
         // The scene's Sun lamps, which the page asks the server for turned
-        // (`sun_lamps.bin`).
+        // (`sharp_lights.bin`).
         "sun_lamps": frame.header.sun_lamps.len(),
-        "sun_lamps_kept": sun_lamps_kept,
+        "sun_lamps_kept": sharp.lamps_kept,
         "notes": notes,
     });
     let cycles_files = cycles_candidates(file, frame).into_iter().map(|path| (path.clone(), written(&path))).collect();
-    FrameBodies { meta: meta.to_string(), pixels, maps, cycles, cycles_files, sun_lamps: None }
+    FrameBodies { meta: meta.to_string(), pixels, maps, cycles, cycles_files, sharp: None }
 }
 
 /// An HTTP response.
@@ -613,7 +703,7 @@ mod tests {
             (entry["offset"].as_u64().unwrap() as usize, entry["components"].as_u64().unwrap() as usize)
         };
         // 96x54 within 40x30: every third pixel (54 / 30 needs 2, 96 / 40 needs 3), 32x18.
-        let preview = frame_bodies(&file, &transfer, &light, &view, [40, 30], None, None);
+        let preview = frame_bodies(&file, &transfer, &light, &view, [40, 30], SharpShown::default(), None);
         let meta: serde_json::Value = serde_json::from_str(&preview.meta).unwrap();
         assert_eq!((meta["width"].as_u64(), meta["height"].as_u64()), (Some(32), Some(18)));
         assert_eq!(meta["source"], serde_json::json!({"width": 96, "height": 54, "stride": 3}));
@@ -636,7 +726,7 @@ mod tests {
         let (offset, _) = layer(&preview, "alpha");
         assert_eq!(values.len(), offset + 32 * 18, "alpha, the last layer, ends the body");
         // Within the preview's size: whole.
-        let whole = frame_bodies(&file, &transfer, &light, &view, PREVIEW_SIZE, None, None);
+        let whole = frame_bodies(&file, &transfer, &light, &view, PREVIEW_SIZE, SharpShown::default(), None);
         let (offset, count) = layer(&whole, "diffuse");
         assert_eq!(&floats(&whole)[offset..offset + 96 * 54 * count], &transfer.diffuse[..]);
     }
