@@ -43,6 +43,7 @@ use crate::logsh::Lobe;
 use crate::scene::camera::{dot, frame_around};
 use crate::scene::{PointLight, SunLight};
 use std::f64::consts::{FRAC_PI_2, PI};
+use std::ops::ControlFlow;
 
 /// Directions per sun disk (per pixel, each tested against the disk's occluders).
 pub const DISK_DIRECTIONS: usize = 32;
@@ -370,7 +371,7 @@ impl DiskDirections {
                     || distance - sphere.radius >= self.reach
                     || (object != 0 && sphere.object == object && dot(d, n) <= 0.0)
                 {
-                    return;
+                    return ControlFlow::Continue(());
                 }
                 let axis = d.map(|c| c / distance);
                 // The cap's half-angle: asin(r / d), a hemisphere from inside.
@@ -378,6 +379,11 @@ impl DiskDirections {
                 let cos_cap = (1.0 - sin_cap * sin_cap).sqrt();
                 let blocked = blocked.get_or_insert([0.0; DISK_DIRECTIONS]);
                 cover_by_cap(&self.by_axis, axis, [sin_cap, cos_cap], two_patches, blocked);
+                // Wholly covered (an umbra): no other sphere can cover more.
+                if blocked.iter().all(|&b| b >= 1.0) {
+                    return ControlFlow::Break(());
+                }
+                ControlFlow::Continue(())
             });
         }
         match blocked {
