@@ -383,7 +383,13 @@ impl Viewer {
         // The map's suns at the render's turn, shaded at the shown pixels, or held in SH
         // where the scene cannot shade them.
         let mut suns = None;
-        let mut held = (!sharp).then(|| "as the frame was rendered, with --sharp-lights off".to_string());
+        let mut held = match frame.header.settings {
+            Some(settings) if settings.sharp_lights => None,
+            Some(_) => Some("as the frame was rendered, with --sharp-lights off".to_string()),
+            None => {
+                Some("its header does not record the render's settings: render it again with this logsh".to_string())
+            }
+        };
         if let Some(turn) = turn.as_ref().filter(|_| !light.sharp_suns().is_empty()) {
             let shaded = turn.as_ref().map_err(Clone::clone).and_then(|turn| {
                 let prepared = turn.prepare(&frame, file).map_err(|e| e.to_string())?;
