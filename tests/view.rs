@@ -432,6 +432,11 @@ fn the_page_turns_a_sun_lamp_with_the_map() {
     let turned = status_line(&browser, &url);
     println!("turned: {turned}");
     assert!(turned.contains("the scene's Sun lamp turned with the map"), "{turned}");
+    // While the rotation is held (`dragging=1`, in full with `proxy=1`) the lamp follows it.
+    let dragged = format!("{url}&dragging=1&proxy=1");
+    let shot = screenshot(&browser, &dragged, 480, 400, &dir.path().join("dragged.png"));
+    let during = difference(&shot, &preview("turn"));
+    assert!(during < 1.5, "during a drag the page differs from logsh relight by {during:.2} levels");
     let unturned = status_line(&browser, &server.address);
     assert!(unturned.contains("relit") && !unturned.contains("Sun lamp"), "{unturned}");
     server.stop();
@@ -499,6 +504,11 @@ fn the_page_shades_a_map_sun_sharp() {
     let status = status_line(&browser, &url);
     println!("sharp: {status}");
     assert!(status.contains("the map's sun shaded sharp by logsh, turned with the map"), "{status}");
+    // While the rotation is held (`dragging=1`, in full with `proxy=1`) the sun follows it.
+    let dragged = format!("{url}&dragging=1&proxy=1");
+    let shot = screenshot(&browser, &dragged, 480, 400, &dir.path().join("dragged.png"));
+    let during = difference(&shot, &preview("sharp"));
+    assert!(during < 1.5, "during a drag the page differs from logsh relight by {during:.2} levels");
     server.stop();
 
     // The scene's description gone (its map stays): the sun held in SH, and said why.

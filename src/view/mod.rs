@@ -17,7 +17,7 @@
 //! The page takes its sliders' first values from its address: `?frame=I` (the index in
 //! `frames.json`, from 0), `rotation=DEG` (any angle, wrapped into -180 to 180),
 //! `strength=S`, `exposure=EV`, `wipe=F` (0 to 1), `pass=NAME`; `bench=N` and `proxy=N`
-//! time it (below).
+//! time it (below), and `dragging=1` shows the frame as while the rotation is held.
 //!
 //! The page turns the light about Z by rotating its SH vector (exact, [`crate::sh::rotate_z`])
 //! and reading the maps along `Rz(-turn) R`; strength scales the environment (its
@@ -35,9 +35,10 @@
 //! default) takes out of its map, whose residual the page's SH vector and glossy maps
 //! then hold ([`RelightLight::with_sharp_suns`]). The map's suns come with the frame's
 //! layers at the render's turn (`suns_diffuse`, `suns_specular`), shaded at the shown
-//! pixels. Once a turn is let go, the page asks for them and the Sun lamps turned
-//! (`sharp_lights.bin`: the scene shaded again, a sun's share of a render) and shows
-//! them at the render's turn until they come. Where the scene cannot be read, the Sun
+//! pixels. At each turn, the page asks for them and the Sun lamps turned
+//! (`sharp_lights.bin`: the scene shaded again, a sun's share of a render), one turn at a
+//! time, and shows them at the last turn shaded (the render's before any) until they
+//! come: during a drag they follow it a turn of the server's behind. Where the scene cannot be read, the Sun
 //! lamps stay as rendered and the map's suns are held in SH (soft shadows, as
 //! `logsh relight --sharp-lights off` holds them), and the page says why.
 
