@@ -39,7 +39,7 @@ pub enum Command {
     Info(InfoArgs),
     /// Recompute the beauty and every pass of frames rendered with --transfer under a turned, scaled or swapped environment, without shading again.
     Relight(RelightArgs),
-    /// Serve a local web page (127.0.0.1 only) that shows the frames of a directory rendered with --transfer and relights them in the browser: environment rotation, strength, exposure, and a wipe against the Cycles render.
+    /// Serve a local web page (127.0.0.1 only) that shows the frames of a directory rendered with --transfer and relights them in the browser: environment rotation, strength, exposure, and a wipe against the Cycles render; the Sun lamps and the suns of an HDRI are shaded sharp from the scene, as logsh relight shades them.
     View(ViewArgs),
 }
 
