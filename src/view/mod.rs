@@ -46,6 +46,7 @@ use crate::scene::SunLight;
 use crate::scene::ViewTransform;
 use crate::transfer::{RelightLight, RelightOptions, SunLampFrame, SunLampTurn, TransferFrame};
 use anyhow::{anyhow, Context, Result};
+use std::borrow::Cow;
 use std::io::{BufRead, BufReader, Write};
 use std::net::{TcpListener, TcpStream};
 use std::path::{Path, PathBuf};
@@ -562,23 +563,23 @@ fn frame_bodies(
 ) -> FrameBodies {
     let (shown, [width, height], stride) = preview_pixels(frame.width, frame.height, size);
     // A layer at the shown pixels: itself where they are all of them, in order.
-    let sampled = |values: &'_ [f32], components| -> Vec<f32> { at_pixels(&shown, values, components).collect() };
-    let whole = stride == 1;
+    let at_shown = |values, components| match stride {
+        1 => Cow::Borrowed(values),
+        _ => Cow::Owned(at_pixels(&shown, values, components).collect()),
+    };
     let mut pixels = Vec::new();
     let mut layout = Vec::new();
+    // A layer of the shown pixels, appended with its place in the layout.
     let mut put = |name: &str, components: usize, values: &[f32]| {
         let start = pixels.len() / 4;
-        match whole {
-            true => put_f32s(&mut pixels, values),
-            false => put_f32s(&mut pixels, &sampled(values, components)),
-        }
+        put_f32s(&mut pixels, values);
         layout.push(serde_json::json!({"name": name, "components": components, "offset": start}));
     };
     let count = frame.count();
-    put("diffuse", count, &frame.diffuse);
-    put("unoccluded", count, &frame.unoccluded);
+    put("diffuse", count, &at_shown(&frame.diffuse, count));
+    put("unoccluded", count, &at_shown(&frame.unoccluded, count));
     if let Some(specular) = &frame.specular {
-        put("specular", count, specular);
+        put("specular", count, &at_shown(specular, count));
     }
     for (name, values) in [
         ("albedo", &frame.albedo),
@@ -587,18 +588,15 @@ fn frame_bodies(
         ("lamps_specular", &frame.lamps_specular),
         ("glossy_direction", &frame.glossy_direction),
     ] {
-        put(name, 3, values.as_flattened());
+        put(name, 3, &at_shown(values.as_flattened(), 3));
     }
-    put("glossy_lobe", 1, &frame.glossy_lobe);
-    put("glossy_weight", 2, frame.glossy_weight.as_flattened());
-    put("alpha", 1, &frame.alpha);
+    put("glossy_lobe", 1, &at_shown(&frame.glossy_lobe, 1));
+    put("glossy_weight", 2, &at_shown(frame.glossy_weight.as_flattened(), 2));
+    put("alpha", 1, &at_shown(&frame.alpha, 1));
     // The map's suns, shaded at the shown pixels already.
     if let Some([diffuse, specular]) = sharp.suns {
-        for (name, layer) in [("suns_diffuse", diffuse), ("suns_specular", specular)] {
-            let start = pixels.len() / 4;
-            put_f32s(&mut pixels, layer.as_flattened());
-            layout.push(serde_json::json!({"name": name, "components": 3, "offset": start}));
-        }
+        put("suns_diffuse", 3, diffuse.as_flattened());
+        put("suns_specular", 3, specular.as_flattened());
     }
     let mut maps = Vec::new();
     let mut map_layout = Vec::new();
