@@ -377,6 +377,27 @@ fn required_browser(test: &str) -> Option<PathBuf> {
     found
 }
 
+/// The page at `url` (screenshots into `dir`) shows `relit`, the preview of `logsh
+/// relight`: within 1.5 levels of it and more than three times as far from `unlike` (a
+/// preview it must not show, named); and, held in a drag (`dragging=1`, in full with
+/// `proxy=1`), within 1.5 levels of `relit` still.
+fn assert_page_shows(
+    browser: &Path,
+    url: &str,
+    dir: &Path,
+    relit: &image::RgbaImage,
+    (unlike, name): (&image::RgbaImage, &str),
+) {
+    let shot = screenshot(browser, url, 480, 400, &dir.join("shown.png"));
+    let (to_relit, to_unlike) = (difference(&shot, relit), difference(&shot, unlike));
+    println!("screenshot of {url}: {to_relit:.2} levels from logsh relight, {to_unlike:.2} from {name}");
+    assert!(to_relit < 1.5, "the page differs from logsh relight by {to_relit:.2} levels");
+    assert!(to_unlike > 3.0 * to_relit, "the page must differ from {name}: {to_unlike:.2} levels from it");
+    let shot = screenshot(browser, &format!("{url}&dragging=1&proxy=1"), 480, 400, &dir.join("dragged.png"));
+    let during = difference(&shot, relit);
+    assert!(during < 1.5, "during a drag the page differs from logsh relight by {during:.2} levels");
+}
+
 /// The page's status line at `url` once its script and fetches have run (the browser's
 /// dump of the page's DOM).
 fn status_line(browser: &Path, url: &str) -> String {
@@ -424,19 +445,11 @@ fn the_page_turns_a_sun_lamp_with_the_map() {
     assert_eq!(server.request("GET", "/frame/0/sharp_lights.bin").0, 400, "no rotation");
     assert_eq!(server.request("GET", "/frame/0/sharp_lights.bin?rotation=inf").0, 400);
     let url = format!("{}?rotation=75", server.address);
-    let shot = screenshot(&browser, &url, 480, 400, &dir.path().join("turned.png"));
-    let (to_turned, to_kept) = (difference(&shot, &preview("turn")), difference(&shot, &preview("keep")));
-    println!("screenshot at 75 degrees: {to_turned:.2} levels from logsh relight, {to_kept:.2} from --sun-lamps keep");
-    assert!(to_turned < 1.5, "the page differs from logsh relight by {to_turned:.2} levels");
-    assert!(to_kept > 3.0 * to_turned, "the page must turn the Sun lamp: {to_kept:.2} from the lamp kept");
+    // The lamp turned, and following the rotation while it is held.
+    assert_page_shows(&browser, &url, dir.path(), &preview("turn"), (&preview("keep"), "--sun-lamps keep"));
     let turned = status_line(&browser, &url);
     println!("turned: {turned}");
     assert!(turned.contains("the scene's Sun lamp turned with the map"), "{turned}");
-    // While the rotation is held (`dragging=1`, in full with `proxy=1`) the lamp follows it.
-    let dragged = format!("{url}&dragging=1&proxy=1");
-    let shot = screenshot(&browser, &dragged, 480, 400, &dir.path().join("dragged.png"));
-    let during = difference(&shot, &preview("turn"));
-    assert!(during < 1.5, "during a drag the page differs from logsh relight by {during:.2} levels");
     let unturned = status_line(&browser, &server.address);
     assert!(unturned.contains("relit") && !unturned.contains("Sun lamp"), "{unturned}");
     server.stop();
@@ -496,19 +509,11 @@ fn the_page_shades_a_map_sun_sharp() {
     assert!(server.request("GET", "/frame/0/sharp_lights.bin?rotation=75").1 == suns, "turned 75 deg again");
     assert!(server.request("GET", "/frame/0/sharp_lights.bin?rotation=40").1 != suns, "turned 40 deg");
     let url = format!("{}?rotation=75&strength=1.5", server.address);
-    let shot = screenshot(&browser, &url, 480, 400, &dir.path().join("sharp.png"));
-    let (to_sharp, to_soft) = (difference(&shot, &preview("sharp")), difference(&shot, &preview("soft")));
-    println!("screenshot at 75 degrees: {to_sharp:.2} levels from logsh relight, {to_soft:.2} from the sun in SH");
-    assert!(to_sharp < 1.5, "the page differs from logsh relight by {to_sharp:.2} levels");
-    assert!(to_soft > 3.0 * to_sharp, "the page must shade the sun sharp: {to_soft:.2} from it held in SH");
+    // The sun shaded sharp, and following the rotation while it is held.
+    assert_page_shows(&browser, &url, dir.path(), &preview("sharp"), (&preview("soft"), "the sun held in SH"));
     let status = status_line(&browser, &url);
     println!("sharp: {status}");
     assert!(status.contains("the map's sun shaded sharp by logsh, turned with the map"), "{status}");
-    // While the rotation is held (`dragging=1`, in full with `proxy=1`) the sun follows it.
-    let dragged = format!("{url}&dragging=1&proxy=1");
-    let shot = screenshot(&browser, &dragged, 480, 400, &dir.path().join("dragged.png"));
-    let during = difference(&shot, &preview("sharp"));
-    assert!(during < 1.5, "during a drag the page differs from logsh relight by {during:.2} levels");
     server.stop();
 
     // The scene's description gone (its map stays): the sun held in SH, and said why.
