@@ -297,6 +297,34 @@ fn tiles_give_the_untiled_image() {
     assert_eq!(whole.rgba, pieces.rgba, "three tiles of 1000 points and one frame-sized tile differ");
 }
 
+/// One `Gpu` shared by eight threads, two scenes (two programs compiled at once on a device
+/// that has none yet): every frame equals the same frame shaded alone, bit for bit. The
+/// frames take turns on the device; shading at once, 16 threads never finished on an NVIDIA
+/// H200 (README, GPU).
+#[test]
+fn frames_from_many_threads_take_turns() {
+    let Some(_) = gpu() else { return };
+    let shared = own_device();
+    let samples = Path::new(env!("CARGO_MANIFEST_DIR")).join("gbuffers");
+    let scenes = [Scene::load(&samples.join("spheres")).unwrap(), Scene::load(&samples.join("cones")).unwrap()];
+    let frames: Vec<Frame> = scenes.iter().map(|s| s.frame(s.default_frame()).unwrap()).collect();
+    let settings = ShadingSettings::default();
+    let at_once: Vec<(usize, ShadedFrame)> = std::thread::scope(|threads| {
+        let shading: Vec<_> = (0..8)
+            .map(|i| {
+                let (scene, frame, shared, settings) = (&scenes[i % 2], &frames[i % 2], &shared, &settings);
+                threads.spawn(move || (i % 2, shared.shade_frame(scene, frame, settings).unwrap()))
+            })
+            .collect();
+        shading.into_iter().map(|t| t.join().unwrap()).collect()
+    });
+    let alone: Vec<ShadedFrame> =
+        scenes.iter().zip(&frames).map(|(s, f)| gpu().unwrap().shade_frame(s, f, &settings).unwrap()).collect();
+    for (k, shaded) in &at_once {
+        assert_eq!(shaded.rgba, alone[*k].rgba, "scene {k}: a frame shaded beside seven others differs");
+    }
+}
+
 /// An 8192 x 8192 frame: the spheres sample's 320 x 180 pixels in the middle of a
 /// background of 67 million pixels. Tiled within the adapter's limits, background from
 /// the light, the middle equal to the sample frame shaded on the CPU.

@@ -36,6 +36,11 @@ pub struct Gpu {
     errors: Arc<Mutex<Vec<String>>>,
     shade_pipelines: Mutex<HashMap<String, Arc<wgpu::ComputePipeline>>>,
     pyramid_pipelines: Mutex<Option<Arc<(wgpu::ComputePipeline, wgpu::ComputePipeline)>>>,
+    /// Held while a frame is on the device, from its pipeline to its last read-back, so
+    /// that threads sharing one `Gpu` take turns: frames shaded from 16 threads at once
+    /// never finished on an NVIDIA H200 (Vulkan, driver 580.159) while 2 or 4 did, and
+    /// the uncaptured errors in `errors` are the device's, not a frame's.
+    pub(super) one_frame_at_a_time: Mutex<()>,
     /// An upper bound on the points per tile below the adapter's own.
     max_tile_points: Option<usize>,
 }
@@ -113,6 +118,7 @@ impl Gpu {
             errors,
             shade_pipelines: Mutex::new(HashMap::new()),
             pyramid_pipelines: Mutex::new(None),
+            one_frame_at_a_time: Mutex::new(()),
             max_tile_points: None,
         }
     }
