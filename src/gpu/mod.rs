@@ -5,7 +5,8 @@
 //! - [`layout`]: the structs shared with WGSL, declared once.
 //! - [`program`]: the WGSL composed for what the scene contains, and the tables it
 //!   reads, generated from the CPU kernel (`shaders/` holds the modules).
-//! - `device`: [`Gpu`], the adapter and device, buffers, the pipeline cache, timing.
+//! - `device`: [`Gpu`], the adapter and device, buffers, the pipeline cache, timing. A
+//!   `Gpu` shared between threads shades one frame at a time.
 //! - `frame`: one frame's shading pass (prepare, bind, pack a tile, run a tile), from the
 //!   same [`crate::shade::FramePlan`] as the CPU executor.
 //! - `pyramid`: the height-field pyramid pre-pass.
