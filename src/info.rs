@@ -53,7 +53,7 @@ pub struct ExrInfo {
 }
 
 /// Reads the headers of `file`, and its chunk offsets and last chunk's size, to refuse a
-/// file that ends before its pixels do ([`check_complete`]).
+/// file that ends before its pixels do (`check_complete`).
 pub fn describe(file: &Path) -> Result<ExrInfo, SceneError> {
     let bytes = std::fs::metadata(file).map_err(|e| SceneError::io(file, "the EXR file", e))?.len();
     let opened = std::fs::File::open(file).map_err(|e| SceneError::io(file, "the EXR file", e))?;

@@ -619,7 +619,7 @@ pub const HORIZON_SECTORS: usize = 16;
 ///
 /// Step `j` reads its level at `x + d_j u` along `u` and at `x + d_j u_k` along `u_k`, above
 /// the same receiver terms. A read rises from one point to another at most by the climb
-/// bound of their difference ([`ClimbBound`]: the steepest cell's slopes weighted by
+/// bound of their difference (`ClimbBound`: the steepest cell's slopes weighted by
 /// `|dx|`, `|dy|`; clamping to the field's edges only shortens it), `d_j c(u - u_k)`, so
 /// the two steps' tangents differ by at most `c(u - u_k)`, whatever the step. A march
 /// along `u` takes a prefix of the step table (its reach, `t_far`), and every step of it
@@ -629,7 +629,7 @@ pub const HORIZON_SECTORS: usize = 16;
 /// each `k`, `t_k` the horizon tangent along `u_k` (SN08 Section 6's maximum over the
 /// steps, which the lanes find to the bit), and so at most a sector's highest `t_k` plus
 /// the least `c(u - u_k)` of its azimuths; the bound is the least of those, with twice
-/// the f32 rounding of a tangent ([`ClimbBound::rounding`]) for the two marches'
+/// the f32 rounding of a tangent (`ClimbBound::rounding`) for the two marches'
 /// arithmetic. Of the pixels a turn would march over the Sun-lamp scene's field (W =
 /// 16), sixteen sectors answer 98 to 100 % for its three lamps (2 deg disks at 50, 35
 /// and 25 deg) turned 20, 150 and 250 deg (four 97 to 100 %), and 84 to 92 % for the
@@ -1087,9 +1087,9 @@ impl HorizonPyramid {
     /// At least the tangent of every step along the unit azimuth `dir` from any receiver, on
     /// the field or above it: a step's climb is its level's read less the receiver's read
     /// of that level and its height above the surface, and a read rises along `dir` at
-    /// most by its cell's slopes weighted by `|dir|` ([`slopes_by_bucket`]; clamping to the
+    /// most by its cell's slopes weighted by `|dir|` (`slopes_by_bucket`; clamping to the
     /// field's edges only shortens the way), so by the steepest cell's. With the rounding
-    /// of the tangents ([`ClimbBound`]). Where it is below a sun's disk, the field casts
+    /// of the tangents (`ClimbBound`). Where it is below a sun's disk, the field casts
     /// no shadow on it. The Sun-lamp scene's field (256x256) climbs at most 0.39, 0.49 and
     /// 0.43 along its lamp and the two added in the README's "Several Sun lamps", turned 75
     /// deg (elevations 50, 35 and 25 deg, 2 deg disks whose feet are at tangents 1.15, 0.67

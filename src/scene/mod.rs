@@ -11,7 +11,7 @@
 //!   and the column. `version` must be 1 (checked before anything else, so a newer file
 //!   says "unsupported version" rather than "unknown key").
 //! - Paths are relative to the scene directory and must stay inside it (no `..` above
-//!   it, no absolute path elsewhere; see [`paths`]). A run of `#` is the frame number,
+//!   it, no absolute path elsewhere; see `paths`). A run of `#` is the frame number,
 //!   zero-padded to the run's length (`####` and frame 7 give `0007`); a path without `#`
 //!   is shared by all frames.
 //! - Materials: keys are material indices as decimal strings, at least 1 (0 is the
@@ -943,7 +943,7 @@ impl Scene {
 
     /// Refuses an output path that is `scene.json`, the view's LUT or any input of any
     /// frame (a templated input matches every frame number, inside or outside `frames`).
-    /// Paths are compared where writing would put the file ([`written_entry`]: links
+    /// Paths are compared where writing would put the file (`written_entry`: links
     /// and `..` resolved as the system resolves them), against each input's own entry and
     /// the file it resolves to; a templated input's directory is resolved the same way.
     pub fn check_output_path(&self, path: &Path) -> Result<(), SceneError> {

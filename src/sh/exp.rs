@@ -264,7 +264,7 @@ pub fn exp_series<T: Real>(tensor: &TriplingTensor, f: &[T], out: &mut [T]) {
 #[derive(Clone, Debug)]
 pub struct OlTable {
     pub order: usize,
-    /// Coefficients at the nodes of [`ol_node_magnitude`].
+    /// Coefficients at the nodes of `ol_node_magnitude`.
     pub a: Vec<f64>,
     pub b: Vec<f64>,
 }

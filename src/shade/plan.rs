@@ -65,7 +65,7 @@ pub struct FramePlan<'a> {
     pub contents: FrameContents,
     /// `Some` when the scene has a height map.
     pub terrain: Option<Terrain>,
-    /// Shared with the frames before it whose kernel is the same ([`lighting`]).
+    /// Shared with the frames before it whose kernel is the same (`lighting`).
     pub kernel: Arc<PlannedKernel>,
     /// The frame's sphere blockers as a hierarchy.
     pub blockers: BlockerTree,

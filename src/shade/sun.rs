@@ -290,7 +290,7 @@ impl DiskDirections {
     }
 
     /// The elevations between which the height field's horizon changes the disk's
-    /// visibility ([`Self::horizon_band`]), where its axis has an azimuth to march: what
+    /// visibility (`Self::horizon_band`), where its axis has an azimuth to march: what
     /// a frame's horizons are marched against before its pixels are shaded
     /// ([`DiskHorizon::Known`]).
     pub fn march_band(&self) -> Option<MarchAlong> {

@@ -112,7 +112,7 @@ pub struct TransferHeader {
     /// How many sectors of azimuths the `horizon` layer keeps per pixel
     /// ([`crate::heightfield::HorizonPyramid::horizon_sectors`]) where the frame holds it;
     /// `None` without the layer, and in files written before the count was recorded
-    /// ([`UNRECORDED_SECTORS`]).
+    /// (`UNRECORDED_SECTORS`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub horizon_sectors: Option<usize>,
 }

@@ -6,8 +6,8 @@
 //! | path | body |
 //! |---|---|
 //! | `/` | the page (`page.html`: canvas, sliders, the relight in JavaScript) |
-//! | `/frames.json` | the frames of the directory: file names, those found at start sorted, then those written since appended ([`Viewer::listed`]) |
-//! | `/frame/<i>/meta.json` | size (of a preview at most 1920x1080: [`PREVIEW_SIZE`]), order, the light's SH vector, the lobes, the layout of the next two |
+//! | `/frames.json` | the frames of the directory: file names, those found at start sorted, then those written since appended (`Viewer::listed`) |
+//! | `/frame/<i>/meta.json` | size (of a preview at most 1920x1080: `PREVIEW_SIZE`), order, the light's SH vector, the lobes, the layout of the next two |
 //! | `/frame/<i>/pixels.bin` | the transfer layers, little-endian f32, one array after another |
 //! | `/frame/<i>/maps.bin` | the maps the glossy lookups read ([`RelightLight::sampled_maps`]), then the scene's view transform LUT ([`crate::scene::view`]) |
 //! | `/frame/<i>/cycles.bin` | the Cycles render of the frame as RGB f32, where one is found |

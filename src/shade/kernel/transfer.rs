@@ -29,7 +29,7 @@ pub enum GlossyTransfer {
     Sh,
     /// The prefiltered map of the material's lobe along `direction`, times
     /// `cone + sh_weight * ratio`, `ratio` the log-SH share of the specular occlusion
-    /// under the light ([`ShadingKernel::prefiltered_glossy`]).
+    /// under the light (`ShadingKernel::prefiltered_glossy`).
     Prefiltered { material: u32, direction: [f64; 3], cone: f64, sh_weight: f64 },
 }
 
@@ -87,7 +87,7 @@ impl PointTransfer {
 
 impl<T: Real> ShadingKernel<T> {
     /// The prefiltered glossy lobes, by material: the lobe and its exponentiated ZH about
-    /// +Z ([`super::SharpGlossy::open`]).
+    /// +Z (`super::SharpGlossy::open`).
     pub fn prefiltered_lobes(&self) -> Vec<(u32, SharpLobe, Vec<f64>)> {
         let lobes = self.materials.iter().filter_map(|(&index, lobes)| lobes.sharp.as_ref().map(|s| (index, s)));
         lobes
