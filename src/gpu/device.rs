@@ -36,7 +36,7 @@ pub struct Gpu {
     errors: Arc<Mutex<Vec<String>>>,
     shade_pipelines: Mutex<HashMap<String, Arc<wgpu::ComputePipeline>>>,
     pyramid_pipelines: Mutex<Option<Arc<(wgpu::ComputePipeline, wgpu::ComputePipeline)>>>,
-    /// Held while a frame is on the device, from its pipeline to its last read-back, so
+    /// Held while a frame is on the device, from its plan to its last read-back, so
     /// that threads sharing one `Gpu` take turns: frames shaded from 16 threads at once
     /// never finished on an NVIDIA H200 (Vulkan, driver 580.159) while 2 or 4 did, and
     /// the uncaptured errors in `errors` are the device's, not a frame's.
