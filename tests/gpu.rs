@@ -16,6 +16,7 @@ use logsh::sh::ExpMethod;
 use logsh::shade::{shade_frame, GlossyMethod, ShadedFrame, ShadingSettings};
 use logsh::sweep::unoccluded_value;
 use logsh::synth::{self, ExampleOptions, SphereOverPlane};
+use rayon::prelude::*;
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
@@ -297,10 +298,10 @@ fn tiles_give_the_untiled_image() {
     assert_eq!(whole.rgba, pieces.rgba, "three tiles of 1000 points and one frame-sized tile differ");
 }
 
-/// One `Gpu` shared by eight threads, two scenes (two programs compiled at once on a device
-/// that has none yet): every frame equals the same frame shaded alone, bit for bit. The
-/// frames take turns on the device; shading at once, 16 threads never finished on an NVIDIA
-/// H200 (README, GPU).
+/// One `Gpu` shared by eight frames at once over two scenes (two programs compiled at once
+/// on a device that has none yet), from eight threads and then from eight jobs of a pool of
+/// four: every frame equals the same frame shaded alone, bit for bit. Frames take turns on
+/// the device; shading at once, 16 threads never finished on an NVIDIA H200 (README, GPU).
 #[test]
 fn frames_from_many_threads_take_turns() {
     let Some(_) = gpu() else { return };
@@ -309,18 +310,16 @@ fn frames_from_many_threads_take_turns() {
     let scenes = [Scene::load(&samples.join("spheres")).unwrap(), Scene::load(&samples.join("cones")).unwrap()];
     let frames: Vec<Frame> = scenes.iter().map(|s| s.frame(s.default_frame()).unwrap()).collect();
     let settings = ShadingSettings::default();
-    let at_once: Vec<(usize, ShadedFrame)> = std::thread::scope(|threads| {
-        let shading: Vec<_> = (0..8)
-            .map(|i| {
-                let (scene, frame, shared, settings) = (&scenes[i % 2], &frames[i % 2], &shared, &settings);
-                threads.spawn(move || (i % 2, shared.shade_frame(scene, frame, settings).unwrap()))
-            })
-            .collect();
+    let shade = |i: usize| (i % 2, shared.shade_frame(&scenes[i % 2], &frames[i % 2], &settings).unwrap());
+    let from_threads: Vec<(usize, ShadedFrame)> = std::thread::scope(|threads| {
+        let shading: Vec<_> = (0..8).map(|i| threads.spawn(move || shade(i))).collect();
         shading.into_iter().map(|t| t.join().unwrap()).collect()
     });
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(4).build().unwrap();
+    let from_jobs: Vec<(usize, ShadedFrame)> = pool.install(|| (0..8usize).into_par_iter().map(shade).collect());
     let alone: Vec<ShadedFrame> =
         scenes.iter().zip(&frames).map(|(s, f)| gpu().unwrap().shade_frame(s, f, &settings).unwrap()).collect();
-    for (k, shaded) in &at_once {
+    for (k, shaded) in from_threads.iter().chain(&from_jobs) {
         assert_eq!(shaded.rgba, alone[*k].rgba, "scene {k}: a frame shaded beside seven others differs");
     }
 }

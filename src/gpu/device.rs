@@ -4,6 +4,7 @@
 use super::layout::{wgsl_declarations, GpuPoint, GpuShaded, WORKGROUP_SIZE};
 use super::program::PYRAMID_WGSL;
 use super::GpuError;
+use parking_lot::ReentrantMutex;
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 use wgpu::util::DeviceExt;
@@ -36,11 +37,13 @@ pub struct Gpu {
     errors: Arc<Mutex<Vec<String>>>,
     shade_pipelines: Mutex<HashMap<String, Arc<wgpu::ComputePipeline>>>,
     pyramid_pipelines: Mutex<Option<Arc<(wgpu::ComputePipeline, wgpu::ComputePipeline)>>>,
-    /// Held while a frame is on the device, from its plan to its last read-back, so
-    /// that threads sharing one `Gpu` take turns: frames shaded from 16 threads at once
-    /// never finished on an NVIDIA H200 (Vulkan, driver 580.159) while 2 or 4 did, and
-    /// the uncaptured errors in `errors` are the device's, not a frame's.
-    pub(super) one_frame_at_a_time: Mutex<()>,
+    /// Held while a frame is on the device, from its plan to its last read-back, so that
+    /// threads sharing one `Gpu` take turns: frames shaded from 16 threads at once never
+    /// finished on an NVIDIA H200 (Vulkan, driver 580.159) while 2 or 4 did, and the
+    /// uncaptured errors in `errors` are the device's, not a frame's. Re-entrant: a rayon
+    /// worker waiting inside a frame's parallel work may take up another frame's job,
+    /// which then shades on the same thread rather than waiting for itself.
+    pub(super) one_frame_at_a_time: ReentrantMutex<()>,
     /// An upper bound on the points per tile below the adapter's own.
     max_tile_points: Option<usize>,
 }
@@ -118,7 +121,7 @@ impl Gpu {
             errors,
             shade_pipelines: Mutex::new(HashMap::new()),
             pyramid_pipelines: Mutex::new(None),
-            one_frame_at_a_time: Mutex::new(()),
+            one_frame_at_a_time: ReentrantMutex::new(()),
             max_tile_points: None,
         }
     }

@@ -137,8 +137,7 @@ impl Gpu {
         passes: bool,
         consume: &mut ConsumeTile,
     ) -> Result<StageTimings, GpuError> {
-        // A frame whose thread panicked left the device as idle as any other.
-        let _turn = self.one_frame_at_a_time.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+        let _turn = self.one_frame_at_a_time.lock();
         let prepared = self.prepare(scene, frame, settings, specialisation, passes)?;
         let mut timings = prepared.plan.timings.clone();
         let bound = self.bind(&prepared, &mut timings)?;
