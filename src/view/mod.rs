@@ -611,9 +611,9 @@ fn frame_bodies(
         serde_json::json!({"size": lut.size, "log2_range": lut.log2_range, "offset": offset})
     });
     let (cycles, no_cycles) = cycles_render(file, frame);
-    let cycles: Option<Vec<u8>> = cycles.map(|rgb| {
+    let cycles: Option<Vec<u8>> = cycles.as_ref().map(|rgb| {
         let mut bytes = Vec::new();
-        put_f32s(&mut bytes, &at_pixels(&shown, rgb.as_flattened(), 3).collect::<Vec<f32>>());
+        put_f32s(&mut bytes, &at_shown(rgb.as_flattened(), 3));
         bytes
     });
     // What the page says beside its status: why it shows what it shows.
