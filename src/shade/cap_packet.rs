@@ -290,13 +290,10 @@ mod lanes {
             _mm256_cmp_ps::<_CMP_LT_OQ>(squared, _mm256_set1_ps(f32::INFINITY)),
         );
         let facing = _mm256_cmp_ps::<_CMP_GT_OQ>(dot(d, lanes.n), zero);
-        // 1 / |d|: the processor's estimate and one Newton step (to about 2^-22).
-        let estimate = _mm256_rsqrt_ps(squared);
-        let half_squared = _mm256_mul_ps(_mm256_set1_ps(0.5), squared);
-        let inverse = _mm256_mul_ps(
-            estimate,
-            _mm256_fnmadd_ps(half_squared, _mm256_mul_ps(estimate, estimate), _mm256_set1_ps(1.5)),
-        );
+        // |d| and 1 / |d| correctly rounded, so the same bits on every processor (its
+        // reciprocal square root estimate differs between vendors).
+        let distance = _mm256_sqrt_ps(squared);
+        let inverse = _mm256_div_ps(one, distance);
         let direction = d.map(|c| _mm256_mul_ps(c, inverse));
         let keep = _mm256_and_ps(_mm256_and_ps(seen, finite), facing);
         // Lanes that add nothing evaluate the basis at +Z, so no NaN reaches the sums.
@@ -305,7 +302,11 @@ mod lanes {
             _mm256_and_ps(keep, direction[1]),
             _mm256_blendv_ps(one, direction[2], keep),
         ];
-        let ratio = _mm256_min_ps(_mm256_mul_ps(_mm256_set1_ps(sphere[3]), inverse), one);
+        // r / |d| divided, as the WGSL pass divides it: a receiver on the sphere (r = |d|)
+        // gets exactly 1, the hemisphere a receiver inside gets. Rounded below 1 there,
+        // asin would take ~sqrt(2 ulp) = 3e-4 rad off the cap, 0.5 % of a pixel's value
+        // at eps 1e-6 (`tests/extremes.rs`, receivers inside and touching).
+        let ratio = _mm256_min_ps(_mm256_div_ps(_mm256_set1_ps(sphere[3]), distance), one);
         let ratio = _mm256_and_ps(keep, ratio);
         let alpha = asin(ratio);
         let depth = crate::shade::fitted_depth::depth_at_lanes(packet.cap_depths, alpha);
