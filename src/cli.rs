@@ -289,7 +289,7 @@ pub struct RenderArgs {
     /// Frames to render, as farm managers and oiiotool write them: 1-240, 1-240x2, 1,5,10-20, 1..10 [default: the scene's frames].
     #[arg(long, value_parser = clap::value_parser!(crate::render::frames::FrameSpec))]
     pub frames: Option<crate::render::frames::FrameSpec>,
-    /// Output directory; receives <name>.NNNN.exr (multi-layer: beauty, passes, P, N) and <name>.NNNN.png.
+    /// Output directory; receives NAME.NNNN.exr (multi-layer: beauty, passes, P, N) and NAME.NNNN.png, NAME from --name.
     #[arg(long)]
     pub out: PathBuf,
     /// File name stem of the outputs.
@@ -331,7 +331,7 @@ pub struct RelightArgs {
     /// Strength of the map [default: the rendered strength; 1 with --light]; scales a constant or SH light too.
     #[arg(long, allow_negative_numbers = true, value_parser = relight_strength)]
     pub strength: Option<f32>,
-    /// Output directory; receives each frame's relit EXR (beauty and passes, same file name), a PNG preview and <frame>.light.json (the light's SH vector).
+    /// Output directory; receives each frame's relit EXR (beauty and passes, same file name), a PNG preview and FRAME.light.json (the light's SH vector).
     #[arg(long)]
     pub out: PathBuf,
     /// Storage of the colour passes and visibility terms (P and N are always float); half stops at 65504 rather than infinity.
