@@ -17,6 +17,12 @@ per-frame sphere blockers and camera, height map, materials and the World's ligh
     --heightmap-size N      height map samples along the terrain's longer side (256)
     --supersample N         G-buffer samples per pixel along each axis, 1 to 4 (1): the
                             G-buffers at N times the output size, which logsh resolves
+    --no-colour-passes      leave out the Diffuse Color and Glossy Color passes: logsh then
+                            shades the material table's colours (the converted materials
+                            of render_cycles.py's direct-light truth)
+    --approximate           export materials logsh cannot represent (transmission,
+                            subsurface, emission, another shader) with a warning each,
+                            where the export otherwise stops naming the material
 
 What is exported and how materials and blockers are derived is documented at the top of
 `blender_scripts/logsh_exporter/exporter.py`; the add-on in the same folder runs the same
@@ -80,6 +86,11 @@ def main(argv):
     parser.add_argument("--heightfield")
     parser.add_argument("--heightmap-size", type=int, default=Options.heightmap_size)
     parser.add_argument("--supersample", type=int, default=Options.supersample)
+    parser.add_argument("--no-colour-passes", dest="colour_passes", action="store_false",
+                        help="leave out the Diffuse Color and Glossy Color passes: logsh shades the material table's "
+                             "colours (the materials of render_cycles.py's direct-light truth)")
+    parser.add_argument("--approximate", action="store_true",
+                        help="export materials logsh cannot represent with a warning each, where the export stops")
     args = parser.parse_args(argv)
 
     if args.blend:
@@ -93,7 +104,8 @@ def main(argv):
         sys.exit("error: --spheres must be >= 1, --fit-error in (0, 1), --heightmap-size >= 2")
     options = Options(out=args.out, frames=args.frames, resolution=args.resolution, spheres=args.spheres,
                       fit_error=args.fit_error, heightfield=args.heightfield,
-                      heightmap_size=args.heightmap_size, supersample=args.supersample)
+                      heightmap_size=args.heightmap_size, supersample=args.supersample,
+                      colour_passes=args.colour_passes, approximate=args.approximate)
     try:
         export(scene, options)
     except ExportError as e:

@@ -1,12 +1,24 @@
-"""Renders one frame of a .blend in Cycles with direct lighting only, as the ground truth
-logsh is compared against (`examples/cycles_compare.rs`).
+"""Renders one frame of a .blend in Cycles as a truth logsh is compared against
+(`examples/cycles_compare.rs`): by default the truth for the method (direct light on the
+exporter's converted materials); with `--as-authored`, the truth for the user (the
+.blend's materials untouched).
 
     python blender_scripts/render_cycles.py --blend scene.blend --out DIR [--frame 1]
         [--samples 256] [--resolution WxH] [--seed 0] [--ladder 1,2,4,...]
+        [--as-authored [--bounces N|default]] [--denoise]
     blender -b scene.blend -P blender_scripts/render_cycles.py -- --out DIR ...
 
 Writes `DIR/cycles.NNNN.exr` (linear RGB, half float) and `DIR/cycles.NNNN.png` (sRGB,
-Standard view transform); refuses to write over either.
+Standard view transform); with `--as-authored`, `DIR/authored.NNNN.exr` and `.png`
+(`authored_bN` with `--bounces N`); refuses to write over any of them.
+
+`--as-authored` renders the .blend as its author would, but for what must match the
+G-buffer: materials, World and lamps untouched, each pixel sampled at its centre (as
+below), the Standard view transform, no motion blur or depth of field. `--bounces N`
+sets Cycles' max bounces (0: direct light only, the measure of materials alone);
+`default` keeps the file's light paths (bounce light included, what the user renders).
+`--denoise` runs OpenImageDenoise on the result (with its albedo and normal passes), the
+user's alternative at a few samples.
 
 With `--ladder`, times Cycles instead (`examples/cycles_timing.rs` reads the results):
 one render of 1 sample first, untimed, so that loading Cycles' kernels is not counted,
@@ -30,7 +42,9 @@ and turned back into the Cycles shader that means the same thing:
 
 The World is used as it is (the same light logsh reads). Each pixel's samples are taken
 at its centre (box filter of width 0.01 px), as for the G-buffer, so the two images
-compare pixel for pixel; no denoising, no clamping. `--filter box1` or `--filter
+compare pixel for pixel (a Gaussian of width 0.01 px: Cycles' box filter is one pixel wide
+whatever its width, so a box of 0.01 px averaged each pixel over its whole area); no
+denoising, no clamping. `--filter box1` or `--filter
 blackman-harris` render with a 1-px box or Blender's default 1.5-px Blackman-Harris
 instead: the truth for a supersampled export that logsh resolves with the same filter.
 """
@@ -44,7 +58,7 @@ import bpy
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from export_scene import size  # noqa: E402
-from logsh_exporter.exporter import DATA_FILTER_WIDTH, Changes, material_table, find_heightfield, Options, \
+from logsh_exporter.exporter import DATA_FILTER, DATA_FILTER_WIDTH, Changes, material_table, find_heightfield, Options, \
     output_size, renderable_objects  # noqa: E402
 
 
@@ -96,6 +110,11 @@ def main(argv):
     parser.add_argument("--resolution", type=size)
     parser.add_argument("--seed", type=int, default=0, help="Cycles' noise seed (two seeds measure the noise)")
     parser.add_argument("--ladder", type=sample_ladder, help="time renders at these sample counts (1,2,4,...)")
+    parser.add_argument("--as-authored", action="store_true",
+                        help="render the .blend's own materials (the truth for the user), not the converted ones")
+    parser.add_argument("--bounces", default="0",
+                        help="with --as-authored: Cycles' max bounces, or 'default' for the file's light paths (0)")
+    parser.add_argument("--denoise", action="store_true", help="OpenImageDenoise the render (albedo and normal)")
     parser.add_argument("--filter", choices=["centre", "box1", "blackman-harris"], default="centre",
                         help="pixel filter: each pixel's centre (as a point-sampled G-buffer), a 1-px box, or 1.5-px "
                              "Blackman-Harris")
@@ -106,7 +125,13 @@ def main(argv):
         sys.exit("error: no .blend given; pass --blend FILE")
     scene = bpy.context.scene
     frame = args.frame if args.frame is not None else scene.frame_start
-    stem = os.path.join(os.path.abspath(args.out), f"cycles.{frame:04d}")
+    if args.bounces != "default" and not (args.bounces.isdigit() and int(args.bounces) <= 1024):
+        sys.exit(f"error: --bounces {args.bounces}: a count from 0 to 1024, or 'default'")
+    if args.as_authored:
+        name = "authored" if args.bounces == "0" else f"authored_b{args.bounces}"
+    else:
+        name = "cycles"
+    stem = os.path.join(os.path.abspath(args.out), f"{name}.{frame:04d}")
     outputs = [f"{stem}.s{n}.exr" for n in args.ladder] + [stem + ".timing.json"] if args.ladder else \
         [stem + ".exr", stem + ".png"]
     for path in outputs:
@@ -114,11 +139,14 @@ def main(argv):
             sys.exit(f"error: {path} exists; choose another directory")
     os.makedirs(args.out, exist_ok=True)
 
-    objects = renderable_objects(scene, bpy.context.view_layer)
-    table, index_of = material_table(objects, find_heightfield(objects, Options(out=args.out)), Changes())
-    for name, index in index_of.items():
-        cycles_shader(bpy.data.materials[name], table[index])
-    water = any(m["type"] == "water" for m in table.values())
+    water = False
+    if not args.as_authored:
+        objects = renderable_objects(scene, bpy.context.view_layer)
+        options = Options(out=args.out, colour_passes=False, approximate=True)
+        table, index_of = material_table(objects, find_heightfield(objects, options), Changes(), options, [])
+        for material, index in index_of.items():
+            cycles_shader(bpy.data.materials[material], table[index])
+        water = any(m["type"] == "water" for m in table.values())
 
     render, cycles = scene.render, scene.cycles
     render.engine = "CYCLES"
@@ -126,19 +154,26 @@ def main(argv):
     cycles.samples = args.samples
     cycles.seed = args.seed
     cycles.use_adaptive_sampling = False
-    cycles.use_denoising = False
+    cycles.use_denoising = args.denoise
+    if args.denoise:
+        cycles.denoiser = "OPENIMAGEDENOISE"
+        cycles.denoising_input_passes = "RGB_ALBEDO_NORMAL"
     cycles.pixel_filter_type, cycles.filter_width = {
-        "centre": ("BOX", DATA_FILTER_WIDTH),
+        "centre": (DATA_FILTER, DATA_FILTER_WIDTH),
         "box1": ("BOX", 1.0),
         "blackman-harris": ("BLACKMAN_HARRIS", 1.5),
     }[args.filter]
-    cycles.max_bounces = 1 if water else 0
-    cycles.glossy_bounces = 1 if water else 0
-    cycles.diffuse_bounces = cycles.transmission_bounces = cycles.volume_bounces = 0
-    cycles.transparent_max_bounces = 0
-    cycles.sample_clamp_direct = cycles.sample_clamp_indirect = 0.0
-    cycles.blur_glossy = 0.0
-    cycles.caustics_reflective = True
+    if args.as_authored:
+        if args.bounces != "default":
+            cycles.max_bounces = int(args.bounces)
+    else:
+        cycles.max_bounces = 1 if water else 0
+        cycles.glossy_bounces = 1 if water else 0
+        cycles.diffuse_bounces = cycles.transmission_bounces = cycles.volume_bounces = 0
+        cycles.transparent_max_bounces = 0
+        cycles.sample_clamp_direct = cycles.sample_clamp_indirect = 0.0
+        cycles.blur_glossy = 0.0
+        cycles.caustics_reflective = True
     render.use_motion_blur = False
     render.use_compositing = render.use_sequencer = False
     render.film_transparent = False
@@ -164,7 +199,8 @@ def main(argv):
     settings.file_format = "PNG"
     settings.color_depth = "8"
     bpy.data.images["Render Result"].save_render(stem + ".png", scene=scene)
-    print(f"wrote {stem}.exr and .png ({args.samples} samples, max bounces {cycles.max_bounces})")
+    print(f"wrote {stem}.exr and .png ({args.samples} samples, max bounces {cycles.max_bounces}, "
+          f"{'as authored' if args.as_authored else 'converted materials'})")
 
 
 def sample_ladder(text):

@@ -3,10 +3,16 @@
 //! (`--fitted-depths off`), with ratio attenuation, without the
 //! overlap floor and without clusters (and, where `--sharp-lights` takes suns out of the
 //! map, `default` and `high` without that; under a map, `default` with its projection
-//! windowed), and compares each with the direct-lighting Cycles render stored beside it
-//! (`cycles.NNNN.exr`, written by `blender_scripts/render_cycles.py` with the exported
-//! material table turned back into Cycles shaders, so that both sides use the same albedo,
-//! specular colour and lobe width).
+//! windowed), and compares each with the Cycles renders stored beside it, each a truth
+//! of its own (`blender_scripts/render_cycles.py` writes them):
+//!
+//! - `cycles.NNNN.exr`, the truth for the method: direct light, with the exported material
+//!   table turned back into Cycles shaders, so that both sides use the same albedo,
+//!   specular colour and lobe width;
+//! - `authored.NNNN.exr` (`--as-authored`), the truth for the user with direct light
+//!   only: the .blend's own materials, which the colour passes bring to logsh;
+//! - `authored_bdefault.NNNN.exr` (`--as-authored --bounces default`), the user's own
+//!   render, bounce light included.
 //!
 //!     cargo run --release --example cycles_compare -- gbuffers/dunes gbuffers/wrecking_ball
 //!
@@ -21,7 +27,8 @@
 //! Error: [`logsh::compare`]'s, the mean over non-background pixels and over R, G, B of
 //! |logsh - Cycles| divided by the radiance an open white floor receives from the scene's
 //! light (a point lamp's share averaged over the frame). Also printed: the 95th percentile
-//! and the mean signed difference (positive: logsh brighter).
+//! and the mean signed difference (positive: logsh brighter); and the plain mean absolute
+//! difference over non-background pixels and R, G, B, the figure the issues quote.
 
 use logsh::compare::{frame_error, read_rgb, unoccluded_value};
 use logsh::reference::{render_reference, ReferenceOptions};
@@ -30,6 +37,13 @@ use logsh::shade::shade_frame;
 use logsh::shade::sharp_lights::extract_suns;
 use logsh::shade::{GlossyMethod, LightWindow, Quality, ShadingSettings};
 use std::path::PathBuf;
+
+/// The Cycles renders compared against, where present: file stem and what it is.
+const TRUTHS: [(&str, &str); 3] = [
+    ("cycles", "direct light, converted materials"),
+    ("authored", "as authored, direct light"),
+    ("authored_bdefault", "as authored, Blender's light paths"),
+];
 
 fn main() {
     let mut args: Vec<String> = std::env::args().skip(1).collect();
@@ -49,8 +63,10 @@ fn main() {
         eprintln!("usage: cycles_compare [--quick] [--noise DIR] [--reference TOLERANCE] SCENE_DIR...");
         std::process::exit(2);
     }
-    println!("| scene | settings | pixels | mean abs error | p95 | mean signed | glossy pixels (exponent >= 50) |");
-    println!("| --- | --- | --- | --- | --- | --- | --- |");
+    println!(
+        "| scene | truth | settings | pixels | mean abs error | p95 | mean signed | mean abs (plain) | glossy pixels (exponent >= 50) |"
+    );
+    println!("| --- | --- | --- | --- | --- | --- | --- | --- | --- |");
     let default = Quality::Default.settings();
     let all_runs = [
         ("default", default),
@@ -71,8 +87,19 @@ fn main() {
         );
         let number = scene.default_frame();
         let frame = scene.frame(number).unwrap_or_else(|e| panic!("{e}"));
-        let (width, height, cycles) =
-            read_rgb(&dir.join(format!("cycles.{number:04}.exr"))).unwrap_or_else(|e| panic!("{e}"));
+        let truths: Vec<(&str, Vec<[f32; 3]>)> = TRUTHS
+            .iter()
+            .filter_map(|&(stem, name)| {
+                let file = dir.join(format!("{stem}.{number:04}.exr"));
+                file.is_file().then(|| (name, read_rgb(&file).unwrap_or_else(|e| panic!("{e}")).2))
+            })
+            .collect();
+        assert!(
+            !truths.is_empty(),
+            "{}: no Cycles render (cycles.{number:04}.exr, authored.{number:04}.exr)",
+            dir.display()
+        );
+        let (width, height) = (frame.gbuffer.width, frame.gbuffer.height);
         let unoccluded = unoccluded_value(&frame)
             .expect("an SH light has no map to integrate; compare scenes with an environment or constant light");
         eprintln!("{}: frame {number}, unoccluded value {unoccluded:.3?}", dir.display());
@@ -135,8 +162,20 @@ fn main() {
                 .unwrap_or_else(|e| panic!("{e}"));
             images.push(("Cycles, another seed".to_string(), second));
         }
-        for (name, image) in &images {
-            let error = frame_error(&frame.gbuffer.material, image, &cycles, unoccluded);
+        for ((truth, cycles), (name, image)) in truths.iter().flat_map(|t| images.iter().map(move |i| (t, i))) {
+            assert_eq!(
+                cycles.len(),
+                width * height,
+                "{}: the {truth} render and the G-buffer differ in size",
+                dir.display()
+            );
+            let error = frame_error(&frame.gbuffer.material, image, cycles, unoccluded);
+            let surface: Vec<usize> = (0..image.len()).filter(|&i| frame.gbuffer.material[i] != 0).collect();
+            let plain = surface
+                .iter()
+                .map(|&i| (0..3).map(|k| f64::from((image[i][k] - cycles[i][k]).abs())).sum::<f64>() / 3.0)
+                .sum::<f64>()
+                / surface.len().max(1) as f64;
             let (count, mean, p95, signed) = (error.pixels, error.mean, error.p95, error.signed);
             let errors = error.per_pixel;
             let glossy: Vec<f64> = frame
@@ -153,7 +192,9 @@ fn main() {
             } else {
                 format!("{:.3} ({} px)", glossy.iter().sum::<f64>() / glossy.len() as f64, glossy.len())
             };
-            println!("| {scene_name} | {name} | {count} | {mean:.3} | {p95:.3} | {signed:+.3} | {glossy} |");
+            println!(
+                "| {scene_name} | {truth} | {name} | {count} | {mean:.3} | {p95:.3} | {signed:+.3} | {plain:.4} | {glossy} |"
+            );
             if std::env::var_os("LOGSH_COMPARE_BY_MATERIAL").is_some() {
                 let mut by_material: std::collections::BTreeMap<u32, (f64, f64, usize)> = Default::default();
                 for (i, &m) in frame.gbuffer.material.iter().enumerate() {

@@ -11,6 +11,7 @@ mod support;
 use assert_cmd::Command;
 use exr::prelude::{read, FlatSamples, ReadChannels, ReadLayers};
 use logsh::scene::{Scene, Sphere};
+use logsh::shade::ShadingSettings;
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::process::Output;
@@ -501,7 +502,10 @@ fn dunes_height_map_and_sky_match_blender() {
     let blend = dir.path().join("dunes.blend");
     assert_ok(&run_python(&python, "blender_scripts/scenes/dunes.py", &[Path::new("--save"), &blend]), "dunes.py");
     let scene_dir = dir.path().join("scene");
-    let options = ["--frames", "1", "--resolution", "64x36", "--heightmap-size", "97"].map(Path::new);
+    // Without colour passes, so that the terrain's material is `heightfield` (with them a
+    // Principled BSDF is `phong` wherever it is).
+    let options =
+        ["--frames", "1", "--resolution", "64x36", "--heightmap-size", "97", "--no-colour-passes"].map(Path::new);
     let mut args = vec![Path::new("--blend"), &blend, Path::new("--out"), &scene_dir];
     args.extend(options);
     assert_ok(&run_python(&python, "blender_scripts/export_scene.py", &args), "export_scene.py");
@@ -805,4 +809,179 @@ fn supersampled_export_resolves_to_the_camera() {
     println!("edge pixels with partial alpha: point-sampled {}, 2x2 {}", partial(&alphas[0]), partial(&alphas[1]));
     assert_eq!(partial(&alphas[0]), 0);
     assert!(partial(&alphas[1]) > 5, "the resolved frame has anti-aliased edges");
+}
+
+/// A checker texture on a Principled BSDF arrives as Blender evaluates it: the export
+/// carries Cycles' Diffuse Color and Glossy Color passes (scene.json `colour_passes`),
+/// the ground's Diffuse Color takes the checker's two colours, and logsh's shade of the
+/// light cells is brighter than of the dark ones by about their ratio (0.8 / 0.1). With
+/// `--no-colour-passes` the ground is one colour again.
+#[test]
+fn textured_materials_shade_as_blender_evaluates_them() {
+    let Some(python) = bpy_python() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let blend = dir.path().join("checker.blend");
+    make_blend(
+        &python,
+        &blend,
+        "bpy.ops.mesh.primitive_plane_add(size=8); \
+         m = bpy.data.materials.new('checker'); m.use_nodes = True; t = m.node_tree; \
+         c = t.nodes.new('ShaderNodeTexChecker'); c.inputs['Scale'].default_value = 3.0; \
+         c.inputs['Color1'].default_value = (0.8, 0.8, 0.8, 1); c.inputs['Color2'].default_value = (0.1, 0.1, 0.1, 1); \
+         t.links.new(c.outputs['Color'], t.nodes['Principled BSDF'].inputs['Base Color']); \
+         bpy.context.object.data.materials.append(m); \
+         bpy.ops.object.camera_add(location=(0, 0, 9)); bpy.context.scene.camera = bpy.context.object; \
+         w = bpy.data.worlds.new('World'); bpy.context.scene.world = w; w.use_nodes = True; \
+         w.node_tree.nodes['Background'].inputs['Color'].default_value = (0.5, 0.5, 0.5, 1)",
+    );
+    let out = dir.path().join("scene");
+    assert_ok(&export_frame_1(&python, &blend, &out, "48x27"), "exporting a textured ground");
+    let scene = Scene::load(&out).unwrap();
+    assert!(scene.colour_passes(), "the export says colour_passes");
+    let frame = scene.frame(1).unwrap();
+    let colours = frame.gbuffer.colours.as_ref().expect("the G-buffer holds the colour passes");
+    let shaded = logsh::shade::shade_frame(&scene, &frame, &ShadingSettings::default()).unwrap();
+    let (mut light, mut dark) = (Vec::new(), Vec::new());
+    for (i, d) in colours.diffuse.iter().enumerate() {
+        if frame.gbuffer.material[i] != 0 {
+            let grey = shaded.rgba[i][0] + shaded.rgba[i][1] + shaded.rgba[i][2];
+            match d[0] {
+                v if v > 0.5 => light.push(grey),
+                v if v < 0.2 => dark.push(grey),
+                v => panic!("pixel {i}: Diffuse Color {v} is neither of the checker's colours (times the layering)"),
+            }
+        }
+    }
+    assert!(light.len() > 100 && dark.len() > 100, "{} light and {} dark pixels", light.len(), dark.len());
+    let mean = |v: &[f32]| v.iter().sum::<f32>() / v.len() as f32;
+    let ratio = mean(&light) / mean(&dark);
+    eprintln!("light cells {:.4}, dark cells {:.4}: ratio {ratio:.2}", mean(&light), mean(&dark));
+    assert!((4.0..9.0).contains(&ratio), "light cells are {ratio:.2} times as bright as dark ones");
+
+    let plain = dir.path().join("plain");
+    let args =
+        [Path::new("--blend"), &blend, Path::new("--out"), &plain, Path::new("--resolution"), Path::new("48x27")];
+    let output = run_python(
+        &python,
+        "blender_scripts/export_scene.py",
+        &[&args[..], &[Path::new("--no-colour-passes")]].concat(),
+    );
+    assert_ok(&output, "exporting without colour passes");
+    let warned = String::from_utf8_lossy(&output.stdout);
+    assert!(warned.contains("material \"checker\": its Base Color is driven by nodes"), "{warned}");
+    let scene = Scene::load(&plain).unwrap();
+    assert!(!scene.colour_passes() && scene.frame(1).unwrap().gbuffer.colours.is_none());
+}
+
+/// What logsh cannot shade stops the export, naming the material and the node: emission,
+/// transmission outside water, a Mix Shader surface; `--approximate` exports with a
+/// warning each, which the summary counts.
+#[test]
+fn unrepresentable_materials_are_refused_by_name() {
+    let Some(python) = bpy_python() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let setup = "bpy.ops.mesh.primitive_plane_add(size=8); bpy.ops.mesh.primitive_cube_add(location=(0, 0, 1)); \
+                 m = bpy.data.materials.new('CASE'); m.use_nodes = True; t = m.node_tree; \
+                 p = t.nodes['Principled BSDF']; bpy.context.object.data.materials.append(m); \
+                 bpy.ops.object.camera_add(location=(7, -7, 5), rotation=(math.radians(63), 0, math.radians(45))); \
+                 bpy.context.scene.camera = bpy.context.object; \
+                 w = bpy.data.worlds.new('World'); bpy.context.scene.world = w";
+    let cases = [
+        ("lamp shade", "p.inputs['Emission Strength'].default_value = 4.0; p.inputs['Emission Color'].default_value = (1, 1, 1, 1)", "emits light"),
+        ("frosted glass", "p.inputs['Transmission Weight'].default_value = 0.9", "has transmission"),
+        (
+            "mixed",
+            "x = t.nodes.new('ShaderNodeMixShader'); x.name = 'Mix'; \
+             t.links.new(x.outputs[0], t.nodes['Material Output'].inputs['Surface'])",
+            "its surface is a Mix Shader node (\"Mix\")",
+        ),
+    ];
+    for (name, change, says) in cases {
+        let blend = dir.path().join(format!("{name}.blend"));
+        make_blend(&python, &blend, &format!("{}; {change}", setup.replace("CASE", name)));
+        let out = dir.path().join(name);
+        let output = export_frame_1(&python, &blend, &out, "16x9");
+        assert_eq!(output.status.code(), Some(1), "{name}: the export stops");
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert!(stderr.contains(&format!("error: material \"{name}\"")) && stderr.contains(says), "{name}: {stderr}");
+        assert!(!out.exists(), "{name}: a refused export left {} behind", out.display());
+
+        let args =
+            [Path::new("--blend"), &blend, Path::new("--out"), &out, Path::new("--resolution"), Path::new("16x9")];
+        let output = run_python(
+            &python,
+            "blender_scripts/export_scene.py",
+            &[&args[..], &[Path::new("--approximate")]].concat(),
+        );
+        assert_ok(&output, "exporting with --approximate");
+        let stdout = String::from_utf8_lossy(&output.stdout);
+        assert!(
+            stdout.contains(&format!("warning: material \"{name}\"")) && stdout.contains("1 warning:"),
+            "{name}: {stdout}"
+        );
+    }
+}
+
+/// Dielectric Fresnel reflectance of unpolarised light at `cos_i` into a medium of index
+/// `n` from air (Fresnel's equations).
+fn fresnel_dielectric(cos_i: f64, n: f64) -> f64 {
+    let sin_t = (1.0 - cos_i * cos_i).max(0.0).sqrt() / n;
+    let cos_t = (1.0 - sin_t * sin_t).sqrt();
+    let s = (cos_i - n * cos_t) / (cos_i + n * cos_t);
+    let p = (cos_t - n * cos_i) / (cos_t + n * cos_i);
+    0.5 * (s * s + p * p)
+}
+
+/// Water as Blender renders it: the exported Glossy Color of clear water (IOR 1.33) is
+/// Fresnel's reflectance at each pixel's view angle, within 0.005 + 3 % of the closed form
+/// as it rises towards grazing angles, and logsh shades a water pixel mirroring
+/// the constant sky as that reflectance times the sky.
+#[test]
+fn water_reflects_with_fresnel() {
+    let Some(python) = bpy_python() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let blend = dir.path().join("water.blend");
+    make_blend(
+        &python,
+        &blend,
+        "bpy.ops.mesh.primitive_plane_add(size=200); \
+         m = bpy.data.materials.new('lake'); m.use_nodes = True; p = m.node_tree.nodes['Principled BSDF']; \
+         p.inputs['Transmission Weight'].default_value = 1.0; p.inputs['IOR'].default_value = 1.33; \
+         p.inputs['Roughness'].default_value = 0.0; m['logsh_type'] = 'water'; \
+         bpy.context.object.data.materials.append(m); \
+         bpy.ops.object.camera_add(location=(0, -6, 1.2), rotation=(math.radians(78), 0, 0)); \
+         bpy.context.scene.camera = bpy.context.object; \
+         w = bpy.data.worlds.new('World'); bpy.context.scene.world = w; w.use_nodes = True; \
+         w.node_tree.nodes['Background'].inputs['Color'].default_value = (0.5, 0.6, 0.7, 1)",
+    );
+    let out = dir.path().join("scene");
+    assert_ok(&export_frame_1(&python, &blend, &out, "32x18"), "exporting a lake");
+    let scene = Scene::load(&out).unwrap();
+    let frame = scene.frame(1).unwrap();
+    let (g, camera) = (&frame.gbuffer, frame.camera.as_ref().unwrap());
+    let shaded = logsh::shade::shade_frame(&scene, &frame, &ShadingSettings::default()).unwrap();
+    let (mut worst, mut seen) = (0.0f64, Vec::new());
+    for i in (0..g.material.len()).filter(|&i| g.material[i] != 0) {
+        let p = g.position[i].map(f64::from);
+        let d: Vec<f64> = (0..3).map(|k| p[k] - camera.position[k]).collect();
+        let cos = -d[2] / (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+        let fresnel = fresnel_dielectric(cos, 1.33);
+        let glossy = g.colours_at(i).expect("colour passes").1;
+        // Relative to the closed form's own slope: at 80 degrees a thousandth of a radian
+        // moves it by 1 %.
+        worst = worst.max((f64::from(glossy[0]) - fresnel).abs() / (0.005 + 0.03 * fresnel));
+        seen.push(fresnel);
+        for (k, sky) in [0.5, 0.6, 0.7].into_iter().enumerate() {
+            let expected = f64::from(glossy[k]) * sky;
+            let got = f64::from(shaded.rgba[i][k]);
+            assert!((got - expected).abs() < 1e-4, "pixel {i}: {got} where Glossy Color times the sky is {expected}");
+        }
+    }
+    let (low, high) = seen.iter().fold((1.0f64, 0.0f64), |(l, h), &f| (l.min(f), h.max(f)));
+    eprintln!(
+        "Glossy Color against Fresnel over {} pixels ({low:.3} to {high:.3}): worst {worst:.2} of the tolerance",
+        seen.len()
+    );
+    assert!(high > 0.3 && high - low > 0.2, "the view angles span Fresnel's rise: {low:.3} to {high:.3}");
+    assert!(worst < 1.0, "the water's Glossy Color is {worst} times the tolerance from Fresnel's reflectance");
 }

@@ -160,6 +160,7 @@ fn point_frame(base: &Frame, points: &[([f64; 3], [f64; 3], u32)]) -> Frame {
         uv: None,
         material: points.iter().map(|p| p.2).collect(),
         object: None,
+        colours: None,
     };
     frame
 }

@@ -146,6 +146,14 @@ fn small_dunes(dir: &Path) -> Scene {
     Scene::load(dir).expect("load dunes")
 }
 
+/// [`small_dunes`] with a checker texture's colour passes (`SynthScene::checker`).
+fn textured_dunes(dir: &Path) -> Scene {
+    let mut scene = synth::example("dunes", ExampleOptions { width: 64, height: 36, ..Default::default() }).unwrap();
+    scene.checker = Some(synth::Checker { cell: 1.5, dark: 0.2 });
+    synth::write_scene(dir, &scene).expect("write textured dunes");
+    Scene::load(dir).expect("load textured dunes")
+}
+
 #[test]
 fn every_order_and_exponentiation_matches() {
     let Some(gpu) = gpu() else { return };
@@ -346,6 +354,7 @@ fn frame_of_8192_squared_is_shaded_in_tiles() {
         uv: None,
         material: vec![0; SIDE * SIDE],
         object: None,
+        colours: None,
     };
     for y in 0..h {
         for x in 0..w {
@@ -399,16 +408,19 @@ fn settings_beyond_lavapipes_loop_budget_are_refused_there() {
 }
 
 /// `logsh render`'s passes: diffuse, specular, environment, beauty and the three
-/// visibility terms, GPU against CPU.
+/// visibility terms, GPU against CPU, with and without colour passes.
 #[test]
 fn compositing_passes_match() {
     let Some(gpu) = gpu() else { return };
     let dir = tempfile::tempdir().unwrap();
-    let mut scenes = vec![small_dunes(dir.path())];
+    let mut scenes = vec![small_dunes(dir.path()), textured_dunes(&dir.path().join("textured"))];
     scenes.extend(sample_scenes().iter().map(|d| Scene::load(d).unwrap()));
     for scene in &scenes {
         let frame = scene.frame(scene.default_frame()).unwrap();
         let settings = ShadingSettings::default();
+        if scene.colour_passes() {
+            check_parity(gpu, scene, &frame, &settings, "textured dunes, beauty");
+        }
         let cpu = logsh::shade::shade_frame_passes(scene, &frame, &settings).unwrap();
         let on_gpu = gpu.shade_frame_passes(scene, &frame, &settings).unwrap();
         let unit = unoccluded_value(&frame.light).max(1e-12) as f32;

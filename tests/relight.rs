@@ -53,6 +53,15 @@ fn dunes(dir: &Path) -> PathBuf {
     out
 }
 
+/// [`dunes`] with a checker texture's colour passes (`SynthScene::checker`).
+fn textured_dunes(dir: &Path) -> PathBuf {
+    let mut scene = synth::example("dunes", ExampleOptions { width: 96, height: 54, ..Default::default() }).unwrap();
+    scene.checker = Some(synth::Checker { cell: 1.5, dark: 0.2 });
+    let out = dir.join("textured dunes");
+    synth::write_scene(&out, &scene).unwrap();
+    out
+}
+
 /// A copy of the scene `from` under a constant light, in `dir`.
 fn constant_light(from: &Path, dir: &Path) -> PathBuf {
     let out = dir.join("constant");
@@ -120,9 +129,11 @@ const RELIT_TOLERANCE: f64 = 0.002;
 fn relit_equals_a_fresh_shade_under_the_same_turned_light() {
     let dir = tempfile::tempdir().unwrap();
     let cones = Path::new(env!("CARGO_MANIFEST_DIR")).join("gbuffers/cones");
-    let cases: [(PathBuf, f64, &[&str]); 8] = [
+    let cases: [(PathBuf, f64, &[&str]); 9] = [
         (dunes(dir.path()), 0.0, &[]),
         (dunes(dir.path()), 120.0, &[]),
+        // Colours per pixel from the G-buffer's colour passes.
+        (textured_dunes(dir.path()), 60.0, &[]),
         (cones.clone(), -90.0, &[]),
         // The lowest and highest orders: the relight's lanes are compiled per order.
         (cones.clone(), 45.0, &["--order", "3"]),

@@ -570,3 +570,37 @@ fn paths_outside_the_scene_directory_are_refused() {
     });
     Scene::load(dir.path()).unwrap().frame(1).unwrap();
 }
+
+/// `"colour_passes": true`: the G-buffer must hold the Diffuse Color and Glossy Color
+/// passes (Blender 4's names found too), finite and `>= 0` on surface pixels; a missing
+/// channel, NaN or a negative colour is an error naming the file, the pass and the pixel.
+#[test]
+fn colour_passes_are_required_and_checked() {
+    let dir = base_scene();
+    edit_json(&dir.path().join("scene.json"), |v| v["colour_passes"] = serde_json::json!(true));
+    let err = frame_error(dir.path());
+    assert!(matches!(err, SceneError::MissingChannel { .. }), "{err:?}");
+    assert_mentions(&err, &["gbuffer.0001.exr", "ViewLayer.Diffuse Color.R"]);
+
+    let with_colours = |diffuse: f32, glossy_at_6_1: f32| {
+        let mut channels = gbuffer_channels(32, 18, |x, _| if x < 4 { 0.0 } else { 1.0 });
+        for c in ["R", "G", "B"] {
+            let name = |pass: &str| -> &'static str { Box::leak(format!("ViewLayer.{pass}.{c}").into_boxed_str()) };
+            channels.push((name("DiffCol"), vec![diffuse; 32 * 18]));
+            let mut glossy = vec![0.5; 32 * 18];
+            glossy[32 + 6] = glossy_at_6_1;
+            glossy[1] = f32::NAN; // pixel (1, 0) is background: ignored
+            channels.push((name("GlossCol"), glossy));
+        }
+        write_raw_exr(&dir.path().join("gbuffer.0001.exr"), 32, 18, channels);
+    };
+    with_colours(0.25, 0.5);
+    let frame = Scene::load(dir.path()).unwrap().frame(1).unwrap();
+    assert_eq!(frame.gbuffer.colours_at(32 + 6), Some(([0.25; 3], [0.5; 3])));
+    with_colours(0.25, f32::NAN);
+    let err = frame_error(dir.path());
+    assert!(matches!(err, SceneError::NonFinite { .. }), "{err:?}");
+    assert_mentions(&err, &["gbuffer.0001.exr", "Glossy Color", "pixel (6, 1)"]);
+    with_colours(-0.25, 0.5);
+    assert_mentions(&frame_error(dir.path()), &["gbuffer.0001.exr", "Diffuse Color", "pixel (4, 0)", "negative"]);
+}

@@ -2,6 +2,7 @@
 //! through the same reader and kernel as `logsh shade`.
 mod support;
 
+use logsh::reference::{render_reference, ReferenceOptions};
 use logsh::scene::{Scene, Sphere};
 use logsh::shade::{shade_frame, ShadedFrame, ShadingSettings};
 use logsh::synth::{
@@ -187,4 +188,61 @@ fn sample_scene_with_height_field_water_and_phong_shades_finite() {
         }
         assert!(surface > 0);
     }
+}
+
+/// The synthetic dunes (terrain, water, glossy blockers, a sky) at `width` x `height`,
+/// written into `dir/name` with colour passes of a checker of 1.5 m cells whose odd cells
+/// are `dark` times the table's colours.
+fn dunes_scene(dir: &Path, name: &str, width: u32, height: u32, dark: f32) -> Scene {
+    let mut scene = logsh::synth::example("dunes", ExampleOptions { width, height, ..Default::default() }).unwrap();
+    scene.checker = Some(logsh::synth::Checker { cell: 1.5, dark });
+    let out = dir.join(name);
+    logsh::synth::write_scene(&out, &scene).unwrap();
+    Scene::load(&out).unwrap()
+}
+
+/// Each pixel's shade divided by the same pixel's with a uniform texture, where the
+/// latter is not dark: the checker's factor (1, 0.2, or 0.04 for water reflecting a dark
+/// cell in a dark cell).
+fn ratios(textured: &[[f32; 4]], plain: &[[f32; 4]]) -> Vec<f64> {
+    let luminance = |c: &[f32; 4]| f64::from(c[0] + c[1] + c[2]);
+    textured.iter().zip(plain).filter(|(_, p)| luminance(p) > 1e-3).map(|(t, p)| luminance(t) / luminance(p)).collect()
+}
+
+/// Blender's colour passes multiply the light through each lobe per pixel: a checker
+/// texture of the table's colours times 1 and 0.2 shades every pixel as a uniform
+/// texture of the table's colours does, times its cell's factor (water's tint and its
+/// reflected point's colours both), on the fast path and in the reference renderer; so
+/// the texture is in the image.
+#[test]
+fn colour_passes_carry_a_texture_into_the_shade() {
+    let dir = tempfile::tempdir().unwrap();
+    let plain = dunes_scene(dir.path(), "plain", 48, 27, 1.0);
+    let textured = dunes_scene(dir.path(), "textured", 48, 27, 0.2);
+    assert!(textured.colour_passes() && plain.colour_passes());
+    let settings = ShadingSettings::default();
+    let shade = |scene: &Scene| shade_frame(scene, &scene.frame(1).unwrap(), &settings).unwrap().rgba;
+    let factors = ratios(&shade(&textured), &shade(&plain));
+    let near = |f: f64, to: f64| (f - to).abs() <= 1e-4 * to.max(0.04);
+    let bad: Vec<&f64> = factors.iter().filter(|&&f| !near(f, 1.0) && !near(f, 0.2) && !near(f, 0.04)).collect();
+    assert!(
+        bad.is_empty(),
+        "{} of {} pixels are not the table's times 1, 0.2 or 0.04: {:?}",
+        bad.len(),
+        factors.len(),
+        &bad[..bad.len().min(8)]
+    );
+    let (light, dark) =
+        (factors.iter().filter(|&&f| near(f, 1.0)).count(), factors.iter().filter(|&&f| near(f, 0.2)).count());
+    eprintln!("{light} light and {dark} dark pixels of {}", factors.len());
+    assert!(light > 200 && dark > 200, "the checker shows: {light} light and {dark} dark pixels");
+
+    let options = ReferenceOptions { tolerance: 2e-2, max_level: 3, ..Default::default() };
+    let plain = dunes_scene(dir.path(), "plain small", 16, 9, 1.0);
+    let textured = dunes_scene(dir.path(), "textured small", 16, 9, 0.2);
+    let reference = |scene: &Scene| render_reference(scene, &scene.frame(1).unwrap(), &options, &|_| {}).unwrap().rgba;
+    let factors = ratios(&reference(&textured), &reference(&plain));
+    let bad: Vec<&f64> = factors.iter().filter(|&&f| !near(f, 1.0) && !near(f, 0.2) && !near(f, 0.04)).collect();
+    assert!(bad.is_empty(), "reference: {} of {} pixels off the checker's factors: {bad:?}", bad.len(), factors.len());
+    assert!(factors.iter().filter(|&&f| near(f, 0.2)).count() > 20, "reference: the checker shows");
 }

@@ -52,6 +52,12 @@ class LOGSH_OT_export_scene(bpy.types.Operator, ExportHelper):
     supersample: IntProperty(name="Supersample", default=1, min=1, max=exporter.MAX_SUPERSAMPLE,
                              description="G-buffer samples per pixel along each axis, which logsh resolves "
                                          "to anti-aliased outputs")
+    colour_passes: BoolProperty(name="Colour passes", default=True,
+                                description="Render the Diffuse Color and Glossy Color passes, so that logsh shades "
+                                            "textures and the Principled BSDF's layers as Blender evaluates them")
+    approximate: BoolProperty(name="Approximate", default=False,
+                              description="Export materials logsh cannot represent (transmission, subsurface, "
+                                          "emission, other shaders) with a warning each, where the export stops")
 
     def invoke(self, context, event):
         self.frame_start, self.frame_end = context.scene.frame_start, context.scene.frame_end
@@ -67,6 +73,8 @@ class LOGSH_OT_export_scene(bpy.types.Operator, ExportHelper):
             heightfield=self.heightfield or None,
             heightmap_size=self.heightmap_size,
             supersample=self.supersample,
+            colour_passes=self.colour_passes,
+            approximate=self.approximate,
         )
         try:
             exporter.export(context.scene, options, log=lambda line: self.report({"INFO"}, line))
@@ -92,6 +100,8 @@ class LOGSH_OT_export_scene(bpy.types.Operator, ExportHelper):
         layout.prop(self, "heightfield")
         layout.prop(self, "heightmap_size")
         layout.prop(self, "supersample")
+        layout.prop(self, "colour_passes")
+        layout.prop(self, "approximate")
 
 
 def _menu(self, context):

@@ -8,10 +8,15 @@ What is written into the output directory, per frame `####`:
 - `gbuffer.####.exr`: Cycles' Position, Normal, UV and Material Index passes in Blender's
   own multilayer EXR (32-bit float, ZIP). Data passes must not be blended at object
   edges (a pixel half ball, half floor would get a position between them and a material
-  index of 1.5), so each pixel gets exactly one sample at its centre: 1 sample, a box
-  pixel filter of the smallest width Cycles accepts (0.01 px), no denoising, no motion
-  blur, no depth of field. The file also holds Blender's Combined pass, which nothing
-  reads. With `supersample` N > 1 (`--supersample`), the G-buffers and the reflection
+  index of 1.5), so each pixel gets exactly one sample at its centre: 1 sample, a
+  Gaussian pixel filter of the smallest width Cycles accepts (0.01 px), no denoising, no motion
+  blur, no depth of field. With `colour_passes` (the default), the file also holds
+  Cycles' Diffuse Color and Glossy Color passes: the material as Blender evaluates it at
+  each pixel (textures, vertex colours, every node in front of the BSDF, and the
+  Principled BSDF's layers weighed as Cycles weighs them, the specular layer with its
+  Fresnel term at the pixel's view angle), which logsh multiplies the light through the
+  diffuse and the glossy lobe by (scene.json `colour_passes`). The file also holds
+  Blender's Combined pass, which nothing reads. With `supersample` N > 1 (`--supersample`), the G-buffers and the reflection
   G-buffer are N times the output size, one sample at each sub-pixel centre, which logsh
   shades and resolves to the camera's size (scene.json `supersample`; the cameras keep the
   output size).
@@ -45,11 +50,32 @@ Scene markup, all optional (custom properties, set in the Object or Material tab
   lowest flat horizontal mesh under every other object is, when there is no height field);
 - material `logsh_type`: `diffuse`, `phong`, `water` or `heightfield`. Default: `phong`
   for a Principled BSDF with metallic >= 0.5 or roughness < 0.4, else `diffuse`; every
-  material on the height field object is `heightfield`.
+  material on the height field object is `heightfield` (with colour passes, a Principled
+  BSDF is `phong` wherever it is: see below).
 - material `logsh_tint` (colour): a water tint other than its base colour.
 
-Material conversion (logsh has no Fresnel term and a Phong lobe about the mirror
-direction, `docs/design.md`):
+What a material may hold: a Principled BSDF, a Diffuse BSDF or a Glossy BSDF feeding the
+Material Output, with any nodes in front of them. The Principled BSDF's Transmission,
+Subsurface, Sheen and Coat weights must be at most `NEGLIGIBLE_WEIGHT` and unlinked, and
+it must not emit (Emission Strength times Emission Color). Water with colour passes is
+the other way round: logsh shades it as its reflection alone (the reflection G-buffer's point times the Glossy
+Color pass, the Fresnel reflectance at the pixel's view angle), so it must transmit
+(Transmission Weight 1) or be a metal, and not have a diffuse layer. Anything else (another surface node such as a Mix Shader, Glass or
+Emission, a linked or heavier weight) stops the export, naming the material and the node;
+`Options.approximate` (`--approximate`) makes each a warning instead, which the summary
+counts. A Roughness driven by nodes is always a warning: logsh shades one lobe width per
+material. With colour passes, that width is fitted to Blender's own evaluation: an AOV
+Output node (`logsh_roughness`, removed again after the export) carries what drives the
+socket into the first exported frame's G-buffer, and the material takes the root mean
+square of its pixels' roughness; without them, the socket's own value.
+
+With colour passes, every Principled BSDF that is not water is `phong`, on the terrain
+too and whatever its `logsh_type` says (its specular layer shaded as a GGX lobe, weighed per pixel
+by the Glossy Color pass, which is black where Specular IOR Level is 0) and the table's colours below are what
+logsh uses only for points seen in water's reflection. Without them (`colour_passes`
+False, `--no-colour-passes`, the materials of `render_cycles.py`'s direct-light truth),
+the conversion is the whole of the material (logsh has no Fresnel term and a Phong lobe
+about the mirror direction, `docs/design.md`):
 
 - albedo = base colour x (1 - metallic) x (1 - transmission);
 - specular = base colour x metallic + (1 - metallic) x F0, with F0 the normal-incidence
@@ -60,8 +86,10 @@ direction, `docs/design.md`):
   (Walter et al. 2007, "Microfacet Models for Refraction", Section 5.2), and a Phong lobe
   about the mirror direction is about four times wider than a Blinn-Phong lobe about the
   half vector, so exponent = `(2 / alpha^2 - 2) / 4 = 1 / (2 alpha^2) - 1/2`, clamped to
-  1..10^6 (roughness 0.5 gives 7.5, 0.3 gives 61, 0.2 gives 312, 0.05 gives 80000; the
-  clamp is roughness 0.027, a mirror to any environment map's resolution). logsh reads
+  0.01..10^6 (roughness 1 gives 0.01, GGX alpha 0.99; 0.5 gives 7.5, 0.3 gives 61, 0.2
+  gives 312, 0.05 gives 80000; the upper clamp is roughness 0.027, a mirror to any
+  environment map's resolution; a lower clamp of 1, alpha 0.58, left roughness-1 floors
+  of the `glossy` measurement scene 0.0155 from Cycles as authored, against 0.0140). logsh reads
   such lobes from a prefiltered environment (`--glossy ggx`, the default) as the GGX
   lobe of this alpha, which is what Cycles renders.
 
@@ -87,17 +115,25 @@ import numpy as np
 from mathutils.bvhtree import BVHTree
 
 from . import blockers as blocker_fit
-from .exr import write_exr
+from .exr import read_exr_channels, write_exr
 
 GEOMETRY_TYPES = {"MESH", "CURVE", "SURFACE", "FONT", "META", "CURVES"}
 MATERIAL_TYPES = ("diffuse", "phong", "water", "heightfield")
-# The smallest pixel filter Cycles accepts: one sample lands within 0.005 px of the centre.
-DATA_FILTER_WIDTH = 0.01
+# The narrowest pixel filter Cycles accepts: every sample lands within about 0.01 px of
+# the centre. Not a box: Cycles' box filter is one pixel wide whatever its width (a
+# 1024-sample render with a 0.01 px box averaged each pixel over its whole area).
+DATA_FILTER, DATA_FILTER_WIDTH = "GAUSSIAN", 0.01
 FLAT_THICKNESS = 0.02
 # Roughness 0.027 (module doc): sharper than any environment map resolves.
 MAX_EXPONENT = 1.0e6
+# Roughness 1 (module doc): GGX alpha 0.99.
+MIN_EXPONENT = 0.01
 VIEW_LAYER = "ViewLayer"
 MAX_SUPERSAMPLE = 4
+# A Principled BSDF's Transmission, Subsurface, Sheen or Coat weight up to which it is
+# left out without a word (a weight of 0.01 moves a pixel by about 1 %).
+NEGLIGIBLE_WEIGHT = 0.01
+SURFACE_NODES = ("BSDF_PRINCIPLED", "BSDF_DIFFUSE", "BSDF_GLOSSY", "BSDF_ANISOTROPIC")
 
 
 class ExportError(Exception):
@@ -127,6 +163,12 @@ class Options:
     # G-buffers at this multiple of the output size, one sample at each sub-pixel centre,
     # which logsh resolves to the output size with a pixel filter.
     supersample: int = 1
+    # Render Cycles' Diffuse Color and Glossy Color passes into the G-buffer, which logsh
+    # reads in place of the material table's colours (module doc).
+    colour_passes: bool = True
+    # Export materials logsh cannot represent (module doc) with a warning each, where
+    # the export otherwise stops.
+    approximate: bool = False
 
 
 # ---- undoable scene changes ------------------------------------------------------------
@@ -193,7 +235,11 @@ def export(scene, options, log=print):
         lights = export_lamps(scene, view_layer, start, end)
         objects = renderable_objects(scene, view_layer)
         terrain = find_heightfield(objects, options)
-        table, index_of = material_table(objects, terrain, changes)
+        warnings = []
+        table, index_of = material_table(objects, terrain, changes, options, warnings)
+        textured_roughness = roughness_aovs(table, index_of, view_layer, changes) if options.colour_passes else {}
+        for warning in warnings:
+            log(f"warning: {warning}")
         object_index = object_indices(objects, changes)
         water = {i for i, m in table.items() if m["type"] == "water"}
         # The camera's size; the G-buffers are `supersample` times it along each axis.
@@ -208,6 +254,8 @@ def export(scene, options, log=print):
             "light": export_world(scene, out, options, log),
             "view": view,
         }
+        if options.colour_passes:
+            description["colour_passes"] = True
         if lights:
             description["lights"] = lights
             for light in lights:
@@ -240,6 +288,9 @@ def export(scene, options, log=print):
             depsgraph = bpy.context.evaluated_depsgraph_get()
             scene.render.filepath = new_file(out, f"gbuffer.{frame:04d}.exr")
             bpy.ops.render.render(write_still=True, scene=scene.name, layer=view_layer.name)
+            if textured_roughness:
+                fit_roughness(scene.render.filepath, frame, table, textured_roughness, warnings, log)
+                textured_roughness = {}
             camera = camera_json(scene, frame, width, height)
             write_json(new_file(out, f"camera.{frame:04d}.json"), camera)
             spheres = export_blockers(scene, depsgraph, objects, terrain, index_of, table, object_index, options, fits,
@@ -250,6 +301,9 @@ def export(scene, options, log=print):
                 write_reflection(scene, depsgraph, sampled, index_of, water, new_file(out, f"reflection.{frame:04d}.exr"))
             log(f"frame {frame}: {len(spheres)} blocker spheres, {time.time() - began:.1f} s")
         write_json(new_file(out, "scene.json"), description)
+        if warnings:
+            log(f"{len(warnings)} warning{'s' if len(warnings) > 1 else ''}: the export approximates what logsh "
+                "cannot represent (above)")
     except BaseException:
         if created:
             # Only this export wrote there: leave no half-written scene behind.
@@ -331,7 +385,7 @@ def configure_render(scene, options, changes):
     changes.set(cycles, "samples", 1)
     changes.set(cycles, "use_adaptive_sampling", False)
     changes.set(cycles, "use_denoising", False)
-    changes.set(cycles, "pixel_filter_type", "BOX")
+    changes.set(cycles, "pixel_filter_type", DATA_FILTER)
     changes.set(cycles, "filter_width", DATA_FILTER_WIDTH)
     changes.set(cycles, "max_bounces", 0)  # data passes come from the camera ray alone
     changes.set(render, "use_motion_blur", False)
@@ -380,7 +434,8 @@ def configure_render(scene, options, changes):
     for attribute in dir(layer):
         if attribute.startswith("use_pass_"):
             wanted = attribute in ("use_pass_position", "use_pass_normal", "use_pass_uv", "use_pass_material_index",
-                                   "use_pass_object_index")
+                                   "use_pass_object_index") or \
+                (options.colour_passes and attribute in ("use_pass_diffuse_color", "use_pass_glossy_color"))
             changes.set(layer, attribute, wanted)
     for attribute in dir(layer.cycles):  # Cycles' own passes (denoising data, debug, ...)
         if attribute.startswith("use_pass_") or attribute in ("denoising_store_passes", "pass_debug_sample_count"):
@@ -497,9 +552,11 @@ def find_heightfield(objects, options):
     return marked[0] if marked else None
 
 
-def material_table(objects, terrain, changes):
+def material_table(objects, terrain, changes, options, warnings):
     """Gives every material on a renderable object its own pass index 1..N and returns
-    the table (index -> format-v1 material) and the map material name -> index."""
+    the table (index -> format-v1 material) and the map material name -> index; what a
+    material holds that logsh cannot represent stops the export, or with
+    `options.approximate` is appended to `warnings`."""
     default = None
     used = {}
     for obj in objects:
@@ -524,9 +581,67 @@ def material_table(objects, terrain, changes):
         if on_terrain == {True, False}:
             raise ExportError(f"material \"{name}\" is on the height field and on other objects; give the terrain its own material")
         changes.set(material, "pass_index", i)
-        table[i] = convert_material(material, on_terrain == {True})
+        table[i] = convert_material(material, on_terrain == {True}, options.colour_passes,
+                                    lambda problem: refuse(problem, options, warnings), warnings.append)
         index_of[name] = i
     return table, index_of
+
+
+ROUGHNESS_AOV = "logsh_roughness"
+
+
+def roughness_aovs(table, index_of, view_layer, changes):
+    """For every `phong` material whose Roughness is driven by nodes, an AOV Output node
+    (`ROUGHNESS_AOV`) fed by what drives it, and the view layer's AOV of that name, both
+    removed again by `changes`; returns index -> (name, socket value) of those materials.
+    Textures and everything else in front of the socket then arrive as Blender evaluates
+    them, in the G-buffer's `ViewLayer.logsh_roughness.X`, which `fit_roughness` reads."""
+    textured = {}
+    for name, i in index_of.items():
+        material = bpy.data.materials[name]
+        node = _principled(material)
+        if table[i]["type"] != "phong" or node is None or not _linked(node, "Roughness"):
+            continue
+        tree = material.node_tree
+        aov = tree.nodes.new("ShaderNodeOutputAOV")
+        aov.aov_name = ROUGHNESS_AOV
+        changes.on_undo(lambda tree=tree, aov=aov: tree.nodes.remove(aov))
+        tree.links.new(node.inputs["Roughness"].links[0].from_socket, aov.inputs["Value"])
+        textured[i] = (name, float(node.inputs["Roughness"].default_value))
+    if textured and ROUGHNESS_AOV not in view_layer.aovs:
+        added = view_layer.aovs.add()
+        added.name, added.type = ROUGHNESS_AOV, "VALUE"
+        changes.on_undo(lambda: view_layer.aovs.remove(view_layer.aovs[ROUGHNESS_AOV]))
+    return textured
+
+
+def fit_roughness(gbuffer, frame, table, textured, warnings, log):
+    """Gives each material of `textured` (from `roughness_aovs`) the lobe width of its
+    pixels in `gbuffer`: the root mean square of their roughness, so that the mean of
+    GGX's alpha = roughness^2 is kept. logsh shades one lobe width per material; each
+    such material is a warning, which says the width chosen."""
+    index_names = ("ViewLayer.Material Index.X", "ViewLayer.IndexMA.X")
+    for index_name in index_names:
+        try:
+            channels = read_exr_channels(gbuffer, [f"{VIEW_LAYER}.{ROUGHNESS_AOV}.X", index_name])
+            break
+        except ValueError:
+            channels = None
+    if channels is None:
+        raise ExportError(f"{gbuffer}: Blender wrote no {ROUGHNESS_AOV} AOV or material index; cannot fit roughness")
+    roughness, index = channels[f"{VIEW_LAYER}.{ROUGHNESS_AOV}.X"], np.rint(channels[index_name]).astype(int)
+    for i, (name, unlinked) in sorted(textured.items()):
+        values = roughness[index == i]
+        if values.size == 0:
+            warnings.append(f"material \"{name}\": its Roughness is driven by nodes and it is not in view at frame "
+                            f"{frame}; logsh shades it with roughness {unlinked:.3g}, the socket's own value")
+            continue
+        fitted = float(np.sqrt(np.mean(np.clip(values, 0.0, 1.0) ** 2)))
+        table[i]["exponent"] = phong_exponent(fitted)
+        warnings.append(f"material \"{name}\": its Roughness is driven by nodes (from {float(values.min()):.3g} to "
+                        f"{float(values.max()):.3g} over its {values.size} pixels at frame {frame}); logsh shades one "
+                        f"lobe width per material, roughness {fitted:.3g}")
+        log(f"warning: {warnings[-1]}")
 
 
 def _principled(material):
@@ -545,19 +660,65 @@ def _value(node, name, fallback):
     socket = node.inputs.get(name)
     if socket is None:
         return fallback
-    if socket.is_linked:
-        print(f"note: {node.id_data.name}: input \"{name}\" is linked; its constant value is exported")
     v = socket.default_value
     return list(v)[:3] if hasattr(v, "__len__") else float(v)
+
+
+def _linked(node, name):
+    socket = node.inputs.get(name)
+    return socket is not None and socket.is_linked
+
+
+def refuse(problem, options, warnings):
+    """Stops the export on `problem`, or with `options.approximate` records it."""
+    if not options.approximate:
+        raise ExportError(f"{problem}; logsh cannot shade it (export with --approximate to leave it out with a "
+                          "warning)")
+    warnings.append(problem)
+
+
+def unrepresentable(material, node, kind, colour_passes):
+    """What `node`, the surface of `material`, holds that logsh cannot shade: a list of
+    sentences naming the material and the node (module doc)."""
+    where = f"material \"{material.name}\": {node.bl_label} \"{node.name}\""
+    if node.type not in SURFACE_NODES:
+        return [f"material \"{material.name}\": its surface is a {node.bl_label} node (\"{node.name}\"), not a "
+                "Principled, Diffuse or Glossy BSDF"]
+    if node.type != "BSDF_PRINCIPLED":
+        return []
+    problems = []
+    layers = [("Subsurface Weight", "subsurface"), ("Sheen Weight", "sheen"), ("Coat Weight", "coat")]
+    if kind != "water":
+        layers.insert(0, ("Transmission Weight", "transmission"))
+    for socket, what in layers:
+        if _linked(node, socket):
+            problems.append(f"{where} has a linked {socket} ({what})")
+        elif _value(node, socket, 0.0) > NEGLIGIBLE_WEIGHT:
+            problems.append(f"{where} has {what} ({socket} {_value(node, socket, 0.0):.3g} > {NEGLIGIBLE_WEIGHT})")
+    if kind == "water" and colour_passes and (_linked(node, "Transmission Weight") or
+                            _value(node, "Transmission Weight", 0.0) < 1.0 - NEGLIGIBLE_WEIGHT) and \
+            (_linked(node, "Metallic") or _value(node, "Metallic", 0.0) < 1.0 - NEGLIGIBLE_WEIGHT):
+        problems.append(f"{where} is water with a diffuse layer (Transmission Weight "
+                        f"{_value(node, 'Transmission Weight', 0.0):.3g}); logsh shades water as its reflection alone "
+                        "(set Transmission Weight to 1)")
+    colour, strength = _value(node, "Emission Color", [0.0] * 3), _value(node, "Emission Strength", 0.0)
+    if _linked(node, "Emission Strength") or (_linked(node, "Emission Color") and strength > 0.0) or \
+            strength * max(colour) > 0.0:
+        problems.append(f"{where} emits light (Emission Strength {strength:.3g})")
+    return problems
 
 
 def phong_exponent(roughness):
     """Phong exponent about the mirror direction for a GGX roughness (module doc)."""
     alpha = max(roughness, 1e-3) ** 2
-    return float(min(max(1.0 / (2.0 * alpha * alpha) - 0.5, 1.0), MAX_EXPONENT))
+    return float(min(max(1.0 / (2.0 * alpha * alpha) - 0.5, MIN_EXPONENT), MAX_EXPONENT))
 
 
-def convert_material(material, on_terrain):
+def convert_material(material, on_terrain, colour_passes=False, refuse=None, warn=None):
+    """The format-v1 entry of `material` (module doc); `refuse(problem)` is told what it
+    holds that logsh cannot shade, `warn(problem)` what logsh approximates."""
+    refuse = refuse or (lambda problem: None)
+    warn = warn or (lambda problem: None)
     node = _principled(material)
     base, metallic, roughness, transmission = list(material.diffuse_color)[:3], material.metallic, material.roughness, 0.0
     ior, level, tint = 1.5, 0.5, [1.0, 1.0, 1.0]
@@ -577,17 +738,31 @@ def convert_material(material, on_terrain):
     elif node is not None and node.type in ("BSDF_GLOSSY", "BSDF_ANISOTROPIC"):
         base, metallic = _value(node, "Color", base), 1.0
         roughness = _value(node, "Roughness", 0.5)
-    elif node is not None:
-        print(f"note: material \"{material.name}\": surface node {node.bl_label} is not read; its viewport colour is exported")
 
     kind = material.get("logsh_type")
-    if on_terrain:
+    principled = node is not None and node.type == "BSDF_PRINCIPLED"
+    if colour_passes and principled and (on_terrain or kind in (None, "diffuse", "phong")):
+        # Its specular layer, weighed per pixel by the Glossy Color pass; on the terrain
+        # too, which logsh shades by where it is, whatever its material's type.
+        kind = "phong"
+    elif on_terrain:
         kind = "heightfield"
     elif kind is None:
         kind = "phong" if metallic >= 0.5 or roughness < 0.4 else "diffuse"
     kind = str(kind)
     if kind not in MATERIAL_TYPES:
         raise ExportError(f"material \"{material.name}\": logsh_type \"{kind}\" is not one of {', '.join(MATERIAL_TYPES)}")
+    if node is not None:
+        for problem in unrepresentable(material, node, kind, colour_passes):
+            refuse(problem)
+        if kind == "phong" and _linked(node, "Roughness") and not colour_passes:
+            warn(f"material \"{material.name}\": its Roughness is driven by nodes; logsh shades one lobe width per "
+                 f"material, that of roughness {roughness:.3g}")
+        if not colour_passes:
+            for socket in ("Base Color", "Color", "Metallic", "IOR", "Specular IOR Level", "Specular Tint"):
+                if _linked(node, socket):
+                    warn(f"material \"{material.name}\": its {socket} is driven by nodes; without colour passes "
+                         f"its unlinked value is exported")
     colour = [max(float(c), 0.0) for c in base]
     if kind in ("diffuse", "heightfield"):
         return {"type": kind, "albedo": colour}
@@ -596,12 +771,18 @@ def convert_material(material, on_terrain):
         return {"type": "water", "tint": [float(c) for c in tint_prop][:3] if tint_prop is not None else colour}
     f0 = ((ior - 1.0) / (ior + 1.0)) ** 2 * 2.0 * level
     diffuse_weight = (1.0 - metallic) * (1.0 - transmission)
-    return {
-        "type": "phong",
-        "albedo": [c * diffuse_weight for c in colour],
-        "specular": [c * metallic + (1.0 - metallic) * f0 * t for c, t in zip(colour, tint)],
-        "exponent": phong_exponent(roughness),
-    }
+    albedo = [c * diffuse_weight for c in colour]
+    specular = [c * metallic + (1.0 - metallic) * f0 * t for c, t in zip(colour, tint)]
+    if colour_passes and node is not None:
+        # A black colour tells logsh to leave the lobe out: only where no node can make
+        # the pass non-zero.
+        driven = lambda *sockets: any(_linked(node, s) for s in sockets)  # noqa: E731
+        if max(albedo) <= 0.0 and driven("Base Color", "Color", "Metallic", "Transmission Weight"):
+            albedo = [1e-3] * 3
+        if max(specular) <= 0.0 and driven("Base Color", "Color", "Metallic", "Specular IOR Level", "Specular Tint",
+                                           "IOR"):
+            specular = [1e-3] * 3
+    return {"type": "phong", "albedo": albedo, "specular": specular, "exponent": phong_exponent(roughness)}
 
 
 # ---- geometry --------------------------------------------------------------------------

@@ -83,3 +83,102 @@ def write_exr(path, channels):
         f.write(struct.pack(f"<{len(offsets)}Q", *offsets))
         for c in chunks:
             f.write(c)
+
+
+_NO_COMPRESSION, _ZIPS_COMPRESSION = 0, 2
+_SAMPLE_TYPES = {0: np.dtype("<u4"), 1: np.dtype("<f2"), 2: np.dtype("<f4")}
+
+
+def _read_header(data, at):
+    """One header's attributes (name -> (type, payload)) from `at`; returns them and the
+    offset after the header's terminating null byte."""
+    attributes = {}
+    while data[at] != 0:
+        name_end = data.index(b"\0", at)
+        kind_end = data.index(b"\0", name_end + 1)
+        size, = struct.unpack_from("<i", data, kind_end + 1)
+        start = kind_end + 5
+        attributes[data[at:name_end].decode()] = (data[name_end + 1:kind_end].decode(), data[start:start + size])
+        at = start + size
+    return attributes, at + 1
+
+
+def _channel_list(payload):
+    channels, at = [], 0
+    while payload[at] != 0:
+        end = payload.index(b"\0", at)
+        pixel_type, = struct.unpack_from("<i", payload, end + 1)
+        channels.append((payload[at:end].decode(), pixel_type))
+        at = end + 17
+    return channels
+
+
+def _unzip_chunk(packed, size):
+    """The inverse of `_zip_chunk`: inflate, undo the delta, de-interleave."""
+    delta = np.frombuffer(zlib.decompress(packed), dtype=np.uint8)[:size]
+    # The first byte is as stored; each next one is the previous plus its delta - 128.
+    interleaved = (np.cumsum(np.concatenate([[delta[0]], delta[1:].astype(np.int64) - 128])) & 0xFF).astype(np.uint8)
+    half = (size + 1) // 2
+    out = np.empty(size, dtype=np.uint8)
+    out[0::2], out[1::2] = interleaved[:half], interleaved[half:]
+    return out.tobytes()
+
+
+def read_exr_channels(path, wanted):
+    """The channels `wanted` (full dotted names, as the G-buffer reader names them: a
+    multi-part file's channels prefixed with their part's name unless they already are)
+    of a scan-line EXR with no, ZIPS or ZIP compression, as 2-D float32 arrays (row 0 the
+    top scan line); a channel not in the file is an error naming it."""
+    with open(path, "rb") as f:
+        data = f.read()
+    magic, flags = struct.unpack_from("<ii", data, 0)
+    if magic != _MAGIC:
+        raise ValueError(f"{path}: not an OpenEXR file")
+    multipart, at, headers = bool(flags & 0x1000), 8, []
+    while True:
+        attributes, at = _read_header(data, at)
+        headers.append(attributes)
+        if not multipart or data[at] == 0:
+            break
+    at += 1 if multipart else 0
+    parts = []
+    for attributes in headers:
+        x0, y0, x1, y1 = struct.unpack("<iiii", attributes["dataWindow"][1])
+        compression = attributes["compression"][1][0]
+        if compression not in (_NO_COMPRESSION, _ZIPS_COMPRESSION, _ZIP_COMPRESSION) or \
+                attributes.get("type", ("", b"scanlineimage\0"))[1].rstrip(b"\0") != b"scanlineimage":
+            raise ValueError(f"{path}: only scan-line files with no, ZIPS or ZIP compression are read")
+        width, height = x1 - x0 + 1, y1 - y0 + 1
+        lines = _LINES_PER_CHUNK if compression == _ZIP_COMPRESSION else 1
+        chunks = (height + lines - 1) // lines
+        offsets = struct.unpack_from(f"<{chunks}Q", data, at)
+        at += 8 * chunks
+        prefix = attributes["name"][1].rstrip(b"\0").decode() + "." if multipart else ""
+        channels = [(n if n.startswith(prefix) else prefix + n, t) for n, t in _channel_list(attributes["channels"][1])]
+        parts.append((width, height, y0, lines, compression, offsets, channels))
+    out = {}
+    for k, (width, height, y0, lines, compression, offsets, channels) in enumerate(parts):
+        taken = [name for name, _ in channels if name in wanted]
+        if not taken:
+            continue
+        values = {name: np.empty((height, width), dtype=np.float32) for name in taken}
+        for offset in offsets:
+            head = 4 if multipart else 0
+            y, size = struct.unpack_from("<ii", data, offset + head)
+            packed = data[offset + head + 8:offset + head + 8 + size]
+            rows = min(lines, y0 + height - y)
+            raw_size = rows * width * sum(_SAMPLE_TYPES[t].itemsize for _, t in channels)
+            raw = packed if compression == _NO_COMPRESSION or size == raw_size else _unzip_chunk(packed, raw_size)
+            at = 0
+            for row in range(rows):
+                for name, pixel_type in channels:
+                    dtype = _SAMPLE_TYPES[pixel_type]
+                    line = np.frombuffer(raw, dtype=dtype, count=width, offset=at)
+                    at += width * dtype.itemsize
+                    if name in values:
+                        values[name][y - y0 + row] = line.astype(np.float32)
+        out.update(values)
+    missing = [name for name in wanted if name not in out]
+    if missing:
+        raise ValueError(f"{path}: no channel {missing[0]}")
+    return out

@@ -53,6 +53,17 @@ def material(name, colour, roughness=0.5, metallic=0.0, logsh_type=None):
     return m
 
 
+def water_material(name, colour):
+    """Water as Blender users make it: a clear Principled BSDF (Transmission Weight 1, IOR
+    1.33, roughness 0) marked `logsh_type = water`, whose Fresnel reflection logsh shades
+    through the reflection G-buffer; `colour` is its tint without colour passes."""
+    m = material(name, colour, roughness=0.0, logsh_type="water")
+    bsdf = m.node_tree.nodes["Principled BSDF"]
+    bsdf.inputs["Transmission Weight"].default_value = 1.0
+    bsdf.inputs["IOR"].default_value = 1.33
+    return m
+
+
 def assign(obj, mat):
     obj.data.materials.clear()
     obj.data.materials.append(mat)

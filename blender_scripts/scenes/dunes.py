@@ -5,13 +5,15 @@ tail beating (an animated Bend modifier). Lit by a procedural sky with a low sun
     python blender_scripts/scenes/dunes.py --save out/dunes.blend
 
 Markup read by the exporter: the terrain has `logsh_heightfield`; the whale asks for 50
-blocker spheres (`logsh_spheres`); the water material is `logsh_type = water`.
+blocker spheres (`logsh_spheres`); the water material is `logsh_type = water`, clear
+(Transmission Weight 1, IOR 1.33: `common.water_material`).
 """
 import os
 
 import numpy as np
 
-from common import assign, camera, empty_scene, grid_object, material, mesh_object, parse_args, save, sky_world
+from common import assign, camera, empty_scene, grid_object, material, mesh_object, parse_args, save, sky_world, \
+    water_material
 
 args = parse_args(__doc__)
 scene = empty_scene((1, 3))
@@ -32,7 +34,7 @@ assign(dunes, material("sand", (0.8, 0.68, 0.5), roughness=0.9))
 dunes["logsh_heightfield"] = True
 
 water = grid_object("water", np.linspace(-7.0, 8.0, 2), np.linspace(-4.0, 6.0, 2), lambda x, y: 0 * x + WATER_LEVEL)
-assign(water, material("water", (0.55, 0.75, 0.85), roughness=0.0, logsh_type="water"))
+assign(water, water_material("water", (0.55, 0.75, 0.85)))
 
 
 def whale_mesh(length=6.0, rings=40, segments=24):

@@ -7,7 +7,7 @@ exported with the script's defaults.
 """
 import bpy
 
-from common import assign, camera, empty_scene, grey_world, material, parse_args, save
+from common import assign, camera, empty_scene, grey_world, material, parse_args, save, water_material
 
 args = parse_args(__doc__)
 scene = empty_scene((1, 2), 64, 36)
@@ -15,7 +15,7 @@ scene = empty_scene((1, 2), 64, 36)
 bpy.ops.mesh.primitive_plane_add(size=20, location=(0, 0, 0))
 assign(bpy.context.object, material("ground", (0.8, 0.8, 0.8)))
 bpy.ops.mesh.primitive_plane_add(size=3, location=(-0.5, -2.5, 0.01))
-assign(bpy.context.object, material("water", (0.6, 0.8, 0.9), roughness=0.0, logsh_type="water")).name = "water"
+assign(bpy.context.object, water_material("water", (0.6, 0.8, 0.9))).name = "water"
 
 bpy.ops.mesh.primitive_uv_sphere_add(radius=1.0, location=(-1.5, 0, 1.0), segments=32, ring_count=16)
 bpy.ops.object.shade_smooth()

@@ -14,7 +14,7 @@ use crate::scene::{Frame, Scene};
 use crate::shade::compositing::{assemble, Pixel};
 use crate::shade::kernel::reflect_view;
 use crate::shade::ShadingSettings;
-use crate::shade::{pixel_work, FramePlan, PixelPasses, PixelWork, PlannedKernel, ShadedFrame, ShadedPasses};
+use crate::shade::{pixel_work, FramePlan, PixelPasses, PixelWork, PlannedKernel, ShadedFrame, ShadedPasses, Tint};
 use crate::timing::{Clock, StageTimings};
 use rayon::prelude::*;
 use std::sync::Arc;
@@ -25,7 +25,7 @@ use std::time::Instant;
 #[derive(Clone, Copy, Debug)]
 enum TileWork {
     Fixed([f32; 4]),
-    Shaded([f32; 3]),
+    Shaded(Tint),
 }
 
 /// Receives each shaded tile: its first pixel, what each of its pixels is, its shaded
@@ -85,8 +85,8 @@ impl Gpu {
                     *out = match *w {
                         TileWork::Fixed(colour) => colour,
                         TileWork::Shaded(tint) => {
-                            let (d, s) = (s.diffuse, s.specular);
-                            [tint[0] * (d[0] + s[0]), tint[1] * (d[1] + s[1]), tint[2] * (d[2] + s[2]), 1.0]
+                            let rgb = |v: [f32; 4]| [v[0], v[1], v[2]];
+                            tint.beauty(rgb(s.diffuse), rgb(s.specular))
                         }
                     };
                 },

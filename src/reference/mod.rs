@@ -132,10 +132,12 @@ pub use integrate::{
 pub use sampled::{TexelSampler, BASE_POINTS, REPLICATES};
 
 use crate::logsh::Lobe;
-use crate::scene::{Frame, GBuffer, Material, Scene};
-use crate::shade::frame::{mirrored_lamp, mirrored_suns, surface_at};
+use crate::scene::{Frame, Material, Scene};
+use crate::shade::frame::{mirrored_suns, pixel_source, PixelSource, Tint};
 use crate::shade::kernel::reflect_view;
+use crate::shade::kernel::SurfacePoint;
 use rayon::prelude::*;
+use std::collections::BTreeMap;
 use std::sync::Mutex;
 
 /// Which light the reference integrates.
@@ -263,6 +265,7 @@ pub fn render_reference(
         _ => None,
     };
     let ctx = Context {
+        materials: scene.kernel_materials(),
         integration,
         environment: environment.as_ref(),
         scene,
@@ -315,6 +318,9 @@ pub fn render_reference(
 /// What every pixel's integration reads.
 struct Context<'a> {
     scene: &'a Scene,
+    /// The lobes and their colours as the kernel shades them, the pixels' tints on top
+    /// ([`Scene::kernel_materials`]).
+    materials: BTreeMap<u32, Material>,
     frame: &'a Frame,
     occluders: ReferenceOccluders<'a>,
     light: &'a LightModel<'a>,
@@ -333,30 +339,21 @@ impl Context<'_> {
         self.light.radiance(dir.map(|c| c / l))
     }
 
-    /// Shading of G-buffer pixel `i` of `buffer`, seen from `view_origin` (the eye when
-    /// `None`), times `tint`.
-    /// `seed` fixes a sampled pixel's randomisation.
-    fn surface(
-        &self,
-        buffer: &GBuffer,
-        i: usize,
-        view_origin: Option<[f64; 3]>,
-        tint: [f64; 3],
-        seed: u64,
-    ) -> PointEstimate {
-        let point = surface_at(buffer, i, view_origin, self.frame);
+    /// Shading of `point`, its diffuse lobe times `tint.diffuse` and its glossy lobe
+    /// times `tint.specular`. `seed` fixes a sampled pixel's randomisation.
+    fn surface(&self, point: SurfacePoint, tint: Tint, seed: u64) -> PointEstimate {
         let (p, n, view) = (point.position, point.normal, point.view_origin);
-        let scaled = |c: [f32; 3]| [0, 1, 2].map(|k| f64::from(c[k]) * tint[k]);
-        let terms = match self.scene.materials.get(&buffer.material[i]) {
+        let scaled = |c: [f32; 3], t: [f32; 3]| [0, 1, 2].map(|k| f64::from(c[k]) * f64::from(t[k]));
+        let terms = match self.materials.get(&point.material) {
             Some(Material::Diffuse { albedo }) | Some(Material::Heightfield { albedo }) => {
-                vec![LobeTerm { lobe: Lobe::Diffuse, axis: n, scale: scaled(*albedo) }]
+                vec![LobeTerm { lobe: Lobe::Diffuse, axis: n, scale: scaled(*albedo, tint.diffuse) }]
             }
             Some(Material::Phong { albedo, specular, exponent }) => vec![
-                LobeTerm { lobe: Lobe::Diffuse, axis: n, scale: scaled(*albedo) },
+                LobeTerm { lobe: Lobe::Diffuse, axis: n, scale: scaled(*albedo, tint.diffuse) },
                 LobeTerm {
                     lobe: Lobe::Phong { exponent: f64::from(*exponent) },
                     axis: reflect_view(view, p, n),
-                    scale: scaled(*specular),
+                    scale: scaled(*specular, tint.specular),
                 },
             ],
             Some(Material::Water { .. }) | None => Vec::new(),
@@ -385,43 +382,25 @@ impl Context<'_> {
     }
 
     fn pixel(&self, x: usize, y: usize, width: usize) -> ([f32; 4], PointEstimate) {
-        let g = &self.frame.gbuffer;
-        let i = g.index(x, y);
         let seed = (y * width + x) as u64;
         let out = |c: [f64; 3], alpha: f32| [c[0] as f32, c[1] as f32, c[2] as f32, alpha];
         let exact =
             |c: [f64; 3]| PointEstimate { rgb: c, error: 0.0, level: 0, converged: true, meridians: 0, evaluations: 0 };
-        match g.material[i] {
-            0 => {
-                let sky = match &self.frame.camera {
-                    Some(camera) => self.light_along(camera.ray_direction(x as f64 + 0.5, y as f64 + 0.5)),
-                    None => [0.0; 3],
-                };
-                (out(sky, 0.0), exact(sky))
+        let tinted = |tint: [f32; 3], c: [f64; 3]| [0, 1, 2].map(|k| f64::from(tint[k]) * c[k]);
+        // The same walk as the fast path's, which the reference checks.
+        let estimate = match pixel_source(&self.scene.materials, self.frame, x, y) {
+            PixelSource::Background { ray } => {
+                let sky = ray.map_or([0.0; 3], |d| self.light_along(d));
+                return (out(sky, 0.0), exact(sky));
             }
-            m => match self.scene.materials.get(&m) {
-                Some(Material::Water { tint }) => {
-                    let reflection = self.frame.reflection.as_ref().expect("checked before rendering");
-                    let water = surface_at(g, i, None, self.frame);
-                    let tint = tint.map(f64::from);
-                    let mirror = reflect_view(water.view_origin, water.position, water.normal);
-                    let lamp = mirrored_lamp(self.frame, water.position, mirror, reflection, i);
-                    let estimate = if let Some(lamp) = lamp {
-                        exact([0, 1, 2].map(|k| tint[k] * f64::from(lamp[k])))
-                    } else if reflection.material[i] == 0 {
-                        let sky = self.light_along(mirror);
-                        let suns = mirrored_suns(self.frame, mirror);
-                        exact([0, 1, 2].map(|k| tint[k] * (sky[k] + f64::from(suns[k]))))
-                    } else {
-                        self.surface(reflection, i, Some(water.position), tint, seed)
-                    };
-                    (out(estimate.rgb, 1.0), estimate)
-                }
-                _ => {
-                    let estimate = self.surface(g, i, None, [1.0; 3], seed);
-                    (out(estimate.rgb, 1.0), estimate)
-                }
-            },
-        }
+            PixelSource::WaterLamp { tint, radiance } => exact(tinted(tint, radiance.map(f64::from))),
+            PixelSource::WaterSky { tint, mirror } => {
+                let sky = self.light_along(mirror);
+                let suns = mirrored_suns(self.frame, mirror);
+                exact(tinted(tint, [0, 1, 2].map(|k| sky[k] + f64::from(suns[k]))))
+            }
+            PixelSource::Surface { point, tint } => self.surface(point, tint, seed),
+        };
+        (out(estimate.rgb, 1.0), estimate)
     }
 }

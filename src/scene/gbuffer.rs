@@ -11,7 +11,22 @@
 //! - the material index must lie within 1e-3 of a whole number, be `>= 0`, and be 0
 //!   (background) or a key of the material table; it is rounded to that whole number;
 //! - on every non-background pixel, position and normal must be finite. Background
-//!   pixels are not checked (their position and normal are never read).
+//!   pixels are not checked (their position and normal are never read);
+//! - where the scene takes its colours from the G-buffer (`"colour_passes": true`), the
+//!   Diffuse Color and Glossy Color passes must be present in the G-buffer, and on every
+//!   non-background pixel finite and `>= 0`. The reflection G-buffer's are read where
+//!   present.
+//!
+//! # Colour passes
+//!
+//! Cycles' Diffuse Color and Glossy Color passes hold, per pixel, what Blender's own
+//! evaluation of the material multiplies the light through each lobe by: textures,
+//! vertex colours and every node in front of the BSDF, and for a Principled BSDF the
+//! layering of its parts (Cycles' `bsdf_albedo`: the diffuse weight is the base colour
+//! times `1 - metallic`, times `1 -` the specular layer's albedo; the glossy weight is the
+//! directional albedo of the Fresnel-weighted specular layer at this pixel's view angle,
+//! whose F0 is the base colour for a metal). Blender 5 names them `Diffuse Color` and
+//! `Glossy Color`, Blender 4 `DiffCol` and `GlossCol`; both are read.
 
 use super::error::SceneError;
 use super::exr_read::ChannelFile;
@@ -30,6 +45,8 @@ pub struct ChannelOverrides {
     pub uv: Option<[String; 2]>,
     pub material_index: Option<String>,
     pub object_index: Option<String>,
+    pub diffuse_colour: Option<[String; 3]>,
+    pub glossy_colour: Option<[String; 3]>,
 }
 
 /// The full channel names the G-buffer reader looks up.
@@ -46,6 +63,36 @@ pub struct ChannelNames {
     pub object_index: Vec<String>,
     /// True when `object_index` came from an override, which makes it required.
     pub object_index_required: bool,
+    /// The colour passes, each tried in order ([`module doc`](self)): `None` where the
+    /// scene's colours come from its material table.
+    pub colours: Option<ColourChannels>,
+}
+
+/// The channel names of the Diffuse Color and Glossy Color passes, each list tried in
+/// order; the first whose channels are present is used.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct ColourChannels {
+    pub diffuse: Vec<[String; 3]>,
+    pub glossy: Vec<[String; 3]>,
+}
+
+/// Blender 5's and Blender 4's names of the Diffuse Color pass, in view layer `ViewLayer`.
+pub const DIFFUSE_COLOUR: [[&str; 3]; 2] = [
+    ["ViewLayer.Diffuse Color.R", "ViewLayer.Diffuse Color.G", "ViewLayer.Diffuse Color.B"],
+    ["ViewLayer.DiffCol.R", "ViewLayer.DiffCol.G", "ViewLayer.DiffCol.B"],
+];
+/// Blender 5's and Blender 4's names of the Glossy Color pass.
+pub const GLOSSY_COLOUR: [[&str; 3]; 2] = [
+    ["ViewLayer.Glossy Color.R", "ViewLayer.Glossy Color.G", "ViewLayer.Glossy Color.B"],
+    ["ViewLayer.GlossCol.R", "ViewLayer.GlossCol.G", "ViewLayer.GlossCol.B"],
+];
+
+/// Per pixel, what the light through each lobe is multiplied by ([module doc](self),
+/// "Colour passes"): row-major from the top row, as the G-buffer's other passes.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SurfaceColours {
+    pub diffuse: Vec<[f32; 3]>,
+    pub glossy: Vec<[f32; 3]>,
 }
 
 /// Blender's default channel names for view layer `ViewLayer`.
@@ -68,6 +115,24 @@ impl Default for ChannelNames {
 }
 
 impl ChannelNames {
+    /// The names of a scene's G-buffers: `colour_passes` where its colours come from them.
+    pub fn new(o: Option<&ChannelOverrides>, colour_passes: bool) -> Self {
+        let three = |a: &[&str; 3]| a.map(str::to_string);
+        let names = |given: &Option<[String; 3]>, defaults: &[[&str; 3]; 2]| match given {
+            Some(given) => vec![given.clone()],
+            None => defaults.iter().map(three).collect(),
+        };
+        let colours = colour_passes.then(|| {
+            let o = o.cloned().unwrap_or_default();
+            ColourChannels {
+                diffuse: names(&o.diffuse_colour, &DIFFUSE_COLOUR),
+                glossy: names(&o.glossy_colour, &GLOSSY_COLOUR),
+            }
+        });
+        Self { colours, ..Self::from_overrides(o) }
+    }
+
+    /// The names of a scene whose colours come from its material table.
     pub fn from_overrides(o: Option<&ChannelOverrides>) -> Self {
         let o = o.cloned().unwrap_or_default();
         let owned = |a: &[&str]| -> Vec<String> { a.iter().map(|s| s.to_string()).collect() };
@@ -86,6 +151,7 @@ impl ChannelNames {
                 Some(m) => vec![m],
                 None => owned(&[OBJECT_INDEX_BLENDER5, OBJECT_INDEX_BLENDER4]),
             },
+            colours: None,
         }
     }
 }
@@ -108,6 +174,9 @@ pub struct GBuffer {
     /// Object index (Blender's Object Index pass, the `object` of the blocker spheres),
     /// 0 = no object; `None` when the file has no such channel.
     pub object: Option<Vec<u32>>,
+    /// Blender's colour passes ([module doc](self)), where the scene reads them and the
+    /// file has them.
+    pub colours: Option<SurfaceColours>,
 }
 
 impl GBuffer {
@@ -116,8 +185,15 @@ impl GBuffer {
         y * self.width + x
     }
 
-    /// Reads and validates a G-buffer file.
-    pub fn read(file: &Path, names: &ChannelNames, materials: &BTreeMap<u32, Material>) -> Result<GBuffer, SceneError> {
+    /// Reads and validates a G-buffer file; `colours_required`: the colour passes must be
+    /// there where `names` has them (the G-buffer), else they are read where present (the
+    /// reflection G-buffer).
+    pub fn read(
+        file: &Path,
+        names: &ChannelNames,
+        materials: &BTreeMap<u32, Material>,
+        colours_required: bool,
+    ) -> Result<GBuffer, SceneError> {
         const WHAT: &str = "a G-buffer";
         let channels = ChannelFile::read(file, WHAT, &names.position[0])?;
         let (width, height) = channels.size();
@@ -129,6 +205,16 @@ impl GBuffer {
             None if names.object_index_required => Some(&names.object_index[0]),
             found => found,
         };
+        let present = |lists: &Vec<[String; 3]>| -> Option<[String; 3]> {
+            match lists.iter().find(|names| names.iter().all(|name| channels.has(name))) {
+                None if colours_required => Some(lists[0].clone()),
+                found => found.cloned(),
+            }
+        };
+        let colour_names = names.colours.as_ref().and_then(|c| Some((present(&c.diffuse)?, present(&c.glossy)?)));
+        let mut colours = colour_names
+            .as_ref()
+            .map(|_| SurfaceColours { diffuse: vec![[0.0f32; 3]; n], glossy: vec![[0.0f32; 3]; n] });
         let (mut position, mut normal) = (vec![[0.0f32; 3]; n], vec![[0.0f32; 3]; n]);
         let mut uv = vec![[0.0f32; 2]; if has_uv { n } else { 0 }];
         let mut raw_index = vec![0.0f32; n];
@@ -148,6 +234,10 @@ impl GBuffer {
         });
         if let Some(name) = object_name {
             targets.push(Target { values: &mut raw_object, stride: 1, channels: in_order(std::slice::from_ref(name)) });
+        }
+        if let (Some((diffuse, glossy)), Some(colours)) = (&colour_names, &mut colours) {
+            targets.push(Target { values: colours.diffuse.as_flattened_mut(), stride: 3, channels: in_order(diffuse) });
+            targets.push(Target { values: colours.glossy.as_flattened_mut(), stride: 3, channels: in_order(glossy) });
         }
         channels.fill(file, WHAT, &mut targets)?;
         let uv = has_uv.then_some(uv);
@@ -199,10 +289,31 @@ impl GBuffer {
                         what: format!("normal {n:?} of pixel ({x}, {y})"),
                     });
                 }
+                if let Some(colours) = &colours {
+                    for (pass, c) in [("Diffuse Color", colours.diffuse[i]), ("Glossy Color", colours.glossy[i])] {
+                        if c.iter().any(|v| !v.is_finite()) {
+                            return Err(SceneError::NonFinite {
+                                file: file.to_path_buf(),
+                                what: format!("{pass} {c:?} of pixel ({x}, {y})"),
+                            });
+                        }
+                        if c.iter().any(|&v| v < 0.0) {
+                            return Err(SceneError::invalid(
+                                file,
+                                format!("{pass} {c:?} of pixel ({x}, {y}) is negative; a colour is >= 0"),
+                            ));
+                        }
+                    }
+                }
             }
             material.push(m);
         }
-        Ok(GBuffer { file: file.to_path_buf(), width, height, position, normal, uv, material, object })
+        Ok(GBuffer { file: file.to_path_buf(), width, height, position, normal, uv, material, object, colours })
+    }
+
+    /// The Diffuse Color and Glossy Color of pixel `i`, where the G-buffer has them.
+    pub fn colours_at(&self, i: usize) -> Option<([f32; 3], [f32; 3])> {
+        self.colours.as_ref().map(|c| (c.diffuse[i], c.glossy[i]))
     }
 
     /// The object index of pixel `i`, 0 when the G-buffer has none.

@@ -41,6 +41,12 @@
 //! - Supersample: an optional `supersample`, 1 to [`MAX_SUPERSAMPLE`]: the G-buffers hold
 //!   that many samples per camera pixel along each axis, and the camera's `resolution`
 //!   times it must be their size ([`crate::shade::resolve`]).
+//! - Colour passes: an optional `colour_passes` (default false). True: the G-buffer holds
+//!   Blender's Diffuse Color and Glossy Color passes, which multiply the light through
+//!   the diffuse and the glossy lobe per pixel in place of the table's `albedo` and
+//!   `specular` (and of a water pixel's `tint`); the table still gives each material's
+//!   type and lobe width, and the colours of the points seen in a reflection G-buffer
+//!   without such passes ([`gbuffer`], "Colour passes").
 //! - G-buffers: see [`gbuffer`] for channel names, layouts and per-pixel checks.
 //!
 //! # Channel-name overrides
@@ -53,7 +59,9 @@
 //!   "position": ["P.X", "P.Y", "P.Z"],
 //!   "normal": ["N.X", "N.Y", "N.Z"],
 //!   "uv": ["UV.U", "UV.V"],
-//!   "material_index": "IndexMA.X"
+//!   "material_index": "IndexMA.X",
+//!   "diffuse_colour": ["DiffCol.R", "DiffCol.G", "DiffCol.B"],
+//!   "glossy_colour": ["GlossCol.R", "GlossCol.G", "GlossCol.B"]
 //! }
 //! ```
 //!
@@ -301,6 +309,7 @@ struct SceneFile {
     channels: Option<gbuffer::ChannelOverrides>,
     view: Option<view::ViewSpec>,
     supersample: Option<u32>,
+    colour_passes: Option<bool>,
 }
 
 #[derive(Deserialize)]
@@ -681,7 +690,7 @@ impl Scene {
                 Lamp::Point(point) => points.push(point),
             }
         }
-        let channels = ChannelNames::from_overrides(raw.channels.as_ref());
+        let channels = ChannelNames::new(raw.channels.as_ref(), raw.colour_passes.unwrap_or(false));
         let view = match &raw.view {
             Some(spec) => ViewTransform::load(spec, dir, &file)?,
             None => ViewTransform::default(),
@@ -715,6 +724,33 @@ impl Scene {
             static_height_map: None,
         };
         Ok(scene)
+    }
+
+    /// Whether the G-buffer's colour passes multiply the light through each lobe per
+    /// pixel (`"colour_passes": true`), in place of the material table's colours.
+    pub fn colour_passes(&self) -> bool {
+        self.channels.colours.is_some()
+    }
+
+    /// The material table as the kernel shades it: the table itself, or, where the
+    /// colours come from the G-buffer's passes ([`Self::colour_passes`]), every colour
+    /// white, so that the kernel's passes are the light through each lobe and the
+    /// passes multiply them per pixel ([`crate::shade::Tint`]). A black albedo or
+    /// specular stays black: a lobe the table says is absent is not shaded.
+    pub fn kernel_materials(&self) -> BTreeMap<u32, Material> {
+        if !self.colour_passes() {
+            return self.materials.clone();
+        }
+        let white = |c: [f32; 3]| if c == [0.0; 3] { c } else { [1.0; 3] };
+        let whitened = |m: &Material| match *m {
+            Material::Heightfield { albedo } => Material::Heightfield { albedo: white(albedo) },
+            Material::Diffuse { albedo } => Material::Diffuse { albedo: white(albedo) },
+            Material::Phong { albedo, specular, exponent } => {
+                Material::Phong { albedo: white(albedo), specular: white(specular), exponent }
+            }
+            Material::Water { tint } => Material::Water { tint: white(tint) },
+        };
+        self.materials.iter().map(|(&i, m)| (i, whitened(m))).collect()
     }
 
     /// Path of `scene.json`.
@@ -850,12 +886,12 @@ impl Scene {
     pub fn frame(&self, frame: i64) -> Result<Frame, SceneError> {
         self.check_frame(frame)?;
         let gfile = self.gbuffer.resolve(&self.dir, frame);
-        let gbuffer = GBuffer::read(&gfile, &self.channels, &self.materials)?;
+        let gbuffer = GBuffer::read(&gfile, &self.channels, &self.materials, true)?;
         let reflection = match &self.reflection_gbuffer {
             None => None,
             Some(t) => {
                 let rfile = t.resolve(&self.dir, frame);
-                let r = GBuffer::read(&rfile, &self.channels, &self.materials)?;
+                let r = GBuffer::read(&rfile, &self.channels, &self.materials, false)?;
                 if [r.width, r.height] != [gbuffer.width, gbuffer.height] {
                     return Err(SceneError::SizeMismatch {
                         file: rfile,

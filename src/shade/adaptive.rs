@@ -15,6 +15,7 @@
 
 use super::compositing::ShadedPasses;
 use super::frame::{pixel_work, unit_or_up, PixelWork};
+use crate::scene::gbuffer::SurfaceColours;
 use crate::scene::{Frame, GBuffer, Material};
 use std::collections::BTreeMap;
 
@@ -104,7 +105,7 @@ enum Pick {
     /// A sample of the frame.
     Sample(usize),
     /// The mean of a pixel's samples that agree: mean position, normalised mean normal,
-    /// the first sample's material and object.
+    /// mean colours, the first sample's material and object.
     Mean(Vec<usize>),
 }
 
@@ -123,6 +124,10 @@ fn pack(frame: &Frame, picked: &[Pick]) -> Frame {
             uv: None,
             material: vec![0; width * height],
             object: buffer.object.as_ref().map(|_| vec![0; width * height]),
+            colours: buffer.colours.as_ref().map(|_| SurfaceColours {
+                diffuse: vec![[0.0; 3]; width * height],
+                glossy: vec![[0.0; 3]; width * height],
+            }),
         };
         for (k, pick) in picked.iter().enumerate() {
             let samples = match pick {
@@ -144,6 +149,10 @@ fn pack(frame: &Frame, picked: &[Pick]) -> Frame {
             packed.material[k] = buffer.material[first];
             if let (Some(out), Some(object)) = (&mut packed.object, &buffer.object) {
                 out[k] = object[first];
+            }
+            if let (Some(out), Some(colours)) = (&mut packed.colours, &buffer.colours) {
+                out.diffuse[k] = mean(&colours.diffuse);
+                out.glossy[k] = mean(&colours.glossy);
             }
         }
         packed

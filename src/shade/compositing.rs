@@ -3,9 +3,10 @@
 //! and grade each part (docs/design.md, "Compositing passes").
 //!
 //! Per pixel, `beauty = diffuse + specular + environment`, summed in f32 in that order:
-//! - `diffuse`, `specular`: [`PixelPasses`] of the surface; for water, of the point in the
-//!   reflection G-buffer times the tint (water reflecting the sky puts `tint * sky` in
-//!   `specular`, a mirror reflection);
+//! - `diffuse`, `specular`: [`PixelPasses`] of the surface times its [`Tint`] (the colour
+//!   passes, where the G-buffer has them); for water, of the point in the reflection
+//!   G-buffer times the tint (water reflecting the sky puts `tint * sky` in `specular`, a
+//!   mirror reflection);
 //! - `environment`: the light seen directly on background pixels (the camera's ray
 //!   direction; black without a camera), 0 elsewhere.
 //!
@@ -13,6 +14,7 @@
 //! `tint * (d + s)` and `tint * d + tint * s` can differ in the last bit.
 //! Visibility terms are 1 on the background and, for water, those of the reflected point.
 
+use super::frame::Tint;
 use super::kernel::PixelPasses;
 use crate::scene::Frame;
 
@@ -59,9 +61,9 @@ impl Pixel {
 
     /// A shaded point's passes times its tint ([`PixelWork::Shade`](super::PixelWork::Shade)); the visibility
     /// terms are the point's own.
-    pub fn shaded(seen: PixelPasses, tint: [f32; 3]) -> Self {
-        let tinted = |c: [f32; 3]| [0, 1, 2].map(|k| tint[k] * c[k]);
-        let passes = PixelPasses { diffuse: tinted(seen.diffuse), specular: tinted(seen.specular), ..seen };
+    pub fn shaded(seen: PixelPasses, tint: Tint) -> Self {
+        let (diffuse, specular) = tint.apply(seen.diffuse, seen.specular);
+        let passes = PixelPasses { diffuse, specular, ..seen };
         Pixel { passes, environment: [0.0; 3], alpha: 1.0 }
     }
 }

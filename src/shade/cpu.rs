@@ -3,7 +3,7 @@
 //! GPU pass is compared with, and the fallback where no GPU can shade a frame.
 
 use super::compositing::{assemble, Pixel, ShadedPasses};
-use super::frame::{pixel_work, PixelWork, ShadeError, ShadedFrame};
+use super::frame::{pixel_work, PixelWork, ShadeError, ShadedFrame, Tint};
 use super::kernel::{Caps, Occluders, ShadingKernel, SurfacePoint};
 use super::plan::{FramePlan, PlannedKernel};
 use super::settings::ShadingSettings;
@@ -50,7 +50,7 @@ trait PixelResult: Copy + Send + Sync {
         occluders: Occluders,
         point: &SurfacePoint,
         caps: Caps,
-        tint: [f32; 3],
+        tint: Tint,
     ) -> Self;
 }
 
@@ -65,10 +65,15 @@ impl PixelResult for [f32; 4] {
         occluders: Occluders,
         point: &SurfacePoint,
         caps: Caps,
-        tint: [f32; 3],
+        tint: Tint,
     ) -> Self {
-        let c = kernel.shade(occluders, point, caps);
-        [tint[0] * c[0], tint[1] * c[1], tint[2] * c[2], 1.0]
+        if tint.diffuse == tint.specular {
+            let (t, c) = (tint.diffuse, kernel.shade(occluders, point, caps));
+            [t[0] * c[0], t[1] * c[1], t[2] * c[2], 1.0]
+        } else {
+            let passes = kernel.shade_passes(occluders, point, caps);
+            tint.beauty(passes.diffuse, passes.specular)
+        }
     }
 }
 
@@ -83,7 +88,7 @@ impl PixelResult for Pixel {
         occluders: Occluders,
         point: &SurfacePoint,
         caps: Caps,
-        tint: [f32; 3],
+        tint: Tint,
     ) -> Self {
         Pixel::shaded(kernel.shade_passes(occluders, point, caps), tint)
     }

@@ -177,14 +177,76 @@ pub fn mirrored_lamp(
         .map(|(_, lamp)| lamp.radiance())
 }
 
+/// What a shaded point's diffuse and specular passes are multiplied by: white, but for
+/// water (its tint, with the reflected point's own colours where the kernel shades it
+/// white) and where the G-buffer carries Blender's colour passes (the pixel's Diffuse
+/// Color and Glossy Color, the kernel's materials then white:
+/// [`Scene::kernel_materials`](crate::scene::Scene::kernel_materials)).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Tint {
+    pub diffuse: [f32; 3],
+    pub specular: [f32; 3],
+}
+
+impl Tint {
+    pub const WHITE: Tint = Tint { diffuse: [1.0; 3], specular: [1.0; 3] };
+
+    /// The same colour on both passes.
+    pub fn uniform(colour: [f32; 3]) -> Self {
+        Tint { diffuse: colour, specular: colour }
+    }
+
+    /// This tint times `colour` on both passes.
+    pub fn times(self, colour: [f32; 3]) -> Self {
+        let times = |c: [f32; 3]| [0, 1, 2].map(|k| c[k] * colour[k]);
+        Tint { diffuse: times(self.diffuse), specular: times(self.specular) }
+    }
+
+    /// `diffuse` and `specular` tinted.
+    pub fn apply(&self, diffuse: [f32; 3], specular: [f32; 3]) -> ([f32; 3], [f32; 3]) {
+        let tinted = |t: [f32; 3], c: [f32; 3]| [0, 1, 2].map(|k| t[k] * c[k]);
+        (tinted(self.diffuse, diffuse), tinted(self.specular, specular))
+    }
+
+    /// The tinted sum `diffuse + specular` as RGBA with alpha 1: where both passes take
+    /// the same colour, that colour times the sum (the bits of a tint of one colour).
+    pub fn beauty(&self, diffuse: [f32; 3], specular: [f32; 3]) -> [f32; 4] {
+        if self.diffuse == self.specular {
+            let t = self.diffuse;
+            [
+                t[0] * (diffuse[0] + specular[0]),
+                t[1] * (diffuse[1] + specular[1]),
+                t[2] * (diffuse[2] + specular[2]),
+                1.0,
+            ]
+        } else {
+            let (d, s) = self.apply(diffuse, specular);
+            [d[0] + s[0], d[1] + s[1], d[2] + s[2], 1.0]
+        }
+    }
+}
+
+/// A material's colours in the table, as a tint: albedo on the diffuse pass, specular
+/// colour on the specular pass (a water tint on both).
+fn table_tint(material: Option<&Material>) -> Tint {
+    match material {
+        Some(Material::Diffuse { albedo }) | Some(Material::Heightfield { albedo }) => {
+            Tint { diffuse: *albedo, specular: [0.0; 3] }
+        }
+        Some(Material::Phong { albedo, specular, .. }) => Tint { diffuse: *albedo, specular: *specular },
+        Some(Material::Water { tint }) => Tint::uniform(*tint),
+        None => Tint::WHITE,
+    }
+}
+
 /// What one pixel needs from an executor.
 #[derive(Clone, Copy, Debug)]
 pub enum PixelWork {
     /// A colour known without shading: the background (alpha 0), or water mirroring the
     /// sky (alpha 1).
     Fixed([f32; 4]),
-    /// A point to shade, its result multiplied by `tint` (1 but for water), alpha 1.
-    Shade { point: SurfacePoint, tint: [f32; 3] },
+    /// A point to shade, its passes multiplied by `tint`, alpha 1.
+    Shade { point: SurfacePoint, tint: Tint },
 }
 
 /// Where a pixel's colour comes from: the frame walk shared by the CPU and GPU executors
@@ -198,23 +260,30 @@ pub enum PixelSource {
     WaterSky { tint: [f32; 3], mirror: [f64; 3] },
     /// Water whose mirror ray meets a point lamp first: `tint` times its radiance.
     WaterLamp { tint: [f32; 3], radiance: [f32; 3] },
-    /// A point to shade, its result times `tint` (1 but for water).
-    Surface { point: SurfacePoint, tint: [f32; 3] },
+    /// A point to shade, its passes times `tint`.
+    Surface { point: SurfacePoint, tint: Tint },
 }
 
 /// Background from the light along the camera ray, water through the reflection
 /// G-buffer (the reflected point shaded as seen from the water surface, or the sky and
 /// the Sun lamps in the mirror direction, or a point lamp the mirror ray meets first),
 /// every other pixel its own surface point.
+///
+/// Where the G-buffer carries colour passes, a surface takes its pixel's Diffuse Color
+/// and Glossy Color as its tint, and water its Glossy Color (the Fresnel reflectance at
+/// its view angle) in place of its tint; a reflected point takes the reflection
+/// G-buffer's colours where it has them, else its material's in the table.
 pub fn pixel_source(materials: &BTreeMap<u32, Material>, frame: &Frame, x: usize, y: usize) -> PixelSource {
     let g = &frame.gbuffer;
     let i = g.index(x, y);
+    let own_colours = g.colours_at(i);
     match g.material[i] {
         0 => PixelSource::Background {
             ray: frame.camera.as_ref().map(|camera| camera.ray_direction(x as f64 + 0.5, y as f64 + 0.5)),
         },
         m => match materials.get(&m) {
             Some(Material::Water { tint }) => {
+                let tint = &own_colours.map_or(*tint, |(_, glossy)| glossy);
                 let reflection = frame.reflection.as_ref().expect("checked before shading");
                 let water = surface_at(g, i, None, frame);
                 let mirror = super::kernel::reflect_view(water.view_origin, water.position, water.normal);
@@ -226,10 +295,20 @@ pub fn pixel_source(materials: &BTreeMap<u32, Material>, frame: &Frame, x: usize
                 if reflection.material[i] == 0 {
                     PixelSource::WaterSky { tint: *tint, mirror }
                 } else {
-                    PixelSource::Surface { point: surface_at(reflection, i, Some(water.position), frame), tint: *tint }
+                    // The kernel shades white where the colours come from the passes.
+                    let seen = match (reflection.colours_at(i), own_colours) {
+                        (Some((diffuse, glossy)), _) => Tint { diffuse, specular: glossy },
+                        (None, Some(_)) => table_tint(materials.get(&reflection.material[i])),
+                        (None, None) => Tint::WHITE,
+                    };
+                    let point = surface_at(reflection, i, Some(water.position), frame);
+                    PixelSource::Surface { point, tint: seen.times(*tint) }
                 }
             }
-            _ => PixelSource::Surface { point: surface_at(g, i, None, frame), tint: [1.0; 3] },
+            _ => {
+                let tint = own_colours.map_or(Tint::WHITE, |(diffuse, glossy)| Tint { diffuse, specular: glossy });
+                PixelSource::Surface { point: surface_at(g, i, None, frame), tint }
+            }
         },
     }
 }

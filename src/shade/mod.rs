@@ -21,7 +21,7 @@ pub mod sun;
 
 pub use compositing::ShadedPasses;
 pub use cpu::{shade_frame, shade_frame_passes, shade_frame_timed};
-pub use frame::{pixel_source, pixel_work, work_of, PixelSource, PixelWork, ShadeError, ShadedFrame};
+pub use frame::{pixel_source, pixel_work, work_of, PixelSource, PixelWork, ShadeError, ShadedFrame, Tint};
 pub use kernel::{CapSums, Caps, Exponentiator, KnownAlongSun, Occluders, PixelPasses, ShadingKernel, SurfacePoint};
 pub use plan::{FrameContents, FramePlan, PlannedKernel, Terrain};
 pub use resolve::{PixelFilter, Resolve, Resolving};

@@ -146,7 +146,8 @@ impl KernelInputs<'_> {
     fn kernel<T: Real>(&self) -> ShadingKernel<T> {
         ShadingKernel::new(
             self.settings,
-            &self.scene.materials,
+            &self.scene.kernel_materials(),
+            self.scene.colour_passes(),
             self.light,
             self.residual,
             self.heightfield,
@@ -177,6 +178,7 @@ struct LightingKey {
     settings: ShadingSettings,
     light: Arc<Light>,
     materials: BTreeMap<u32, Material>,
+    colour_passes: bool,
     suns: Vec<SunLight>,
     points: Vec<PointLight>,
     ground: Option<f64>,
@@ -188,6 +190,7 @@ impl LightingKey {
         Arc::ptr_eq(&self.light, &other.light)
             && self.settings == other.settings
             && self.materials == other.materials
+            && self.colour_passes == other.colour_passes
             && self.suns == other.suns
             && self.points == other.points
             && self.ground == other.ground
@@ -204,7 +207,8 @@ fn lighting(settings: &ShadingSettings, scene: &Scene, frame: &Frame, heightfiel
     let key = LightingKey {
         settings: *settings,
         light: frame.light.clone(),
-        materials: scene.materials.clone(),
+        materials: scene.kernel_materials(),
+        colour_passes: scene.colour_passes(),
         suns: frame.suns.clone(),
         points: frame.points.clone(),
         ground: frame.ground,

@@ -25,7 +25,7 @@ pub mod raycast;
 pub use raycast::{render_gbuffer, render_reflection, trace, Hit, Object, Shape};
 
 use crate::scene::camera::blockers_json;
-use crate::scene::gbuffer::{MATERIAL_INDEX_BLENDER4, MATERIAL_INDEX_BLENDER5};
+use crate::scene::gbuffer::{SurfaceColours, MATERIAL_INDEX_BLENDER4, MATERIAL_INDEX_BLENDER5};
 use crate::scene::light::equirectangular_to_direction;
 use crate::scene::output::{write_atomically, OutputError};
 use crate::scene::{Camera, GBuffer, HeightMap, Material, Sphere};
@@ -167,6 +167,10 @@ pub struct SynthScene {
     /// [`Shape::Terrain`] in every frame.
     pub terrain: Option<(Arc<HeightMap>, u32)>,
     pub frames: Vec<SynthFrame>,
+    /// Colour passes: where given, the G-buffers carry Blender's Diffuse Color and Glossy
+    /// Color passes ([`crate::scene::gbuffer`]) of this checker texture over every
+    /// material, and scene.json says `colour_passes`.
+    pub checker: Option<Checker>,
 }
 
 impl SynthScene {
@@ -181,11 +185,47 @@ impl SynthScene {
         if let Some((map, material)) = &self.terrain {
             objects.push(Object { shape: Shape::Terrain(map.clone()), material: *material });
         }
-        let primary = render_gbuffer(&objects, &frame.camera);
+        let mut primary = render_gbuffer(&objects, &frame.camera);
         let water = self.water_materials();
-        let reflection = (!water.is_empty()).then(|| render_reflection(&objects, &primary, &frame.camera, &water));
+        let mut reflection = (!water.is_empty()).then(|| render_reflection(&objects, &primary, &frame.camera, &water));
+        if let Some(checker) = self.checker {
+            for g in std::iter::once(&mut primary).chain(reflection.as_mut()) {
+                g.colours = Some(checker_colours(g, &self.materials, checker));
+            }
+        }
         (primary, reflection)
     }
+}
+
+/// A checker texture in world X and Y ([`SynthScene::checker`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Checker {
+    /// The side of a cell.
+    pub cell: f64,
+    /// What the odd cells multiply the table's colours by (the even ones by 1).
+    pub dark: f32,
+}
+
+/// The colour passes of `checker` over `g`: per pixel, the table's albedo and specular
+/// colour (a water tint as its glossy colour), times 1 on even cells and `checker.dark`
+/// on odd ones; black on the background.
+pub fn checker_colours(g: &GBuffer, materials: &BTreeMap<u32, Material>, checker: Checker) -> SurfaceColours {
+    let cell = checker.cell;
+    let (diffuse, glossy) = (0..g.width * g.height)
+        .map(|i| {
+            let (albedo, specular) = match materials.get(&g.material[i]) {
+                Some(Material::Diffuse { albedo }) | Some(Material::Heightfield { albedo }) => (*albedo, [0.0; 3]),
+                Some(Material::Phong { albedo, specular, .. }) => (*albedo, *specular),
+                Some(Material::Water { tint }) => ([0.0; 3], *tint),
+                None => ([0.0; 3], [0.0; 3]),
+            };
+            let p = g.position[i].map(f64::from);
+            let odd = ((p[0] / cell).floor() + (p[1] / cell).floor()).rem_euclid(2.0) == 1.0;
+            let scale = if odd { checker.dark } else { 1.0 };
+            (albedo.map(|c| c * scale), specular.map(|c| c * scale))
+        })
+        .unzip();
+    SurfaceColours { diffuse, glossy }
 }
 
 fn material_json(m: &Material) -> serde_json::Value {
@@ -255,7 +295,7 @@ pub fn write_gbuffer_exr(path: &Path, g: &GBuffer, layout: GBufferLayout) -> Res
     let uv = g.uv.clone().unwrap_or_else(|| vec![[0.0; 2]; g.width * g.height]);
     let shade: Vec<f32> = g.normal.iter().zip(&hit).map(|(n, h)| h * (0.2 + 0.8 * n[2].max(0.0))).collect();
     let index: Vec<f32> = g.material.iter().map(|&m| m as f32).collect();
-    let passes: Vec<(&str, Vec<AnyChannel<FlatSamples>>)> = vec![
+    let mut passes: Vec<(&str, Vec<AnyChannel<FlatSamples>>)> = vec![
         (
             "ViewLayer.Combined",
             vec![
@@ -303,6 +343,16 @@ pub fn write_gbuffer_exr(path: &Path, g: &GBuffer, layout: GBufferLayout) -> Res
             )],
         ),
     ];
+    if let Some(colours) = &g.colours {
+        let (diffuse, glossy) = match layout {
+            GBufferLayout::Blender5 => ("ViewLayer.Diffuse Color", "ViewLayer.Glossy Color"),
+            GBufferLayout::Blender4 => ("ViewLayer.DiffCol", "ViewLayer.GlossCol"),
+        };
+        for (pass, values) in [(diffuse, &colours.diffuse), (glossy, &colours.glossy)] {
+            let channel = |k: usize, c: &str| f32_channel(&format!("{pass}.{c}"), comp(k, values));
+            passes.push((pass, vec![channel(0, "R"), channel(1, "G"), channel(2, "B")]));
+        }
+    }
     let layers = match layout {
         GBufferLayout::Blender5 => passes.into_iter().map(|(name, ch)| (Some(name), ch)).collect(),
         GBufferLayout::Blender4 => vec![(None, passes.into_iter().flat_map(|(_, ch)| ch).collect())],
@@ -367,6 +417,9 @@ pub fn write_scene_supersampled(out: &Path, scene: &SynthScene, supersample: u32
     };
     if supersample > 1 {
         description["supersample"] = json!(supersample);
+    }
+    if scene.checker.is_some() {
+        description["colour_passes"] = json!(true);
     }
     for frame in &scene.frames {
         let mut sampled = frame.clone();
@@ -440,6 +493,7 @@ impl SphereOverPlane {
             light: SynthLight::Constant([1.0; 3]),
             terrain: None,
             frames: vec![SynthFrame { number: 1, camera, objects }],
+            checker: None,
         }
     }
 
@@ -593,6 +647,7 @@ fn dunes(options: ExampleOptions) -> SynthScene {
         light: SynthLight::Sky(Sky::default()),
         terrain: Some((map.clone(), sand)),
         frames,
+        checker: None,
     }
 }
 

@@ -269,6 +269,7 @@ fn gbuffer_from(width: usize, height: usize, samples: Vec<Sample>) -> GBuffer {
         uv: Some(samples.iter().map(|s| s.2).collect()),
         material: samples.iter().map(|s| s.3).collect(),
         object: None,
+        colours: None,
     }
 }
 

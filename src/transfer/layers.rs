@@ -9,6 +9,7 @@ use crate::scene::{LightSource, SceneError};
 use crate::sh::{coefficient_count, MAX_ORDER, MIN_ORDER};
 use crate::shade::glossy::SharpLobe;
 use crate::shade::kernel::{GlossyTransfer, PointTransfer};
+use crate::shade::Tint;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -284,8 +285,9 @@ pub enum PixelTransfer<'a> {
     Mirror { tint: [f32; 3], mirror: [f64; 3], suns: [f32; 3] },
     /// Water mirroring a lamp.
     Lamp { tint: [f32; 3], radiance: [f32; 3] },
-    /// A surface point, times `tint`.
-    Surface { point: &'a PointTransfer, tint: [f32; 3] },
+    /// A surface point, its diffuse parts times `tint.diffuse` and its specular parts
+    /// times `tint.specular`.
+    Surface { point: &'a PointTransfer, tint: Tint },
 }
 
 /// One row of a frame's layers ([`TransferFrame::rows_mut`]), its pixels to be written
@@ -339,15 +341,16 @@ impl TransferRow<'_> {
                         (lobe_code::PREFILTERED + lobes[&material] as f32, to_f32(direction))
                     }
                 };
+                let specular = tint.specular;
                 (
                     point,
-                    tint,
+                    tint.diffuse,
                     1.0,
                     lobe,
                     direction,
-                    tinted(tint, point.lamps_specular),
-                    tinted(tint, point.sun_lamps_specular),
-                    tinted(tint, point.specular_colour),
+                    tinted(specular, point.lamps_specular),
+                    tinted(specular, point.sun_lamps_specular),
+                    tinted(specular, point.specular_colour),
                 )
             }
         };

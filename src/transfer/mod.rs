@@ -16,7 +16,7 @@
 //! | `sh_unoccluded_<k>.*` | colour | `exp*(T + D)`: the visibility passes' denominator |
 //! | `sh_heightfield_<k>.*`, `sh_blockers_<k>.*` | colour | their numerators; only in frames with both |
 //! | `sh_specular_<k>.*` | colour | the glossy transfer (below); only in scenes with a Phong material |
-//! | `albedo.{R,G,B}`, `specular_colour.{R,G,B}` | colour | the material's colours, times water's tint |
+//! | `albedo.{R,G,B}`, `specular_colour.{R,G,B}` | colour | the material's colours, times the pixel's tint (water's, or the G-buffer's Diffuse and Glossy Color passes) |
 //! | `lamps_diffuse.{R,G,B}`, `lamps_specular.{R,G,B}` | colour | the scene's Sun and point lamps, shaded (kept by a relight, but for the Sun lamps when it turns them) |
 //! | `sun_lamps_diffuse.{R,G,B}`, `sun_lamps_specular.{R,G,B}` | colour | the Sun lamps' part of `lamps_*`; only in frames with a Sun lamp |
 //! | `glossy_lobe.V` | float | what the glossy term reads: 0 nothing, 1 the light itself (mirror, background), 2 `sh_specular`, `3 + j` the header's prefiltered lobe `j` |

@@ -560,8 +560,8 @@ fn move_lamps<T: Real>(
                 PixelSource::Surface { ref point, tint } => {
                     let known = &known[i * disks.len()..(i + 1) * disks.len()];
                     if let Some((lit_d, lit_s)) = kernel.sun_lamps_lit(occluders, point, &disks, Some(known)) {
-                        moved(d, rd, tint, lit_d);
-                        moved(s, rs, tint, lit_s);
+                        moved(d, rd, tint.diffuse, lit_d);
+                        moved(s, rs, tint.specular, lit_s);
                     }
                 }
                 PixelSource::WaterSky { tint, mirror } => moved(s, rs, tint, suns_along(turned, mirror)),
