@@ -451,45 +451,62 @@ fn world_mapping_rotation_exports() {
     }
 }
 
-/// A Sky Texture World is baked by Cycles into the scene's map, and its sun comes back
-/// out of the map as a sharp light at the Sky Texture's elevation.
+/// A Sky Texture World is baked by Cycles into the scene's map without its sun disc, and
+/// the disc becomes a sun light of Blender's Sun Size towards the Sky Texture's sun (Sun
+/// Elevation 30 degrees, Sun Rotation 0 and 120), of the same strength however turned.
 #[test]
-fn sky_texture_bakes_and_its_sun_is_taken_out() {
+fn sky_texture_bakes_and_its_sun_is_a_sun_light() {
     let Some(python) = bpy_python() else { return };
     let dir = tempfile::tempdir().unwrap();
-    let blend = dir.path().join("sky.blend");
-    make_blend(
-        &python,
-        &blend,
-        "bpy.ops.mesh.primitive_plane_add(size=8); bpy.ops.mesh.primitive_cube_add(location=(0, 0, 1)); \
-         bpy.ops.object.camera_add(location=(0, -9, 6), rotation=(math.radians(60), 0, 0)); \
-         bpy.context.scene.camera = bpy.context.object; \
-         w = bpy.data.worlds.new('World'); bpy.context.scene.world = w; w.use_nodes = True; n = w.node_tree.nodes; \
-         sky = n.new('ShaderNodeTexSky'); sky.sun_elevation = math.radians(30); \
-         w.node_tree.links.new(sky.outputs['Color'], n['Background'].inputs['Color'])",
-    );
-    let out = dir.path().join("scene");
-    let output = export_frame_1(&python, &blend, &out, "32x18");
-    assert_ok(&output, "exporting a Sky Texture World");
-    assert!(String::from_utf8_lossy(&output.stdout).contains("World (Sky Texture) baked by Cycles"));
-    let scene = Scene::load(&out).unwrap();
-    let output = Command::cargo_bin("logsh")
-        .unwrap()
-        .args(["shade", "--device", "cpu", "--out"])
-        .arg(dir.path().join("shaded"))
-        .arg(&out)
-        .output()
-        .unwrap();
-    assert_ok(&output, "logsh shade");
-    let stderr = String::from_utf8_lossy(&output.stderr);
-    let elevation: f64 = stderr
-        .split("elevation ")
-        .nth(1)
-        .and_then(|rest| rest.split(' ').next())
-        .and_then(|e| e.parse().ok())
-        .unwrap_or_else(|| panic!("no sun taken out: {stderr}"));
-    assert!((elevation - 30.0).abs() < 1.0, "sun at elevation {elevation}: {stderr}");
-    assert!(matches!(scene.frame(1).unwrap().light.as_ref(), logsh::scene::Light::Environment { .. }));
+    let mut strengths = Vec::new();
+    for rotation in [0.0f64, 120.0] {
+        let blend = dir.path().join(format!("sky {rotation}.blend"));
+        make_blend(
+            &python,
+            &blend,
+            &format!(
+                "bpy.ops.mesh.primitive_plane_add(size=8); bpy.ops.mesh.primitive_cube_add(location=(0, 0, 1)); \
+                 bpy.ops.object.camera_add(location=(0, -9, 6), rotation=(math.radians(60), 0, 0)); \
+                 bpy.context.scene.camera = bpy.context.object; \
+                 w = bpy.data.worlds.new('World'); bpy.context.scene.world = w; w.use_nodes = True; n = w.node_tree.nodes; \
+                 sky = n.new('ShaderNodeTexSky'); sky.sun_elevation = math.radians(30); \
+                 sky.sun_rotation = math.radians({rotation}); \
+                 w.node_tree.links.new(sky.outputs['Color'], n['Background'].inputs['Color'])"
+            ),
+        );
+        let out = dir.path().join(format!("scene {rotation}"));
+        let output = export_frame_1(&python, &blend, &out, "32x18");
+        assert_ok(&output, "exporting a Sky Texture World");
+        let stdout = String::from_utf8_lossy(&output.stdout);
+        assert!(stdout.contains("World (Sky Texture) baked by Cycles"), "{stdout}");
+        assert!(!out.join("sky_sun_with.tmp.exr").exists(), "the sun's window renders are removed");
+        let scene = Scene::load(&out).unwrap();
+        assert_eq!(scene.suns.len(), 1, "the Sky Texture's sun is a sun light: {stdout}");
+        let sun = scene.suns[0];
+        let (e, r) = (30f64.to_radians(), rotation.to_radians());
+        let expected = [e.cos() * r.sin(), e.cos() * r.cos(), e.sin()];
+        let cos = (0..3).map(|k| sun.direction[k] * expected[k]).sum::<f64>();
+        assert!(
+            cos > 0.1f64.to_radians().cos(),
+            "rotation {rotation}: sun towards {:?}, expected {expected:?}",
+            sun.direction
+        );
+        assert!((sun.half_angle.to_degrees() * 2.0 - 0.545).abs() < 0.01, "Blender's Sun Size");
+        strengths.push(sun.strength);
+        let output = Command::cargo_bin("logsh")
+            .unwrap()
+            .args(["shade", "--device", "cpu", "--out"])
+            .arg(dir.path().join(format!("shaded {rotation}")))
+            .arg(&out)
+            .output()
+            .unwrap();
+        assert_ok(&output, "logsh shade");
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert!(!stderr.contains("took a sun out"), "the map holds no sun any more: {stderr}");
+        assert!(matches!(scene.frame(1).unwrap().light.as_ref(), logsh::scene::Light::Environment { .. }));
+    }
+    // The same sun wherever it is turned: the window found it both times.
+    assert!((strengths[0] / strengths[1] - 1.0).abs() < 0.01, "sun strengths {strengths:?}");
 }
 
 /// The `dunes` sample built and exported small: the height map lies where the G-buffer

@@ -7,8 +7,9 @@ is soft. One frame, 240x135.
 
     python blender_scripts/scenes/primitives.py --save out/primitives.blend
 
-`soft_sky_world` is also used by other measurement scenes (import this module's function;
-the scene itself is only built when the file is run).
+`soft_sky_world` and `build_objects` (the scene without its World) are also used by other
+measurement scenes (import this module's functions; the scene itself is only built when
+the file is run).
 """
 import math
 import os
@@ -52,6 +53,13 @@ def rest_on_ground(obj):
 
 
 def build(save_path):
+    build_objects()
+    soft_sky_world(os.path.splitext(save_path)[0] + "_sky.exr")
+    save(save_path)
+
+
+def build_objects():
+    """The scene without its World: primitives on a ground plane, and the camera."""
     empty_scene((1, 1), width=240, height=135)
 
     bpy.ops.mesh.primitive_plane_add(size=60, location=(0, 0, 0))
@@ -86,8 +94,6 @@ def build(save_path):
         assign(bpy.context.object, diffuse(name, colour)).name = name
 
     camera((0.4, -7.0, 4.8), (0.3, 0.2, 0.3), lens=35.0)
-    soft_sky_world(os.path.splitext(save_path)[0] + "_sky.exr")
-    save(save_path)
 
 
 if __name__ == "__main__":
