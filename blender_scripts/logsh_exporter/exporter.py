@@ -71,9 +71,12 @@ socket into the first exported frame's G-buffer, and the material takes the root
 square of its pixels' roughness; without them, the socket's own value.
 
 With colour passes, every Principled BSDF that is not water is `phong`, on the terrain
-too and whatever its `logsh_type` says (its specular layer shaded as a GGX lobe, weighed per pixel
-by the Glossy Color pass, which is black where Specular IOR Level is 0) and the table's colours below are what
-logsh uses only for points seen in water's reflection. Without them (`colour_passes`
+too and whatever its `logsh_type` says (its specular layer shaded as a GGX lobe, weighed
+per pixel by the Glossy Color pass, which is black where Specular IOR Level is 0), and the
+table's colours are each material's mean Diffuse and Glossy Color over its pixels in the
+first frame (`fit_to_passes`), which logsh uses only for the points seen in water's
+reflection (the exporter ray casts the reflection G-buffer, which has no colour passes of
+its own); a material out of view keeps the colours below. Without them (`colour_passes`
 False, `--no-colour-passes`, the materials of `render_cycles.py`'s direct-light truth),
 the conversion is the whole of the material (logsh has no Fresnel term and a Phong lobe
 about the mirror direction, `docs/design.md`):
@@ -289,9 +292,8 @@ def export(scene, options, log=print):
             depsgraph = bpy.context.evaluated_depsgraph_get()
             scene.render.filepath = new_file(out, f"gbuffer.{frame:04d}.exr")
             bpy.ops.render.render(write_still=True, scene=scene.name, layer=view_layer.name)
-            if textured_roughness:
-                fit_roughness(scene.render.filepath, frame, table, textured_roughness, warnings, log)
-                textured_roughness = {}
+            if options.colour_passes and frame == frames[0]:
+                fit_to_passes(scene.render.filepath, frame, table, textured_roughness, warnings, log)
             camera = camera_json(scene, frame, width, height)
             write_json(new_file(out, f"camera.{frame:04d}.json"), camera)
             spheres = export_blockers(scene, depsgraph, objects, terrain, index_of, table, object_index, options, fits,
@@ -596,7 +598,7 @@ def roughness_aovs(table, index_of, view_layer, changes):
     (`ROUGHNESS_AOV`) fed by what drives it, and the view layer's AOV of that name, both
     removed again by `changes`; returns index -> (name, socket value) of those materials.
     Textures and everything else in front of the socket then arrive as Blender evaluates
-    them, in the G-buffer's `ViewLayer.logsh_roughness.X`, which `fit_roughness` reads."""
+    them, in the G-buffer's `ViewLayer.logsh_roughness.X`, which `fit_to_passes` reads."""
     textured = {}
     for name, i in index_of.items():
         material = bpy.data.materials[name]
@@ -616,32 +618,57 @@ def roughness_aovs(table, index_of, view_layer, changes):
     return textured
 
 
-def fit_roughness(gbuffer, frame, table, textured, warnings, log):
-    """Gives each material of `textured` (from `roughness_aovs`) the lobe width of its
-    pixels in `gbuffer`: the root mean square of their roughness, so that the mean of
-    GGX's alpha = roughness^2 is kept. logsh shades one lobe width per material; each
-    such material is a warning, which says the width chosen."""
-    index_names = ("ViewLayer.Material Index.X", "ViewLayer.IndexMA.X")
-    for index_name in index_names:
+def _read_first(gbuffer, alternatives):
+    """The channels of the first of `alternatives` (lists of full channel names: Blender
+    5's, then Blender 4's) that `gbuffer` holds, in their order."""
+    for names in alternatives:
         try:
-            channels = read_exr_channels(gbuffer, [f"{VIEW_LAYER}.{ROUGHNESS_AOV}.X", index_name])
-            break
+            channels = read_exr_channels(gbuffer, names)
+            return [channels[name] for name in names]
         except ValueError:
-            channels = None
-    if channels is None:
-        raise ExportError(f"{gbuffer}: Blender wrote no {ROUGHNESS_AOV} AOV or material index; cannot fit roughness")
-    roughness, index = channels[f"{VIEW_LAYER}.{ROUGHNESS_AOV}.X"], np.rint(channels[index_name]).astype(int)
+            continue
+    raise ExportError(f"{gbuffer}: Blender wrote none of {alternatives[0]}")
+
+
+def fit_to_passes(gbuffer, frame, table, textured, warnings, log):
+    """What the table takes from Blender's own evaluation in the first frame's G-buffer:
+
+    - each material of `textured` (from `roughness_aovs`) the lobe width of its pixels:
+      the root mean square of their roughness, so that the mean of GGX's alpha =
+      roughness^2 is kept (logsh shades one lobe width per material; each is a warning
+      that says the width chosen);
+    - every material in view its mean Diffuse Color as `albedo` and mean Glossy Color as
+      `specular`, which logsh uses only for the points seen in water's reflection (the
+      G-buffer's passes colour the rest), in place of the sockets' unlinked values; a
+      mean that is black keeps the table's colour, which says whether a lobe is shaded."""
+    index, = _read_first(gbuffer, [["ViewLayer.Material Index.X"], ["ViewLayer.IndexMA.X"]])
+    index = np.rint(index).astype(int)
+    passes = []
+    for blender5, blender4 in (("Diffuse Color", "DiffCol"), ("Glossy Color", "GlossCol")):
+        passes.append(np.stack(_read_first(gbuffer, [[f"{VIEW_LAYER}.{name}.{c}" for c in "RGB"]
+                                                     for name in (blender5, blender4)]), axis=-1))
+    for i, entry in table.items():
+        pixels = index == i
+        if entry["type"] == "water" or not pixels.any():
+            continue
+        for key, values in (("albedo", passes[0]), ("specular", passes[1])):
+            mean = values[pixels].mean(axis=0)
+            if key in entry and mean.max() > 0.0:
+                entry[key] = [float(c) for c in mean]
+    if not textured:
+        return
+    roughness, = _read_first(gbuffer, [[f"{VIEW_LAYER}.{ROUGHNESS_AOV}.X"]])
     for i, (name, unlinked) in sorted(textured.items()):
         values = roughness[index == i]
         if values.size == 0:
             warnings.append(f"material \"{name}\": its Roughness is driven by nodes and it is not in view at frame "
                             f"{frame}; logsh shades it with roughness {unlinked:.3g}, the socket's own value")
-            continue
-        fitted = float(np.sqrt(np.mean(np.clip(values, 0.0, 1.0) ** 2)))
-        table[i]["exponent"] = phong_exponent(fitted)
-        warnings.append(f"material \"{name}\": its Roughness is driven by nodes (from {float(values.min()):.3g} to "
-                        f"{float(values.max()):.3g} over its {values.size} pixels at frame {frame}); logsh shades one "
-                        f"lobe width per material, roughness {fitted:.3g}")
+        else:
+            fitted = float(np.sqrt(np.mean(np.clip(values, 0.0, 1.0) ** 2)))
+            table[i]["exponent"] = phong_exponent(fitted)
+            warnings.append(f"material \"{name}\": its Roughness is driven by nodes (from {float(values.min()):.3g} "
+                            f"to {float(values.max()):.3g} over its {values.size} pixels at frame {frame}); logsh "
+                            f"shades one lobe width per material, roughness {fitted:.3g}")
         log(f"warning: {warnings[-1]}")
 
 

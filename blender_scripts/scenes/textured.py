@@ -12,18 +12,14 @@ import os
 
 import bpy
 
-from common import assign, camera, empty_scene, parse_args, save
+from common import assign, camera, empty_scene, material, parse_args, save
 from primitives import rest_on_ground, soft_sky_world
 
 
 def principled(name, roughness=0.5, metallic=0.0, colour=(0.8, 0.8, 0.8)):
-    mat = bpy.data.materials.new(name)
-    mat.use_nodes = True
-    node = mat.node_tree.nodes["Principled BSDF"]
-    node.inputs["Base Color"].default_value = (*colour, 1.0)
-    node.inputs["Roughness"].default_value = roughness
-    node.inputs["Metallic"].default_value = metallic
-    return mat, node
+    """`common.material` without markup, and its Principled BSDF."""
+    mat = material(name, colour, roughness=roughness, metallic=metallic)
+    return mat, mat.node_tree.nodes["Principled BSDF"]
 
 
 def textured(name, texture_type, roughness=0.5, **inputs):
