@@ -757,13 +757,21 @@ impl<T: Real> ShadingKernel<T> {
     /// surface material here: the caller shades the reflected point instead.
     /// `caps`: where its sphere caps come from.
     pub fn shade(&self, occluders: Occluders, point: &SurfacePoint, caps: Caps) -> [f32; 3] {
+        let (diffuse, glossy) = self.shade_lobes(occluders, point, caps);
+        [0, 1, 2].map(|i| diffuse[i] + glossy[i])
+    }
+
+    /// [`Self::shade`]'s diffuse and glossy radiance apart, without the visibility terms
+    /// that [`Self::shade_passes`] adds: what a pixel whose colour passes tint the two
+    /// apart needs.
+    pub fn shade_lobes(&self, occluders: Occluders, point: &SurfacePoint, caps: Caps) -> ([f32; 3], [f32; 3]) {
         let Some((visibility, occlusion)) = self.surface_visibility(occluders, point, caps, None) else {
-            return [0.0; 3];
+            return ([0.0; 3], [0.0; 3]);
         };
         let lobes = &self.materials[&point.material];
         let (diffuse, glossy) = self.environment_radiance(occluders, &visibility, &occlusion, lobes, point);
         let (sun_diffuse, sun_glossy) = self.sunlit(occluders, point, &lobes.material);
-        [0, 1, 2].map(|i| (diffuse[i] + sun_diffuse[i]) + (glossy[i] + sun_glossy[i]))
+        ([0, 1, 2].map(|i| diffuse[i] + sun_diffuse[i]), [0, 1, 2].map(|i| glossy[i] + sun_glossy[i]))
     }
 
     /// The log visibility of a surface point, and that of its specular occlusion where
