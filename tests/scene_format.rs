@@ -603,4 +603,14 @@ fn colour_passes_are_required_and_checked() {
     assert_mentions(&err, &["gbuffer.0001.exr", "Glossy Color", "pixel (6, 1)"]);
     with_colours(-0.25, 0.5);
     assert_mentions(&frame_error(dir.path()), &["gbuffer.0001.exr", "Diffuse Color", "pixel (4, 0)", "negative"]);
+
+    // Names the passes by another name; without colour_passes such a name is refused.
+    with_colours(0.25, 0.5);
+    edit_json(&dir.path().join("scene.json"), |v| {
+        v["channels"] = serde_json::json!({"glossy_colour": ["Gloss.R", "Gloss.G", "Gloss.B"]})
+    });
+    assert_mentions(&frame_error(dir.path()), &["gbuffer.0001.exr", "missing channel \"Gloss.R\""]);
+    edit_json(&dir.path().join("scene.json"), |v| v["colour_passes"] = serde_json::json!(false));
+    let err = Scene::load(dir.path()).unwrap_err();
+    assert_mentions(&err, &["scene.json", "glossy_colour", "colour_passes"]);
 }

@@ -46,7 +46,9 @@
 //!   the diffuse and the glossy lobe per pixel in place of the table's `albedo` and
 //!   `specular` (and of a water pixel's `tint`); the table still gives each material's
 //!   type and lobe width, and the colours of the points seen in a reflection G-buffer
-//!   without such passes ([`gbuffer`], "Colour passes").
+//!   without such passes ([`gbuffer`], "Colour passes"). Their channels may be renamed
+//!   under `"channels"` (`diffuse_colour`, `glossy_colour`), which is an error without
+//!   `colour_passes`.
 //! - G-buffers: see [`gbuffer`] for channel names, layouts and per-pixel checks.
 //!
 //! # Channel-name overrides
@@ -690,7 +692,18 @@ impl Scene {
                 Lamp::Point(point) => points.push(point),
             }
         }
-        let channels = ChannelNames::new(raw.channels.as_ref(), raw.colour_passes.unwrap_or(false));
+        let colour_passes = raw.colour_passes.unwrap_or(false);
+        if let Some(named) = raw.channels.as_ref().filter(|_| !colour_passes) {
+            for (key, given) in [("diffuse_colour", &named.diffuse_colour), ("glossy_colour", &named.glossy_colour)] {
+                if given.is_some() {
+                    return Err(SceneError::invalid(
+                        &file,
+                        format!("\"channels\" names \"{key}\" but \"colour_passes\" is not true, so nothing reads it"),
+                    ));
+                }
+            }
+        }
+        let channels = ChannelNames::new(raw.channels.as_ref(), colour_passes);
         let view = match &raw.view {
             Some(spec) => ViewTransform::load(spec, dir, &file)?,
             None => ViewTransform::default(),
