@@ -29,8 +29,10 @@ build() {  # name, frames, extra export options...
     shift 2
     echo "== $name"
     "$PYTHON" blender_scripts/scenes/"$name".py --save "$WORK/$name.blend"
+    # Without colour passes: each sample is compared with render_cycles.py's converted
+    # materials (cycles.0001.exr), the truth for the method.
     "$PYTHON" blender_scripts/export_scene.py --blend "$WORK/$name.blend" --out "$WORK/$name" \
-        --frames "$frames" --resolution $RESOLUTION "$@"
+        --frames "$frames" --resolution $RESOLUTION --no-colour-passes "$@"
     "$PYTHON" blender_scripts/render_cycles.py --blend "$WORK/$name.blend" --out "$WORK/$name" \
         --samples $SAMPLES --resolution $RESOLUTION
     mkdir -p "$OUT"

@@ -35,8 +35,9 @@ for scene in $SCENES; do
         dir="$OUT/$scene-$resolution"
         if [ ! -f "$dir/cycles.0001.exr" ]; then
             rm -rf "$dir"
+            # Without colour passes: the truth below is render_cycles.py's converted materials.
             "$PYTHON" blender_scripts/export_scene.py --blend "$OUT/$scene.blend" --out "$dir" \
-                --frames 1 --resolution "$resolution"
+                --frames 1 --resolution "$resolution" --no-colour-passes
             "$PYTHON" blender_scripts/render_cycles.py --blend "$OUT/$scene.blend" --out "$dir" \
                 --samples "$TRUTH_SAMPLES" --resolution "$resolution"
         fi
