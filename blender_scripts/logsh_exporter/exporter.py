@@ -59,10 +59,11 @@ What a material may hold: a Principled BSDF, a Diffuse BSDF or a Glossy BSDF fee
 Material Output, with any nodes in front of them. The Principled BSDF's Transmission,
 Subsurface, Sheen and Coat weights must be at most `NEGLIGIBLE_WEIGHT` and unlinked, and
 it must not emit (Emission Strength times Emission Color). Water with colour passes is
-the other way round: logsh shades it as its reflection alone (the reflection G-buffer's point times the Glossy
-Color pass, the Fresnel reflectance at the pixel's view angle), so it must transmit
-(Transmission Weight 1) or be a metal, and not have a diffuse layer. Anything else (another surface node such as a Mix Shader, Glass or
-Emission, a linked or heavier weight) stops the export, naming the material and the node;
+the other way round: logsh shades it as its reflection alone (the reflection G-buffer's
+point times the Glossy Color pass, the Fresnel reflectance at the pixel's view angle), so
+it must transmit (Transmission Weight 1) or be a metal, and not have a diffuse layer.
+Anything else (another surface node such as a Mix Shader, Glass or Emission, a linked or
+heavier weight) stops the export, naming the material and the node;
 `Options.approximate` (`--approximate`) makes each a warning instead, which the summary
 counts. A Roughness driven by nodes is always a warning: logsh shades one lobe width per
 material. With colour passes, that width is fitted to Blender's own evaluation: an AOV
@@ -742,11 +743,9 @@ def phong_exponent(roughness):
     return float(min(max(1.0 / (2.0 * alpha * alpha) - 0.5, MIN_EXPONENT), MAX_EXPONENT))
 
 
-def convert_material(material, on_terrain, colour_passes=False, refuse=None, warn=None):
+def convert_material(material, on_terrain, colour_passes, refuse, warn):
     """The format-v1 entry of `material` (module doc); `refuse(problem)` is told what it
     holds that logsh cannot shade, `warn(problem)` what logsh approximates."""
-    refuse = refuse or (lambda problem: None)
-    warn = warn or (lambda problem: None)
     node = _principled(material)
     base, metallic, roughness, transmission = list(material.diffuse_color)[:3], material.metallic, material.roughness, 0.0
     ior, level, tint = 1.5, 0.5, [1.0, 1.0, 1.0]
@@ -1285,34 +1284,17 @@ def bake_world(scene, world, out, options, what, log, sky=None, lights=None):
             bpy.ops.render.render(write_still=True, scene=bake.name)
 
         began = time.time()
+        whole_map = dict(size=(width, width // 2), samples=BAKE_SAMPLES)
         if not with_disc:
-            panorama(new_file(out, "sky.exr"), (width, width // 2), BAKE_SAMPLES)
+            panorama(new_file(out, "sky.exr"), **whole_map)
         else:
+            window = sun_window(sky)
+            temporary = [new_file(out, f"sky_sun_{k}.tmp.exr") for k in ("with", "without")]
+            panorama(temporary[0], **window)
             sky.sun_disc = False
             try:
-                panorama(new_file(out, "sky.exr"), (width, width // 2), BAKE_SAMPLES)
-            finally:
-                sky.sun_disc = True
-            # The disc's window, in the map's latitude and longitude (`sun_of`). The sun
-            # lies towards (cos e sin r, cos e cos r, sin e) for Sun Elevation e and Sun
-            # Rotation r (measured: the disc's centroid in a bake, rotation 40 and
-            # elevation 35 degrees, at azimuth 50.0 and elevation 35.0).
-            latitude = sky.sun_elevation
-            longitude = math.atan2(-math.cos(sky.sun_rotation), math.sin(sky.sun_rotation))
-            half = sky.sun_size / 2.0 + SUN_WINDOW_MARGIN
-            window = dict(
-                size=(SUN_WINDOW_PIXELS, SUN_WINDOW_PIXELS),
-                samples=SUN_WINDOW_SAMPLES,
-                latitudes=(latitude - half, latitude + half),
-                longitudes=(longitude - min(math.pi, half / max(math.cos(latitude), 1e-3)),
-                            longitude + min(math.pi, half / max(math.cos(latitude), 1e-3))),
-            )
-            paths = [new_file(out, f"sky_sun_{k}.tmp.exr") for k in ("with", "without")]
-            temporary.extend(paths)
-            panorama(paths[0], **window)
-            sky.sun_disc = False
-            try:
-                panorama(paths[1], **window)
+                panorama(new_file(out, "sky.exr"), **whole_map)
+                panorama(temporary[1], **window)
             finally:
                 sky.sun_disc = True
     finally:
@@ -1335,6 +1317,24 @@ def bake_world(scene, world, out, options, what, log, sky=None, lights=None):
             if os.path.exists(path):
                 os.remove(path)
     return {"environment": "sky.exr", "strength": 1.0}
+
+
+def sun_window(sky):
+    """The panorama (`bake_world`'s) of the window around the Sky Texture `sky`'s sun
+    disc, in the map's latitude and longitude (`sun_of`). The sun lies towards (cos e sin
+    r, cos e cos r, sin e) for Sun Elevation e and Sun Rotation r (measured: the disc's
+    centroid in a whole bake, rotation 40 and elevation 35 degrees, at azimuth 50.0 and
+    elevation 35.0)."""
+    latitude = sky.sun_elevation
+    longitude = math.atan2(-math.cos(sky.sun_rotation), math.sin(sky.sun_rotation))
+    half = sky.sun_size / 2.0 + SUN_WINDOW_MARGIN
+    half_longitude = min(math.pi, half / max(math.cos(latitude), 1e-3))
+    return dict(
+        size=(SUN_WINDOW_PIXELS, SUN_WINDOW_PIXELS),
+        samples=SUN_WINDOW_SAMPLES,
+        latitudes=(latitude - half, latitude + half),
+        longitudes=(longitude - half_longitude, longitude + half_longitude),
+    )
 
 
 def sun_of(with_sun, without_sun, latitudes, longitudes, angle):

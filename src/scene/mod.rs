@@ -120,6 +120,17 @@ pub enum Material {
 }
 
 impl Material {
+    /// The colours of the table as Blender's Diffuse Color and Glossy Color passes carry
+    /// them ([`gbuffer`], "Colour passes"): the albedo and the specular colour, a water
+    /// tint on the glossy pass, black where a lobe is absent.
+    pub fn pass_colours(&self) -> ([f32; 3], [f32; 3]) {
+        match *self {
+            Material::Diffuse { albedo } | Material::Heightfield { albedo } => (albedo, [0.0; 3]),
+            Material::Phong { albedo, specular, .. } => (albedo, specular),
+            Material::Water { tint } => ([0.0; 3], tint),
+        }
+    }
+
     /// The type name used in `scene.json`.
     pub fn type_name(&self) -> &'static str {
         match self {

@@ -67,13 +67,8 @@ impl PixelResult for [f32; 4] {
         caps: Caps,
         tint: Tint,
     ) -> Self {
-        if tint.diffuse == tint.specular {
-            let (t, c) = (tint.diffuse, kernel.shade(occluders, point, caps));
-            [t[0] * c[0], t[1] * c[1], t[2] * c[2], 1.0]
-        } else {
-            let (diffuse, specular) = kernel.shade_lobes(occluders, point, caps);
-            tint.beauty(diffuse, specular)
-        }
+        let (diffuse, specular) = kernel.shade_lobes(occluders, point, caps);
+        tint.beauty(diffuse, specular)
     }
 }
 

@@ -191,11 +191,6 @@ pub struct Tint {
 impl Tint {
     pub const WHITE: Tint = Tint { diffuse: [1.0; 3], specular: [1.0; 3] };
 
-    /// The same colour on both passes.
-    pub fn uniform(colour: [f32; 3]) -> Self {
-        Tint { diffuse: colour, specular: colour }
-    }
-
     /// This tint times `colour` on both passes.
     pub fn times(self, colour: [f32; 3]) -> Self {
         let times = |c: [f32; 3]| [0, 1, 2].map(|k| c[k] * colour[k]);
@@ -223,19 +218,6 @@ impl Tint {
             let (d, s) = self.apply(diffuse, specular);
             [d[0] + s[0], d[1] + s[1], d[2] + s[2], 1.0]
         }
-    }
-}
-
-/// A material's colours in the table, as a tint: albedo on the diffuse pass, specular
-/// colour on the specular pass (a water tint on both).
-fn table_tint(material: Option<&Material>) -> Tint {
-    match material {
-        Some(Material::Diffuse { albedo }) | Some(Material::Heightfield { albedo }) => {
-            Tint { diffuse: *albedo, specular: [0.0; 3] }
-        }
-        Some(Material::Phong { albedo, specular, .. }) => Tint { diffuse: *albedo, specular: *specular },
-        Some(Material::Water { tint }) => Tint::uniform(*tint),
-        None => Tint::WHITE,
     }
 }
 
@@ -283,26 +265,29 @@ pub fn pixel_source(materials: &BTreeMap<u32, Material>, frame: &Frame, x: usize
         },
         m => match materials.get(&m) {
             Some(Material::Water { tint }) => {
-                let tint = &own_colours.map_or(*tint, |(_, glossy)| glossy);
+                let tint = own_colours.map_or(*tint, |(_, glossy)| glossy);
                 let reflection = frame.reflection.as_ref().expect("checked before shading");
                 let water = surface_at(g, i, None, frame);
                 let mirror = super::kernel::reflect_view(water.view_origin, water.position, water.normal);
                 // A lamp the mirror ray meets before the reflected surface (Cycles shows
                 // lamps to glossy rays): the pixel is its radiance.
                 if let Some(radiance) = mirrored_lamp(frame, water.position, mirror, reflection, i) {
-                    return PixelSource::WaterLamp { tint: *tint, radiance };
+                    return PixelSource::WaterLamp { tint, radiance };
                 }
                 if reflection.material[i] == 0 {
-                    PixelSource::WaterSky { tint: *tint, mirror }
+                    PixelSource::WaterSky { tint, mirror }
                 } else {
                     // The kernel shades white where the colours come from the passes.
                     let seen = match (reflection.colours_at(i), own_colours) {
                         (Some((diffuse, glossy)), _) => Tint { diffuse, specular: glossy },
-                        (None, Some(_)) => table_tint(materials.get(&reflection.material[i])),
+                        (None, Some(_)) => materials.get(&reflection.material[i]).map_or(Tint::WHITE, |m| {
+                            let (diffuse, specular) = m.pass_colours();
+                            Tint { diffuse, specular }
+                        }),
                         (None, None) => Tint::WHITE,
                     };
                     let point = surface_at(reflection, i, Some(water.position), frame);
-                    PixelSource::Surface { point, tint: seen.times(*tint) }
+                    PixelSource::Surface { point, tint: seen.times(tint) }
                 }
             }
             _ => {

@@ -131,7 +131,9 @@ impl<'a> FramePlan<'a> {
 /// What a frame's kernel is built from, at either precision.
 struct KernelInputs<'a> {
     settings: &'a ShadingSettings,
-    scene: &'a Scene,
+    /// The materials as the kernel shades them ([`Scene::kernel_materials`]).
+    materials: &'a BTreeMap<u32, Material>,
+    colour_passes: bool,
     frame: &'a Frame,
     /// The SH projection of `residual`.
     light: &'a [[f64; 3]],
@@ -146,8 +148,8 @@ impl KernelInputs<'_> {
     fn kernel<T: Real>(&self) -> ShadingKernel<T> {
         ShadingKernel::new(
             self.settings,
-            &self.scene.kernel_materials(),
-            self.scene.colour_passes(),
+            self.materials,
+            self.colour_passes,
             self.light,
             self.residual,
             self.heightfield,
@@ -232,7 +234,16 @@ fn lighting(settings: &ShadingSettings, scene: &Scene, frame: &Frame, heightfiel
     };
     let mut light = residual.sh_coefficients(settings.order);
     settings.light_window.apply(settings.order, &mut light);
-    let inputs = KernelInputs { settings, scene, frame, light: &light, residual, heightfield, suns: &suns };
+    let inputs = KernelInputs {
+        settings,
+        materials: &key.materials,
+        colour_passes: key.colour_passes,
+        frame,
+        light: &light,
+        residual,
+        heightfield,
+        suns: &suns,
+    };
     let kernel = match settings.precision {
         Precision::F32 => PlannedKernel::F32(inputs.kernel()),
         Precision::F64 => PlannedKernel::F64(inputs.kernel()),

@@ -213,12 +213,7 @@ pub fn checker_colours(g: &GBuffer, materials: &BTreeMap<u32, Material>, checker
     let cell = checker.cell;
     let (diffuse, glossy) = (0..g.width * g.height)
         .map(|i| {
-            let (albedo, specular) = match materials.get(&g.material[i]) {
-                Some(Material::Diffuse { albedo }) | Some(Material::Heightfield { albedo }) => (*albedo, [0.0; 3]),
-                Some(Material::Phong { albedo, specular, .. }) => (*albedo, *specular),
-                Some(Material::Water { tint }) => ([0.0; 3], *tint),
-                None => ([0.0; 3], [0.0; 3]),
-            };
+            let (albedo, specular) = materials.get(&g.material[i]).map_or(([0.0; 3], [0.0; 3]), Material::pass_colours);
             let p = g.position[i].map(f64::from);
             let odd = ((p[0] / cell).floor() + (p[1] / cell).floor()).rem_euclid(2.0) == 1.0;
             let scale = if odd { checker.dark } else { 1.0 };
