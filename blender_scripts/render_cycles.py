@@ -4,19 +4,26 @@ exporter's converted materials); with `--as-authored`, the truth for the user (t
 .blend's materials untouched).
 
     python blender_scripts/render_cycles.py --blend scene.blend --out DIR [--frame 1]
-        [--samples 256] [--resolution WxH] [--seed 0] [--ladder 1,2,4,...]
-        [--as-authored [--bounces N|default]] [--denoise]
+        [--samples 256] [--resolution WxH] [--seed 0] [--ladder 1,2,4,... [--ladder-denoise]]
+        [--as-authored] [--bounces N|default] [--denoise]
     blender -b scene.blend -P blender_scripts/render_cycles.py -- --out DIR ...
 
 Writes `DIR/cycles.NNNN.exr` (linear RGB, half float) and `DIR/cycles.NNNN.png` (sRGB,
-Standard view transform); with `--as-authored`, `DIR/authored.NNNN.exr` and `.png`
-(`authored_bN` with `--bounces N`); refuses to write over any of them.
+Standard view transform); with `--as-authored`, `DIR/authored.NNNN.exr` and `.png`;
+with `--bounces N` other than 0, `cycles_bN` or `authored_bN` (`_bdefault` for Blender's
+own light paths); refuses to write over any of them.
+
+The three truths: `cycles` (converted materials, direct light) is the truth for the
+method; `cycles_bdefault` (converted materials, Blender's light paths) isolates bounce
+light from materials; `authored_bdefault` is what the user renders.
 
 `--as-authored` renders the .blend as its author would, but for what must match the
 G-buffer: materials, World and lamps untouched, each pixel sampled at its centre (as
 below), the Standard view transform, no motion blur or depth of field. `--bounces N`
 sets Cycles' max bounces (0: direct light only, the measure of materials alone);
 `default` keeps the file's light paths (bounce light included, what the user renders).
+On converted materials, `--bounces` other than 0 likewise keeps (or sets) the light
+paths instead of the direct-light settings below.
 `--denoise` runs OpenImageDenoise on the result (with its albedo and normal passes), the
 user's alternative at a few samples.
 
@@ -25,6 +32,17 @@ one render of 1 sample first, untimed, so that loading Cycles' kernels is not co
 then one render per sample count of the ladder, each timed from the render call to its
 return (scene sync included, as every frame of a sequence pays it), written as
 `DIR/cycles.NNNN.sN.exr`, and the times as `DIR/cycles.NNNN.timing.json`.
+`--ladder-denoise` then times the user's alternative, OpenImageDenoise at a few samples:
+each sample count of the ladder up to 16 again, denoised (`use_denoising`, OpenImageDenoise
+on the CPU at Blender's default quality, input passes RGB + albedo + normal), once with the
+`ACCURATE` prefilter of the albedo and normal passes and once with `FAST`, written as
+`DIR/cycles.NNNN.sN.oidn_accurate.exr` and `.oidn_fast.exr`. Each is timed like the
+plain rungs, from the render call to its return: the denoise runs inside the render call
+and is counted. One denoised 1-sample render comes first, untimed, so that loading
+OpenImageDenoise is not counted either. The JSON keeps its keys (`warm_up_seconds`,
+`samples`, `seconds`: the plain ladder) and adds `oidn_warm_up_seconds`, `oidn_quality`
+and `oidn`, a list of `{"name": "oidn_accurate", "prefilter": "ACCURATE", "samples": [..],
+"seconds": [..]}`, one per prefilter.
 
 So that the two renders differ only in how they compute light and visibility, every
 material is first converted as the exporter converts it (`logsh_exporter/exporter.py`)
@@ -110,6 +128,9 @@ def main(argv):
     parser.add_argument("--resolution", type=size)
     parser.add_argument("--seed", type=int, default=0, help="Cycles' noise seed (two seeds measure the noise)")
     parser.add_argument("--ladder", type=sample_ladder, help="time renders at these sample counts (1,2,4,...)")
+    parser.add_argument("--ladder-denoise", action="store_true",
+                        help="with --ladder: also time the counts up to 16 with OpenImageDenoise (prefilter ACCURATE, "
+                             "then FAST)")
     parser.add_argument("--as-authored", action="store_true",
                         help="render the .blend's own materials (the truth for the user), not the converted ones")
     parser.add_argument("--bounces", default="0",
@@ -119,6 +140,10 @@ def main(argv):
                         help="pixel filter: each pixel's centre (as a point-sampled G-buffer), a 1-px box, or 1.5-px "
                              "Blackman-Harris")
     args = parser.parse_args(argv)
+    if args.ladder_denoise and not args.ladder:
+        sys.exit("error: --ladder-denoise times the ladder's denoised rungs; pass --ladder too")
+    if args.ladder_denoise and args.denoise:
+        sys.exit("error: --ladder-denoise with --denoise would denoise the plain ladder too; leave out --denoise")
     if args.blend:
         bpy.ops.wm.open_mainfile(filepath=os.path.abspath(args.blend), load_ui=False)
     elif not bpy.data.filepath:
@@ -127,13 +152,14 @@ def main(argv):
     frame = args.frame if args.frame is not None else scene.frame_start
     if args.bounces != "default" and not (args.bounces.isdigit() and int(args.bounces) <= 1024):
         sys.exit(f"error: --bounces {args.bounces}: a count from 0 to 1024, or 'default'")
-    if args.as_authored:
-        name = "authored" if args.bounces == "0" else f"authored_b{args.bounces}"
-    else:
-        name = "cycles"
+    name = "authored" if args.as_authored else "cycles"
+    if args.bounces != "0":
+        name += f"_b{args.bounces}"
     stem = os.path.join(os.path.abspath(args.out), f"{name}.{frame:04d}")
     outputs = [f"{stem}.s{n}.exr" for n in args.ladder] + [stem + ".timing.json"] if args.ladder else \
         [stem + ".exr", stem + ".png"]
+    if args.ladder_denoise:
+        outputs += [f"{stem}.s{n}.{name}.exr" for name, _ in OIDN_PREFILTERS for n in oidn_counts(args.ladder)]
     for path in outputs:
         if os.path.exists(path):
             sys.exit(f"error: {path} exists; choose another directory")
@@ -163,7 +189,7 @@ def main(argv):
         "box1": ("BOX", 1.0),
         "blackman-harris": ("BLACKMAN_HARRIS", 1.5),
     }[args.filter]
-    if args.as_authored:
+    if args.as_authored or args.bounces != "0":
         if args.bounces != "default":
             cycles.max_bounces = int(args.bounces)
     else:
@@ -191,7 +217,7 @@ def main(argv):
     scene.frame_set(frame)
     render.use_file_extension = False
     if args.ladder:
-        time_ladder(scene, stem, args.ladder)
+        time_ladder(scene, stem, args.ladder, args.ladder_denoise)
         return
     bpy.ops.render.render()
     save_exr(scene, stem + ".exr")
@@ -210,24 +236,57 @@ def sample_ladder(text):
     return counts
 
 
-def time_ladder(scene, stem, ladder):
-    """Renders 1 sample untimed (Cycles loads its kernels), then each count of `ladder`
-    timed; writes each image and the times."""
-    scene.cycles.samples = 1
+# `--ladder-denoise`: the name of each denoised rung's file and its prefilter, and the
+# highest sample count denoised (a few samples are where a denoiser is the alternative).
+OIDN_PREFILTERS = (("oidn_accurate", "ACCURATE"), ("oidn_fast", "FAST"))
+OIDN_MAX_SAMPLES = 16
+
+
+def oidn_counts(ladder):
+    return [n for n in ladder if n <= OIDN_MAX_SAMPLES]
+
+
+def timed_render(scene, samples):
+    scene.cycles.samples = samples
     started = time.perf_counter()
     bpy.ops.render.render()
-    warm_up = time.perf_counter() - started
+    return time.perf_counter() - started
+
+
+def time_ladder(scene, stem, ladder, denoise=False):
+    """Renders 1 sample untimed (Cycles loads its kernels), then each count of `ladder`
+    timed; with `denoise`, then 1 sample denoised untimed (OpenImageDenoise loads) and
+    each count up to `OIDN_MAX_SAMPLES` denoised with each prefilter, timed; writes each
+    image and the times."""
+    warm_up = timed_render(scene, 1)
     seconds = []
     for count in ladder:
-        scene.cycles.samples = count
-        started = time.perf_counter()
-        bpy.ops.render.render()
-        seconds.append(time.perf_counter() - started)
+        seconds.append(timed_render(scene, count))
         save_exr(scene, f"{stem}.s{count}.exr")
         print(f"{count} samples: {seconds[-1]:.3f} s")
+    timing = {"warm_up_seconds": warm_up, "samples": ladder, "seconds": seconds,
+              "threads": scene.render.threads, "resolution": list(output_size(scene))}
+    if denoise:
+        cycles = scene.cycles
+        cycles.use_denoising = True
+        cycles.denoiser = "OPENIMAGEDENOISE"
+        cycles.denoising_input_passes = "RGB_ALBEDO_NORMAL"
+        cycles.denoising_use_gpu = False
+        cycles.denoising_prefilter = OIDN_PREFILTERS[0][1]
+        timing["oidn_warm_up_seconds"] = timed_render(scene, 1)
+        timing["oidn_quality"] = cycles.denoising_quality
+        timing["oidn"] = []
+        for name, prefilter in OIDN_PREFILTERS:
+            cycles.denoising_prefilter = prefilter
+            counts, times = oidn_counts(ladder), []
+            for count in counts:
+                times.append(timed_render(scene, count))
+                save_exr(scene, f"{stem}.s{count}.{name}.exr")
+                print(f"{count} samples, OpenImageDenoise ({prefilter.lower()} prefilter): {times[-1]:.3f} s")
+            timing["oidn"].append({"name": name, "prefilter": prefilter, "samples": counts, "seconds": times})
+        cycles.use_denoising = False
     with open(stem + ".timing.json", "w") as f:
-        json.dump({"warm_up_seconds": warm_up, "samples": ladder, "seconds": seconds,
-                   "threads": scene.render.threads, "resolution": list(output_size(scene))}, f, indent=1)
+        json.dump(timing, f, indent=1)
     print(f"wrote {stem}.timing.json (warm-up render {warm_up:.2f} s)")
 
 
