@@ -11,8 +11,13 @@
 //!   specular colour and lobe width;
 //! - `authored.NNNN.exr` (`--as-authored`), the truth for the user with direct light
 //!   only: the .blend's own materials, which the colour passes bring to logsh;
+//! - `cycles_bdefault.NNNN.exr` (`--bounces default`), converted materials with
+//!   Blender's own light paths: the truth for bounce light, apart from the materials;
 //! - `authored_bdefault.NNNN.exr` (`--as-authored --bounces default`), the user's own
 //!   render, bounce light included.
+//!
+//! Every run shades as `logsh render` does, bounce light included (the preset's
+//! `--bounces`); `default, --bounces 0` is the direct light alone.
 //!
 //!     cargo run --release --example cycles_compare -- gbuffers/dunes gbuffers/wrecking_ball
 //!
@@ -31,16 +36,18 @@
 //! difference over non-background pixels and R, G, B, the figure the issues quote.
 
 use logsh::compare::{frame_error, read_rgb, unoccluded_value};
+use logsh::executor::Executor;
 use logsh::reference::{render_reference, ReferenceOptions};
 use logsh::scene::{Light, Material, Scene};
-use logsh::shade::shade_frame;
+use logsh::shade::bounce::BounceSettings;
 use logsh::shade::sharp_lights::extract_suns;
 use logsh::shade::{GlossyMethod, LightWindow, Quality, ShadingSettings};
 use std::path::PathBuf;
 
 /// The Cycles renders compared against, where present: file stem and what it is.
-const TRUTHS: [(&str, &str); 3] = [
+const TRUTHS: [(&str, &str); 4] = [
     ("cycles", "direct light, converted materials"),
+    ("cycles_bdefault", "converted materials, Blender's light paths"),
     ("authored", "as authored, direct light"),
     ("authored_bdefault", "as authored, Blender's light paths"),
 ];
@@ -70,6 +77,7 @@ fn main() {
     let default = Quality::Default.settings();
     let all_runs = [
         ("default", default),
+        ("default, --bounces 0", ShadingSettings { bounce: BounceSettings::none(), ..default }),
         ("high", Quality::High.settings()),
         ("ultra", Quality::Ultra.settings()),
         ("default, depths at log(eps) (--fitted-depths off)", ShadingSettings { fitted_depths: false, ..default }),
@@ -77,7 +85,8 @@ fn main() {
         ("default, overlap floor off", ShadingSettings { overlap_floor: false, ..default }),
         ("default, no clusters", ShadingSettings { cluster_ratio: 0.0, ..default }),
     ];
-    let runs = if quick { &all_runs[..1] } else { &all_runs[..] };
+    let runs = if quick { &all_runs[..2] } else { &all_runs[..] };
+    let executor = Executor::cpu();
     for dir in dirs {
         let scene = Scene::load(&dir).unwrap_or_else(|e| panic!("{e}"));
         assert!(
@@ -134,7 +143,7 @@ fn main() {
             .chain(if is_map && !quick { &windowed[..] } else { &[] })
             .collect();
         for (name, settings) in runs {
-            let shaded = shade_frame(&scene, &frame, settings).unwrap_or_else(|e| panic!("{e}"));
+            let shaded = executor.shade(&scene, &frame, settings).unwrap_or_else(|e| panic!("{e}"));
             assert_eq!(
                 [width, height],
                 [shaded.width, shaded.height],

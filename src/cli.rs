@@ -75,6 +75,12 @@ pub struct ReferenceArgs {
     /// How a supersampled scene's samples are resolved to the camera's pixels (see `logsh shade --help`).
     #[arg(long, value_enum, default_value_t = crate::shade::PixelFilter::Box)]
     pub pixel_filter: crate::shade::PixelFilter,
+    /// Diffuse bounces of light off the proxies (height field or ground plane, blocker spheres), 0 to 3: paths traced with exact visibility, the truth for logsh's --bounces.
+    #[arg(long, default_value_t = 0)]
+    pub bounces: usize,
+    /// Rays per receiver and bounce (cosine-weighted, stratified); the bounce's noise falls as one over their square root.
+    #[arg(long, default_value_t = 64)]
+    pub bounce_samples: usize,
 }
 
 #[derive(Args, Debug)]
@@ -202,6 +208,15 @@ pub struct ShadingArgs {
     /// Glossy lobes: ggx reads the environment prefiltered with the GGX lobe (what Cycles' Glossy BSDF renders) and scales it by a log-SH specular occlusion; phong does the same with the Phong lobe; sh keeps the Phong lobe in log-SH, no sharper than the order allows.
     #[arg(long, value_enum, default_value_t = GlossyMethod::Ggx)]
     pub glossy: GlossyMethod,
+    /// Bounces of light off the terrain (height field or ground plane) and the sphere blockers, 0 (direct light only) to 3 [default: from --quality].
+    #[arg(long)]
+    pub bounces: Option<usize>,
+    /// Texels per side of the grid on which the terrain's bounce light is shaded, 8 to 512 [default: from --quality].
+    #[arg(long)]
+    pub bounce_grid: Option<usize>,
+    /// Pixels between the points where bounce light is gathered, along each axis, 1 (every pixel) to 16; the pixels between interpolate it and reflect it with their own normals [default: from --quality].
+    #[arg(long)]
+    pub bounce_stride: Option<usize>,
     /// Precision of the per-pixel kernel (the GPU pass is f32 only).
     #[arg(long, value_enum, default_value_t = Precision::F32)]
     pub precision: Precision,
@@ -248,6 +263,15 @@ impl ShadingArgs {
         }
         if let Some(o) = self.level_offset {
             settings.horizon.level_offset = o;
+        }
+        if let Some(bounces) = self.bounces {
+            settings.bounce.bounces = bounces;
+        }
+        if let Some(grid) = self.bounce_grid {
+            settings.bounce.grid = grid;
+        }
+        if let Some(stride) = self.bounce_stride {
+            settings.bounce.stride = stride;
         }
         settings.precision = self.precision;
         settings.validate()?;

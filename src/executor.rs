@@ -12,7 +12,9 @@
 
 use crate::gpu::{Gpu, GpuError, Specialisation};
 use crate::scene::{Frame, Scene};
-use crate::shade::{adaptive, Precision, Resolve, Resolving, ShadeError, ShadedFrame, ShadedPasses, ShadingSettings};
+use crate::shade::{
+    adaptive, bounce, Precision, Resolve, Resolving, ShadeError, ShadedFrame, ShadedPasses, ShadingSettings,
+};
 use crate::timing::{Clock, StageTimings};
 use std::sync::Mutex;
 
@@ -162,8 +164,19 @@ impl Executor {
         Ok(self.shade_timed(scene, frame, settings, Specialisation::Full)?.0)
     }
 
-    /// The frame's compositing passes and visibility terms (`logsh render`).
+    /// The frame's compositing passes and visibility terms (`logsh render`), bounce light
+    /// included.
     pub fn shade_passes(
+        &self,
+        scene: &Scene,
+        frame: &Frame,
+        settings: &ShadingSettings,
+    ) -> Result<ShadedPasses, ExecutorError> {
+        Ok(self.shade_passes_timed(scene, frame, settings, Resolving::default())?.0)
+    }
+
+    /// [`shade_passes`](Self::shade_passes) with direct light only.
+    fn shade_direct_passes(
         &self,
         scene: &Scene,
         frame: &Frame,
@@ -176,9 +189,30 @@ impl Executor {
         )
     }
 
+    /// The bounce light of `frame` ([`bounce`]), `None` where nothing bounces: the
+    /// surroundings' secondary points are shaded with direct light on this executor, then
+    /// gathered on the CPU. `visibility`: the frame's `visibility` pass.
+    pub fn bounce(
+        &self,
+        scene: &Scene,
+        frame: &Frame,
+        settings: &ShadingSettings,
+        visibility: &[f32],
+    ) -> Result<Option<bounce::IndirectParts>, ExecutorError> {
+        let Some(plan) = bounce::SurroundingsPlan::new(scene, frame, &settings.bounce)? else {
+            return Ok(None);
+        };
+        let direct = self.shade_direct_passes(scene, plan.points(), settings)?;
+        let surroundings = plan.lit(scene, &direct.diffuse, &direct.visibility);
+        // A supersampled G-buffer gathers as densely per camera pixel as a plain one.
+        let stride = settings.bounce.stride * frame.supersample.max(1);
+        Ok(Some(surroundings.indirect(scene, frame, stride, Some(visibility))))
+    }
+
     /// [`shade_passes`](Self::shade_passes) at the camera's resolution: a supersampled
     /// frame shaded where its samples differ ([`crate::shade::adaptive`], unless
-    /// `resolving.every_sample`), then resolved ([`crate::shade::resolve`]).
+    /// `resolving.every_sample`), its bounce light gathered over every sample, then
+    /// resolved ([`crate::shade::resolve`]).
     pub fn shade_passes_resolved(
         &self,
         scene: &Scene,
@@ -186,24 +220,59 @@ impl Executor {
         settings: &ShadingSettings,
         resolving: Resolving,
     ) -> Result<ShadedPasses, ExecutorError> {
-        let n = frame.supersample;
-        if n <= 1 {
-            return self.shade_passes(scene, frame, settings);
-        }
-        let passes = if resolving.every_sample {
-            self.shade_passes(scene, frame, settings)?
+        Ok(self.shade_passes_timed(scene, frame, settings, resolving)?.0)
+    }
+
+    /// [`shade_passes_resolved`](Self::shade_passes_resolved), timed: the stages "shade",
+    /// "adaptive" (choosing, packing and scattering the samples), "bounce" and "resolve",
+    /// on the wall clock.
+    fn shade_passes_timed(
+        &self,
+        scene: &Scene,
+        frame: &Frame,
+        settings: &ShadingSettings,
+        resolving: Resolving,
+    ) -> Result<(ShadedPasses, StageTimings), ExecutorError> {
+        let mut timings = StageTimings {
+            device: self.describe(),
+            on_gpu: matches!(self.device, Device::Gpu { .. }),
+            ..Default::default()
+        };
+        let n = frame.supersample.max(1);
+        let started = std::time::Instant::now();
+        let mut passes = if n == 1 || resolving.every_sample {
+            let passes = self.shade_direct_passes(scene, frame, settings)?;
+            timings.add_wall("shade", started);
+            passes
         } else {
             let selection = adaptive::select(frame);
-            let packed = self.shade_passes(scene, &selection.packed, settings)?;
-            selection.scatter_passes(&scene.materials, frame, &packed)
+            let select_time = started.elapsed();
+            let started = std::time::Instant::now();
+            let packed = self.shade_direct_passes(scene, &selection.packed, settings)?;
+            timings.add_wall("shade", started);
+            let started = std::time::Instant::now();
+            let passes = selection.scatter_passes(&scene.materials, frame, &packed);
+            timings.add("adaptive", (select_time + started.elapsed()).as_secs_f64() * 1e3, Clock::Wall);
+            timings.samples = Some((selection.shaded, selection.samples));
+            passes
         };
+        let started = std::time::Instant::now();
+        if let Some(indirect) = self.bounce(scene, frame, settings, &passes.visibility)? {
+            passes.add_indirect(indirect);
+            timings.add_wall("bounce", started);
+        }
+        if n == 1 {
+            return Ok((passes, timings));
+        }
         let g = &frame.gbuffer;
-        Ok(Resolve::new(n, g.width / n, g.height / n, resolving.filter).passes(&passes))
+        let started = std::time::Instant::now();
+        let passes = Resolve::new(n, g.width / n, g.height / n, resolving.filter).passes(&passes);
+        timings.add_wall("resolve", started);
+        Ok((passes, timings))
     }
 
     /// [`shade_timed`](Self::shade_timed) at the camera's resolution, as
-    /// [`shade_passes_resolved`](Self::shade_passes_resolved) resolves; the timings add
-    /// the stages "adaptive" (choosing, packing and scattering the samples) and "resolve".
+    /// [`shade_passes_resolved`](Self::shade_passes_resolved) shades and resolves.
     pub fn shade_resolved_timed(
         &self,
         scene: &Scene,
@@ -215,14 +284,19 @@ impl Executor {
         if n <= 1 {
             return self.shade_timed(scene, frame, settings, Specialisation::Full);
         }
+        if settings.bounce.bounces > 0 {
+            let (passes, timings) = self.shade_passes_timed(scene, frame, settings, resolving)?;
+            return Ok((ShadedFrame { width: passes.width, height: passes.height, rgba: passes.beauty }, timings));
+        }
         let (rgba, mut timings) = if resolving.every_sample {
-            let (shaded, timings) = self.shade_timed(scene, frame, settings, Specialisation::Full)?;
+            let (shaded, timings) = self.shade_direct_timed(scene, frame, settings, Specialisation::Full)?;
             (shaded.rgba, timings)
         } else {
             let started = std::time::Instant::now();
             let selection = adaptive::select(frame);
             let select_time = started.elapsed();
-            let (shaded, mut timings) = self.shade_timed(scene, &selection.packed, settings, Specialisation::Full)?;
+            let (shaded, mut timings) =
+                self.shade_direct_timed(scene, &selection.packed, settings, Specialisation::Full)?;
             let started = std::time::Instant::now();
             let rgba = selection.scatter_rgba(&scene.materials, frame, &shaded.rgba);
             timings.add("adaptive", (select_time + started.elapsed()).as_secs_f64() * 1e3, Clock::Wall);
@@ -237,9 +311,27 @@ impl Executor {
         Ok((ShadedFrame { width, height, rgba }, timings))
     }
 
-    /// Shades and times each stage; `specialisation` only matters on the GPU (see
-    /// [`Gpu::shade_frame_timed`]). The timings name the executor that really ran.
+    /// Shades and times each stage. Without bounce light the stages are the executor's
+    /// own (GPU timestamps where the adapter has them; `specialisation` only matters on
+    /// the GPU, see [`Gpu::shade_frame_timed`]); with it, the frame is shaded into its
+    /// passes, whose visibility the bounce reads, and timed on the wall clock as "shade"
+    /// and "bounce". The timings name the executor that ran.
     pub fn shade_timed(
+        &self,
+        scene: &Scene,
+        frame: &Frame,
+        settings: &ShadingSettings,
+        specialisation: Specialisation,
+    ) -> Result<(ShadedFrame, StageTimings), ExecutorError> {
+        if settings.bounce.bounces == 0 {
+            return self.shade_direct_timed(scene, frame, settings, specialisation);
+        }
+        let (passes, timings) = self.shade_passes_timed(scene, frame, settings, Resolving::default())?;
+        Ok((ShadedFrame { width: passes.width, height: passes.height, rgba: passes.beauty }, timings))
+    }
+
+    /// [`shade_timed`](Self::shade_timed) with direct light only.
+    fn shade_direct_timed(
         &self,
         scene: &Scene,
         frame: &Frame,

@@ -141,6 +141,8 @@ pub fn reference(args: &ReferenceArgs) -> Result<()> {
             integration: args.integration,
             tolerance: args.tolerance,
             max_level: args.max_level,
+            bounces: args.bounces,
+            bounce_samples: args.bounce_samples,
         };
         let bar = progress_bar(height, &format!("reference ({light:?})"));
         let started = Instant::now();

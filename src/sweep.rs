@@ -5,6 +5,9 @@
 //! white diffuse surface receives from the scene's light (`integral L max(z, 0) / pi`,
 //! luminance), so 0.01 means 1% of what an open white floor would show. They are taken
 //! over the pixels the reference shades (alpha 1), on the mean of the three channels.
+//!
+//! The reference a sweep renders is direct light, so every configuration is shaded
+//! without bounce light (`--bounces 0`): the sweep measures the direct light's method.
 
 use crate::executor::{Executor, ExecutorError};
 use crate::plot::{pareto_front, Chart, Scale, Series};
@@ -81,6 +84,9 @@ pub fn configurations() -> Vec<(String, String, ShadingSettings)> {
     out.push(("ratio_attenuation".into(), "on".into(), ShadingSettings { ratio_attenuation: true, ..base }));
     out.push(("fitted_depths".into(), "off".into(), ShadingSettings { fitted_depths: false, ..base }));
     out.push(("tangent_occlusion".into(), "off".into(), ShadingSettings { tangent_occlusion: false, ..base }));
+    for (_, _, settings) in &mut out {
+        settings.bounce = crate::shade::bounce::BounceSettings::none();
+    }
     out
 }
 

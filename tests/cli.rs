@@ -165,10 +165,19 @@ fn device_gpu_without_an_adapter_fails_and_auto_falls_back() {
 fn bench_prints_stages_as_a_table_and_as_json() {
     let dir = tempfile::tempdir().unwrap();
     let scene = example_scene(dir.path());
-    let table = logsh().args(["bench", "--device", "cpu", "--repeats", "2"]).arg(&scene).output().unwrap();
+    // Direct light alone: the executor's own stages.
+    let args = ["bench", "--device", "cpu", "--repeats", "2", "--bounces", "0"];
+    let table = logsh().args(args).arg(&scene).output().unwrap();
     assert!(table.status.success(), "{}", stderr_of(&table));
     let text = String::from_utf8_lossy(&table.stdout);
     for word in ["stage", "tables", "shade", "frame", "Mpixel/s", "median of 2 run(s)"] {
+        assert!(text.contains(word), "no {word:?} in\n{text}");
+    }
+    // With bounce light (the default preset's), the shading and the bounce.
+    let table = logsh().args(["bench", "--device", "cpu", "--repeats", "2"]).arg(&scene).output().unwrap();
+    assert!(table.status.success(), "{}", stderr_of(&table));
+    let text = String::from_utf8_lossy(&table.stdout);
+    for word in ["shade", "bounce", "frame"] {
         assert!(text.contains(word), "no {word:?} in\n{text}");
     }
     let json = logsh().args(["bench", "--device", "cpu", "--repeats", "1", "--json"]).arg(&scene).output().unwrap();

@@ -618,3 +618,77 @@ fn supersampled_frames_match() {
     let packed = logsh::shade::adaptive::select(&frame).packed;
     check_parity(gpu, &scene, &packed, &ShadingSettings::default(), "dunes 32x18, adaptive samples").expect("shaded");
 }
+
+/// Bounce light on the GPU executor against the CPU one: the surroundings' secondary
+/// points are shaded on each (their gather runs on the CPU for both), on the dunes with
+/// and without colour passes, and on a white sphere over a white ground plane under a
+/// sun of 1e6 and one on the horizon, with a black sky. Every bounce pass within [`TOLERANCE`] of the unoccluded value (the sun's
+/// strength where there is a sun).
+#[test]
+fn bounce_light_matches() {
+    use logsh::executor::{DeviceChoice, Executor};
+    use logsh::scene::{Light, Material, SunLight};
+    use logsh::shade::bounce::BounceSettings;
+    if gpu().is_none() {
+        return;
+    }
+    let settings =
+        ShadingSettings { bounce: BounceSettings { bounces: 3, ..BounceSettings::DEFAULT }, ..Default::default() };
+    let on_gpu = Executor::select(DeviceChoice::Gpu, &settings).expect("the adapter");
+    let dir = tempfile::tempdir().unwrap();
+    let mut cases: Vec<(String, Scene, Frame, f64)> = Vec::new();
+    for (name, scene) in
+        [("dunes", small_dunes(&dir.path().join("d"))), ("textured dunes", textured_dunes(&dir.path().join("t")))]
+    {
+        let frame = scene.frame(1).unwrap();
+        let unit = unoccluded_value(&frame.light);
+        cases.push((name.into(), scene, frame, unit));
+    }
+    let spec = SphereOverPlane { width: 48, height: 27, ..SphereOverPlane::default() };
+    let white = dir.path().join("white");
+    synth::sphere_over_plane(&white, &spec).unwrap();
+    let mut scene = Scene::load(&white).unwrap();
+    for material in scene.materials.values_mut() {
+        if let Material::Diffuse { albedo } = material {
+            *albedo = [1.0; 3];
+        }
+    }
+    scene.ground = Some(0.0);
+    let mut frame = scene.frame(1).unwrap();
+    frame.ground = Some(0.0);
+    frame.light = std::sync::Arc::new(Light::Constant([0.0; 3]));
+    for (elevation, strength) in [(35.0f64, 1e6f32), (0.0, 4.0)] {
+        let e = elevation.to_radians();
+        let mut frame = frame.clone();
+        frame.suns = vec![SunLight {
+            direction: [0.6 * e.cos(), 0.8 * e.cos(), e.sin()],
+            half_angle: 0.0047,
+            strength,
+            color: [1.0; 3],
+        }];
+        cases.push((
+            format!("white sphere over white ground, sun {strength} at {elevation} deg"),
+            scene.clone(),
+            frame,
+            f64::from(strength),
+        ));
+    }
+    for (name, scene, frame, unit) in &cases {
+        let cpu = Executor::cpu().shade_passes(scene, frame, &settings).unwrap_or_else(|e| panic!("{name}: {e}"));
+        let gpu = on_gpu.shade_passes(scene, frame, &settings).unwrap_or_else(|e| panic!("{name}: {e}"));
+        assert!(cpu.indirect.iter().any(|v| v[1] > 0.0), "{name}: no bounce light");
+        for (pass, a, b) in [
+            ("indirect_heightfield", &cpu.indirect_heightfield, &gpu.indirect_heightfield),
+            ("indirect_blockers", &cpu.indirect_blockers, &gpu.indirect_blockers),
+        ] {
+            let worst = a
+                .iter()
+                .zip(b)
+                .flat_map(|(p, q)| (0..3).map(move |c| f64::from((p[c] - q[c]).abs())))
+                .fold(0.0, f64::max)
+                / unit;
+            println!("{name}: {pass} worst difference {worst:.2e} of the unoccluded value");
+            assert!(worst.is_finite() && worst <= TOLERANCE, "{name}: {pass} differs by {worst}");
+        }
+    }
+}

@@ -19,7 +19,13 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
 
 fn options(tolerance: f64, max_level: u32) -> ReferenceOptions {
-    ReferenceOptions { light: ReferenceLight::EnvironmentMap, integration: Integration::Auto, tolerance, max_level }
+    ReferenceOptions {
+        light: ReferenceLight::EnvironmentMap,
+        integration: Integration::Auto,
+        tolerance,
+        max_level,
+        ..Default::default()
+    }
 }
 
 fn render(scene: &Scene, frame: &logsh::scene::Frame, options: &ReferenceOptions) -> ReferenceFrame {
@@ -465,4 +471,55 @@ fn prefiltered_glossy_and_its_occlusion_match_the_reference() {
     println!("glossy plane against the reference: prefiltered {prefiltered:.4}, log-SH lobe {in_sh:.4}");
     assert!(prefiltered < 0.01, "prefiltered glossy off by {prefiltered}");
     assert!(in_sh > 0.3, "the log-SH lobe was expected to blur: {in_sh}");
+}
+
+/// Bounce light of a sphere over a bright plane (the ground plane at the plane's height,
+/// a white sky): logsh's one bounce (the surroundings shaded, then gathered:
+/// `logsh::shade::bounce`) against the reference's paths over the same proxies
+/// (`logsh reference --bounces 1`), pixel by pixel: the plane lit by the sphere around
+/// its shadow, the sphere's underside lit by the plane. `-- --nocapture` prints the
+/// figures.
+#[test]
+fn a_sphere_over_a_bright_plane_bounces_as_the_reference_does() {
+    use logsh::executor::Executor;
+    use logsh::shade::bounce::BounceSettings;
+    use logsh::shade::ShadingSettings;
+    let dir = tempfile::tempdir().unwrap();
+    let spec = SphereOverPlane { width: 32, height: 18, ..SphereOverPlane::default() };
+    sphere_over_plane(dir.path(), &spec).unwrap();
+    let mut scene = Scene::load(dir.path()).unwrap();
+    scene.ground = Some(0.0);
+    let mut frame = scene.frame(1).unwrap();
+    frame.ground = Some(0.0);
+    let started = Instant::now();
+    let direct = render(&scene, &frame, &options(1e-3, 6));
+    let traced = render(&scene, &frame, &ReferenceOptions { bounces: 1, bounce_samples: 256, ..options(1e-3, 6) });
+    println!("reference with one bounce: {:.1} s", started.elapsed().as_secs_f64());
+    let bounce = BounceSettings { bounces: 1, stride: 1, ..BounceSettings::DEFAULT };
+    let settings = ShadingSettings { bounce, ..Default::default() };
+    let passes = Executor::cpu().shade_passes(&scene, &frame, &settings).unwrap();
+    let g = &frame.gbuffer;
+    let (mut truth, mut ours, mut abs, mut count) = (0.0, 0.0, 0.0, 0usize);
+    let mut worst = (0.0f64, 0usize);
+    for i in (0..g.material.len()).filter(|&i| g.material[i] != 0) {
+        let reference = f64::from(traced.rgba[i][1] - direct.rgba[i][1]);
+        let logsh = f64::from(passes.indirect[i][1]);
+        let d = (logsh - reference).abs();
+        (truth, ours, abs, count) = (truth + reference, ours + logsh, abs + d, count + 1);
+        if d > worst.0 {
+            worst = (d, i);
+        }
+    }
+    let n = count as f64;
+    println!(
+        "bounce over {count} pixels: reference mean {:.4}, logsh mean {:.4}, mean abs difference {:.4}, worst {:.4} at pixel {}",
+        truth / n,
+        ours / n,
+        abs / n,
+        worst.0,
+        worst.1
+    );
+    assert!(truth / n > 0.01, "the reference's bounce is there: {}", truth / n);
+    assert!((ours - truth).abs() / n <= 0.1 * truth / n, "mean bounce {} against {}", ours / n, truth / n);
+    assert!(abs / n <= 0.25 * truth / n, "mean abs difference {} against a mean bounce of {}", abs / n, truth / n);
 }

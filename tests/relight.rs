@@ -75,7 +75,19 @@ fn constant_light(from: &Path, dir: &Path) -> PathBuf {
 
 /// Frame 1 of `scene` rendered with its transfer layers into `out`.
 fn render_transfer(scene: &Path, out: &Path) {
-    run(&["render", path(scene), "--out", path(out), "--frames", "1", "--progress", "none", "--transfer"]);
+    run(&[
+        "render",
+        path(scene),
+        "--out",
+        path(out),
+        "--frames",
+        "1",
+        "--progress",
+        "none",
+        "--bounces",
+        "0",
+        "--transfer",
+    ]);
 }
 
 fn path(p: &Path) -> &str {
@@ -121,6 +133,52 @@ fn compare(scene: &Path, turn: f64, relit: &Path, shaded: &Path, what: &str) -> 
     worst
 }
 
+/// A relight keeps the render's bounce light as rendered (README, "Bounce light"):
+/// unturned, the relit frame is the render, bounce included; turned, its bounce passes
+/// are still the render's, and the direct light turns under them.
+#[test]
+fn a_relight_keeps_the_bounce_light_as_rendered() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = dunes(dir.path());
+    let transfer = dir.path().join("transfer");
+    let common = ["--frames", "1", "--sharp-lights", "off", "--progress", "none", "--bounces", "2"];
+    run(&[&["render", path(&scene), "--out", path(&transfer), "--transfer"], &common[..]].concat());
+    let frame = transfer.join("render.0001.exr");
+    let rendered = channels(&frame);
+    assert!(rendered["indirect.G"].iter().any(|&v| v > 1e-3), "the dunes bounce light");
+    for turn in ["0", "90"] {
+        let relit = dir.path().join(format!("relit{turn}"));
+        run(&["relight", path(&frame), "--light-rotation", turn, "--out", path(&relit)]);
+        let relit = channels(&relit.join("render.0001.exr"));
+        for c in ["R", "G", "B"] {
+            for pass in ["indirect_heightfield", "indirect_blockers"] {
+                let name = format!("{pass}.{c}");
+                assert!(relit[&name] == rendered[&name], "turned {turn}: {name} is not the render's");
+            }
+            // Their sum, to half precision (the file holds each in half floats).
+            let name = format!("indirect.{c}");
+            for (a, b) in relit[&name].iter().zip(&rendered[&name]) {
+                assert!((a - b).abs() <= 2e-3 * b.abs().max(1e-2), "turned {turn}: {name} {a} against {b}");
+            }
+        }
+        // The beauty is the direct passes plus the kept bounce, to half precision.
+        for c in ["R", "G", "B"] {
+            for i in 0..relit[c].len() {
+                let sum: f32 = ["diffuse", "specular", "environment", "indirect"]
+                    .iter()
+                    .map(|pass| relit[&format!("{pass}.{c}")][i])
+                    .sum();
+                assert!((sum - relit[c][i]).abs() <= 2e-3 * relit[c][i].abs().max(1e-2), "turned {turn}: {c} {i}");
+            }
+        }
+        if turn == "0" {
+            let worst =
+                relit[&"R".to_string()].iter().zip(&rendered["R"]).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
+            assert!(worst <= 2e-3, "unturned, the relit beauty differs from the render's by {worst}");
+        }
+    }
+}
+
 /// The target: relit equals a fresh shade with the same light within 0.002 when
 /// the light is held wholly in SH. Measured 1e-4 to 2e-4 (half floats in the file).
 const RELIT_TOLERANCE: f64 = 0.002;
@@ -149,7 +207,8 @@ fn relit_equals_a_fresh_shade_under_the_same_turned_light() {
         let out = dir.path().join(format!("out{case}"));
         let (transfer, shaded, relit) = (out.join("transfer"), out.join("shaded"), out.join("relit"));
         let turn_arg = format!("{turn}");
-        let common = [&["--frames", "1", "--sharp-lights", "off", "--progress", "none"][..], extra].concat();
+        let common =
+            [&["--frames", "1", "--sharp-lights", "off", "--progress", "none", "--bounces", "0"][..], extra].concat();
         run(&[&["render", path(scene), "--out", path(&transfer), "--transfer"], &common[..]].concat());
         run(&[
             &["render", path(scene), "--out", path(&shaded), "--device", "cpu", "--light-rotation", &turn_arg],
@@ -180,7 +239,7 @@ fn a_sequence_relights_as_its_frames_do_one_by_one() {
     let mut frames = Vec::new();
     for (k, (scene, extra)) in kinds.iter().enumerate() {
         let out = dir.path().join(format!("transfer{k}"));
-        let common = ["--frames", "1", "--progress", "none", "--transfer"];
+        let common = ["--frames", "1", "--progress", "none", "--bounces", "0", "--transfer"];
         run(&[&["render", path(scene), "--out", path(&out)], &common[..], extra].concat());
         frames.push(out.join("render.0001.exr"));
     }
@@ -254,6 +313,8 @@ fn a_swapped_and_scaled_light_relights_as_a_shade_under_it() {
         "off",
         "--progress",
         "none",
+        "--bounces",
+        "0",
     ]);
     // The same scene lit by the swapped map at strength 3, shaded afresh.
     let lit = dir.path().join("lit");
@@ -264,7 +325,7 @@ fn a_swapped_and_scaled_light_relights_as_a_shade_under_it() {
     json["light"] = serde_json::json!({"environment": "swapped.exr", "strength": 3.0});
     std::fs::write(&file, serde_json::to_string_pretty(&json).unwrap()).unwrap();
     let shaded = dir.path().join("shaded");
-    let args = ["--frames", "1", "--sharp-lights", "off", "--device", "cpu", "--progress", "none"];
+    let args = ["--frames", "1", "--sharp-lights", "off", "--device", "cpu", "--progress", "none", "--bounces", "0"];
     run(&[&["render", path(&lit), "--out", path(&shaded)], &args[..]].concat());
     let relit = dir.path().join("relit");
     let frame = transfer.join("render.0001.exr");
@@ -310,7 +371,7 @@ fn lamps_stay_as_rendered_while_the_environment_turns() {
     ]);
     support::sharp::load_with_lights(&scene, lights).unwrap();
     let transfer = dir.path().join("transfer");
-    let common = ["--frames", "1", "--sharp-lights", "off", "--progress", "none"];
+    let common = ["--frames", "1", "--sharp-lights", "off", "--progress", "none", "--bounces", "0"];
     run(&[&["render", path(&scene), "--out", path(&transfer), "--transfer"], &common[..]].concat());
     let frame = transfer.join("render.0001.exr");
     let lamps = channels(&frame);
@@ -353,7 +414,7 @@ fn a_sun_lamp_turns_with_the_map_or_stays_as_rendered() {
     ]);
     support::sharp::load_with_lights(&scene, lights.clone()).unwrap();
     let transfer = dir.path().join("transfer");
-    let common = ["--frames", "1", "--sharp-lights", "off", "--progress", "none", "--device", "cpu"];
+    let common = ["--frames", "1", "--sharp-lights", "off", "--progress", "none", "--bounces", "0", "--device", "cpu"];
     let render = ["render", path(&scene), "--out", path(&transfer), "--transfer", "--light-rotation", "20"];
     run(&[&render[..], &common[..], &["--quality", "high"]].concat());
     let frame = transfer.join("render.0001.exr");
@@ -457,7 +518,7 @@ fn sun_lamps_turn_the_same_from_a_frame_read_once() {
 
     for (scene, name) in [(&scene, "one map"), (&per_frame, "a map per frame")] {
         let transfer = dir.path().join(format!("transfer {name}"));
-        let common = ["--sharp-lights", "off", "--progress", "none", "--device", "cpu", "--transfer"];
+        let common = ["--sharp-lights", "off", "--progress", "none", "--bounces", "0", "--device", "cpu", "--transfer"];
         run(&[&["render", path(scene), "--out", path(&transfer), "--frames", "1-2"], &common[..]].concat());
         let files = [1, 2].map(|n| transfer.join(format!("render.{n:04}.exr")));
         let frames = files.clone().map(|f| TransferFrame::read(&f).unwrap());
@@ -513,7 +574,8 @@ fn horizons_are_kept_where_a_turned_lamp_may_be_shadowed() {
             serde_json::json!([{"type": "sun", "direction": [cos_e, 0.0, sin_e], "angle": 2.0, "strength": 3.0}]);
         support::sharp::load_with_lights(&scene, lights).unwrap();
         let out = dir.path().join(format!("lamp at {elevation}"));
-        let common = ["--frames", "1", "--sharp-lights", "off", "--progress", "none", "--device", "cpu"];
+        let common =
+            ["--frames", "1", "--sharp-lights", "off", "--progress", "none", "--bounces", "0", "--device", "cpu"];
         run(&[&["render", path(&scene), "--out", path(&out), "--transfer"], &common[..]].concat());
         let file = out.join("render.0001.exr");
         let frame = TransferFrame::read(&file).unwrap();
@@ -532,7 +594,7 @@ fn a_sun_lamp_under_a_constant_light_turns_on_from_the_rendered_turn() {
     let scene = constant_light(&dunes(dir.path()), dir.path());
     let lights = serde_json::json!([{"type": "sun", "direction": [0.6, 0.0, 0.8], "angle": 1.0, "strength": 3.0}]);
     support::sharp::load_with_lights(&scene, lights).unwrap();
-    let common = ["--frames", "1", "--sharp-lights", "off", "--progress", "none", "--device", "cpu"];
+    let common = ["--frames", "1", "--sharp-lights", "off", "--progress", "none", "--bounces", "0", "--device", "cpu"];
     let (transfer, relit, shaded) = (dir.path().join("transfer"), dir.path().join("relit"), dir.path().join("shaded"));
     let render = ["render", path(&scene), "--out", path(&transfer), "--transfer", "--light-rotation", "30"];
     run(&[&render[..], &common[..]].concat());
@@ -572,7 +634,7 @@ fn water_mirrors_a_turned_sun_lamp_as_a_render_does() {
     let scene = dir.path().join("dunes");
     support::copy_scene(&sample, &scene);
     let transfer = dir.path().join("transfer");
-    let common = ["--frames", "1", "--sharp-lights", "off", "--progress", "none", "--device", "cpu"];
+    let common = ["--frames", "1", "--sharp-lights", "off", "--progress", "none", "--bounces", "0", "--device", "cpu"];
     run(&[&["render", path(&scene), "--out", path(&transfer), "--transfer"], &common[..]].concat());
     let frame = TransferFrame::read(&transfer.join("render.0001.exr")).unwrap();
     let water = (0..frame.alpha.len())
@@ -607,7 +669,7 @@ fn the_header_records_the_sh_convention_and_the_light() {
     let dir = tempfile::tempdir().unwrap();
     let scene = dunes(dir.path());
     let transfer = dir.path().join("transfer");
-    let args = ["--frames", "1", "--order", "3", "--light-rotation", "30", "--progress", "none"];
+    let args = ["--frames", "1", "--order", "3", "--light-rotation", "30", "--progress", "none", "--bounces", "0"];
     run(&[&["render", path(&scene), "--out", path(&transfer), "--transfer"], &args[..]].concat());
     let frame = TransferFrame::read(&transfer.join("render.0001.exr")).unwrap();
     let header = &frame.header;
@@ -647,7 +709,20 @@ fn bad_relight_inputs_are_refused_with_the_file_named() {
     let scene = dunes(dir.path());
     let plain = dir.path().join("plain");
     let transfer = dir.path().join("transfer");
-    run(&["render", path(&scene), "--out", path(&plain), "--frames", "1", "--progress", "none", "--device", "cpu"]);
+    run(&[
+        "render",
+        path(&scene),
+        "--out",
+        path(&plain),
+        "--frames",
+        "1",
+        "--progress",
+        "none",
+        "--bounces",
+        "0",
+        "--device",
+        "cpu",
+    ]);
     render_transfer(&scene, &transfer);
     let frame = transfer.join("render.0001.exr");
     let out = dir.path().join("out");
@@ -742,7 +817,7 @@ fn bad_relight_inputs_are_refused_with_the_file_named() {
     assert_fails_naming(&["relight", path(&frame), "--out", path(&transfer)], &["over an input"]);
     assert_eq!(std::fs::read(&frame).unwrap(), before, "the input is untouched");
     assert_fails_naming(
-        &["render", path(&scene), "--out", o, "--transfer", "--device", "gpu", "--progress", "none"],
+        &["render", path(&scene), "--out", o, "--transfer", "--device", "gpu", "--progress", "none", "--bounces", "0"],
         &["--transfer", "CPU"],
     );
     // A transfer file whose layers were cut: a missing channel is named.
@@ -894,8 +969,20 @@ fn outputs_never_replace_a_linked_input() {
     let before = std::fs::read(storage.join("gbuffer.0001.exr")).unwrap();
     assert_fails_naming(&["relight", path(&named), "--out", path(&scene.join("gb"))], &["gb/gbuffer.####.exr"]);
     let gb = scene.join("gb");
-    let render =
-        ["render", path(&scene), "--out", path(&gb), "--name", "gbuffer", "--frames", "1", "--progress", "none"];
+    let render = [
+        "render",
+        path(&scene),
+        "--out",
+        path(&gb),
+        "--name",
+        "gbuffer",
+        "--frames",
+        "1",
+        "--progress",
+        "none",
+        "--bounces",
+        "0",
+    ];
     assert_fails_naming(&render, &["gb/gbuffer.####.exr"]);
     // The G-buffer files themselves links into storage.
     std::fs::remove_file(scene.join("gb")).unwrap();
@@ -936,7 +1023,8 @@ fn an_sh_light_relights_whole_and_turned_as_its_render() {
         json["light"] = serde_json::json!({ "sh": sh });
         std::fs::write(&file, json.to_string()).unwrap();
         let out = dir.path().join(format!("out{case}"));
-        let common = ["--frames", "1", "--sharp-lights", "off", "--progress", "none", "--device", "cpu"];
+        let common =
+            ["--frames", "1", "--sharp-lights", "off", "--progress", "none", "--bounces", "0", "--device", "cpu"];
         for (name, turn) in [("transfer", "0"), ("turned", "40")] {
             let extra: &[&str] = if name == "transfer" { &["--transfer"] } else { &[] };
             let target = out.join(name);
@@ -967,7 +1055,7 @@ fn skip_existing_renders_again_a_frame_without_transfer_layers() {
     let dir = tempfile::tempdir().unwrap();
     let scene = dunes(dir.path());
     let out = dir.path().join("frames");
-    let common = ["--frames", "1", "--progress", "none", "--device", "cpu"];
+    let common = ["--frames", "1", "--progress", "none", "--bounces", "0", "--device", "cpu"];
     run(&[&["render", path(&scene), "--out", path(&out)], &common[..]].concat());
     assert!(TransferFrame::read_header(&out.join("render.0001.exr")).is_err());
     run(&[&["render", path(&scene), "--out", path(&out), "--transfer", "--skip-existing"], &common[..]].concat());
@@ -1045,7 +1133,8 @@ fn a_map_sun_is_shaded_sharp_as_the_render_shades_it() {
         let out = |name: &str| dir.path().join(format!("{name}-{turn}"));
         let (shaded, relit, soft) = (out("shaded"), out("relit"), out("soft"));
         let turned = ["--light-rotation", &turn_arg];
-        let render = ["render", path(&scene), "--out", path(&shaded), "--frames", "1", "--progress", "none"];
+        let render =
+            ["render", path(&scene), "--out", path(&shaded), "--frames", "1", "--progress", "none", "--bounces", "0"];
         run(&[&render[..], &turned, &["--device", "cpu"]].concat());
         run(&[&["relight", path(&frame), "--out", path(&relit)][..], &turned].concat());
         run(&[&["relight", path(&frame), "--out", path(&soft), "--sharp-lights", "off"][..], &turned].concat());
@@ -1168,7 +1257,7 @@ fn a_transfer_frame_reads_the_same_in_any_exr_layout() {
     let sun = serde_json::json!([{"type": "sun", "direction": [0.65, 0.65, 0.35], "angle": 2.0, "strength": 2.0}]);
     support::sharp::load_with_lights(&scene, sun).unwrap();
     let transfer = dir.path().join("transfer");
-    let args = ["--frames", "1", "--order", "3", "--progress", "none"];
+    let args = ["--frames", "1", "--order", "3", "--progress", "none", "--bounces", "0"];
     run(&[&["render", path(&scene), "--out", path(&transfer), "--transfer"], &args[..]].concat());
     let file = transfer.join("render.0001.exr");
     let written = TransferFrame::read(&file).unwrap();

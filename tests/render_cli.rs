@@ -78,6 +78,15 @@ const PASS_CHANNELS: &[&str] = &[
     "environment.R",
     "environment.G",
     "environment.B",
+    "indirect.R",
+    "indirect.G",
+    "indirect.B",
+    "indirect_heightfield.R",
+    "indirect_heightfield.G",
+    "indirect_heightfield.B",
+    "indirect_blockers.R",
+    "indirect_blockers.G",
+    "indirect_blockers.B",
     "visibility.Y",
     "visibility_heightfield.Y",
     "visibility_blockers.Y",
@@ -113,18 +122,28 @@ fn three_frames_render_to_passes_that_add_up() {
         let mut expected = PASS_CHANNELS.to_vec();
         expected.sort();
         assert_eq!(names, expected);
-        // Stored as float (--colour-type float), the sum is exact.
+        // Stored as float (--colour-type float), the sums are exact: the beauty is the
+        // direct passes plus the bounce, and the bounce its two parts.
         for (k, ch) in ["R", "G", "B"].iter().enumerate() {
             for (i, beauty) in c[*ch].0.iter().enumerate() {
+                let indirect = c[&format!("indirect.{ch}")].0[i];
                 let sum = c[&format!("diffuse.{ch}")].0[i]
                     + c[&format!("specular.{ch}")].0[i]
-                    + c[&format!("environment.{ch}")].0[i];
+                    + c[&format!("environment.{ch}")].0[i]
+                    + indirect;
                 assert_eq!(sum, *beauty, "frame {frame} pixel {i} channel {k}");
+                let parts = c[&format!("indirect_heightfield.{ch}")].0[i] + c[&format!("indirect_blockers.{ch}")].0[i];
+                assert_eq!(parts, indirect, "frame {frame} pixel {i} channel {k}: the bounce's parts");
             }
         }
-        // Something of every kind of shading is in the frame.
+        // Something of every kind of shading is in the frame, bounce light from the
+        // height field and from the blockers included.
         let positive = |name: &str| c[name].0.iter().filter(|&&v| v > 1e-4).count();
         assert!(positive("specular.G") > 0 && positive("environment.G") > 0 && positive("diffuse.G") > 0);
+        assert!(positive("indirect_heightfield.G") > 0 && positive("indirect_blockers.G") > 0);
+        for name in ["indirect.R", "indirect.G", "indirect.B"] {
+            assert!(c[name].0.iter().all(|v| v.is_finite() && *v >= 0.0), "{name} negative or not finite");
+        }
         let shadowed = |name: &str| c[name].0.iter().filter(|&&v| v < 0.9).count();
         assert!(shadowed("visibility_heightfield.Y") > 0, "the dunes shadow themselves");
         assert!(shadowed("visibility_blockers.Y") > 0, "the spheres cast shadows");
@@ -168,7 +187,8 @@ fn three_frames_render_to_passes_that_add_up() {
         for i in 0..c[ch].0.len() {
             let sum = c[&format!("diffuse.{ch}")].0[i]
                 + c[&format!("specular.{ch}")].0[i]
-                + c[&format!("environment.{ch}")].0[i];
+                + c[&format!("environment.{ch}")].0[i]
+                + c[&format!("indirect.{ch}")].0[i];
             assert!((sum - c[ch].0[i]).abs() <= 2e-3 * c[ch].0[i].abs().max(1e-2), "{ch} {i}");
         }
     }

@@ -98,7 +98,8 @@ fn resolved_passes_add_up_and_data_is_the_nearest_sample() {
             for i in 0..beauty.len() {
                 let sum = c[&format!("diffuse.{name}")][i]
                     + c[&format!("specular.{name}")][i]
-                    + c[&format!("environment.{name}")][i];
+                    + c[&format!("environment.{name}")][i]
+                    + c[&format!("indirect.{name}")][i];
                 assert!(
                     (beauty[i] - sum).abs() <= 1e-5 * (1.0 + sum.abs()),
                     "{filter} channel {k} pixel {i}: {} vs {sum}",

@@ -122,6 +122,7 @@
 //! sun, tolerance 1e-2): about 30 ms per pixel with the map, 25 ms with the order-8
 //! projection.
 
+mod bounce;
 mod integrate;
 mod sampled;
 
@@ -187,6 +188,10 @@ pub struct ReferenceOptions {
     /// meridians a pixel converges when two successive refinements both change it by at
     /// most `tolerance`; sampled, when the statistical error estimate is at most it.
     pub max_level: u32,
+    /// Diffuse bounces of light off the proxies ([`bounce`]), 0 for direct light only.
+    pub bounces: usize,
+    /// Rays per receiver and bounce.
+    pub bounce_samples: usize,
 }
 
 impl Default for ReferenceOptions {
@@ -196,9 +201,14 @@ impl Default for ReferenceOptions {
             integration: Integration::Auto,
             tolerance: 1e-3,
             max_level: 6,
+            bounces: 0,
+            bounce_samples: 64,
         }
     }
 }
+
+/// Most bounce rays per receiver accepted.
+pub const MAX_BOUNCE_SAMPLES: usize = 65536;
 
 /// Highest `max_level` accepted (level 20 is 32 million meridians per pixel).
 pub const MAX_REFERENCE_LEVEL: u32 = 20;
@@ -210,6 +220,12 @@ impl ReferenceOptions {
         }
         if self.max_level < 2 || self.max_level > MAX_REFERENCE_LEVEL {
             return Err(format!("max_level {} is out of range 2..={MAX_REFERENCE_LEVEL}", self.max_level));
+        }
+        if self.bounces > crate::shade::bounce::MAX_BOUNCES {
+            return Err(format!("bounces {} is out of range 0..={}", self.bounces, crate::shade::bounce::MAX_BOUNCES));
+        }
+        if self.bounces > 0 && !(1..=MAX_BOUNCE_SAMPLES).contains(&self.bounce_samples) {
+            return Err(format!("bounce samples {} is out of range 1..={MAX_BOUNCE_SAMPLES}", self.bounce_samples));
         }
         if let ReferenceLight::ShProjected { order } = self.light {
             if order == 0 || order > MAX_REFERENCE_SH_ORDER {
@@ -264,7 +280,15 @@ pub fn render_reference(
         Integration::Sampled => TexelSampler::of(&light),
         _ => None,
     };
+    let albedos = (options.bounces > 0).then(|| {
+        let ground = frame.ground;
+        crate::shade::bounce::SurfaceAlbedos::of(scene, frame, |p| {
+            let height = field.as_ref().map(|f| f.height_at(p[0], p[1])).or(ground);
+            height.is_some_and(|h| (p[2] - h).abs() <= 1e-3 * (1.0 + p[2].abs()))
+        })
+    });
     let ctx = Context {
+        albedos: albedos.as_ref(),
         materials: scene.kernel_materials(),
         integration,
         environment: environment.as_ref(),
@@ -318,6 +342,8 @@ pub fn render_reference(
 /// What every pixel's integration reads.
 struct Context<'a> {
     scene: &'a Scene,
+    /// What the proxies reflect with, where bounces are asked for.
+    albedos: Option<&'a crate::shade::bounce::SurfaceAlbedos>,
     /// The lobes and their colours as the kernel shades them, the pixels' tints on top
     /// ([`Scene::kernel_materials`]).
     materials: BTreeMap<u32, Material>,
@@ -358,13 +384,32 @@ impl Context<'_> {
             ],
             Some(Material::Water { .. }) | None => Vec::new(),
         };
-        let occluders = ReferenceOccluders { receiver_object: point.object, ..self.occluders };
-        let (tolerance, max_level) = (self.options.tolerance, self.options.max_level);
+        let estimate = self.lit(p, n, point.object, &terms, self.options.tolerance, seed);
+        let Some(albedos) = self.albedos else { return estimate };
+        // The bounce off the diffuse lobe (the glossy lobe's is left out).
+        let bounce = self.bounced(albedos, p, n, point.object, self.options.bounces, seed);
+        let diffuse = terms.iter().find(|t| matches!(t.lobe, Lobe::Diffuse)).map_or([0.0; 3], |t| t.scale);
+        PointEstimate { rgb: std::array::from_fn(|c| estimate.rgb[c] + diffuse[c] * bounce[c]), ..estimate }
+    }
+
+    /// The direct light at `p` (normal `n`, on `object`) through `terms`: the
+    /// environment, the suns and the lamps, to `tolerance`.
+    fn lit(
+        &self,
+        p: [f64; 3],
+        n: [f64; 3],
+        object: u32,
+        terms: &[LobeTerm],
+        tolerance: f64,
+        seed: u64,
+    ) -> PointEstimate {
+        let occluders = ReferenceOccluders { receiver_object: object, ..self.occluders };
+        let max_level = self.options.max_level;
         let environment = match self.integration {
             Integration::Sampled => {
-                sample_point(occluders, self.light, self.environment, p, n, &terms, tolerance, max_level, seed)
+                sample_point(occluders, self.light, self.environment, p, n, terms, tolerance, max_level, seed)
             }
-            _ => integrate_point(occluders, self.light, p, n, &terms, tolerance, max_level),
+            _ => integrate_point(occluders, self.light, p, n, terms, tolerance, max_level),
         };
         if self.frame.suns.is_empty() && self.frame.points.is_empty() {
             return environment;
@@ -372,8 +417,8 @@ impl Context<'_> {
         // The sharp lights to half the tolerance (their part is sampled whatever the
         // integration), split between the suns and the lamps.
         let sharp = 0.5 * tolerance / (!self.frame.suns.is_empty() as u8 + !self.frame.points.is_empty() as u8) as f64;
-        let suns = sample_suns(occluders, &self.frame.suns, p, n, &terms, sharp, max_level, seed ^ 0x5u64);
-        let lamps = sample_lamps(occluders, &self.frame.points, p, n, &terms, sharp, max_level, seed ^ 0x6u64);
+        let suns = sample_suns(occluders, &self.frame.suns, p, n, terms, sharp, max_level, seed ^ 0x5u64);
+        let lamps = sample_lamps(occluders, &self.frame.points, p, n, terms, sharp, max_level, seed ^ 0x6u64);
         PointEstimate {
             meridians: environment.meridians,
             level: environment.level,

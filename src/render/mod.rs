@@ -11,10 +11,13 @@
 //!
 //! | channels | type | what |
 //! |---|---|---|
-//! | `R`, `G`, `B`, `A` | colour | beauty = diffuse + specular + environment; alpha 1 on surfaces |
+//! | `R`, `G`, `B`, `A` | colour | beauty = diffuse + specular + environment + indirect; alpha 1 on surfaces |
 //! | `diffuse.{R,G,B}` | colour | the diffuse term |
 //! | `specular.{R,G,B}` | colour | the Phong term (and water's mirror of the sky) |
 //! | `environment.{R,G,B}` | colour | the light seen directly on the background |
+//! | `indirect.{R,G,B}` | colour | bounce light: `indirect_heightfield` + `indirect_blockers` |
+//! | `indirect_heightfield.{R,G,B}` | colour | bounce light from the terrain (height field or ground plane) |
+//! | `indirect_blockers.{R,G,B}` | colour | bounce light from the sphere blockers |
 //! | `visibility.Y` | colour | height field and blockers together |
 //! | `visibility_heightfield.Y` | colour | the height field alone |
 //! | `visibility_blockers.Y` | colour | the sphere blockers alone |
@@ -287,7 +290,10 @@ fn shade_frame(
     options: &SequenceOptions,
 ) -> anyhow::Result<FramePasses> {
     Ok(if options.transfer {
-        let (passes, transfer) = crate::transfer::shade_with_transfer(scene, data, &options.settings)?;
+        let (mut passes, transfer) = crate::transfer::shade_with_transfer(scene, data, &options.settings)?;
+        if let Some(indirect) = executor.bounce(scene, data, &options.settings, &passes.visibility)? {
+            passes.add_indirect(indirect);
+        }
         FramePasses { passes, transfer: Some(transfer) }
     } else {
         let passes = executor.shade_passes_resolved(scene, data, &options.settings, options.resolving)?;
@@ -319,9 +325,14 @@ fn write_frame(
 pub fn pass_channels(passes: &ShadedPasses, colour: SampleType) -> Vec<OutputChannel<'_>> {
     let (rgb, xyz) = (["R", "G", "B"], ["X", "Y", "Z"]);
     let mut channels = OutputChannel::layer("", &["R", "G", "B", "A"], passes.beauty.as_flattened(), colour);
-    for (layer, values) in
-        [("diffuse", &passes.diffuse), ("specular", &passes.specular), ("environment", &passes.environment)]
-    {
+    for (layer, values) in [
+        ("diffuse", &passes.diffuse),
+        ("specular", &passes.specular),
+        ("environment", &passes.environment),
+        ("indirect", &passes.indirect),
+        ("indirect_heightfield", &passes.indirect_heightfield),
+        ("indirect_blockers", &passes.indirect_blockers),
+    ] {
         channels.extend(OutputChannel::layer(layer, &rgb, values.as_flattened(), colour));
     }
     channels.extend(OutputChannel::layer("P", &xyz, passes.position.as_flattened(), SampleType::Float));

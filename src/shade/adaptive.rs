@@ -207,6 +207,9 @@ impl Selection {
             diffuse: Vec::with_capacity(count),
             specular: Vec::with_capacity(count),
             environment: Vec::with_capacity(count),
+            indirect: Vec::with_capacity(count),
+            indirect_heightfield: Vec::with_capacity(count),
+            indirect_blockers: Vec::with_capacity(count),
             visibility: Vec::with_capacity(count),
             visibility_heightfield: Vec::with_capacity(count),
             visibility_blockers: Vec::with_capacity(count),
@@ -221,6 +224,9 @@ impl Selection {
                     out.diffuse.push(passes.diffuse[k]);
                     out.specular.push(passes.specular[k]);
                     out.environment.push(passes.environment[k]);
+                    out.indirect.push(passes.indirect[k]);
+                    out.indirect_heightfield.push(passes.indirect_heightfield[k]);
+                    out.indirect_blockers.push(passes.indirect_blockers[k]);
                     out.visibility.push(passes.visibility[k]);
                     out.visibility_heightfield.push(passes.visibility_heightfield[k]);
                     out.visibility_blockers.push(passes.visibility_blockers[k]);
@@ -231,6 +237,9 @@ impl Selection {
                     out.diffuse.push([0.0; 3]);
                     out.specular.push([0.0; 3]);
                     out.environment.push([sky[0], sky[1], sky[2]]);
+                    out.indirect.push([0.0; 3]);
+                    out.indirect_heightfield.push([0.0; 3]);
+                    out.indirect_blockers.push([0.0; 3]);
                     out.visibility.push(1.0);
                     out.visibility_heightfield.push(1.0);
                     out.visibility_blockers.push(1.0);

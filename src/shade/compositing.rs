@@ -2,13 +2,17 @@
 //! [`shade_frame`](super::shade_frame), split so that a compositor can rebuild the beauty
 //! and grade each part (docs/design.md, "Compositing passes").
 //!
-//! Per pixel, `beauty = diffuse + specular + environment`, summed in f32 in that order:
+//! Per pixel, `beauty = diffuse + specular + environment + indirect`, summed in f32 in that
+//! order:
 //! - `diffuse`, `specular`: [`PixelPasses`] of the surface times its [`Tint`] (the colour
 //!   passes, where the G-buffer has them); for water, of the point in the reflection
 //!   G-buffer times the tint (water reflecting the sky puts `tint * sky` in `specular`, a
 //!   mirror reflection);
 //! - `environment`: the light seen directly on background pixels (the camera's ray
-//!   direction; black without a camera), 0 elsewhere.
+//!   direction; black without a camera), 0 elsewhere;
+//! - `indirect`: bounce light ([`super::bounce`]), `indirect_heightfield` (the terrain:
+//!   height field or ground plane) plus `indirect_blockers` (the sphere blockers); 0
+//!   without bounces, on water and on the background.
 //!
 //! The beauty equals `shade_frame`'s image exactly except on water pixels, where
 //! `tint * (d + s)` and `tint * d + tint * s` can differ in the last bit.
@@ -29,6 +33,10 @@ pub struct ShadedPasses {
     pub diffuse: Vec<[f32; 3]>,
     pub specular: Vec<[f32; 3]>,
     pub environment: Vec<[f32; 3]>,
+    /// Bounce light, the sum of the two below.
+    pub indirect: Vec<[f32; 3]>,
+    pub indirect_heightfield: Vec<[f32; 3]>,
+    pub indirect_blockers: Vec<[f32; 3]>,
     /// Height field and blockers together ([`PixelPasses::visibility`]).
     pub visibility: Vec<f32>,
     pub visibility_heightfield: Vec<f32>,
@@ -85,10 +93,28 @@ pub fn assemble(frame: &Frame, pixels: &[Pixel]) -> ShadedPasses {
         diffuse: pixels.iter().map(|p| p.passes.diffuse).collect(),
         specular: pixels.iter().map(|p| p.passes.specular).collect(),
         environment: pixels.iter().map(|p| p.environment).collect(),
+        indirect: vec![[0.0; 3]; pixels.len()],
+        indirect_heightfield: vec![[0.0; 3]; pixels.len()],
+        indirect_blockers: vec![[0.0; 3]; pixels.len()],
         visibility: scalar(|q| q.visibility),
         visibility_heightfield: scalar(|q| q.visibility_heightfield),
         visibility_blockers: scalar(|q| q.visibility_blockers),
         position: g.position.as_slice().into(),
         normal: g.normal.as_slice().into(),
+    }
+}
+
+impl ShadedPasses {
+    /// Sets the bounce passes from their two parts and adds their sum to the beauty.
+    pub fn add_indirect(&mut self, parts: super::bounce::IndirectParts) {
+        self.indirect = parts.total();
+        let super::bounce::IndirectParts { heightfield, blockers } = parts;
+        for (beauty, indirect) in self.beauty.iter_mut().zip(&self.indirect) {
+            for c in 0..3 {
+                beauty[c] += indirect[c];
+            }
+        }
+        self.indirect_heightfield = heightfield;
+        self.indirect_blockers = blockers;
     }
 }

@@ -6,6 +6,7 @@
 //! `src/gpu/`); [`compositing`] assembles the passes of `logsh render`.
 pub mod adaptive;
 pub mod blocker_tree;
+pub mod bounce;
 pub mod cap_packet;
 pub mod compositing;
 pub mod cpu;

@@ -1,6 +1,7 @@
 //! What a user chooses: order, clamp, exponentiation, attenuation and the height-field
 //! march, with defaults chosen by measurement.
 
+use super::bounce::{BounceSettings, MAX_BOUNCES, MAX_BOUNCE_GRID, MAX_BOUNCE_STRIDE, MIN_BOUNCE_GRID};
 use crate::heightfield::HorizonSettings;
 use crate::sh::{ExpMethod, MAX_ORDER, MIN_ORDER};
 
@@ -60,6 +61,10 @@ pub struct ShadingSettings {
     pub horizon: HorizonSettings,
     /// The precision of the per-pixel kernel.
     pub precision: Precision,
+    /// Bounce light ([`super::bounce`]); absent from a transfer frame written before it
+    /// existed, which was shaded without.
+    #[serde(default = "BounceSettings::none")]
+    pub bounce: BounceSettings,
 }
 
 /// How the glossy lobe of a `phong` material is shaded (`--glossy`). The first two read
@@ -145,6 +150,12 @@ pub enum SettingsError {
     LevelOffset(f64),
     #[error("--cluster-ratio {0} is outside 0..={MAX_CLUSTER_RATIO}")]
     ClusterRatio(f64),
+    #[error("--bounces {0} is outside 0..={MAX_BOUNCES}")]
+    Bounces(usize),
+    #[error("--bounce-grid {0} is outside {MIN_BOUNCE_GRID}..={MAX_BOUNCE_GRID}")]
+    BounceGrid(usize),
+    #[error("--bounce-stride {0} is outside 1..={MAX_BOUNCE_STRIDE}")]
+    BounceStride(usize),
 }
 
 /// Default `cluster_ratio`: clusters spanning at most about 40 degrees are one cap. Against
@@ -196,6 +207,7 @@ impl ShadingSettings {
             glossy: GlossyMethod::Ggx,
             horizon: HorizonSettings::default(),
             precision: Precision::F32,
+            bounce: BounceSettings::DEFAULT,
         }
     }
 
@@ -226,6 +238,15 @@ impl ShadingSettings {
         }
         if !(0.0..=MAX_CLUSTER_RATIO).contains(&self.cluster_ratio) {
             return Err(SettingsError::ClusterRatio(self.cluster_ratio));
+        }
+        if self.bounce.bounces > MAX_BOUNCES {
+            return Err(SettingsError::Bounces(self.bounce.bounces));
+        }
+        if !(MIN_BOUNCE_GRID..=MAX_BOUNCE_GRID).contains(&self.bounce.grid) {
+            return Err(SettingsError::BounceGrid(self.bounce.grid));
+        }
+        if !(1..=MAX_BOUNCE_STRIDE).contains(&self.bounce.stride) {
+            return Err(SettingsError::BounceStride(self.bounce.stride));
         }
         Ok(())
     }

@@ -270,6 +270,10 @@ pub struct TransferFrame {
     /// ([`super::SunLampTurn`]). `None` in other frames and in files written before it was
     /// kept.
     pub horizons: Option<Vec<f32>>,
+    /// The render's bounce light from the terrain and from the blockers
+    /// (`indirect_heightfield`, `indirect_blockers`), which a relight keeps as rendered;
+    /// `None` in a frame written before bounce light, or while one is being shaded.
+    pub bounce: Option<[Vec<[f32; 3]>; 2]>,
     /// The G-buffer's world position and normal (`P`, `N`), passed through (shared with
     /// the passes relit from it).
     pub position: std::sync::Arc<[[f32; 3]]>,
@@ -428,6 +432,7 @@ impl TransferFrame {
             glossy_weight: vec![[0.0; 2]; n],
             alpha: vec![0.0; n],
             horizons: (horizon_sectors > 0).then(|| vec![f32::INFINITY; n * horizon_sectors]),
+            bounce: None,
             position: std::sync::Arc::from([]),
             normal: std::sync::Arc::from([]),
         }
@@ -685,6 +690,11 @@ impl TransferFrame {
         let mut alpha = sized(spare.alpha, n);
         let mut horizons =
             (horizon_sectors > 0).then(|| sized(spare.horizons.unwrap_or_default(), n * horizon_sectors));
+        let bounce_names = ["indirect_heightfield.", "indirect_blockers."];
+        let mut bounce = channels.has("indirect_heightfield.R").then(|| {
+            let [heightfield, blockers] = spare.bounce.unwrap_or_default();
+            [sized(heightfield, n), sized(blockers, n)]
+        });
         let (position_values, normal_values) = (
             std::sync::Arc::get_mut(&mut position).expect("unshared"),
             std::sync::Arc::get_mut(&mut normal).expect("unshared"),
@@ -732,6 +742,9 @@ impl TransferFrame {
         if let Some(values) = &mut horizons {
             let names = horizon_channels(horizon_sectors).into_iter().enumerate().map(|(k, name)| (name, k));
             targets.push(Target { values, stride: horizon_sectors, channels: names.collect() });
+        }
+        for (values, name) in bounce.iter_mut().flatten().zip(bounce_names) {
+            targets.push(Target { values: values.as_flattened_mut(), stride: 3, channels: named(name, &rgb) });
         }
         channels.fill(file, WHAT, &mut targets)?;
         drop(targets);
@@ -782,7 +795,8 @@ impl TransferFrame {
                 .iter()
                 .all(|l| l.as_ref().is_none_or(|v| finite(v.as_flattened())))
             && finite(glossy_weight.as_flattened())
-            && finite(&alpha);
+            && finite(&alpha)
+            && bounce.iter().flatten().all(|l| finite(l.as_flattened()));
         if !all_finite {
             // Named by the file's channel, with its first pixel that is not finite (rare:
             // a damaged file).
@@ -809,6 +823,9 @@ impl TransferFrame {
             }
             layers.push((glossy_weight.as_flattened(), named("glossy_weight.", &["X", "Y"])));
             layers.push((&alpha, named("", &["A"])));
+            for (values, name) in bounce.iter().flatten().zip(bounce_names) {
+                layers.push((values.as_flattened(), named(name, &rgb)));
+            }
             let what = layers
                 .iter()
                 .find_map(|(values, channels)| {
@@ -840,6 +857,7 @@ impl TransferFrame {
             glossy_weight,
             alpha,
             horizons,
+            bounce,
             position,
             normal,
         })

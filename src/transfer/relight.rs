@@ -7,6 +7,7 @@ use crate::scene::light::{equirectangular_to_direction, file_crc, lookup_coordin
 use crate::scene::{EnvironmentMap, Light, LightSource, SceneError, SunLight};
 use crate::sh::basis::funk_hecke_factor;
 use crate::sh::{coefficient_count, eval_basis, MAX_COEFFICIENTS};
+use crate::shade::bounce::IndirectParts;
 use crate::shade::compositing::ShadedPasses;
 use crate::shade::glossy::{MapLevels, Prefiltered};
 use crate::shade::kernel::{glossy_map, occlusion_ratio, visibility_ratio};
@@ -463,7 +464,7 @@ unsafe fn relight_by(
         });
     // SAFETY: the chunks cover every pixel, and `relight_chunk` writes every element of
     // its chunk of each pass.
-    unsafe {
+    let mut passes = unsafe {
         ShadedPasses {
             width: frame.width,
             height: frame.height,
@@ -471,13 +472,22 @@ unsafe fn relight_by(
             diffuse: written(diffuse),
             specular: written(specular),
             environment: written(environment),
+            indirect: vec![[0.0; 3]; n],
+            indirect_heightfield: vec![[0.0; 3]; n],
+            indirect_blockers: vec![[0.0; 3]; n],
             visibility: written(visibility),
             visibility_heightfield: written(heightfield),
             visibility_blockers: written(blockers),
             position: frame.position.clone(),
             normal: frame.normal.clone(),
         }
+    };
+    // The render's bounce light, kept as rendered (README, "Bounce light": what turning
+    // the light does to it).
+    if let Some([heightfield, blockers]) = &frame.bounce {
+        passes.add_indirect(IndirectParts { heightfield: heightfield.clone(), blockers: blockers.clone() });
     }
+    passes
 }
 
 /// `n` elements in the memory of `v` (new memory where it holds fewer), to be written once
@@ -1067,6 +1077,9 @@ mod tests {
                 diffuse: vec![[nan; 3]; n],
                 specular: vec![[nan; 3]; n],
                 environment: vec![[nan; 3]; n],
+                indirect: vec![[nan; 3]; n],
+                indirect_heightfield: vec![[nan; 3]; n],
+                indirect_blockers: vec![[nan; 3]; n],
                 visibility: vec![nan; n],
                 visibility_heightfield: vec![nan; n],
                 visibility_blockers: vec![nan; n],

@@ -590,6 +590,16 @@ fn frame_bodies(
     ] {
         put(name, 3, &at_shown(values.as_flattened(), 3));
     }
+    // The render's bounce light, which a relight keeps as rendered.
+    if let Some([heightfield, blockers]) = &frame.bounce {
+        let total: Vec<[f32; 3]> =
+            heightfield.iter().zip(blockers).map(|(h, b)| [0, 1, 2].map(|c| h[c] + b[c])).collect();
+        let shown_total: Vec<f32> = match stride {
+            1 => total.as_flattened().to_vec(),
+            _ => at_pixels(&shown, total.as_flattened(), 3).collect(),
+        };
+        put("indirect", 3, &shown_total);
+    }
     put("glossy_lobe", 1, &at_shown(&frame.glossy_lobe, 1));
     put("glossy_weight", 2, &at_shown(frame.glossy_weight.as_flattened(), 2));
     put("alpha", 1, &at_shown(&frame.alpha, 1));

@@ -30,6 +30,7 @@ impl PlaneComparison {
             integration: Integration::Auto,
             tolerance: 2e-3,
             max_level: 6,
+            ..Default::default()
         };
         let truth = render_reference(scene, frame, &options, &|_| {}).unwrap();
         let (mut fast, mut reference, mut pixels, mut penumbra) = (0.0, 0.0, 0usize, 0usize);

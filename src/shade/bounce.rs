@@ -1,0 +1,1114 @@
+//! Bounce light: what the terrain (the height field, or the ground plane) and the sphere
+//! blockers reflect onto each surface point, added outside the exponential (docs/design.md,
+//! "Bounce light").
+//!
+//! The surroundings are shaded as secondary lights at points of their own: the texels of
+//! a grid over the terrain and fourteen points around each blocker sphere. Their direct
+//! light comes from the executor that shades the frame (the same kernel, the same
+//! visibility), times an albedo baked from the frame's own pixels (the Diffuse Color pass,
+//! or the material). Each further bounce gathers at those points what the previous one
+//! left on them. A receiver then gathers, into an order-3 SH vector of incident radiance
+//! `U`:
+//!
+//! - the terrain after NS09 (paper 003, Section 3, Eq. 6-12): along each of
+//!   [`AZIMUTHS`] azimuths, the casting set (the samples that rise above all nearer ones)
+//!   with each member's radiance held from its blocking angle up to the next one's, in the
+//!   NLP basis (Eq. 12), turned into SH by the wedge operator of paper 000 (Eq. 18-23);
+//! - each blocker sphere as a cap (paper 000, Section 7: the cap's directions return the
+//!   sphere's reflected radiance instead of black) of the radiance its side facing the
+//!   receiver has, with the caps of one object scaled by how much of their summed area
+//!   the object's union covers (the spheres of a proxy overlap).
+//!
+//! and irradiance `E(n) = sum_lm A_l U_lm y_lm(n)` with the clamped cosine's
+//! `A = (pi, 2 pi / 3, pi / 4)` (Ramamoorthi and Hanrahan 2001: order 3 holds 99 % of a
+//! cosine-weighted integral's energy). A point's bounce is its diffuse albedo times
+//! `E / pi`. Order 3 and the coarse grid suffice because bounce light is low-frequency; a
+//! sphere cap in front of the terrain adds to it rather than hiding it, and a sphere's
+//! radiance is read at one point per cap: the approximations of paper 000's Section 7.
+
+use super::frame::{height_field, unit_or_up, ShadeError};
+use super::kernel::SurfacePoint;
+use crate::heightfield::HeightField;
+use crate::logsh::{cap_log_zh, nlp_slice_of_sine, WedgeOperator, WedgeTurn};
+use crate::scene::gbuffer::SurfaceColours;
+use crate::scene::{Frame, GBuffer, Material, Scene};
+use crate::sh::basis::eval_basis;
+use crate::sh::rotation::add_rotated_zonal;
+use rayon::prelude::*;
+use std::collections::BTreeMap;
+use std::f64::consts::PI;
+
+/// Most bounces `--bounces` accepts.
+pub const MAX_BOUNCES: usize = 3;
+/// The SH order of the gathered radiance.
+const ORDER: usize = 5;
+const COUNT: usize = ORDER * ORDER;
+/// Azimuths of the terrain gather.
+pub const AZIMUTHS: usize = 16;
+/// Ratio of successive steps along an azimuth: each step's footprint is about a fifth of
+/// its distance, which the grid's texels cover beyond a few texels.
+const STEP_RATIO: f64 = 1.15;
+/// The clamped cosine's SH factors per band.
+const COSINE: [f64; ORDER] = [PI, 2.0 * PI / 3.0, PI / 4.0, 0.0, -PI / 24.0];
+/// What a gather carries per SH coefficient: the radiance in R, G, B, and the occlusion
+/// (radiance 1 wherever the surroundings are), which tells how much of a receiver's
+/// cosine lobe they cover.
+const CHANNELS: usize = 4;
+/// The fourteen directions a sphere's secondary points lie along: the axes and the
+/// diagonals.
+const SPHERE_DIRECTIONS: usize = 14;
+
+/// Fewest and most texels per side of the terrain's grid (`--bounce-grid`).
+pub const MIN_BOUNCE_GRID: usize = 8;
+pub const MAX_BOUNCE_GRID: usize = 512;
+/// Most pixels between gathers (`--bounce-stride`).
+pub const MAX_BOUNCE_STRIDE: usize = 16;
+
+/// How bounce light is computed (`--bounces`, `--bounce-grid`).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct BounceSettings {
+    /// 0 (direct light only) to [`MAX_BOUNCES`].
+    pub bounces: usize,
+    /// Texels per side of the grid the terrain's radiance is shaded on.
+    pub grid: usize,
+    /// Pixels between the points where bounce light is gathered, along each axis
+    /// ([`Surroundings::indirect`]).
+    #[serde(default = "BounceSettings::default_stride")]
+    pub stride: usize,
+}
+
+impl BounceSettings {
+    /// The presets' bounce (chosen by measurement: README, "Bounce light").
+    pub const DEFAULT: Self = Self { bounces: 2, grid: 64, stride: 4 };
+
+    fn default_stride() -> usize {
+        Self::DEFAULT.stride
+    }
+
+    /// No bounce.
+    pub fn none() -> Self {
+        Self { bounces: 0, ..Self::DEFAULT }
+    }
+}
+
+/// The terrain as a secondary light: a grid of texels over the height field (or over the
+/// frame's neighbourhood of the ground plane), each with its surface point, albedo and
+/// radiance.
+struct TerrainGrid {
+    min: [f64; 2],
+    max: [f64; 2],
+    side: usize,
+    /// `None`: the ground plane at this height.
+    field: Option<HeightField>,
+    ground: f64,
+    albedo: Vec<[f32; 3]>,
+    radiance: Vec<[f32; 3]>,
+    material: u32,
+}
+
+impl TerrainGrid {
+    fn height(&self, x: f64, y: f64) -> f64 {
+        self.field.as_ref().map_or(self.ground, |f| f.height_at(x, y))
+    }
+
+    fn texel_position(&self, i: usize) -> [f64; 3] {
+        let (c, r) = (i % self.side, i / self.side);
+        let last = (self.side - 1) as f64;
+        let x = self.min[0] + (self.max[0] - self.min[0]) * c as f64 / last;
+        let y = self.min[1] + (self.max[1] - self.min[1]) * r as f64 / last;
+        [x, y, self.height(x, y)]
+    }
+
+    fn normal_at(&self, x: f64, y: f64) -> [f64; 3] {
+        let Some(field) = &self.field else { return [0.0, 0.0, 1.0] };
+        let spacing = field.spacing();
+        let (hx, hy) = (spacing[0].max(1e-9), spacing[1].max(1e-9));
+        let dx = (field.height_at(x + hx, y) - field.height_at(x - hx, y)) / (2.0 * hx);
+        let dy = (field.height_at(x, y + hy) - field.height_at(x, y - hy)) / (2.0 * hy);
+        let length = (dx * dx + dy * dy + 1.0).sqrt();
+        [-dx / length, -dy / length, 1.0 / length]
+    }
+
+    /// Whether `p` lies on the terrain (to a hundredth of a texel, or f32 rounding).
+    fn holds(&self, p: [f64; 3]) -> bool {
+        let tolerance = 1e-3 * (1.0 + p[2].abs()) + 0.01 * (self.max[0] - self.min[0]) / self.side as f64;
+        (p[2] - self.height(p[0], p[1])).abs() <= tolerance
+    }
+
+    /// The texel containing world `(x, y)`, clamped to the grid.
+    fn texel_of(&self, x: f64, y: f64) -> usize {
+        let last = (self.side - 1) as f64;
+        let at = |v: f64, a: usize| {
+            (((v - self.min[a]) / (self.max[a] - self.min[a]) * last).round().clamp(0.0, last)) as usize
+        };
+        at(y, 1) * self.side + at(x, 0)
+    }
+
+    /// Bilinear radiance at world `(x, y)`, clamped to the grid's edge.
+    fn radiance_at(&self, x: f64, y: f64) -> [f64; 3] {
+        let last = (self.side - 1) as f64;
+        let u = ((x - self.min[0]) / (self.max[0] - self.min[0]) * last).clamp(0.0, last);
+        let v = ((y - self.min[1]) / (self.max[1] - self.min[1]) * last).clamp(0.0, last);
+        let (c0, r0) = ((u.floor() as usize).min(self.side - 2), (v.floor() as usize).min(self.side - 2));
+        let (fx, fy) = (u - c0 as f64, v - r0 as f64);
+        let at = |c: usize, r: usize| self.radiance[r * self.side + c].map(f64::from);
+        let (a, b, c, d) = (at(c0, r0), at(c0 + 1, r0), at(c0, r0 + 1), at(c0 + 1, r0 + 1));
+        std::array::from_fn(|k| (a[k] * (1.0 - fx) + b[k] * fx) * (1.0 - fy) + (c[k] * (1.0 - fx) + d[k] * fx) * fy)
+    }
+
+    /// The first point where the ray from `p` along unit `d` meets the terrain, and its
+    /// distance ([`terrain_hit`], steps of a quarter texel, out to twice the grid).
+    fn hit(&self, p: [f64; 3], d: [f64; 3]) -> Option<([f64; 3], f64)> {
+        let span = (self.max[0] - self.min[0]).max(self.max[1] - self.min[1]);
+        terrain_hit(|x, y| self.height(x, y), p, d, 0.25 * span / (self.side - 1) as f64, 2.0 * span)
+    }
+
+    /// Adds the terrain's radiance seen from `p` to `slices` (NLP, per azimuth and colour
+    /// channel): NS09's Eq. 12 over the casting set, closed at the horizontal where the
+    /// last sample is below it (the flat continuation beyond the grid).
+    fn add_slices(&self, p: [f64; 3], slices: &mut [[f64; ORDER]; CHANNELS * AZIMUTHS]) {
+        let span = (self.max[0] - self.min[0]).max(self.max[1] - self.min[1]);
+        let first = 0.5 * span / (self.side - 1) as f64;
+        let far =
+            2.0 * span + (0..2).map(|a| (p[a] - self.min[a]).abs().max((p[a] - self.max[a]).abs())).fold(0.0, f64::max);
+        let mut below = [0.0; ORDER];
+        let mut above = [0.0; ORDER];
+        for k in 0..AZIMUTHS {
+            let phi = 2.0 * PI * k as f64 / AZIMUTHS as f64;
+            let (dy, dx) = phi.sin_cos();
+            let (mut sine, mut radiance) = (-1.0f64, [0.0f64; CHANNELS]);
+            nlp_slice_of_sine(ORDER, 1.0, sine, &mut below);
+            let mut t = first;
+            while t < far {
+                let (x, y) = (p[0] + t * dx, p[1] + t * dy);
+                let rise = self.height(x, y) - p[2];
+                let s = rise / (rise * rise + t * t).sqrt();
+                if s > sine {
+                    let [r, g, b] = self.radiance_at(x, y);
+                    radiance = [r, g, b, 1.0];
+                    nlp_slice_of_sine(ORDER, 1.0, s, &mut above);
+                    add_band(&mut slices[CHANNELS * k..CHANNELS * (k + 1)], radiance, &below, &above);
+                    below = above;
+                    sine = s;
+                }
+                t *= STEP_RATIO;
+            }
+            if sine < 0.0 {
+                nlp_slice_of_sine(ORDER, 1.0, 0.0, &mut above);
+                add_band(&mut slices[CHANNELS * k..CHANNELS * (k + 1)], radiance, &below, &above);
+            }
+        }
+    }
+}
+
+/// The first point where the ray from `p` along unit `d` goes below the surface
+/// `height(x, y)`, and its distance, within `far`: steps of `step` near `p`, growing
+/// with the distance travelled by a tenth, the crossing then refined by bisection to
+/// `step / 4096`. A surface thinner than a step along the ray can be missed.
+pub fn terrain_hit(
+    height: impl Fn(f64, f64) -> f64,
+    p: [f64; 3],
+    d: [f64; 3],
+    step: f64,
+    far: f64,
+) -> Option<([f64; 3], f64)> {
+    let below = |t: f64| {
+        let q: [f64; 3] = std::array::from_fn(|k| p[k] + t * d[k]);
+        q[2] < height(q[0], q[1])
+    };
+    let (mut t, mut before) = (step, 0.0);
+    while t < far {
+        if below(t) {
+            let (mut lo, mut hi) = (before, t);
+            for _ in 0..12 {
+                let mid = 0.5 * (lo + hi);
+                if below(mid) {
+                    hi = mid;
+                } else {
+                    lo = mid;
+                }
+            }
+            return Some((std::array::from_fn(|k| p[k] + hi * d[k]), hi));
+        }
+        before = t;
+        t += step.max(0.1 * t);
+    }
+    None
+}
+
+/// Adds `radiance` times the NLP band between two cumulative integrals (Eq. 12's
+/// `u(t_i) (v(w_i) - v(w_{i-1}))`).
+fn add_band(slices: &mut [[f64; ORDER]], radiance: [f64; CHANNELS], below: &[f64; ORDER], above: &[f64; ORDER]) {
+    for (channel, slice) in slices.iter_mut().enumerate() {
+        for l in 0..ORDER {
+            slice[l] += radiance[channel] * (above[l] - below[l]);
+        }
+    }
+}
+
+/// One blocker sphere as a secondary light: its radiance at [`SPHERE_DIRECTIONS`] points
+/// around it (`None` where the point lies under the terrain).
+struct SphereLight {
+    centre: [f64; 3],
+    radius: f64,
+    object: u32,
+    albedo: [f32; 3],
+    material: u32,
+    radiance: [Option<[f32; 3]>; SPHERE_DIRECTIONS],
+    /// How much of the summed area of its object's spheres their union covers.
+    overlap: f64,
+}
+
+impl SphereLight {
+    /// The radiance of the sphere's side facing `m` (a unit vector from its centre): its
+    /// points' radiance weighted by `max(0, m . m_k)^4`.
+    fn radiance_towards(&self, m: [f64; 3]) -> [f64; 3] {
+        let (mut sum, mut weights) = ([0.0; 3], 0.0);
+        for (k, radiance) in self.radiance.iter().enumerate() {
+            let Some(radiance) = radiance else { continue };
+            let w = dot(m, sphere_direction(k)).max(0.0).powi(4);
+            for c in 0..3 {
+                sum[c] += w * f64::from(radiance[c]);
+            }
+            weights += w;
+        }
+        if weights > 0.0 {
+            sum.map(|s| s / weights)
+        } else {
+            [0.0; 3]
+        }
+    }
+}
+
+fn sphere_direction(k: usize) -> [f64; 3] {
+    const AXES: [[f64; 3]; 6] =
+        [[1.0, 0.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, 1.0], [0.0, 0.0, -1.0]];
+    if k < 6 {
+        AXES[k]
+    } else {
+        let s = 1.0 / 3f64.sqrt();
+        let j = k - 6;
+        [if j & 1 == 0 { s } else { -s }, if j & 2 == 0 { s } else { -s }, if j & 4 == 0 { s } else { -s }]
+    }
+}
+
+fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+/// A frame's surroundings, ready to be shaded: the secondary points as a G-buffer
+/// ([`Self::points`]), to go through the executor's direct shading before
+/// [`Self::lit`].
+pub struct SurroundingsPlan {
+    points: Frame,
+    terrain: Option<TerrainGrid>,
+    spheres: Vec<SphereLight>,
+    bounces: usize,
+}
+
+/// A frame's surroundings with their radiance after all but the last bounce.
+pub struct Surroundings {
+    terrain: Option<TerrainGrid>,
+    spheres: Vec<SphereLight>,
+    turn: WedgeTurn<f64>,
+}
+
+/// What a pixel reflects diffusely: its Diffuse Color pass, or its material's albedo;
+/// black for water and the background.
+pub fn diffuse_albedo(scene: &Scene, gbuffer: &GBuffer, i: usize) -> [f32; 3] {
+    match scene.materials.get(&gbuffer.material[i]) {
+        None | Some(Material::Water { .. }) => [0.0; 3],
+        Some(material) => gbuffer.colours_at(i).map_or(material.pass_colours().0, |(diffuse, _)| diffuse),
+    }
+}
+
+/// The albedos the surroundings reflect with, baked from the frame's own pixels
+/// ([`diffuse_albedo`]): the mean over the pixels of each object (blocker spheres of an
+/// object take its mean), over the terrain's pixels, and over every surface pixel (what
+/// a blocker of no object, or of an object no pixel shows, takes; and the terrain where
+/// none of its pixels is seen).
+pub struct SurfaceAlbedos {
+    pub by_object: BTreeMap<u32, [f32; 3]>,
+    pub terrain: [f32; 3],
+    pub frame: [f32; 3],
+}
+
+impl SurfaceAlbedos {
+    /// The albedos of `frame`'s pixels; `on_terrain(p)` tells a terrain pixel by its
+    /// position.
+    pub fn of(scene: &Scene, frame: &Frame, on_terrain: impl Fn([f64; 3]) -> bool) -> Self {
+        let g = &frame.gbuffer;
+        let mut sums = BTreeMap::<u32, ([f64; 3], usize)>::new();
+        let (mut terrain, mut all) = (([0.0f64; 3], 0usize), ([0.0f64; 3], 0usize));
+        let add = |sum: &mut ([f64; 3], usize), a: [f32; 3]| {
+            (0..3).for_each(|c| sum.0[c] += f64::from(a[c]));
+            sum.1 += 1;
+        };
+        for i in 0..g.material.len() {
+            if !matches!(scene.materials.get(&g.material[i]), Some(m) if !matches!(m, Material::Water { .. })) {
+                continue;
+            }
+            let a = diffuse_albedo(scene, g, i);
+            add(&mut all, a);
+            if on_terrain(g.position[i].map(f64::from)) {
+                add(&mut terrain, a);
+            }
+            if g.object_at(i) != 0 {
+                add(sums.entry(g.object_at(i)).or_default(), a);
+            }
+        }
+        let mean = |(sum, n): ([f64; 3], usize)| (n > 0).then(|| sum.map(|v| (v / n as f64) as f32));
+        let frame = mean(all).unwrap_or([0.0; 3]);
+        Self {
+            by_object: sums.into_iter().filter_map(|(object, sum)| Some((object, mean(sum)?))).collect(),
+            terrain: mean(terrain).unwrap_or(frame),
+            frame,
+        }
+    }
+
+    /// The albedo of the spheres of `object`.
+    pub fn of_object(&self, object: u32) -> [f32; 3] {
+        (object != 0).then(|| self.by_object.get(&object)).flatten().copied().unwrap_or(self.frame)
+    }
+}
+
+impl SurroundingsPlan {
+    /// The secondary points of `frame`, or `None` where nothing bounces: no bounce asked,
+    /// or neither terrain (height field or ground plane) nor blockers.
+    pub fn new(scene: &Scene, frame: &Frame, settings: &BounceSettings) -> Result<Option<Self>, ShadeError> {
+        if settings.bounces == 0 {
+            return Ok(None);
+        }
+        let g = &frame.gbuffer;
+        let surface: Vec<usize> = (0..g.material.len())
+            .filter(|&i| matches!(scene.materials.get(&g.material[i]), Some(m) if !matches!(m, Material::Water { .. })))
+            .collect();
+        let Some(fallback_material) = surface.first().map(|&i| g.material[i]) else { return Ok(None) };
+        let most_common = |pixels: &mut dyn Iterator<Item = usize>| {
+            let mut counts = BTreeMap::<u32, usize>::new();
+            pixels.for_each(|i| *counts.entry(g.material[i]).or_default() += 1);
+            counts.into_iter().max_by_key(|&(_, n)| n).map_or(fallback_material, |(m, _)| m)
+        };
+
+        let terrain = match height_field(scene, frame)? {
+            Some(field) => Some((field.min(), field.max(), Some(field), 0.0)),
+            None => frame.ground.map(|ground| {
+                let (min, max) = neighbourhood(frame, &surface);
+                (min, max, None, ground)
+            }),
+        };
+        let side = settings.grid.max(2);
+        let terrain = terrain.map(|(min, max, field, ground)| TerrainGrid {
+            min,
+            max,
+            side,
+            field,
+            ground,
+            albedo: Vec::new(),
+            radiance: vec![[0.0; 3]; side * side],
+            material: fallback_material,
+        });
+        let on_terrain = |p: [f64; 3]| terrain.as_ref().is_some_and(|grid| grid.holds(p));
+        let albedos = SurfaceAlbedos::of(scene, frame, on_terrain);
+        let terrain = terrain.map(|mut grid| {
+            let on_grid: Vec<usize> =
+                surface.iter().copied().filter(|&i| grid.holds(g.position[i].map(f64::from))).collect();
+            grid.material = most_common(&mut on_grid.iter().copied());
+            let mut sums = vec![([0.0f64; 3], 0usize); side * side];
+            for &i in &on_grid {
+                let p = g.position[i];
+                let texel = &mut sums[grid.texel_of(f64::from(p[0]), f64::from(p[1]))];
+                let a = diffuse_albedo(scene, g, i);
+                (0..3).for_each(|c| texel.0[c] += f64::from(a[c]));
+                texel.1 += 1;
+            }
+            grid.albedo = sums
+                .iter()
+                .map(|&(s, n)| if n > 0 { s.map(|v| (v / n as f64) as f32) } else { albedos.terrain })
+                .collect();
+            grid
+        });
+
+        let mut spheres: Vec<SphereLight> = Vec::with_capacity(frame.blockers.len());
+        for sphere in frame.blockers.iter().filter(|s| s.radius > 0.0) {
+            let of_object = |i: &usize| sphere.object != 0 && g.object_at(*i) == sphere.object;
+            spheres.push(SphereLight {
+                centre: sphere.center,
+                radius: sphere.radius,
+                object: sphere.object,
+                albedo: albedos.of_object(sphere.object),
+                material: most_common(&mut surface.iter().copied().filter(of_object)),
+                radiance: [None; SPHERE_DIRECTIONS],
+                overlap: 1.0,
+            });
+        }
+        set_overlaps(&mut spheres);
+        if terrain.is_none() && spheres.is_empty() {
+            return Ok(None);
+        }
+
+        let mut position = Vec::new();
+        let mut normal = Vec::new();
+        let mut material = Vec::new();
+        let mut object = Vec::new();
+        let mut albedo = Vec::new();
+        if let Some(grid) = &terrain {
+            for i in 0..grid.side * grid.side {
+                let p = grid.texel_position(i);
+                position.push(p.map(|v| v as f32));
+                normal.push(grid.normal_at(p[0], p[1]).map(|v| v as f32));
+                material.push(grid.material);
+                object.push(0);
+                albedo.push(grid.albedo[i]);
+            }
+        }
+        for sphere in &spheres {
+            for k in 0..SPHERE_DIRECTIONS {
+                let m = sphere_direction(k);
+                let lift = sphere.radius * (1.0 + 1e-3);
+                let p: [f64; 3] = std::array::from_fn(|a| sphere.centre[a] + lift * m[a]);
+                position.push(p.map(|v| v as f32));
+                normal.push(m.map(|v| v as f32));
+                material.push(sphere.material);
+                object.push(sphere.object);
+                albedo.push(sphere.albedo);
+            }
+        }
+        let count = position.len();
+        let width = (count as f64).sqrt().ceil() as usize;
+        let height = count.div_ceil(width);
+        let padded = width * height;
+        position.resize(padded, [0.0; 3]);
+        normal.resize(padded, [0.0, 0.0, 1.0]);
+        material.resize(padded, 0);
+        object.resize(padded, 0);
+        albedo.resize(padded, [0.0; 3]);
+        let colours = scene.colour_passes().then(|| SurfaceColours { diffuse: albedo, glossy: vec![[0.0; 3]; padded] });
+        let gbuffer = GBuffer {
+            file: g.file.with_extension("surroundings"),
+            width,
+            height,
+            position,
+            normal,
+            uv: None,
+            material,
+            object: Some(object),
+            colours,
+        };
+        let points = Frame {
+            number: frame.number,
+            gbuffer,
+            reflection: None,
+            camera: frame.camera.clone(),
+            blockers: frame.blockers.clone(),
+            height_map: frame.height_map.clone(),
+            light: frame.light.clone(),
+            light_file_crc: frame.light_file_crc,
+            suns: frame.suns.clone(),
+            points: frame.points.clone(),
+            ground: frame.ground,
+            supersample: 1,
+        };
+        Ok(Some(Self { points, terrain, spheres, bounces: settings.bounces }))
+    }
+
+    /// The secondary points as a frame to shade with direct light.
+    pub fn points(&self) -> &Frame {
+        &self.points
+    }
+
+    /// The surroundings lit: `direct` is the diffuse pass of [`Self::points`] (albedo
+    /// times direct irradiance over pi), `visibility` their visibility pass; each bounce
+    /// after the first gathers at the points what the one before left on them.
+    pub fn lit(self, scene: &Scene, direct: &[[f32; 3]], visibility: &[f32]) -> Surroundings {
+        let Self { points, terrain, spheres, bounces } = self;
+        let mut surroundings = Surroundings { terrain, spheres, turn: WedgeOperator::new(ORDER, AZIMUTHS).turn() };
+        surroundings.set_radiance(direct);
+        let g = &points.gbuffer;
+        let count = surroundings.point_count();
+        let side = surroundings.terrain.as_ref().map_or(0, |t| t.side);
+        // The texels gather on every other row and column, the rest interpolate between
+        // them: bounce light varies over several texels.
+        let on_lattice = |c: usize| c % 2 == 0 || c + 1 == side;
+        for _ in 1..bounces {
+            let mut gathered: Vec<Option<[f64; 3]>> = (0..count)
+                .into_par_iter()
+                .map(|i| {
+                    if i < side * side && !(on_lattice(i % side) && on_lattice(i / side)) {
+                        return None;
+                    }
+                    let (p, n) = (g.position[i].map(f64::from), unit_or_up(g.normal[i]));
+                    let [terrain, spheres] = surroundings.irradiance(p, n, g.object_at(i), Some(visibility[i]));
+                    Some(std::array::from_fn(|c| terrain[c] + spheres[c]))
+                })
+                .collect();
+            for i in 0..side * side {
+                if gathered[i].is_none() {
+                    let (c, r) = (i % side, i / side);
+                    let span = |v: usize| if on_lattice(v) { [v, v] } else { [v - 1, v + 1] };
+                    let corners = [span(c), span(r)];
+                    let mut e = [0.0; 3];
+                    for row in corners[1] {
+                        for column in corners[0] {
+                            let corner = gathered[row * side + column].expect("a lattice texel");
+                            (0..3).for_each(|k| e[k] += 0.25 * corner[k]);
+                        }
+                    }
+                    gathered[i] = Some(e);
+                }
+            }
+            let radiance: Vec<[f32; 3]> = (0..count)
+                .map(|i| {
+                    let (albedo, e) = (diffuse_albedo(scene, g, i), gathered[i].unwrap_or([0.0; 3]));
+                    std::array::from_fn(|c| direct[i][c] + albedo[c] * (e[c] / PI) as f32)
+                })
+                .collect();
+            surroundings.set_radiance(&radiance);
+        }
+        surroundings
+    }
+}
+
+/// The rectangle of the ground plane the grid covers: the frame's surface points and
+/// blockers, widened by half its size on each side.
+fn neighbourhood(frame: &Frame, surface: &[usize]) -> ([f64; 2], [f64; 2]) {
+    let mut min = [f64::INFINITY; 2];
+    let mut max = [f64::NEG_INFINITY; 2];
+    let mut include = |p: [f64; 3], r: f64| {
+        for a in 0..2 {
+            min[a] = min[a].min(p[a] - r);
+            max[a] = max[a].max(p[a] + r);
+        }
+    };
+    for &i in surface {
+        let p = frame.gbuffer.position[i].map(f64::from);
+        if p.iter().all(|v| v.is_finite()) {
+            include(p, 0.0);
+        }
+    }
+    for sphere in &frame.blockers {
+        include(sphere.center, sphere.radius);
+    }
+    let size = (0..2).map(|a| max[a] - min[a]).fold(1e-3, f64::max);
+    (min.map(|v| v - 0.5 * size), max.map(|v| v + 0.5 * size))
+}
+
+/// Each sphere's [`SphereLight::overlap`]: per object, the area of the union of its
+/// spheres' silhouettes over the sum of their areas, averaged over the three axes (each
+/// rasterised on a 64 x 64 grid); 1 for spheres of no object.
+fn set_overlaps(spheres: &mut [SphereLight]) {
+    const CELLS: usize = 64;
+    let mut by_object = BTreeMap::<u32, Vec<usize>>::new();
+    for (i, s) in spheres.iter().enumerate().filter(|(_, s)| s.object != 0) {
+        by_object.entry(s.object).or_default().push(i);
+    }
+    for members in by_object.values().filter(|m| m.len() > 1) {
+        let mut ratios = 0.0;
+        for axis in 0..3 {
+            let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
+            let lo = |a: usize| {
+                members.iter().map(|&i| spheres[i].centre[a] - spheres[i].radius).fold(f64::INFINITY, f64::min)
+            };
+            let hi = |a: usize| {
+                members.iter().map(|&i| spheres[i].centre[a] + spheres[i].radius).fold(f64::NEG_INFINITY, f64::max)
+            };
+            let (u0, v0) = (lo(u), lo(v));
+            let cell = (hi(u) - u0).max(hi(v) - v0).max(1e-12) / CELLS as f64;
+            let mut covered = vec![false; CELLS * CELLS];
+            let mut summed = 0usize;
+            for &i in members {
+                let s = &spheres[i];
+                for r in 0..CELLS {
+                    for c in 0..CELLS {
+                        let x = u0 + (c as f64 + 0.5) * cell - s.centre[u];
+                        let y = v0 + (r as f64 + 0.5) * cell - s.centre[v];
+                        if x * x + y * y <= s.radius * s.radius {
+                            covered[r * CELLS + c] = true;
+                            summed += 1;
+                        }
+                    }
+                }
+            }
+            let union = covered.iter().filter(|&&c| c).count();
+            ratios += if summed > 0 { union as f64 / summed as f64 } else { 1.0 };
+        }
+        for &i in members {
+            spheres[i].overlap = ratios / 3.0;
+        }
+    }
+}
+
+impl Surroundings {
+    fn point_count(&self) -> usize {
+        self.terrain.as_ref().map_or(0, |t| t.side * t.side) + self.spheres.len() * SPHERE_DIRECTIONS
+    }
+
+    /// Sets the radiance of the secondary points, in [`SurroundingsPlan::points`]' order;
+    /// a sphere's point under the terrain is left out (`None`).
+    fn set_radiance(&mut self, radiance: &[[f32; 3]]) {
+        let finite = |c: [f32; 3]| c.map(|v| if v.is_finite() { v.max(0.0) } else { 0.0 });
+        let mut next = 0;
+        if let Some(grid) = &mut self.terrain {
+            let texels = grid.side * grid.side;
+            grid.radiance = radiance[..texels].iter().map(|&c| finite(c)).collect();
+            next = texels;
+        }
+        let terrain = &self.terrain;
+        for sphere in &mut self.spheres {
+            for k in 0..SPHERE_DIRECTIONS {
+                let m = sphere_direction(k);
+                let p: [f64; 3] = std::array::from_fn(|a| sphere.centre[a] + sphere.radius * m[a]);
+                let buried = terrain.as_ref().is_some_and(|t| p[2] < t.height(p[0], p[1]));
+                sphere.radiance[k] = (!buried).then(|| finite(radiance[next + k]));
+            }
+            next += SPHERE_DIRECTIONS;
+        }
+    }
+
+    /// The bounce radiance incident at `p` with unit normal `n` (order-3 SH per colour
+    /// channel), from the terrain and from the blockers; `object`: the receiver's own
+    /// object, whose spheres it does not see.
+    fn incident(&self, p: [f64; 3], n: [f64; 3], object: u32) -> [Incident; 2] {
+        let mut terrain = [[0.0f64; COUNT]; CHANNELS];
+        if let Some(grid) = &self.terrain {
+            let mut slices = [[0.0f64; ORDER]; CHANNELS * AZIMUTHS];
+            grid.add_slices(p, &mut slices);
+            let mut by_channel = [[0.0f64; ORDER * AZIMUTHS]; CHANNELS];
+            for k in 0..AZIMUTHS {
+                for c in 0..CHANNELS {
+                    by_channel[c][k * ORDER..(k + 1) * ORDER].copy_from_slice(&slices[CHANNELS * k + c]);
+                }
+            }
+            for c in 0..CHANNELS {
+                self.turn.accumulate(&by_channel[c], &mut terrain[c]);
+            }
+        }
+        let mut blockers = [[0.0f64; COUNT]; CHANNELS];
+        let mut cap = [0.0f64; ORDER];
+        for sphere in &self.spheres {
+            if object != 0 && sphere.object == object {
+                continue;
+            }
+            let to: [f64; 3] = std::array::from_fn(|a| sphere.centre[a] - p[a]);
+            let distance = dot(to, to).sqrt();
+            if distance <= sphere.radius || dot(to, n) <= 0.0 {
+                continue;
+            }
+            let direction = to.map(|v| v / distance);
+            cap_log_zh(ORDER, 1.0, (sphere.radius / distance).asin(), &mut cap);
+            let mut rotated = [0.0f64; COUNT];
+            add_rotated_zonal(ORDER, &cap, sphere.overlap, direction, &mut rotated);
+            let [r, g, b] = sphere.radiance_towards(direction.map(|v| -v));
+            for (channel, radiance) in blockers.iter_mut().zip([r, g, b, 1.0]) {
+                for j in 0..COUNT {
+                    channel[j] += radiance * rotated[j];
+                }
+            }
+        }
+        [terrain, blockers]
+    }
+
+    /// The radiance of the surroundings along the ray from `p` in unit direction `d`,
+    /// split as the terrain's and the blockers': that of the nearest of the terrain and
+    /// the spheres (not those of `object`) it meets; black where it meets neither.
+    fn along(&self, p: [f64; 3], d: [f64; 3], object: u32) -> [[f64; 3]; 2] {
+        let mut nearest: Option<(f64, &SphereLight)> = None;
+        for sphere in self.spheres.iter().filter(|s| object == 0 || s.object != object) {
+            let to: [f64; 3] = std::array::from_fn(|k| sphere.centre[k] - p[k]);
+            let (along, squared) = (dot(to, d), dot(to, to));
+            let miss = squared - along * along - sphere.radius * sphere.radius;
+            if along <= 0.0 || miss > 0.0 || squared <= sphere.radius * sphere.radius {
+                continue;
+            }
+            let t = along - (-miss).sqrt();
+            if nearest.is_none_or(|(best, _)| t < best) {
+                nearest = Some((t, sphere));
+            }
+        }
+        let terrain = self.terrain.as_ref().and_then(|grid| grid.hit(p, d).map(|(q, t)| (grid, q, t)));
+        match (terrain, nearest) {
+            (Some((grid, q, t)), sphere) if sphere.is_none_or(|(s, _)| t <= s) => {
+                [grid.radiance_at(q[0], q[1]), [0.0; 3]]
+            }
+            (_, Some((t, sphere))) => {
+                let hit: [f64; 3] = std::array::from_fn(|k| p[k] + t * d[k] - sphere.centre[k]);
+                [[0.0; 3], sphere.radiance_towards(hit.map(|v| v / sphere.radius))]
+            }
+            _ => [[0.0; 3]; 2],
+        }
+    }
+
+    /// The bounce irradiance (RGB) at `p` with unit normal `n`, from the terrain and from
+    /// the blockers; `object`: the receiver's own object, whose spheres it does not see.
+    /// `visibility`: the direct light's own visibility of the receiver (the
+    /// `visibility` pass), which scales the bounce ([`leak_scale`]).
+    pub fn irradiance(&self, p: [f64; 3], n: [f64; 3], object: u32, visibility: Option<f32>) -> [[f64; 3]; 2] {
+        let e = self.incident(p, n, object).map(|incident| convolved(&incident, n, |l| COSINE[l]));
+        let scales = self.leak_scales(visibility, &e);
+        std::array::from_fn(|part| std::array::from_fn(|c| scales[part] * e[part][c]))
+    }
+
+    /// The [`leak_scale`] of the terrain's and of the blockers' parts of the irradiances
+    /// `e`: those the visibility pass covers, the height field and the blockers (the
+    /// ground plane is the kernel's unoccluded hemisphere, and its bounce is not scaled).
+    fn leak_scales(&self, visibility: Option<f32>, e: &[[f64; CHANNELS]; 2]) -> [f64; 2] {
+        let field = self.terrain.as_ref().is_some_and(|t| t.field.is_some());
+        let covered = if field { e[0][3] + e[1][3] } else { e[1][3] };
+        let scale = leak_scale(visibility, covered / PI);
+        [if field { scale } else { 1.0 }, scale]
+    }
+
+    /// The bounce light each pixel of `frame` reflects, by part: its diffuse albedo times
+    /// `E / pi`, plus, for a glossy material, its specular colour times the incident
+    /// radiance about the mirror direction, blurred by the Phong lobe of its exponent
+    /// (band `l` scaled by `exp(-l^2 / 2s)`, the lobe's ZH for large `s`); black on water
+    /// and the background.
+    ///
+    /// The incident radiance is gathered at every `stride`-th pixel of each row and column
+    /// and interpolated between them, each pixel reflecting it with its own normal (NS09,
+    /// Section 7: bounce light sub-sampled, shaded with full-resolution normals). A
+    /// neighbour counts only if it lies on the same object, faces the same way and lies
+    /// near the pixel's tangent plane (within `stride` pixel footprints); a pixel with no
+    /// such neighbour gathers for itself, so edges and silhouettes stay sharp.
+    ///
+    /// `visibility`: the frame's `visibility` pass, which scales each pixel's diffuse
+    /// bounce ([`leak_scale`]).
+    pub fn indirect(&self, scene: &Scene, frame: &Frame, stride: usize, visibility: Option<&[f32]>) -> IndirectParts {
+        let g = &frame.gbuffer;
+        let receivers: Vec<Option<Receiver>> = (0..g.material.len())
+            .into_par_iter()
+            .map(|i| Receiver::of(scene, frame, i, visibility.map(|v| v[i])))
+            .collect();
+        let gather = |r: &Receiver| self.incident(r.point.position, r.point.normal, r.point.object);
+        // World size of a pixel per unit of distance from the eye.
+        let footprint = frame.camera.as_ref().map(|c| c.sensor_width_mm / c.lens_mm / g.width as f64);
+        let (width, height) = (g.width, g.height);
+        let stride = if footprint.is_some() { stride.max(1) } else { 1 };
+        let (columns, rows) = ((width - 1).div_ceil(stride) + 1, (height - 1).div_ceil(stride) + 1);
+        let node_pixel = |gx: usize, gy: usize| (gy * stride).min(height - 1) * width + (gx * stride).min(width - 1);
+        let nodes: Vec<Option<[Incident; 2]>> = if stride > 1 {
+            (0..columns * rows)
+                .into_par_iter()
+                .map(|k| {
+                    let receiver = receivers[node_pixel(k % columns, k / columns)].as_ref();
+                    receiver.filter(|r| r.transmitted.is_none()).map(gather)
+                })
+                .collect()
+        } else {
+            Vec::new()
+        };
+        let (heightfield, blockers) = (0..width * height)
+            .into_par_iter()
+            .map(|i| {
+                let Some(r) = &receivers[i] else { return ([0.0; 3], [0.0; 3]) };
+                if r.transmitted.is_some() {
+                    let [terrain, spheres] = r.reflected(&[[[0.0; COUNT]; CHANNELS]; 2], self);
+                    return (terrain, spheres);
+                }
+                let interpolated = (stride > 1).then(|| {
+                    let (x, y) = (i % width, i / width);
+                    let (gx, gy) = (x / stride, y / stride);
+                    let scale = footprint.unwrap_or(0.0)
+                        * stride as f64
+                        * distance(r.point.position, r.point.view_origin).max(1e-9);
+                    let mut sum = [[[0.0f64; COUNT]; CHANNELS]; 2];
+                    let mut weights = 0.0;
+                    for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
+                        let (cx, cy) = ((gx + dx).min(columns - 1), (gy + dy).min(rows - 1));
+                        let k = node_pixel(cx, cy);
+                        let (Some(node), Some(neighbour)) = (&nodes[cy * columns + cx], &receivers[k]) else {
+                            continue;
+                        };
+                        let along = |c: usize, p: usize, last: usize| {
+                            let (lo, hi) = ((c * stride).min(last), ((c + 1) * stride).min(last));
+                            if hi > lo {
+                                (p - lo) as f64 / (hi - lo) as f64
+                            } else {
+                                0.0
+                            }
+                        };
+                        let (fx, fy) = (along(gx, x, width - 1), along(gy, y, height - 1));
+                        let bilinear = (if dx == 1 { fx } else { 1.0 - fx }) * (if dy == 1 { fy } else { 1.0 - fy });
+                        let w = bilinear * r.likeness(neighbour, scale);
+                        if w > 0.0 {
+                            for (part, from) in sum.iter_mut().zip(node) {
+                                for c in 0..CHANNELS {
+                                    for j in 0..COUNT {
+                                        part[c][j] += w * from[c][j];
+                                    }
+                                }
+                            }
+                            weights += w;
+                        }
+                    }
+                    (weights > 1e-3).then(|| sum.map(|part| part.map(|channel| channel.map(|v| v / weights))))
+                });
+                let incident = interpolated.flatten().unwrap_or_else(|| gather(r));
+                let [terrain, spheres] = r.reflected(&incident, self);
+                (terrain, spheres)
+            })
+            .unzip();
+        IndirectParts { heightfield, blockers }
+    }
+}
+
+/// A pixel that reflects bounce light, and how.
+struct Receiver {
+    point: SurfacePoint,
+    albedo: [f32; 3],
+    specular: [f32; 3],
+    /// The Phong exponent of a glossy material.
+    exponent: Option<f64>,
+    mirror: [f64; 3],
+    /// Water seen with Blender's colour passes: what its surface lets through of the
+    /// terrain below it, and the refracted direction.
+    transmitted: Option<([f32; 3], [f64; 3])>,
+    /// The direct light's visibility of the point ([`leak_scale`]).
+    visibility: Option<f32>,
+}
+
+/// Water's index of refraction, as the exporter's water material has it.
+const WATER_IOR: f64 = 1.33;
+
+/// A glossy lobe of exponent `s` reads the radiance traced along its mirror direction
+/// with weight `s / (s + SHARP_EXPONENT)`, the order-3 incident radiance blurred by the
+/// lobe with the rest: order 3 resolves nothing narrower than about 60 degrees.
+const SHARP_EXPONENT: f64 = 50.0;
+
+impl Receiver {
+    /// Pixel `i` of `frame`, `None` on the background, black materials and water without
+    /// colour passes (a mirror of its tint, the converted material).
+    fn of(scene: &Scene, frame: &Frame, i: usize, visibility: Option<f32>) -> Option<Self> {
+        let g = &frame.gbuffer;
+        let material = scene.materials.get(&g.material[i])?;
+        let point = super::frame::surface_at(g, i, None, frame);
+        let mirror = super::kernel::reflect_view(point.view_origin, point.position, point.normal);
+        let (albedo, specular) = match (material, g.colours_at(i)) {
+            (Material::Water { tint }, Some((_, fresnel))) => {
+                let through = std::array::from_fn(|c| (1.0 - fresnel[c]).clamp(0.0, 1.0) * tint[c]);
+                let refracted = refract(point.view_origin, point.position, point.normal)?;
+                let transmitted = Some((through, refracted));
+                let (albedo, specular) = ([0.0; 3], [0.0; 3]);
+                return Some(Self { point, albedo, specular, exponent: None, mirror, transmitted, visibility });
+            }
+            (Material::Water { .. }, None) => return None,
+            (_, Some(colours)) => colours,
+            (m, None) => m.pass_colours(),
+        };
+        let exponent = match material {
+            Material::Phong { exponent, .. } if specular != [0.0; 3] => Some(f64::from(*exponent)),
+            _ => None,
+        };
+        if albedo == [0.0; 3] && exponent.is_none() {
+            return None;
+        }
+        Some(Self { point, albedo, specular, exponent, mirror, transmitted: None, visibility })
+    }
+
+    /// How far `other`'s gathered radiance stands for this receiver's, in `[0, 1]`: 0
+    /// on another object or facing another way, falling off with the distance between
+    /// `other` and this receiver's tangent plane in units of `scale`.
+    fn likeness(&self, other: &Receiver, scale: f64) -> f64 {
+        let (a, b) = (&self.point, &other.point);
+        let facing = dot(a.normal, b.normal);
+        if a.object != b.object || facing < 0.9 {
+            return 0.0;
+        }
+        let offset: [f64; 3] = std::array::from_fn(|k| b.position[k] - a.position[k]);
+        let off_plane = dot(offset, a.normal).abs() / scale.max(1e-12);
+        ((facing - 0.9) / 0.1) / (1.0 + off_plane * off_plane)
+    }
+
+    /// The radiance this receiver sends towards the eye of the bounce light, by part:
+    /// `incident` gathered for it (terrain, blockers), and what it traces itself (the
+    /// mirror direction of a glossy lobe, the refracted ray of water).
+    fn reflected(&self, incident: &[Incident; 2], surroundings: &Surroundings) -> [[f32; 3]; 2] {
+        let point = &self.point;
+        if let Some((through, refracted)) = self.transmitted {
+            let [terrain, blockers] = surroundings.along(point.position, refracted, point.object);
+            let seen = |l: [f64; 3]| std::array::from_fn(|c| through[c] * l[c] as f32);
+            return [seen(terrain), seen(blockers)];
+        }
+        let traced = self.exponent.map(|s| {
+            let sharp = s / (s + SHARP_EXPONENT);
+            (sharp, surroundings.along(point.position, self.mirror, point.object))
+        });
+        let e = incident.map(|part| convolved(&part, point.normal, |l| COSINE[l]));
+        let scales = surroundings.leak_scales(self.visibility, &e);
+        std::array::from_fn(|part| {
+            let e = e[part].map(|v| scales[part] * v);
+            let glossy = match (self.exponent, traced) {
+                (Some(s), Some((sharp, along))) => {
+                    let blurred = convolved(&incident[part], self.mirror, |l| (-((l * l) as f64) / (2.0 * s)).exp());
+                    std::array::from_fn(|c| sharp * along[part][c] + (1.0 - sharp) * blurred[c])
+                }
+                _ => [0.0; 3],
+            };
+            std::array::from_fn(|c| self.albedo[c] * (e[c] / PI) as f32 + self.specular[c] * glossy[c] as f32)
+        })
+    }
+}
+
+/// The direction a view ray from `eye` through `p` takes into water of normal `n`
+/// (Snell's law, [`WATER_IOR`]); `None` for a ray that meets the surface from below.
+fn refract(eye: [f64; 3], p: [f64; 3], n: [f64; 3]) -> Option<[f64; 3]> {
+    let d: [f64; 3] = std::array::from_fn(|k| p[k] - eye[k]);
+    let length = dot(d, d).sqrt();
+    let v = d.map(|x| x / length.max(1e-300));
+    let cos_in = -dot(v, n);
+    if !(cos_in > 0.0) {
+        return None;
+    }
+    let eta = 1.0 / WATER_IOR;
+    let k = 1.0 - eta * eta * (1.0 - cos_in * cos_in);
+    let scale = eta * cos_in - k.sqrt();
+    Some(std::array::from_fn(|i| eta * v[i] + scale * n[i]))
+}
+
+/// What the bounce gathered over a receiver's covered share `occlusion` of its cosine
+/// lobe is scaled by, given the direct light's visibility of it (`visibility`, 1 where
+/// nothing covers it): `(1 - visibility) / occlusion`, at most 1. The log-SH visibility
+/// lets through part of the light its occluders block (their log depth is finite,
+/// paper 000 Eq. 2), so the covered share it darkens, `1 - visibility`, is smaller than
+/// the share the surroundings cover; scaling the bounce to it keeps a closed white
+/// furnace at most 1 (`tests/extremes.rs`), where adding the whole bounce to the light
+/// let through counted that share twice. The pass is weighted by the environment's
+/// light, and is 1 by convention where the environment is black (a Sun lamp under a
+/// black World): a visibility of 1 leaves the bounce unscaled.
+fn leak_scale(visibility: Option<f32>, occlusion: f64) -> f64 {
+    match visibility {
+        Some(v) if occlusion > 1e-6 && v < 1.0 => ((1.0 - f64::from(v)) / occlusion).clamp(0.0, 1.0),
+        _ => 1.0,
+    }
+}
+
+fn distance(a: [f64; 3], b: [f64; 3]) -> f64 {
+    let d: [f64; 3] = std::array::from_fn(|k| a[k] - b[k]);
+    dot(d, d).sqrt()
+}
+
+/// Incident radiance as SH of [`ORDER`], per [`CHANNELS`].
+type Incident = [[f64; COUNT]; CHANNELS];
+
+/// `sum_lm factor(l) U_lm y_lm(axis)` per channel, clamped at 0: with the clamped
+/// cosine's factors, the irradiance about `axis`.
+fn convolved(incident: &Incident, axis: [f64; 3], factor: impl Fn(usize) -> f64) -> [f64; CHANNELS] {
+    let mut y = [0.0f64; COUNT];
+    eval_basis(ORDER, axis, &mut y);
+    std::array::from_fn(|c| {
+        let mut sum = 0.0;
+        for l in 0..ORDER {
+            let f = factor(l);
+            for i in l * l..(l + 1) * (l + 1) {
+                sum += f * incident[c][i] * y[i];
+            }
+        }
+        sum.max(0.0)
+    })
+}
+
+/// A frame's bounce light per pixel, by where it comes from.
+pub struct IndirectParts {
+    /// From the terrain: the height field or the ground plane.
+    pub heightfield: Vec<[f32; 3]>,
+    pub blockers: Vec<[f32; 3]>,
+}
+
+impl IndirectParts {
+    /// The sum of the two parts per pixel.
+    pub fn total(&self) -> Vec<[f32; 3]> {
+        self.heightfield.iter().zip(&self.blockers).map(|(h, b)| [0, 1, 2].map(|c| h[c] + b[c])).collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A flat terrain of uniform radiance `radiance`, as a [`Surroundings`].
+    fn flat(radiance: f32, height: f64) -> Surroundings {
+        let side = 16;
+        let terrain = TerrainGrid {
+            min: [-10.0, -10.0],
+            max: [10.0, 10.0],
+            side,
+            field: None,
+            ground: height,
+            albedo: vec![[1.0; 3]; side * side],
+            radiance: vec![[radiance; 3]; side * side],
+            material: 1,
+        };
+        Surroundings { terrain: Some(terrain), spheres: Vec::new(), turn: WedgeOperator::new(ORDER, AZIMUTHS).turn() }
+    }
+
+    /// A bowl of uniform radiance 1 around receivers on its floor and walls: the gathered
+    /// irradiance against `pi` times the cosine-weighted fraction of rays that meet the
+    /// bowl, cast exactly ([`terrain_hit`], 4096 stratified rays).
+    #[test]
+    fn the_gather_over_a_bowl_matches_ray_casting() {
+        let side = 65;
+        let bowl = |x: f64, y: f64| 0.1 * (x * x + y * y).min(60.0);
+        let heights: Vec<f32> = (0..side * side)
+            .map(|i| {
+                let (c, r) = ((i % side) as f64, (i / side) as f64);
+                bowl(-8.0 + 16.0 * c / 64.0, -8.0 + 16.0 * r / 64.0) as f32
+            })
+            .collect();
+        let field = HeightField::new(heights, side, side, [-8.0, -8.0], [8.0, 8.0]).unwrap();
+        let grid_side = 64;
+        let terrain = TerrainGrid {
+            min: [-8.0, -8.0],
+            max: [8.0, 8.0],
+            side: grid_side,
+            field: Some(field.clone()),
+            ground: 0.0,
+            albedo: vec![[1.0; 3]; grid_side * grid_side],
+            radiance: vec![[1.0; 3]; grid_side * grid_side],
+            material: 1,
+        };
+        let surroundings = Surroundings {
+            terrain: Some(terrain),
+            spheres: Vec::new(),
+            turn: WedgeOperator::new(ORDER, AZIMUTHS).turn(),
+        };
+        for (x, y) in [(0.0, 0.0), (2.0, 1.0), (4.0, 0.0), (6.0, -2.0)] {
+            let p = [x, y, field.height_at(x, y)];
+            let (dx, dy) = (0.2 * x, 0.2 * y);
+            let length = (dx * dx + dy * dy + 1.0f64).sqrt();
+            let n = [-dx / length, -dy / length, 1.0 / length];
+            let [gathered, _] = surroundings.irradiance(p, n, 0, None);
+            let (e1, e2) = crate::scene::camera::frame_around(n);
+            let strata = 64;
+            let mut hits = 0usize;
+            for i in 0..strata * strata {
+                let u = ((i % strata) as f64 + 0.5) / strata as f64;
+                let v = ((i / strata) as f64 + 0.5) / strata as f64;
+                let (radius, phi) = (u.sqrt(), 2.0 * PI * v);
+                let w: [f64; 3] =
+                    std::array::from_fn(|k| radius * (phi.cos() * e1[k] + phi.sin() * e2[k]) + (1.0 - u).sqrt() * n[k]);
+                let lifted: [f64; 3] = std::array::from_fn(|k| p[k] + 1e-6 * n[k]);
+                hits += usize::from(terrain_hit(|x, y| field.height_at(x, y), lifted, w, 0.01, 64.0).is_some());
+            }
+            let exact = PI * hits as f64 / (strata * strata) as f64;
+            println!("bowl at ({x}, {y}): gathered {:.4}, ray cast {exact:.4}", gathered[0]);
+        }
+    }
+
+    /// Over an infinite plane of uniform radiance `L`, a receiver whose normal leans
+    /// `beta` from the zenith sees the plane over `(1 - cos beta) / 2` of its cosine
+    /// lobe: `E = pi L (1 - cos beta) / 2` (the closed form of a tilted plate over a
+    /// Lambertian ground). Order 3 holds it to the cosine's own truncation, a few percent.
+    #[test]
+    fn a_tilted_receiver_over_a_lit_plane_gets_its_closed_form() {
+        let radiance = 0.8;
+        let surroundings = flat(radiance as f32, 0.0);
+        for degrees in [0.0f64, 30.0, 60.0, 90.0, 120.0, 150.0, 180.0] {
+            let beta = degrees.to_radians();
+            let n = [beta.sin(), 0.0, beta.cos()];
+            let [terrain, _] = surroundings.irradiance([0.3, -0.2, 1.0], n, 0, None);
+            let exact = PI * radiance * (1.0 - beta.cos()) / 2.0;
+            let tolerance = 0.03 * PI * radiance + 0.02 * exact;
+            assert!((terrain[0] - exact).abs() <= tolerance, "{degrees} deg: {} against {exact}", terrain[0]);
+        }
+    }
+}
