@@ -64,6 +64,10 @@ const SPHERE_DIRECTIONS: usize = 14;
 /// Fewest and most texels per side of the terrain's grid (`--bounce-grid`).
 pub const MIN_BOUNCE_GRID: usize = 8;
 pub const MAX_BOUNCE_GRID: usize = 512;
+/// Most blocker spheres that reflect light, the largest: each is 14 points to shade and a
+/// cap to gather at every receiver, and a particle system's thousands of small spheres
+/// reflect little (they still shadow).
+pub const MAX_SPHERE_LIGHTS: usize = 256;
 /// Most pixels between gathers (`--bounce-stride`).
 pub const MAX_BOUNCE_STRIDE: usize = 16;
 
@@ -432,19 +436,30 @@ impl SurroundingsPlan {
             grid
         });
 
-        let mut spheres: Vec<SphereLight> = Vec::with_capacity(frame.blockers.len());
-        for sphere in frame.blockers.iter().filter(|s| s.radius > 0.0) {
-            let of_object = |i: &usize| sphere.object != 0 && g.object_at(*i) == sphere.object;
-            spheres.push(SphereLight {
+        // Each object's most common material, in one pass over the pixels.
+        let mut materials = BTreeMap::<u32, BTreeMap<u32, usize>>::new();
+        for &i in surface.iter().filter(|&&i| g.object_at(i) != 0) {
+            *materials.entry(g.object_at(i)).or_default().entry(g.material[i]).or_default() += 1;
+        }
+        let material_of = |object: u32| {
+            let counts = materials.get(&object).filter(|_| object != 0);
+            counts.and_then(|c| c.iter().max_by_key(|&(_, n)| n).map(|(&m, _)| m)).unwrap_or(fallback_material)
+        };
+        let mut largest: Vec<&crate::scene::Sphere> = frame.blockers.iter().filter(|s| s.radius > 0.0).collect();
+        largest.sort_by(|a, b| b.radius.total_cmp(&a.radius));
+        largest.truncate(MAX_SPHERE_LIGHTS);
+        let mut spheres: Vec<SphereLight> = largest
+            .into_iter()
+            .map(|sphere| SphereLight {
                 centre: sphere.center,
                 radius: sphere.radius,
                 object: sphere.object,
                 albedo: albedos.of_object(sphere.object),
-                material: most_common(&mut surface.iter().copied().filter(of_object)),
+                material: material_of(sphere.object),
                 radiance: [None; SPHERE_DIRECTIONS],
                 overlap: 1.0,
-            });
-        }
+            })
+            .collect();
         set_overlaps(&mut spheres);
         if terrain.is_none() && spheres.is_empty() {
             return Ok(None);
@@ -572,25 +587,31 @@ impl SurroundingsPlan {
     }
 }
 
-/// The rectangle of the ground plane the grid covers: the frame's surface points and
-/// blockers, widened by half its size on each side.
+/// The rectangle of the ground plane the grid covers: the middle 96 % of the frame's
+/// surface points along each axis (a plane seen out to the horizon would stretch the
+/// grid over kilometres) and the blockers, widened by half its size on each side.
 fn neighbourhood(frame: &Frame, surface: &[usize]) -> ([f64; 2], [f64; 2]) {
     let mut min = [f64::INFINITY; 2];
     let mut max = [f64::NEG_INFINITY; 2];
-    let mut include = |p: [f64; 3], r: f64| {
-        for a in 0..2 {
-            min[a] = min[a].min(p[a] - r);
-            max[a] = max[a].max(p[a] + r);
+    for a in 0..2 {
+        let mut values: Vec<f64> =
+            surface.iter().map(|&i| f64::from(frame.gbuffer.position[i][a])).filter(|v| v.is_finite()).collect();
+        if values.is_empty() {
+            continue;
         }
-    };
-    for &i in surface {
-        let p = frame.gbuffer.position[i].map(f64::from);
-        if p.iter().all(|v| v.is_finite()) {
-            include(p, 0.0);
-        }
+        let last = values.len() - 1;
+        let (low, high) = (last / 50, last - last / 50);
+        min[a] = *values.select_nth_unstable_by(low, f64::total_cmp).1;
+        max[a] = *values.select_nth_unstable_by(high, f64::total_cmp).1;
     }
     for sphere in &frame.blockers {
-        include(sphere.center, sphere.radius);
+        for a in 0..2 {
+            min[a] = min[a].min(sphere.center[a] - sphere.radius);
+            max[a] = max[a].max(sphere.center[a] + sphere.radius);
+        }
+    }
+    if !(0..2).all(|a| min[a].is_finite() && max[a].is_finite()) {
+        return ([-1.0; 2], [1.0; 2]);
     }
     let size = (0..2).map(|a| max[a] - min[a]).fold(1e-3, f64::max);
     (min.map(|v| v - 0.5 * size), max.map(|v| v + 0.5 * size))
@@ -694,7 +715,9 @@ impl Surroundings {
             }
             let to: [f64; 3] = std::array::from_fn(|a| sphere.centre[a] - p[a]);
             let distance = dot(to, to).sqrt();
-            if distance <= sphere.radius || dot(to, n) <= 0.0 {
+            // A cap under 1e-4 of the sphere of directions (radius under a hundredth of its
+            // distance) reflects less than that share of its radiance.
+            if distance <= sphere.radius || dot(to, n) <= 0.0 || sphere.radius < 0.01 * distance {
                 continue;
             }
             let direction = to.map(|v| v / distance);
