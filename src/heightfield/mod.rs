@@ -163,6 +163,17 @@ impl HeightField {
     pub fn height_at(&self, x: f64, y: f64) -> f64 {
         bilinear(&self.heights, self.columns, self.rows, self.min, self.max, x, y)
     }
+
+    /// Unit upward normal of the surface at world `(x, y)`, from central differences of
+    /// [`Self::height_at`] one sample spacing apart (+Z along an axis with one sample).
+    pub fn normal_at(&self, x: f64, y: f64) -> [f64; 3] {
+        let spacing = self.spacing();
+        let (hx, hy) = (spacing[0].max(1e-9), spacing[1].max(1e-9));
+        let dx = (self.height_at(x + hx, y) - self.height_at(x - hx, y)) / (2.0 * hx);
+        let dy = (self.height_at(x, y + hy) - self.height_at(x, y - hy)) / (2.0 * hy);
+        let length = (dx * dx + dy * dy + 1.0).sqrt();
+        [-dx / length, -dy / length, 1.0 / length]
+    }
 }
 
 /// Continuous grid coordinate of world coordinate `v` on an axis with `n` samples

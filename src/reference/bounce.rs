@@ -18,7 +18,7 @@ use super::Context;
 use crate::logsh::{own_sphere_holds, Lobe};
 use crate::reference::LobeTerm;
 use crate::scene::camera::{dot, frame_around};
-use crate::shade::bounce::{terrain_hit, SurfaceAlbedos};
+use crate::shade::bounce::{ray_hits_sphere, terrain_hit, SurfaceAlbedos};
 use crate::shade::kernel::above_ground;
 use std::f64::consts::TAU;
 
@@ -100,12 +100,7 @@ impl Context<'_> {
             if own && (own_sphere_holds(p, sphere.center, sphere.radius) || dot(to, n) <= 0.0) {
                 continue;
             }
-            let (along, squared) = (dot(to, w), dot(to, to));
-            let miss = squared - along * along - sphere.radius * sphere.radius;
-            if miss > 0.0 || squared <= sphere.radius * sphere.radius {
-                continue;
-            }
-            let t = along - (-miss).sqrt();
+            let Some(t) = ray_hits_sphere(p, w, sphere.center, sphere.radius) else { continue };
             let point: [f64; 3] = std::array::from_fn(|k| p[k] + t * w[k]);
             let normal = std::array::from_fn(|k| (point[k] - sphere.center[k]) / sphere.radius);
             take(t, Hit { point, normal, object: sphere.object, albedo: albedos.of_object(sphere.object) });
@@ -115,12 +110,7 @@ impl Context<'_> {
             let step = 0.25 * spacing[0].max(spacing[1]).max(1e-6);
             let size = (0..2).map(|a| field.max()[a] - field.min()[a]).fold(0.0, f64::max);
             if let Some((point, t)) = terrain_hit(|x, y| field.height_at(x, y), p, w, step, 4.0 * size) {
-                let (hx, hy) = (spacing[0].max(1e-9), spacing[1].max(1e-9));
-                let (x, y) = (point[0], point[1]);
-                let dx = (field.height_at(x + hx, y) - field.height_at(x - hx, y)) / (2.0 * hx);
-                let dy = (field.height_at(x, y + hy) - field.height_at(x, y - hy)) / (2.0 * hy);
-                let length = (dx * dx + dy * dy + 1.0).sqrt();
-                let normal = [-dx / length, -dy / length, 1.0 / length];
+                let normal = field.normal_at(point[0], point[1]);
                 take(t, Hit { point, normal, object: 0, albedo: albedos.terrain });
             }
         } else if let Some(ground) = self.occluders.ground.filter(|&z| above_ground(p, z) && w[2] < 0.0) {

@@ -282,7 +282,8 @@ pub fn render_reference(
     };
     let albedos = (options.bounces > 0).then(|| {
         let ground = frame.ground;
-        crate::shade::bounce::SurfaceAlbedos::of(scene, frame, |p| {
+        crate::shade::bounce::SurfaceAlbedos::of(scene, frame, |i| {
+            let p = frame.gbuffer.position[i].map(f64::from);
             let height = field.as_ref().map(|f| f.height_at(p[0], p[1])).or(ground);
             height.is_some_and(|h| (p[2] - h).abs() <= 1e-3 * (1.0 + p[2].abs()))
         })

@@ -127,13 +127,7 @@ impl TerrainGrid {
     }
 
     fn normal_at(&self, x: f64, y: f64) -> [f64; 3] {
-        let Some(field) = &self.field else { return [0.0, 0.0, 1.0] };
-        let spacing = field.spacing();
-        let (hx, hy) = (spacing[0].max(1e-9), spacing[1].max(1e-9));
-        let dx = (field.height_at(x + hx, y) - field.height_at(x - hx, y)) / (2.0 * hx);
-        let dy = (field.height_at(x, y + hy) - field.height_at(x, y - hy)) / (2.0 * hy);
-        let length = (dx * dx + dy * dy + 1.0).sqrt();
-        [-dx / length, -dy / length, 1.0 / length]
+        self.field.as_ref().map_or([0.0, 0.0, 1.0], |field| field.normal_at(x, y))
     }
 
     /// Whether `p` lies on the terrain (to a hundredth of a texel, or f32 rounding).
@@ -243,6 +237,16 @@ pub fn terrain_hit(
     None
 }
 
+/// How far along the ray from `p` in unit direction `d` it enters the sphere
+/// `(centre, radius)`; `None` where it misses, where the sphere is behind `p`, and where
+/// `p` lies inside it.
+pub fn ray_hits_sphere(p: [f64; 3], d: [f64; 3], centre: [f64; 3], radius: f64) -> Option<f64> {
+    let to: [f64; 3] = std::array::from_fn(|k| centre[k] - p[k]);
+    let (along, squared) = (dot(to, d), dot(to, to));
+    let miss = squared - along * along - radius * radius;
+    (along > 0.0 && miss <= 0.0 && squared > radius * radius).then(|| along - (-miss).sqrt())
+}
+
 /// Adds `radiance` times the NLP band between two cumulative integrals (Eq. 12's
 /// `u(t_i) (v(w_i) - v(w_{i-1}))`).
 fn add_band(slices: &mut [[f64; ORDER]], radiance: [f64; CHANNELS], below: &[f64; ORDER], above: &[f64; ORDER]) {
@@ -341,9 +345,9 @@ pub struct SurfaceAlbedos {
 }
 
 impl SurfaceAlbedos {
-    /// The albedos of `frame`'s pixels; `on_terrain(p)` tells a terrain pixel by its
-    /// position.
-    pub fn of(scene: &Scene, frame: &Frame, on_terrain: impl Fn([f64; 3]) -> bool) -> Self {
+    /// The albedos of `frame`'s pixels; `on_terrain(i)` tells whether pixel `i` lies on
+    /// the terrain.
+    pub fn of(scene: &Scene, frame: &Frame, on_terrain: impl Fn(usize) -> bool) -> Self {
         let g = &frame.gbuffer;
         let mut sums = BTreeMap::<u32, ([f64; 3], usize)>::new();
         let (mut terrain, mut all) = (([0.0f64; 3], 0usize), ([0.0f64; 3], 0usize));
@@ -357,7 +361,7 @@ impl SurfaceAlbedos {
             }
             let a = diffuse_albedo(scene, g, i);
             add(&mut all, a);
-            if on_terrain(g.position[i].map(f64::from)) {
+            if on_terrain(i) {
                 add(&mut terrain, a);
             }
             if g.object_at(i) != 0 {
@@ -415,11 +419,15 @@ impl SurroundingsPlan {
             radiance: vec![[0.0; 3]; side * side],
             material: fallback_material,
         });
-        let on_terrain = |p: [f64; 3]| terrain.as_ref().is_some_and(|grid| grid.holds(p));
-        let albedos = SurfaceAlbedos::of(scene, frame, on_terrain);
+        let mut on_terrain = vec![false; g.material.len()];
+        if let Some(grid) = &terrain {
+            for &i in &surface {
+                on_terrain[i] = grid.holds(g.position[i].map(f64::from));
+            }
+        }
+        let albedos = SurfaceAlbedos::of(scene, frame, |i| on_terrain[i]);
         let terrain = terrain.map(|mut grid| {
-            let on_grid: Vec<usize> =
-                surface.iter().copied().filter(|&i| grid.holds(g.position[i].map(f64::from))).collect();
+            let on_grid: Vec<usize> = surface.iter().copied().filter(|&i| on_terrain[i]).collect();
             grid.material = most_common(&mut on_grid.iter().copied());
             let mut sums = vec![([0.0f64; 3], 0usize); side * side];
             for &i in &on_grid {
@@ -740,13 +748,7 @@ impl Surroundings {
     fn along(&self, p: [f64; 3], d: [f64; 3], object: u32) -> [[f64; 3]; 2] {
         let mut nearest: Option<(f64, &SphereLight)> = None;
         for sphere in self.spheres.iter().filter(|s| object == 0 || s.object != object) {
-            let to: [f64; 3] = std::array::from_fn(|k| sphere.centre[k] - p[k]);
-            let (along, squared) = (dot(to, d), dot(to, to));
-            let miss = squared - along * along - sphere.radius * sphere.radius;
-            if along <= 0.0 || miss > 0.0 || squared <= sphere.radius * sphere.radius {
-                continue;
-            }
-            let t = along - (-miss).sqrt();
+            let Some(t) = ray_hits_sphere(p, d, sphere.centre, sphere.radius) else { continue };
             if nearest.is_none_or(|(best, _)| t < best) {
                 nearest = Some((t, sphere));
             }
@@ -1057,6 +1059,7 @@ fn convolved_with(incident: &Incident, y: &[f64; COUNT], factor: impl Fn(usize) 
 }
 
 /// A frame's bounce light per pixel, by where it comes from.
+#[derive(Clone, Debug)]
 pub struct IndirectParts {
     /// From the terrain: the height field or the ground plane.
     pub heightfield: Vec<[f32; 3]>,

@@ -7,6 +7,7 @@ use crate::scene::exr_zip::Target;
 use crate::scene::output::{OutputChannel, SampleType};
 use crate::scene::{LightSource, SceneError};
 use crate::sh::{coefficient_count, MAX_ORDER, MIN_ORDER};
+use crate::shade::bounce::IndirectParts;
 use crate::shade::glossy::SharpLobe;
 use crate::shade::kernel::{GlossyTransfer, PointTransfer};
 use crate::shade::Tint;
@@ -273,7 +274,7 @@ pub struct TransferFrame {
     /// The render's bounce light from the terrain and from the blockers
     /// (`indirect_heightfield`, `indirect_blockers`), which a relight keeps as rendered;
     /// `None` in a frame written before bounce light, or while one is being shaded.
-    pub bounce: Option<[Vec<[f32; 3]>; 2]>,
+    pub bounce: Option<IndirectParts>,
     /// The G-buffer's world position and normal (`P`, `N`), passed through (shared with
     /// the passes relit from it).
     pub position: std::sync::Arc<[[f32; 3]]>,
@@ -692,7 +693,7 @@ impl TransferFrame {
             (horizon_sectors > 0).then(|| sized(spare.horizons.unwrap_or_default(), n * horizon_sectors));
         let bounce_names = ["indirect_heightfield.", "indirect_blockers."];
         let mut bounce = channels.has("indirect_heightfield.R").then(|| {
-            let [heightfield, blockers] = spare.bounce.unwrap_or_default();
+            let [heightfield, blockers] = spare.bounce.map(|b| [b.heightfield, b.blockers]).unwrap_or_default();
             [sized(heightfield, n), sized(blockers, n)]
         });
         let (position_values, normal_values) = (
@@ -857,7 +858,7 @@ impl TransferFrame {
             glossy_weight,
             alpha,
             horizons,
-            bounce,
+            bounce: bounce.map(|[heightfield, blockers]| IndirectParts { heightfield, blockers }),
             position,
             normal,
         })

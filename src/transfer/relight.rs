@@ -7,7 +7,6 @@ use crate::scene::light::{equirectangular_to_direction, file_crc, lookup_coordin
 use crate::scene::{EnvironmentMap, Light, LightSource, SceneError, SunLight};
 use crate::sh::basis::funk_hecke_factor;
 use crate::sh::{coefficient_count, eval_basis, MAX_COEFFICIENTS};
-use crate::shade::bounce::IndirectParts;
 use crate::shade::compositing::ShadedPasses;
 use crate::shade::glossy::{MapLevels, Prefiltered};
 use crate::shade::kernel::{glossy_map, occlusion_ratio, visibility_ratio};
@@ -484,8 +483,8 @@ unsafe fn relight_by(
     };
     // The render's bounce light, kept as rendered (README, "Bounce light": what turning
     // the light does to it).
-    if let Some([heightfield, blockers]) = &frame.bounce {
-        passes.add_indirect(IndirectParts { heightfield: heightfield.clone(), blockers: blockers.clone() });
+    if let Some(bounce) = &frame.bounce {
+        passes.add_indirect(bounce.clone());
     }
     passes
 }

@@ -44,6 +44,7 @@
 
 use crate::scene::SunLight;
 use crate::scene::ViewTransform;
+use crate::shade::bounce::IndirectParts;
 use crate::transfer::{RelightLight, RelightOptions, SunLampFrame, SunLampTurn, TransferFrame};
 use anyhow::{anyhow, Context, Result};
 use std::borrow::Cow;
@@ -562,6 +563,8 @@ fn frame_bodies(
     view_standard: Option<String>,
 ) -> FrameBodies {
     let (shown, [width, height], stride) = preview_pixels(frame.width, frame.height, size);
+    // The render's bounce light, which a relight keeps as rendered.
+    let indirect = frame.bounce.as_ref().map(IndirectParts::total);
     // A layer at the shown pixels: itself where they are all of them, in order.
     let at_shown = |values, components| match stride {
         1 => Cow::Borrowed(values),
@@ -590,15 +593,8 @@ fn frame_bodies(
     ] {
         put(name, 3, &at_shown(values.as_flattened(), 3));
     }
-    // The render's bounce light, which a relight keeps as rendered.
-    if let Some([heightfield, blockers]) = &frame.bounce {
-        let total: Vec<[f32; 3]> =
-            heightfield.iter().zip(blockers).map(|(h, b)| [0, 1, 2].map(|c| h[c] + b[c])).collect();
-        let shown_total: Vec<f32> = match stride {
-            1 => total.as_flattened().to_vec(),
-            _ => at_pixels(&shown, total.as_flattened(), 3).collect(),
-        };
-        put("indirect", 3, &shown_total);
+    if let Some(indirect) = &indirect {
+        put("indirect", 3, &at_shown(indirect.as_flattened(), 3));
     }
     put("glossy_lobe", 1, &at_shown(&frame.glossy_lobe, 1));
     put("glossy_weight", 2, &at_shown(frame.glossy_weight.as_flattened(), 2));
