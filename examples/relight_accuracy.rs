@@ -142,7 +142,7 @@ fn main() -> anyhow::Result<()> {
         let turned_frame = turned.frame(number)?;
         // What the scene's loading spent on the light the cold shade uses.
         let started = Instant::now();
-        if let LightSource::Environment { file, rotation, turn, .. } = turned.light_source(number) {
+        if let LightSource::Environment { file, rotation, turn, .. } = turned.light_source(number)? {
             std::hint::black_box(EnvironmentMap::read(&file)?.oriented(rotation, turn));
         }
         let shade_light = started.elapsed().as_secs_f64();

@@ -63,7 +63,9 @@ fn disk_blocked(disk: ptr<function, Disk>, p: vec3<f32>, n: vec3<f32>, object: u
             blocked[q] = covered(-(n.x * (*disk).x[q] + n.y * (*disk).y[q] + n.z * (*disk).z[q]), two_patches);
         }
     }
-    if ground && GROUND && p.z > GROUND_HEIGHT + 1e-4 * (1.0 + abs(GROUND_HEIGHT)) {
+    // The ground hides nothing of a lamp above it (sun.rs, ground_counts).
+    let lamp_above = reach < 1.0e38 && p.z + axis.z * reach > GROUND_HEIGHT;
+    if ground && GROUND && p.z > GROUND_HEIGHT + 1e-4 * (1.0 + abs(GROUND_HEIGHT)) && !lamp_above {
         for (var q = 0u; q < DISK_QUADS; q++) {
             blocked[q] = max(blocked[q], covered(-(*disk).z[q], two_patches));
         }
@@ -75,11 +77,13 @@ fn disk_blocked(disk: ptr<function, Disk>, p: vec3<f32>, n: vec3<f32>, object: u
         let sin_h = sin(horizon);
         let cos_h = cos(horizon);
         for (var q = 0u; q < DISK_QUADS; q++) {
-            // x = horizon - elevation, in [-pi/2, pi]: past pi/2 it is deep inside.
+            // x = horizon - elevation, in [-pi, pi] (a lamp's horizon may lie below the
+            // horizontal): past pi/2 either way it is deep inside or far outside.
             let sin_e = (*disk).z[q];
             let cos_e = sqrt(max(1.0 - sin_e * sin_e, vec4<f32>(0.0)));
             let cos_x = cos_h * cos_e + sin_h * sin_e;
-            let share = select(covered(sin_h * cos_e - cos_h * sin_e, two_patches), vec4<f32>(1.0), cos_x < vec4<f32>(0.0));
+            let beyond = select(vec4<f32>(0.0), vec4<f32>(1.0), vec4<f32>(sin_h) > sin_e);
+            let share = select(covered(sin_h * cos_e - cos_h * sin_e, two_patches), beyond, cos_x < vec4<f32>(0.0));
             blocked[q] = max(blocked[q], share);
         }
     }

@@ -153,6 +153,10 @@ fn step_ceilings(above: f32, receiver: ptr<function, array<f32, LEVELS>>) -> arr
 // receiver terms f_L(x) of SN08 Eq. 2 per level (pyramid.rs, horizon_elevations).
 fn horizon(x: f32, y: f32, above: f32, dir: vec2<f32>, reach: f32, receiver: ptr<function, array<f32, LEVELS>>, ceilings: ptr<function, array<f32, STEP_ARRAY>>) -> f32 {
     let t_far = far_distance(x, y, dir);
+    // The lowest horizon (pyramid.rs, lowest_horizon): 0 unbounded, none within a lamp's
+    // reach. A sun's or the environment's is 3e38, times the horizontal part of its axis
+    // (above 1e-9), so at least 3e29; a lamp's is its distance.
+    let floor_tan = select(0.0, -3.0e38, reach < 1.0e20);
     var max_tan = -3.0e38;
     var omega: array<f32, STEP_ARRAY>;
     var m = 0u;
@@ -161,7 +165,7 @@ fn horizon(x: f32, y: f32, above: f32, dir: vec2<f32>, reach: f32, receiver: ptr
         if step.distance > reach {
             break;
         }
-        if !BSPLINE_SCALE_MAX && max(max_tan, 0.0) >= (*ceilings)[s] {
+        if !BSPLINE_SCALE_MAX && max(max_tan, floor_tan) >= (*ceilings)[s] {
             break;
         }
         let q = sample_level(step.level, x + step.distance * dir.x, y + step.distance * dir.y);
@@ -180,7 +184,7 @@ fn horizon(x: f32, y: f32, above: f32, dir: vec2<f32>, reach: f32, receiver: ptr
     if BSPLINE_SCALE_MAX {
         elevation = bspline_max(&omega, m);
     }
-    return max(elevation, 0.0);
+    return max(elevation, atan(floor_tan));
 }
 
 // NLP coefficients of log(eps) below elevation sigma (slice.rs, nlp_slice; Eq. 15-16).

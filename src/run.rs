@@ -281,7 +281,7 @@ pub fn render(args: &crate::cli::RenderArgs) -> Result<()> {
         let dir = std::path::absolute(&scene.dir).unwrap_or_else(|_| scene.dir.clone());
         let recorded = serde_json::to_string(&(
             &dir,
-            scene.light_source(scene.default_frame()),
+            scene.light_source(scene.default_frame())?,
             scene.view.absolute_spec(&scene.dir),
         ));
         if let Err(e) = recorded {

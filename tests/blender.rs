@@ -1002,3 +1002,90 @@ fn water_reflects_with_fresnel() {
     assert!(high > 0.3 && high - low > 0.2, "the view angles span Fresnel's rise: {low:.3} to {high:.3}");
     assert!(worst < 1.0, "the water's Glossy Color is {worst} times the tolerance from Fresnel's reflectance");
 }
+
+/// A terrain that moves (a Wave modifier, and a keyed drop), a keyed Point lamp and a keyed World Strength,
+/// exported over two frames: one height map per frame, and a frame file per frame with
+/// its lamp and World; the frames differ as Blender's do, and logsh renders both. The
+/// first frame's map given to the second frame is refused as not its terrain. A Sky
+/// Texture World that changes stops the export.
+#[test]
+fn moving_terrain_lamps_and_world_export_per_frame() {
+    let Some(python) = bpy_python() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let blend = dir.path().join("moving.blend");
+    let setup = "bpy.ops.mesh.primitive_grid_add(x_subdivisions=80, y_subdivisions=80, size=8); \
+         sea = bpy.context.object; sea.name = 'Sea'; sea['logsh_heightfield'] = True; \
+         wave = sea.modifiers.new('Wave', 'WAVE'); wave.height = 0.4; wave.width = 1.2; wave.speed = 0.6; \
+         wave.use_normal = False; sea.keyframe_insert('location', frame=1); sea.location = (0, 0, -1); \
+         sea.keyframe_insert('location', frame=2); \
+         bpy.ops.object.camera_add(location=(0, -9, 6), rotation=(math.radians(55), 0, 0)); \
+         bpy.context.scene.camera = bpy.context.object; \
+         bpy.ops.object.light_add(type='POINT', location=(-1, 0, 1)); lamp = bpy.context.object; \
+         lamp.name = 'Lantern'; lamp.data.energy = 200; lamp.keyframe_insert('location', frame=1); \
+         lamp.location = (1.5, 0.5, 1.2); lamp.keyframe_insert('location', frame=2); \
+         w = bpy.data.worlds.new('World'); bpy.context.scene.world = w; w.use_nodes = True; \
+         bg = w.node_tree.nodes['Background']; bg.inputs['Color'].default_value = (0.2, 0.3, 0.5, 1); \
+         bg.inputs['Strength'].default_value = 1.0; bg.inputs['Strength'].keyframe_insert('default_value', frame=1); \
+         bg.inputs['Strength'].default_value = 0.5; bg.inputs['Strength'].keyframe_insert('default_value', frame=2); \
+         bpy.context.scene.frame_start = 1; bpy.context.scene.frame_end = 2";
+    make_blend(&python, &blend, setup);
+    let out = dir.path().join("scene");
+    let args = [Path::new("--blend"), &blend, Path::new("--out"), &out, Path::new("--resolution"), Path::new("48x27")];
+    let output = run_python(&python, "blender_scripts/export_scene.py", &args);
+    assert_ok(&output, "exporting a moving terrain, lamp and World");
+    let log = String::from_utf8_lossy(&output.stdout);
+    assert!(log.contains("height field \"Sea\" moves within frames 1-2"), "{log}");
+
+    let scene = Scene::load(&out).unwrap();
+    assert_eq!(scene.heightfield.as_ref().unwrap().heights.0, "heightmap.####.exr");
+    assert!(scene.per_frame.is_some());
+    let (one, two) = (scene.frame(1).unwrap(), scene.frame(2).unwrap());
+    let (map_one, map_two) = (one.height_map.as_ref().unwrap(), two.height_map.as_ref().unwrap());
+    let moved = map_one.heights.iter().zip(&map_two.heights).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
+    assert!(moved > 0.1, "the two frames' maps differ by at most {moved}");
+    assert_eq!((one.points.len(), two.points.len()), (1, 1));
+    assert!((one.points[0].position[0] + 1.0).abs() < 1e-5, "{:?}", one.points[0]);
+    assert!((two.points[0].position[0] - 1.5).abs() < 1e-5, "{:?}", two.points[0]);
+    let constant = |f: &logsh::scene::Frame| match *f.light {
+        logsh::scene::Light::Constant(c) => c,
+        ref other => panic!("a constant World, not {other:?}"),
+    };
+    assert!((constant(&one)[2] - 0.5).abs() < 1e-5 && (constant(&two)[2] - 0.25).abs() < 1e-5);
+
+    let rendered = dir.path().join("rendered");
+    let output = Command::cargo_bin("logsh")
+        .unwrap()
+        .args(["render", "--device", "cpu", "--frames", "1-2", "--out"])
+        .arg(&rendered)
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert_ok(&output, "logsh render of the moving scene");
+
+    // Frame 1's map as frame 2's: refused, naming both files.
+    std::fs::copy(out.join("heightmap.0001.exr"), out.join("heightmap.0002.exr")).unwrap();
+    let text = match scene.frame(2) {
+        Ok(_) => panic!("frame 1's map was taken for frame 2's terrain"),
+        Err(e) => e.to_string(),
+    };
+    assert!(text.contains("gbuffer.0002.exr") && text.contains("not this frame's terrain"), "{text}");
+
+    // A World logsh bakes (a Sky Texture) that changes cannot be followed.
+    let blend = dir.path().join("sky.blend");
+    make_blend(
+        &python,
+        &blend,
+        &format!(
+            "{setup}; sky = w.node_tree.nodes.new('ShaderNodeTexSky'); \
+             w.node_tree.links.new(sky.outputs['Color'], bg.inputs['Color'])"
+        ),
+    );
+    let refused = dir.path().join("refused");
+    let args =
+        [Path::new("--blend"), &blend, Path::new("--out"), &refused, Path::new("--resolution"), Path::new("16x9")];
+    let output = run_python(&python, "blender_scripts/export_scene.py", &args);
+    assert_eq!(output.status.code(), Some(1));
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(stderr.contains("the World changes within frames 1-2"), "{stderr}");
+    assert!(!refused.exists());
+}

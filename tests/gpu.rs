@@ -519,8 +519,8 @@ fn ground_plane_matches() {
 
 /// Point lamps on both executors, over the small dunes (height field, blockers, Phong,
 /// water) and the `cones` sample (ground plane, metal cone): a Soft Falloff lamp low over
-/// the terrain (its horizon cut at the lamp's distance), a sphere lamp high above, and one
-/// of radius 0 (the narrowest disk).
+/// the terrain (its horizon cut at the lamp's distance), a sphere lamp high above, one
+/// of radius 0 (the narrowest disk), and one low among the receivers.
 #[test]
 fn point_lamps_match() {
     let Some(gpu) = gpu() else { return };
@@ -549,6 +549,13 @@ fn point_lamps_match() {
         };
         // Powers that light the ground about as much as the sky does.
         frame.points = vec![lamp(0.3, 0.05, 1.0, true), lamp(3.0, 0.1, 100.0, false), lamp(1.0, 0.0, 10.0, true)];
+        // And one low among the receivers, below the horizontal of those above it, whose
+        // horizons are marched below the horizontal too.
+        let low_lamp = logsh::scene::PointLight {
+            position: [middle[0], middle[1], low[2] + 0.3 * (high[2] - low[2])],
+            ..lamp(0.0, 0.02, 0.3, true)
+        };
+        frame.points.push(low_lamp);
         // The lamps must light the frame for the comparison to test them.
         let mean = |f: &logsh::scene::Frame| {
             let shaded = shade_frame(scene, f, &ShadingSettings::default()).unwrap();

@@ -4,7 +4,7 @@
 
 mod support;
 
-use logsh::scene::{Light, PointLight, Scene, Sphere};
+use logsh::scene::{HeightMap, Light, PointLight, Scene, Sphere};
 use logsh::shade::sun::cap_overlap;
 use logsh::shade::{shade_frame, ShadingSettings};
 use logsh::synth::{sphere_over_plane, SphereOverPlane, PLANE_MATERIAL};
@@ -23,6 +23,11 @@ fn unit(v: [f64; 3]) -> ([f64; 3], f64) {
 /// blockers must not overlap each other's caps), over pi. Only spheres nearer than the lamp
 /// count.
 fn expected_plane(p: [f64; 3], lamp: &PointLight, blockers: &[Sphere]) -> f64 {
+    expected_on(p, [0.0, 0.0, 1.0], lamp, blockers)
+}
+
+/// [`expected_plane`] for a white plane of unit normal `n` through `p`.
+fn expected_on(p: [f64; 3], n: [f64; 3], lamp: &PointLight, blockers: &[Sphere]) -> f64 {
     let (axis, d) = unit([0, 1, 2].map(|k| lamp.position[k] - p[k]));
     let (r, d2) = (lamp.radius, d * d);
     let (sin2, spread) = if lamp.soft_falloff { (r * r / (d2 + r * r), d2 + r * r) } else { (r * r / d2, d2) };
@@ -37,7 +42,8 @@ fn expected_plane(p: [f64; 3], lamp: &PointLight, blockers: &[Sphere]) -> f64 {
         let gamma = (axis[0] * b[0] + axis[1] * b[1] + axis[2] * b[2]).clamp(-1.0, 1.0).acos();
         visible -= cap_overlap(half_angle, (sphere.radius / distance).asin(), gamma) / disk;
     }
-    f64::from(lamp.power) / (4.0 * PI * spread) * axis[2] / PI * visible
+    let cos_theta = axis[0] * n[0] + axis[1] * n[1] + axis[2] * n[2];
+    f64::from(lamp.power) / (4.0 * PI * spread) * cos_theta / PI * visible
 }
 
 /// A lamp a few degrees wide behind a sphere, over a plane: the shadow on the plane,
@@ -60,6 +66,52 @@ fn lamp_behind_a_sphere_matches_the_closed_form() {
         })
         .assert_close(&format!("lamp (soft falloff {soft_falloff}) over sphere and plane"));
     }
+}
+
+/// A lamp low in front of a slope lies below the horizontal of the receivers above it,
+/// yet lights the slope, which faces it: the horizon is marched up to the lamp, below the
+/// horizontal too (thesis Section 4.3.1, Eq. 4.23). A sphere between them casts a
+/// penumbra. The CPU path and the reference against the closed form of the lamp's cap
+/// over the tilted plane.
+#[test]
+fn a_lamp_below_a_slope_that_faces_it_lights_it() {
+    const SLOPE: f64 = 0.5;
+    let dir = tempfile::tempdir().unwrap();
+    let spec = SphereOverPlane { spheres: vec![], width: 96, height: 54, ..Default::default() };
+    sphere_over_plane(dir.path(), &spec).unwrap();
+    let scene = Scene::load(dir.path()).unwrap();
+    let mut frame = scene.frame(1).unwrap();
+    frame.light = Arc::new(Light::Constant([0.0; 3]));
+    // The plane z = SLOPE x, as a height field and in the G-buffer.
+    let (n, _) = unit([-SLOPE, 0.0, 1.0]);
+    let g = &mut frame.gbuffer;
+    for (i, &m) in g.material.iter().enumerate() {
+        if m == PLANE_MATERIAL {
+            let [x, y, _] = g.position[i];
+            g.position[i] = [x, y, (SLOPE * f64::from(x)) as f32];
+            g.normal[i] = n.map(|c| c as f32);
+        }
+    }
+    frame.height_map = Some(Arc::new(HeightMap::from_fn(129, 129, [-20.0, -20.0], [20.0, 20.0], |x, _| SLOPE * x)));
+    let lamp = PointLight {
+        position: [-9.0, 0.0, SLOPE * -9.0 + 1.5],
+        radius: 0.1,
+        power: 20000.0,
+        color: [1.0; 3],
+        soft_falloff: false,
+    };
+    let sphere = Sphere::new([-5.0, 0.0, SLOPE * -5.0 + 0.6], 0.3);
+    (frame.points, frame.blockers) = (vec![lamp], vec![sphere]);
+    let above_the_lamp = frame
+        .gbuffer
+        .material
+        .iter()
+        .zip(&frame.gbuffer.position)
+        .filter(|&(&m, p)| m == PLANE_MATERIAL && f64::from(p[2]) > lamp.position[2] + 0.5)
+        .count();
+    assert!(above_the_lamp > 2000, "too few receivers above the lamp's horizontal: {above_the_lamp}");
+    PlaneComparison::measure(&scene, &frame, |p| (expected_on(p, n, &lamp, &[sphere]), expected_on(p, n, &lamp, &[])))
+        .assert_close("lamp below the slope it faces");
 }
 
 /// A sphere above a low lamp casts nothing on the plane below the lamp: only what is

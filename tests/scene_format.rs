@@ -614,3 +614,86 @@ fn colour_passes_are_required_and_checked() {
     let err = Scene::load(dir.path()).unwrap_err();
     assert_mentions(&err, &["scene.json", "glossy_colour", "colour_passes"]);
 }
+
+/// [`base_scene`] with `per_frame` and frame 1's file holding `changes`, and a height field
+/// whose map is per frame (`heightmap.0001.exr`, 9x9, flat at 0.5).
+fn scene_with_frame_file(changes: serde_json::Value) -> tempfile::TempDir {
+    let dir = base_scene();
+    let map = logsh::scene::HeightMap::from_fn(9, 9, [-4.0, -4.0], [4.0, 4.0], |_, _| 0.5);
+    synth::write_height_map_exr(&dir.path().join("heightmap.0001.exr"), &map).unwrap();
+    edit_json(&dir.path().join("scene.json"), |v| {
+        v["per_frame"] = serde_json::json!("frame.####.json");
+        v["heightfield"] = serde_json::json!({"heights": "heightmap.####.exr", "min": [-4, -4], "max": [4, 4]});
+    });
+    std::fs::write(dir.path().join("frame.0001.json"), serde_json::to_string_pretty(&changes).unwrap()).unwrap();
+    dir
+}
+
+/// A frame's file replaces scene.json's lamps, changes the World and moves the height
+/// map's rectangle; without a key, scene.json's value stands.
+#[test]
+fn a_frame_file_changes_lamps_light_and_rectangle() {
+    let lamp = serde_json::json!({"type": "point", "position": [0.5, 0.0, 0.6], "radius": 0.1, "power": 150});
+    let dir = scene_with_frame_file(serde_json::json!({
+        "frame": 1,
+        "lights": [lamp],
+        "light": {"constant": [0.25, 0.5, 0.75]},
+        "heightfield": {"min": [-3, -5], "max": [5, 3]}
+    }));
+    let scene = Scene::load(dir.path()).unwrap();
+    let frame = scene.frame(1).unwrap();
+    assert_eq!(frame.points.len(), 1);
+    assert_eq!(frame.points[0].position, [0.5, 0.0, 0.6]);
+    assert!(frame.suns.is_empty());
+    assert!(matches!(*frame.light, Light::Constant(c) if c == [0.25, 0.5, 0.75]), "{:?}", frame.light);
+    let map = frame.height_map.as_ref().unwrap();
+    assert_eq!((map.min, map.max), ([-3.0, -5.0], [5.0, 3.0]));
+    assert!(scene.input_paths(1).iter().any(|p| p.ends_with("frame.0001.json")));
+
+    let dir = scene_with_frame_file(serde_json::json!({"frame": 1}));
+    let frame = Scene::load(dir.path()).unwrap().frame(1).unwrap();
+    assert!(frame.points.is_empty());
+    assert!(matches!(*frame.light, Light::Constant(c) if c == [1.0, 1.0, 1.0]), "{:?}", frame.light);
+    assert_eq!(frame.height_map.as_ref().unwrap().min, [-4.0, -4.0]);
+}
+
+/// A frame file that is missing, for another frame, malformed or inconsistent with
+/// scene.json is refused, naming the file; so is a per-frame height map that is missing.
+#[test]
+fn bad_frame_files_are_refused_naming_the_file() {
+    let cases: Vec<(serde_json::Value, &[&str])> = vec![
+        (serde_json::json!({"frame": 2}), &["frame.0001.json", "\"frame\" is 2"]),
+        (
+            serde_json::json!({"frame": 1, "heightfield": {"min": [3, -4], "max": [-3, 4]}}),
+            &["frame.0001.json", "min", "below max"],
+        ),
+        (serde_json::json!({"frame": 1, "light": {"strength": 2}}), &["frame.0001.json", "constant"]),
+        (serde_json::json!({"frame": 1, "light": {"constant": [1, -1, 1]}}), &["frame.0001.json", "negative"]),
+        (
+            serde_json::json!({"frame": 1, "lights": [{"type": "point", "position": [0, 0, 1], "power": 1}]}),
+            &["frame.0001.json", "lights[0]", "radius"],
+        ),
+        (serde_json::json!({"frame": 1, "lamps": []}), &["frame.0001.json", "lamps"]),
+    ];
+    for (changes, parts) in cases {
+        let dir = scene_with_frame_file(changes);
+        assert_mentions(&frame_error(dir.path()), parts);
+    }
+    let dir = scene_with_frame_file(serde_json::json!({"frame": 1}));
+    std::fs::remove_file(dir.path().join("frame.0001.json")).unwrap();
+    assert_mentions(&frame_error(dir.path()), &["frame.0001.json", "not found"]);
+
+    let dir = scene_with_frame_file(serde_json::json!({"frame": 1}));
+    std::fs::remove_file(dir.path().join("heightmap.0001.exr")).unwrap();
+    assert_mentions(&frame_error(dir.path()), &["heightmap.0001.exr", "not found"]);
+
+    // A map that is not the frame's terrain: the plane's pixels lie 1.5 m under it.
+    let dir = scene_with_frame_file(serde_json::json!({"frame": 1}));
+    let buried = logsh::scene::HeightMap::from_fn(9, 9, [-4.0, -4.0], [4.0, 4.0], |_, _| 1.5);
+    synth::write_height_map_exr(&dir.path().join("heightmap.0001.exr"), &buried).unwrap();
+    assert_mentions(&frame_error(dir.path()), &["gbuffer.0001.exr", "heightmap.0001.exr", "not this frame's terrain"]);
+
+    let dir = scene_with_frame_file(serde_json::json!({"frame": 1}));
+    edit_json(&dir.path().join("scene.json"), |v| v["per_frame"] = serde_json::json!("frame.json"));
+    assert_mentions(&Scene::load(dir.path()).unwrap_err(), &["per_frame", "#"]);
+}

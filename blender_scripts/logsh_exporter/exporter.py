@@ -27,15 +27,21 @@ What is written into the output directory, per frame `####`:
 - `camera.####.json`: the scene camera (perspective only, no lens shift).
 - `blockers.####.json`: spheres for every mesh that is not the height field, evaluated at
   that frame (modifiers, armatures, shape keys, animation applied); see `blockers.py`.
-- `heightmap.exr`: the height field object sampled on a grid by vertical rays (frame
-  `start`; the terrain is static).
+- `heightmap.exr`: the height field object sampled on a grid by vertical rays; one map
+  per frame, `heightmap.####.exr`, when the terrain moves within the exported frames (an
+  animated transform, modifiers such as Wave or Ocean, shape keys, armatures, geometry
+  nodes: `terrain_moves`).
+- `frame.####.json` (scene.json `per_frame`) when something beside the G-buffers changes
+  from frame to frame: a keyed lamp's `lights`, a keyed World's Strength, Mapping rotation
+  or constant colour (`light`), a moving terrain's rectangle (`heightfield`). A World
+  that logsh bakes (below) and that changes stops the export.
 - `sky.exr` when the World uses an environment texture (a Mapping node in front of it
   becomes the light's `rotation`), or a bake of the World by Cycles when it uses anything
   else (a Sky Texture, a gradient, a linked strength; a Sky Texture's sun disc is left out
   of the bake and written as a sun of `lights`, `bake_world`); `scene.json`, whose
   `lights` holds every Sun lamp that renders (direction towards the sun, Angle, Strength, Color)
   and every Point lamp (world position, Radius, Power, Color, Soft Falloff), Exposure
-  folded into Strength or Power; none animated. Any other lamp (Spot, Area), or a lamp
+  folded into Strength or Power; a keyed lamp as it is on each frame. Any other lamp (Spot, Area), or a lamp
   setting logsh does not model (nodes, Temperature, Cast Shadow off, Diffuse or
   Specular factors other than 1, Normalize off, hidden from Diffuse or Glossy rays),
   stops the export with the lamp's name.
@@ -237,7 +243,8 @@ def export(scene, options, log=print):
     try:
         view = export_view(scene, out, changes)
         view_layer = configure_render(scene, options, changes)
-        lights = export_lamps(scene, view_layer, start, end)
+        lamps_by_frame = export_lamps(scene, view_layer, frames)
+        lights = [dict(light) for light in lamps_by_frame[start]]
         objects = renderable_objects(scene, view_layer)
         terrain = find_heightfield(objects, options)
         warnings = []
@@ -256,9 +263,31 @@ def export(scene, options, log=print):
             "camera": "camera.####.json",
             "blockers": "blockers.####.json",
             "materials": {str(i): m for i, m in sorted(table.items())},
-            "light": export_world(scene, out, options, log, lights),
             "view": view,
         }
+        scene.frame_set(start)
+        lamps_before_world = len(lights)
+        description["light"] = export_world(scene, out, options, log, lights)
+        per_frame = {frame: {"frame": frame} for frame in frames}
+        if any(lamps_by_frame[frame] != lamps_by_frame[start] for frame in frames):
+            # A Sky Texture's sun (added by the bake) stays with every frame's lamps.
+            baked_suns = lights[lamps_before_world:]
+            for frame in frames:
+                per_frame[frame]["lights"] = lamps_by_frame[frame] + baked_suns
+            log(f"lamps change within frames {start}-{end}: each frame's are in frame.####.json")
+        world_by_frame = {}
+        for frame in frames:
+            scene.frame_set(frame)
+            world_by_frame[frame] = world_keys(scene)
+        if any(world_by_frame[frame] != world_by_frame[start] for frame in frames):
+            if "baked" in world_by_frame[start]:
+                raise ExportError(f"the World changes within frames {start}-{end}, and logsh bakes it once (a Sky "
+                                  "Texture, a gradient or a linked Strength): export the frames in parts, or key "
+                                  "only an Environment Texture's Strength and Mapping rotation, or a constant colour")
+            for frame in frames:
+                per_frame[frame]["light"] = world_by_frame[frame]
+            log(f"the World changes within frames {start}-{end}: each frame's Strength, rotation or colour is in "
+                "frame.####.json")
         if options.colour_passes:
             description["colour_passes"] = True
         if lights:
@@ -280,8 +309,27 @@ def export(scene, options, log=print):
         ground = find_ground(objects, terrain, log)
         if ground is not None:
             description["ground"] = {"height": float(ground)}
-        if terrain is not None:
+        if terrain is not None and len(frames) > 1 and terrain_moves(scene, terrain, frames):
+            log(f"height field \"{terrain.name}\" moves within frames {start}-{end}: one height map per frame")
+            for frame in frames:
+                scene.frame_set(frame)
+                spec = export_heightmap(terrain, bpy.context.evaluated_depsgraph_get(), out, options, log,
+                                        f"heightmap.{frame:04d}.exr")
+                if frame == start:
+                    description["heightfield"] = dict(spec, heights="heightmap.####.exr")
+                elif [spec["min"], spec["max"]] != [description["heightfield"]["min"],
+                                                    description["heightfield"]["max"]]:
+                    per_frame[frame]["heightfield"] = {"min": spec["min"], "max": spec["max"]}
+            if any("heightfield" in per_frame[frame] for frame in frames):
+                per_frame[start]["heightfield"] = {"min": description["heightfield"]["min"],
+                                                   "max": description["heightfield"]["max"]}
+            scene.frame_set(start)
+        elif terrain is not None:
             description["heightfield"] = export_heightmap(terrain, bpy.context.evaluated_depsgraph_get(), out, options, log)
+        if any(len(changes) > 1 for changes in per_frame.values()):
+            description["per_frame"] = "frame.####.json"
+            for frame in frames:
+                write_json(new_file(out, f"frame.{frame:04d}.json"), per_frame[frame])
 
         fits = {}
         if len(frames) < end - start + 1:
@@ -457,18 +505,21 @@ def output_size(scene):
 LAMP_NAMES = {"SUN": "Sun", "POINT": "Point", "SPOT": "Spot", "AREA": "Area"}
 
 
-def export_lamps(scene, view_layer, start, end):
-    """The lamps that light the render, as scene.json's `lights`: each Sun lamp becomes a
-    `sun` (direction towards it, Blender's Angle, Strength and Color), each Point lamp a
-    `point` (world position, Radius, Power, Color, Soft Falloff). Any other lamp, or a
-    setting logsh cannot represent, stops the export, naming the lamp: a lamp left out
-    would make every frame silently too dark."""
+def export_lamps(scene, view_layer, frames):
+    """The lamps that light the render on each of `frames`, as scene.json's `lights`
+    ({frame: lights}): each Sun lamp becomes a `sun` (direction towards it, Blender's
+    Angle, Strength and Color), each Point lamp a `point` (world position, Radius, Power,
+    Color, Soft Falloff), as it is on that frame: a keyed lamp moves, fades or turns from
+    frame to frame. Any other lamp, or a setting logsh cannot represent, stops the export,
+    naming the lamp: a lamp left out would make every frame silently too dark."""
     names = {o.name for o in view_layer.objects}
-    lights = []
+    lamps = []
     for obj in scene.objects:
-        if obj.type != "LIGHT" or obj.hide_render or obj.name not in names or obj.data.energy <= 0.0:
+        if obj.type != "LIGHT" or obj.hide_render or obj.name not in names:
             continue
         lamp = obj.data
+        if lamp.energy <= 0.0 and not _keyed(lamp):
+            continue
         kind = LAMP_NAMES.get(lamp.type, lamp.type.title())
         if lamp.type not in ("SUN", "POINT"):
             article = "an" if kind[:1] in "AEIOU" else "a"
@@ -493,41 +544,46 @@ def export_lamps(scene, view_layer, start, end):
         for refused, why in unsupported:
             if refused:
                 raise ExportError(f"{kind} lamp \"{obj.name}\" {why}")
-        states = []
-        for frame in range(start, end + 1):
-            scene.frame_set(frame)
-            axis = obj.matrix_world.to_3x3() @ mathutils.Vector((0.0, 0.0, 1.0))
-            position = obj.matrix_world.translation
-            settings = (lamp.energy, getattr(lamp, "exposure", 0.0), tuple(lamp.color), getattr(lamp, "shadow_soft_size", 0.0),
-                        getattr(lamp, "use_soft_falloff", True), getattr(lamp, "angle", 0.0))
-            states.append((axis.normalized(), position.copy(), settings))
-        moved = any((a - states[0][0]).length > 1e-6 or (p - states[0][1]).length > 1e-6 or s != states[0][2]
-                    for a, p, s in states)
-        if moved:
-            raise ExportError(f"{kind} lamp \"{obj.name}\" is animated (its placement or settings change within "
-                              f"frames {start}-{end}); logsh's lights are the same for every frame. Export the "
-                              "frames in parts, or remove the animation")
-        axis, position, (energy, exposure, color, radius, soft_falloff, angle) = states[0]
-        # Blender's Exposure scales the lamp's Strength or Power by 2^Exposure.
-        energy = float(energy) * 2.0 ** float(exposure)
-        if lamp.type == "SUN":
-            lights.append({
-                "type": "sun",
-                "direction": [float(axis.x), float(axis.y), float(axis.z)],
-                "angle": max(math.degrees(angle), 1e-3),
-                "strength": energy,
-                "color": [float(c) for c in color],
-            })
-        else:
-            lights.append({
-                "type": "point",
-                "position": [float(c) for c in position],
-                "radius": float(radius),
-                "power": energy,
-                "color": [float(c) for c in color],
-                "soft_falloff": bool(soft_falloff),
-            })
-    return lights
+        lamps.append(obj)
+    by_frame = {}
+    for frame in frames:
+        scene.frame_set(frame)
+        by_frame[frame] = [lamp_json(obj) for obj in lamps]
+    # A lamp dark on every frame lights nothing.
+    lit = [any(by_frame[f][i]["strength" if "strength" in by_frame[f][i] else "power"] > 0.0 for f in frames)
+           for i in range(len(lamps))]
+    return {f: [light for light, on in zip(lights, lit) if on] for f, lights in by_frame.items()}
+
+
+def _keyed(datablock):
+    """Whether `datablock` has animation data (keys or drivers) that may change it."""
+    animation = getattr(datablock, "animation_data", None)
+    return animation is not None and (animation.action is not None or len(animation.drivers) > 0)
+
+
+def lamp_json(obj):
+    """One lamp as scene.json's `lights` holds it, at the current frame."""
+    lamp = obj.data
+    # Blender's Exposure scales the lamp's Strength or Power by 2^Exposure.
+    energy = float(lamp.energy) * 2.0 ** float(getattr(lamp, "exposure", 0.0))
+    color = [float(c) for c in lamp.color]
+    if lamp.type == "SUN":
+        axis = (obj.matrix_world.to_3x3() @ mathutils.Vector((0.0, 0.0, 1.0))).normalized()
+        return {
+            "type": "sun",
+            "direction": [float(axis.x), float(axis.y), float(axis.z)],
+            "angle": max(math.degrees(getattr(lamp, "angle", 0.0)), 1e-3),
+            "strength": energy,
+            "color": color,
+        }
+    return {
+        "type": "point",
+        "position": [float(c) for c in obj.matrix_world.translation],
+        "radius": float(getattr(lamp, "shadow_soft_size", 0.0)),
+        "power": energy,
+        "color": color,
+        "soft_falloff": bool(getattr(lamp, "use_soft_falloff", True)),
+    }
 
 
 def renderable_objects(scene, view_layer):
@@ -982,8 +1038,9 @@ def report_fit_errors(reports, frame, log):
             f"{100 * errors.mean():.1f}% on average, {100 * errors.max():.1f}% at worst ({worst})")
 
 
-def export_heightmap(terrain, depsgraph, out, options, log):
-    """Samples the terrain's top surface on a corner-registered grid over its XY bounds."""
+def export_heightmap(terrain, depsgraph, out, options, log, name="heightmap.exr"):
+    """Samples the terrain's top surface on a corner-registered grid over its XY bounds,
+    into the file `name`."""
     triangles = world_triangles(terrain.evaluated_get(depsgraph), terrain.evaluated_get(depsgraph).matrix_world)
     if triangles is None:
         raise ExportError(f"height field \"{terrain.name}\" has no faces")
@@ -1016,9 +1073,31 @@ def export_heightmap(terrain, depsgraph, out, options, log):
         log(f"note: height field \"{terrain.name}\": {int(holes.sum())} of {holes.size} samples fall in holes; set to its lowest point")
         heights[holes] = np.nanmin(heights)
     # Row 0 of the map lies at min y and is the file's first scan line.
-    write_exr(new_file(out, "heightmap.exr"), {"Y": heights})
-    log(f"height map: {columns}x{rows} samples of \"{terrain.name}\" over x {lo[0]:.3g}..{hi[0]:.3g}, y {lo[1]:.3g}..{hi[1]:.3g}")
-    return {"heights": "heightmap.exr", "min": [float(lo[0]), float(lo[1])], "max": [float(hi[0]), float(hi[1])]}
+    write_exr(new_file(out, name), {"Y": heights})
+    log(f"height map {name}: {columns}x{rows} samples of \"{terrain.name}\" over x {lo[0]:.3g}..{hi[0]:.3g}, "
+        f"y {lo[1]:.3g}..{hi[1]:.3g}")
+    return {"heights": name, "min": [float(lo[0]), float(lo[1])], "max": [float(hi[0]), float(hi[1])]}
+
+
+def terrain_moves(scene, terrain, frames):
+    """Whether the terrain's evaluated surface differs between `frames`: anything that
+    moves it (an animated transform, modifiers such as Wave or Ocean, shape keys,
+    armatures, geometry nodes) shows in its world-space triangles. Compared to 1e-6 of its
+    extent, far below a height map's spacing."""
+    first = None
+    for frame in frames:
+        scene.frame_set(frame)
+        depsgraph = bpy.context.evaluated_depsgraph_get()
+        evaluated = terrain.evaluated_get(depsgraph)
+        triangles = world_triangles(evaluated, evaluated.matrix_world)
+        if triangles is None:
+            raise ExportError(f"height field \"{terrain.name}\" has no faces on frame {frame}")
+        if first is None:
+            first = triangles
+            scale = float(np.ptp(triangles.reshape(-1, 3), axis=0).max()) or 1.0
+        elif triangles.shape != first.shape or np.abs(triangles - first).max() > 1e-6 * scale:
+            return True
+    return False
 
 
 # ---- camera and reflection -------------------------------------------------------------
@@ -1178,19 +1257,20 @@ def write_reflection(scene, depsgraph, camera, index_of, water, path):
 
 # ---- light -----------------------------------------------------------------------------
 
-def export_world(scene, out, options, log, lights):
-    """The World as a format-v1 light: an environment map or a constant colour; a Sky
-    Texture's sun is appended to `lights` (`bake_world`)."""
+def world_source(scene):
+    """How the World lights the scene at the current frame: `("constant", rgb)`, `("bake",
+    what, sky)` for what logsh takes from a bake (a Sky Texture, a gradient, a linked
+    strength), or `("environment", background, texture)`."""
     world = scene.world
     if world is None:
         raise ExportError("the scene has no World; add one (World tab) for the light")
     tree = world.node_tree
     if tree is None or not getattr(world, "use_nodes", True):
-        return {"constant": [float(c) for c in world.color]}
+        return "constant", [float(c) for c in world.color]
     outputs = [n for n in tree.nodes if n.type == "OUTPUT_WORLD" and n.is_active_output] or \
               [n for n in tree.nodes if n.type == "OUTPUT_WORLD"]
     if not outputs or not outputs[0].inputs["Surface"].is_linked:
-        return {"constant": [0.0, 0.0, 0.0]}
+        return "constant", [0.0, 0.0, 0.0]
     background = outputs[0].inputs["Surface"].links[0].from_node
     if background.type != "BACKGROUND":
         raise ExportError(f"the World's surface is a {background.bl_label} node; logsh reads a Background node "
@@ -1198,13 +1278,48 @@ def export_world(scene, out, options, log, lights):
     colour = background.inputs["Color"]
     texture = colour.links[0].from_node if colour.is_linked else None
     if background.inputs["Strength"].is_linked or (texture is not None and texture.type != "TEX_ENVIRONMENT"):
-        # A Sky Texture, a gradient, a linked strength: what Cycles renders of the World.
         what = texture.bl_label if texture is not None else "linked Strength"
         sky = texture if texture is not None and texture.type == "TEX_SKY" else None
-        return bake_world(scene, world, out, options, what, log, sky, lights)
-    strength = float(background.inputs["Strength"].default_value)
+        return "bake", what, sky
     if texture is None:
-        return {"constant": [float(c) * strength for c in list(colour.default_value)[:3]]}
+        strength = float(background.inputs["Strength"].default_value)
+        return "constant", [float(c) * strength for c in list(colour.default_value)[:3]]
+    return "environment", background, texture
+
+
+def world_keys(scene):
+    """What of the World logsh follows from frame to frame, at the current frame, as a
+    frame's `light` in scene.json's `per_frame` holds it: a constant World's colour times
+    its Strength, or an Environment Texture's Strength and its Mapping rotation. For a
+    World logsh bakes, every value of its node tree instead, so that a change is seen."""
+    source = world_source(scene)
+    if source[0] == "constant":
+        return {"constant": source[1]}
+    if source[0] == "environment":
+        background, texture = source[1], source[2]
+        rotation = [0.0, 0.0, 0.0]
+        if texture.inputs["Vector"].is_linked:
+            rotation = mapping_rotation(texture.inputs["Vector"].links[0].from_node)
+        return {"strength": float(background.inputs["Strength"].default_value), "rotation": rotation}
+    values = []
+    for node in scene.world.node_tree.nodes:
+        for socket in node.inputs:
+            value = getattr(socket, "default_value", None)
+            values.append(repr(list(value)) if hasattr(value, "__len__") else repr(value))
+    return {"baked": values}
+
+
+def export_world(scene, out, options, log, lights):
+    """The World as a format-v1 light: an environment map or a constant colour; a Sky
+    Texture's sun is appended to `lights` (`bake_world`)."""
+    source = world_source(scene)
+    if source[0] == "constant":
+        return {"constant": source[1]}
+    if source[0] == "bake":
+        # A Sky Texture, a gradient, a linked strength: what Cycles renders of the World.
+        return bake_world(scene, scene.world, out, options, source[1], log, source[2], lights)
+    background, texture = source[1], source[2]
+    strength = float(background.inputs["Strength"].default_value)
     rotation = None
     if texture.inputs["Vector"].is_linked:
         rotation = mapping_rotation(texture.inputs["Vector"].links[0].from_node)

@@ -40,8 +40,9 @@ mod pyramid;
 mod reference;
 
 pub use pyramid::{
-    decimation_taps, ElevationBand, HorizonAgainst, HorizonPyramid, HorizonSettings, HorizonsBetween, HorizonsUnder,
-    LevelReconstruction, MarchStep, PyramidLevel, PyramidPlan, ScaleMax, HORIZON_SECTORS, MAX_LEVELS, MAX_STEPS,
+    decimation_taps, lowest_horizon, ElevationBand, HorizonAgainst, HorizonPyramid, HorizonSettings, HorizonsBetween,
+    HorizonsUnder, LevelReconstruction, MarchStep, PyramidLevel, PyramidPlan, ScaleMax, HORIZON_SECTORS, MAX_LEVELS,
+    MAX_STEPS,
 };
 pub use reference::{brute_force_horizon, horizon_reaches, horizon_reaches_within};
 

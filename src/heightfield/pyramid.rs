@@ -138,11 +138,12 @@ impl ElevationBand {
     /// Every elevation matters: the march finds the horizon.
     pub const ALL: ElevationBand = ElevationBand { below: f64::NEG_INFINITY, above: f64::INFINITY };
 
-    /// Where a march's largest step tangent `t` puts the horizon, `max(atan t, 0)`: a
-    /// horizon at or below the foot hides what one marched to its end there would, and
-    /// one at or above the top the same (the band's definition).
-    fn against(self, t: f64) -> HorizonAgainst {
-        let known = t.max(0.0);
+    /// Where a march's largest step tangent `t` puts the horizon, `max(atan t, atan
+    /// floor)` ([`lowest_horizon`]): a horizon at or below the foot hides what one marched
+    /// to its end there would, and one at or above the top the same (the band's
+    /// definition).
+    fn against(self, t: f64, floor: f64) -> HorizonAgainst {
+        let known = t.max(floor);
         if t >= self.above {
             HorizonAgainst::Above
         } else if known <= self.below {
@@ -150,6 +151,19 @@ impl ElevationBand {
         } else {
             HorizonAgainst::At(known.atan())
         }
+    }
+}
+
+/// The tangent below which no horizon marched within `reach` lies: 0 for an unbounded
+/// march (the flat continuation's horizon tends to the horizontal, SN08 after Eq. 5),
+/// none for a light at a finite distance, whose horizon is the highest surface before it,
+/// below the horizontal too (thesis Section 4.3.1, Eq. 4.23: a lamp low in a valley is
+/// seen from the slopes above it that face it).
+pub fn lowest_horizon(reach: f64) -> f64 {
+    if reach.is_finite() {
+        f64::NEG_INFINITY
+    } else {
+        0.0
     }
 }
 
@@ -1013,7 +1027,8 @@ impl HorizonPyramid {
                     _ => rounded,
                 }
             };
-            let lane_band = [outwards(band.below, true), outwards(band.above, false)];
+            let floor = lowest_horizon(reach);
+            let lane_band = [outwards(band.below, true), outwards(band.above, false), floor as f32];
             let within = self.steps_within(reach);
             let mut eight = [[0.0f64; 3]; 8];
             let mut slots = [usize::MAX; 8];
@@ -1032,7 +1047,7 @@ impl HorizonPyramid {
                 // SAFETY: as above, and each `taken` is a step count.
                 unsafe { lanes::tangents_along(self, &receivers[..eight.len()], dir, lane_band, &mut tangents) };
                 for (&slot, tangent) in slots.iter().zip(tangents) {
-                    out[slot] = band.against(f64::from(tangent));
+                    out[slot] = band.against(f64::from(tangent), floor);
                 }
             };
             for (k, p) in points.iter().enumerate() {
@@ -1202,6 +1217,7 @@ impl HorizonPyramid {
     ) -> HorizonAgainst {
         let marched = self.steps_marched(x, y, dir, self.steps_within(reach));
         let steps = &self.steps[..marched];
+        let floor = lowest_horizon(reach);
         let tangent = |step: &MarchStep, start: f64| {
             let q = self.sample_level(step.level, x + step.distance * dir[0], y + step.distance * dir[1]);
             (q - start - above) * step.inv_distance
@@ -1211,7 +1227,7 @@ impl HorizonPyramid {
                 let mut max_tan = f64::NEG_INFINITY;
                 for (j, step) in steps.iter().enumerate() {
                     let start = receiver.term(self, step.level, x, y);
-                    let (known, ceiling) = (max_tan.max(0.0), self.step_ceiling(j, marched, start, above));
+                    let (known, ceiling) = (max_tan.max(floor), self.step_ceiling(j, marched, start, above));
                     if known >= ceiling {
                         break;
                     }
@@ -1233,7 +1249,7 @@ impl HorizonPyramid {
                 bspline_max(&omega[..marched])
             }
         };
-        HorizonAgainst::At(horizon.max(0.0))
+        HorizonAgainst::At(horizon.max(floor.atan()))
     }
 
     /// At least the tangent of every step from `j` to `marched`, the receiver's term at
@@ -1572,7 +1588,8 @@ mod lanes {
     /// ceiling of its level's steps from its own terms, of later levels from their relief,
     /// [`LaneStep::later`]), once its horizon and every later step are at or below
     /// `band[0]`, or once its horizon reaches `band[1]` (the band's bounds as tangents,
-    /// rounded outwards to f32). A stop where no later step can change the answer leaves
+    /// rounded outwards to f32); `band[2]` is the lowest horizon ([`lowest_horizon`]),
+    /// which no step need pass. A stop where no later step can change the answer leaves
     /// each lane's tangent what it would be marched alone, whatever lanes beside it.
     ///
     /// # Safety
@@ -1583,7 +1600,7 @@ mod lanes {
         pyramid: &HorizonPyramid,
         receivers: &[AlongReceiver],
         dir: [f64; 2],
-        band: [f32; 2],
+        band: [f32; 3],
         out: &mut [f32; 8],
     ) {
         const MARGIN: f32 = 1e-5;
@@ -1598,7 +1615,7 @@ mod lanes {
         let (taken, above) = (_mm256_loadu_si256(taken.as_ptr().cast()), load(&above));
         let (dx, dy) = (_mm256_set1_ps(dir[0] as f32), _mm256_set1_ps(dir[1] as f32));
         let (below, top, margin) = (_mm256_set1_ps(band[0]), _mm256_set1_ps(band[1]), _mm256_set1_ps(MARGIN));
-        let zero = _mm256_setzero_ps();
+        let (zero, floor) = (_mm256_setzero_ps(), _mm256_set1_ps(band[2]));
         // The current level's receiver terms, and the highest any of its reads rises above
         // them (its peak less the terms, with the margin of `step_ceilings`).
         let (mut level, mut u0, mut v0, mut base, mut start, mut rise) = (usize::MAX, zero, zero, zero, zero, zero);
@@ -1626,7 +1643,7 @@ mod lanes {
             let this_level = _mm256_blendv_ps(farthest, nearest, _mm256_cmp_ps::<_CMP_GT_OQ>(rise, zero));
             let this_level = _mm256_fmadd_ps(margin, abs(this_level), this_level);
             let ceiling = _mm256_max_ps(this_level, _mm256_set1_ps(step.later));
-            let known = _mm256_max_ps(max_tan, zero);
+            let known = _mm256_max_ps(max_tan, floor);
             let rising = _mm256_cmp_ps::<_CMP_LT_OQ>(known, ceiling);
             let settled_below =
                 _mm256_and_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(known, below), _mm256_cmp_ps::<_CMP_LE_OQ>(ceiling, below));
@@ -2174,7 +2191,7 @@ mod tests {
     /// One azimuth's march reading every step and every receiver term: what the march's
     /// early stops must give, to the bit.
     fn march_every_step(pyramid: &HorizonPyramid, p: [f64; 3], dir: [f64; 2], reach: f64) -> f64 {
-        every_step_tangent(pyramid, p, dir, reach).atan().max(0.0)
+        every_step_tangent(pyramid, p, dir, reach).atan().max(lowest_horizon(reach).atan())
     }
 
     /// The largest tangent of [`march_every_step`]'s steps.
@@ -2540,7 +2557,11 @@ mod tests {
             for reach in [f64::INFINITY, 2.0, 0.3] {
                 let every: Vec<f64> = points
                     .iter()
-                    .map(|&p| lanes_every_step(&pyramid, p, dir, pyramid.steps_within(reach)).max(0.0).atan())
+                    .map(|&p| {
+                        lanes_every_step(&pyramid, p, dir, pyramid.steps_within(reach))
+                            .max(lowest_horizon(reach))
+                            .atan()
+                    })
                     .collect();
                 for (p, every) in points.iter().zip(&every) {
                     worst = worst.max((every - march_every_step(&pyramid, *p, dir, reach)).abs());

@@ -77,8 +77,14 @@ fn horizon_up_to(field: &HeightField, p: [f64; 3], azimuth: f64, stop: f64, reac
             t_far = t_far.max(axis_exit(p[a], dir[a], min[a], max[a]));
         }
     }
-    // The surface beyond `reach` counts for nothing: the walk ends there (the horizon
-    // stays at least 0, as the fast path's march takes it).
+    // The surface beyond `reach` counts for nothing: the walk ends there. Unbounded, the
+    // flat continuation's horizon tends to the horizontal (the horizon is at least 0);
+    // within a finite reach it may lie below it (`lowest_horizon`), and a continuation
+    // below the receiver rises towards it until the reach.
+    let mut best = super::pyramid::lowest_horizon(reach).atan();
+    if reach.is_finite() && reach > t_far {
+        best = best.max((at(t_far) - z).atan2(reach));
+    }
     let t_far = t_far.min(reach);
 
     let mut crossings = [
@@ -86,7 +92,6 @@ fn horizon_up_to(field: &HeightField, p: [f64; 3], azimuth: f64, stop: f64, reac
         LineCrossings::new(p[1], dir[1], min[1], max[1], n[1], t_far),
     ];
 
-    let mut best: f64 = 0.0; // the flat continuation's limit at t -> infinity
     let mut t0 = 0.0;
     let mut y0 = c0 + z;
     while t0 < t_far {

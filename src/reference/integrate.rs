@@ -535,8 +535,16 @@ pub fn sample_lamps(
     for (i, lamp) in lamps.iter().enumerate() {
         let (disk, reach) = lamp.seen_from(p, unit(n).unwrap_or([0.0, 0.0, 1.0]));
         let seed = seed ^ (i as u64 + 1).wrapping_mul(0x9e37_79b9_7f4a_7c15);
-        let one = PreparedPoint::within(occluders, p, n, terms, reach)
-            .map_or_else(|exact| exact, |point| super::sampled::sample_suns(&point, &[disk], share, max_level, seed));
+        let one = PreparedPoint::within(occluders, p, n, terms, reach).map_or_else(
+            |exact| exact,
+            |mut point| {
+                // A lamp above the ground plane sends no light through it (a ray towards
+                // the part of its sphere below the plane would; none in practice).
+                let lamp_height = point.p[2] + disk.direction[2] * reach;
+                point.above_ground &= occluders.ground.is_none_or(|z| lamp_height <= z);
+                super::sampled::sample_suns(&point, &[disk], share, max_level, seed)
+            },
+        );
         total = total.plus(&one);
     }
     total

@@ -9,6 +9,14 @@ use super::error::SceneError;
 use super::exr_read::ExrChannels;
 use std::path::Path;
 
+/// How far below a height map, in sample spacings, a G-buffer's surface may lie before
+/// it is counted as buried ([`HeightMap::buried_share`]).
+pub const BURIED_DEPTH: f64 = 1.0;
+
+/// The largest share of a frame's surface pixels that may lie buried under its height
+/// map: beyond it the map is not the frame's terrain ([`HeightMap::buried_share`]).
+pub const MOST_BURIED: f64 = 0.1;
+
 /// A corner-registered height map over the rectangle `min..max` in world XY.
 #[derive(Clone, Debug, PartialEq)]
 pub struct HeightMap {
@@ -102,6 +110,26 @@ impl HeightMap {
     /// ([`crate::heightfield::HeightField::height_at`]).
     pub fn height_at(&self, x: f64, y: f64) -> f64 {
         crate::heightfield::bilinear(&self.heights, self.columns, self.rows, self.min, self.max, x, y)
+    }
+
+    /// The share of the surface pixels of `gbuffer` over the map's rectangle that lie
+    /// more than [`BURIED_DEPTH`] sample spacings below it: none can, where the map is
+    /// the frame's terrain (an opaque surface hides what lies under it from a camera
+    /// above). The exported canyon's steep walls, whose mesh the bilinear map cuts
+    /// corners of, reach 0.63 spacings below it; a swell exported as it was on another
+    /// frame puts 37 to 53 % of its pixels deeper. `None` without such pixels.
+    pub fn buried_share(&self, gbuffer: &super::GBuffer) -> Option<f64> {
+        let depth = BURIED_DEPTH * self.cell_size()[0].max(self.cell_size()[1]);
+        let over = |p: &[f32; 3]| {
+            let [x, y] = [f64::from(p[0]), f64::from(p[1])];
+            (self.min[0]..=self.max[0]).contains(&x) && (self.min[1]..=self.max[1]).contains(&y)
+        };
+        let (mut pixels, mut buried) = (0usize, 0usize);
+        for (p, _) in gbuffer.position.iter().zip(&gbuffer.material).filter(|&(p, &m)| m != 0 && over(p)) {
+            pixels += 1;
+            buried += usize::from(self.height_at(f64::from(p[0]), f64::from(p[1])) - f64::from(p[2]) > depth);
+        }
+        (pixels > 0).then(|| buried as f64 / pixels as f64)
     }
 
     /// Lowest and highest sample.

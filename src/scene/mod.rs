@@ -33,6 +33,9 @@
 //!   b}`, a Blender Point lamp: world position, Radius (metres, `>= 0`), Power (watts,
 //!   finite and `>= 0`), `color` optional (default white), Soft Falloff optional (default
 //!   true, Blender's default; see [`PointLight`]). At most [`MAX_SUNS`] entries.
+//! - Per frame: an optional `per_frame`, a path with `#`, one file per frame with what
+//!   changes from frame to frame: lamps, the World's strength, rotation or colour, the
+//!   height map's rectangle ([`per_frame`]).
 //! - Ground: an optional `{"height": z}`, an infinite horizontal plane at world Z `z` that
 //!   hides everything below the horizontal from receivers above it (a flat floor the
 //!   exporter found); not together with `heightfield`.
@@ -89,6 +92,7 @@ pub mod heightmap;
 pub mod light;
 pub mod output;
 mod paths;
+pub mod per_frame;
 pub mod view;
 
 pub use camera::{Camera, Sphere};
@@ -292,6 +296,9 @@ pub struct Scene {
     /// [`MAX_SUPERSAMPLE`]): the G-buffers are this many times the camera's resolution,
     /// and the outputs are resolved back to it ([`crate::shade::resolve`]).
     pub supersample: usize,
+    /// One file per frame with what changes from frame to frame: lamps, the World, the
+    /// height map's rectangle (`per_frame` in scene.json; [`per_frame`]).
+    pub per_frame: Option<PathTemplate>,
     /// With the CRC-32 of the map's file as it was read ([`light::file_crc`]).
     static_light: Option<(Arc<Light>, Option<u32>)>,
     static_height_map: Option<Arc<HeightMap>>,
@@ -323,6 +330,7 @@ struct SceneFile {
     view: Option<view::ViewSpec>,
     supersample: Option<u32>,
     colour_passes: Option<bool>,
+    per_frame: Option<String>,
 }
 
 #[derive(Deserialize)]
@@ -384,6 +392,7 @@ impl SceneFile {
             ("camera", &self.camera),
             ("blockers", &self.blockers),
             ("light.environment", &self.light.environment),
+            ("per_frame", &self.per_frame),
         ];
         paths::check_inside(file, dir, "gbuffer", &self.gbuffer)?;
         for (key, path) in optional {
@@ -692,16 +701,13 @@ impl Scene {
             Some(g) => Some(g.height),
         };
         let light_spec = parse_light(&file, &raw.light)?;
-        let lights = raw.lights.unwrap_or_default();
-        if lights.len() > MAX_SUNS {
-            return Err(SceneError::invalid(&file, format!("{} lights; at most {MAX_SUNS}", lights.len())));
-        }
-        let (mut suns, mut points) = (Vec::new(), Vec::new());
-        for (i, l) in lights.iter().enumerate() {
-            match parse_lamp(&file, i, l)? {
-                Lamp::Sun(sun) => suns.push(sun),
-                Lamp::Point(point) => points.push(point),
-            }
+        let (suns, points) = per_frame::parse_lamps(&file, &raw.lights.unwrap_or_default())?;
+        let per_frame = raw.per_frame.map(PathTemplate);
+        if per_frame.as_ref().is_some_and(|t| !t.is_per_frame()) {
+            return Err(SceneError::invalid(
+                &file,
+                "\"per_frame\" must name one file per frame: a path with # for the frame number",
+            ));
         }
         let colour_passes = raw.colour_passes.unwrap_or(false);
         if let Some(named) = raw.channels.as_ref().filter(|_| !colour_passes) {
@@ -744,6 +750,7 @@ impl Scene {
             channels,
             view,
             supersample,
+            per_frame,
             static_light: None,
             static_height_map: None,
         };
@@ -836,8 +843,9 @@ impl Scene {
 
     /// What the light of `frame` is made from, files resolved: what a relight needs to
     /// build it again ([`crate::transfer`]).
-    pub fn light_source(&self, frame: i64) -> LightSource {
-        match &self.light_spec {
+    pub fn light_source(&self, frame: i64) -> Result<LightSource, SceneError> {
+        let changed = self.changes(frame)?.light;
+        Ok(match changed.as_ref().unwrap_or(&self.light_spec) {
             LightSpec::Environment { path, strength, rotation } => {
                 let file = path.resolve(&self.dir, frame);
                 LightSource::Environment {
@@ -849,7 +857,7 @@ impl Scene {
             }
             LightSpec::Constant(c) => LightSource::Constant(*c),
             LightSpec::Sh(v) => LightSource::Sh(v.clone()),
-        }
+        })
     }
 
     /// The light of `frame` (shared when its path has no `#`).
@@ -860,32 +868,51 @@ impl Scene {
     /// [`Self::light`], with the CRC-32 of its map's file as it was read (`None` without
     /// a map): what a frame's transfer header records.
     pub fn light_as_read(&self, frame: i64) -> Result<(Arc<Light>, Option<u32>), SceneError> {
-        match &self.static_light {
-            Some((light, crc)) => Ok((light.clone(), *crc)),
-            None => {
+        let changed = self.changes(frame)?.light;
+        match (&self.static_light, changed) {
+            (Some((light, crc)), None) => Ok((light.clone(), *crc)),
+            (_, changed) => {
                 self.check_frame(frame)?;
-                let (light, crc) = self.read_light(frame)?;
+                let (light, crc) = self.read_light_of(changed.as_ref().unwrap_or(&self.light_spec), frame)?;
                 Ok((Arc::new(light), crc))
+            }
+        }
+    }
+
+    /// What `frame` changes of scene.json ([`per_frame`]); nothing without `per_frame`.
+    pub fn changes(&self, frame: i64) -> Result<per_frame::FrameChanges, SceneError> {
+        match &self.per_frame {
+            None => Ok(per_frame::FrameChanges::default()),
+            Some(template) => {
+                self.check_frame(frame)?;
+                per_frame::FrameChanges::read(&template.resolve(&self.dir, frame), frame, &self.light_spec)
             }
         }
     }
 
     /// The height map of `frame`, if the scene has a height field.
     pub fn height_map(&self, frame: i64) -> Result<Option<Arc<HeightMap>>, SceneError> {
-        if let Some(h) = &self.static_height_map {
-            return Ok(Some(h.clone()));
-        }
-        if self.heightfield.is_none() {
+        let Some(h) = &self.heightfield else {
             return Ok(None);
+        };
+        let rectangle = self.changes(frame)?.rectangle;
+        if let (Some(map), None) = (&self.static_height_map, rectangle) {
+            return Ok(Some(map.clone()));
         }
         self.check_frame(frame)?;
-        Ok(Some(Arc::new(self.read_height_map(frame)?)))
+        let (min, max) = rectangle.unwrap_or((h.min, h.max));
+        Ok(Some(Arc::new(HeightMap::read(&h.heights.resolve(&self.dir, frame), h.channel.as_deref(), min, max)?)))
     }
 
     /// The light of `frame`, with the CRC-32 of its map's file taken just before the map
     /// is read from it.
     fn read_light(&self, frame: i64) -> Result<(Light, Option<u32>), SceneError> {
-        match &self.light_spec {
+        self.read_light_of(&self.light_spec, frame)
+    }
+
+    /// [`Self::read_light`] of `spec` (scene.json's, or a frame's change of it).
+    fn read_light_of(&self, spec: &LightSpec, frame: i64) -> Result<(Light, Option<u32>), SceneError> {
+        match spec {
             LightSpec::Environment { path, strength, rotation } => {
                 let file = path.resolve(&self.dir, frame);
                 let crc = light::file_crc(&file);
@@ -967,18 +994,38 @@ impl Scene {
             None => Vec::new(),
             Some(t) => camera::read_blockers(&t.resolve(&self.dir, frame), frame)?,
         };
+        let height_map = self.height_map(frame)?;
+        if let (Some(map), Some(h)) = (&height_map, &self.heightfield) {
+            if let Some(share) = map.buried_share(&gbuffer).filter(|&share| share > heightmap::MOST_BURIED) {
+                return Err(SceneError::invalid(
+                    &gfile,
+                    format!(
+                        "{:.0} % of the surface pixels over the height field lie more than {} sample spacing(s) \
+                         below {}: the map is not this frame's terrain. A terrain that moves needs one map per \
+                         frame (\"heightmap.####.exr\", which the exporter writes when it moves)",
+                        100.0 * share,
+                        heightmap::BURIED_DEPTH,
+                        h.heights.for_frame(frame)
+                    ),
+                ));
+            }
+        }
         let (light, light_file_crc) = self.light_as_read(frame)?;
+        let (suns, points) = match self.changes(frame)?.lamps {
+            Some((suns, points)) => (suns.iter().map(|sun| sun.turned(self.light_turn)).collect(), points),
+            None => (self.suns.clone(), self.points.clone()),
+        };
         Ok(Frame {
             number: frame,
             gbuffer,
             reflection,
             camera,
             blockers,
-            height_map: self.height_map(frame)?,
+            height_map,
             light,
             light_file_crc,
-            suns: self.suns.clone(),
-            points: self.points.clone(),
+            suns,
+            points,
             ground: self.ground,
             supersample: self.supersample,
         })
@@ -995,6 +1042,7 @@ impl Scene {
         t.extend(self.camera.iter());
         t.extend(self.blockers.iter());
         t.extend(self.heightfield.iter().map(|h| &h.heights));
+        t.extend(self.per_frame.iter());
         if let LightSpec::Environment { path, .. } = &self.light_spec {
             t.push(path);
         }

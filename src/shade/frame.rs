@@ -5,7 +5,7 @@
 use super::kernel::SurfacePoint;
 use super::settings::SettingsError;
 use crate::heightfield::{HeightField, HeightFieldError};
-use crate::scene::{Frame, GBuffer, Material, Scene};
+use crate::scene::{Frame, GBuffer, Material, Scene, SceneError};
 use std::collections::BTreeMap;
 
 /// A shaded frame: linear RGBA, row-major from the top row. Alpha is 1 where a surface
@@ -21,6 +21,8 @@ pub struct ShadedFrame {
 pub enum ShadeError {
     #[error(transparent)]
     Settings(#[from] SettingsError),
+    #[error(transparent)]
+    Scene(#[from] SceneError),
     #[error("height field of {file}: {cause}")]
     HeightField { file: String, cause: HeightFieldError },
     #[error(

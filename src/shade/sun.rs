@@ -22,14 +22,18 @@
 //!   `asin(r / d)` about the sphere's direction; a receiver inside a sphere sees it as the
 //!   half-space towards its centre (as the reference's surface band does); the receiver's
 //!   own spheres behind its tangent plane cast nothing (the self-shadowing rule);
-//! - the ground plane, for a receiver above it: the horizontal;
+//! - the ground plane, for a receiver above it: the horizontal (not for a lamp above the
+//!   plane too, whose light never crosses it);
 //! - the height field: its horizon marched once along the sun's azimuth
 //!   ([`HorizonPyramid::horizon_along`], SN08's single-azimuth swath), against each
 //!   direction's elevation.
 //!
 //! A point lamp ([`PointLight`]) is a disk too, seen from each receiver
 //! ([`SunDisk::of_lamp`]): built per pixel, its occluders restricted to those nearer than
-//! the lamp (paper 002: the horizon only up to the light's distance).
+//! the lamp (paper 002: the horizon only up to the light's distance). Its horizon is the
+//! highest surface before it, below the horizontal too (thesis Section 4.3.1, Eq. 4.23;
+//! [`crate::heightfield::lowest_horizon`]): a lamp low in a valley lights the slopes
+//! above it that face it.
 //!
 //! The BRDF is evaluated per direction (the cosine lobe, the Phong lobe), so a sun that
 //! grazes the surface or a highlight narrower than the disk is integrated, not sampled at
@@ -38,7 +42,7 @@
 //! value at the directions' mean ([`SunDisk::diffuse_reflected`]).
 
 use super::blocker_tree::BlockerTree;
-use crate::heightfield::{ElevationBand, HorizonAgainst, HorizonPyramid};
+use crate::heightfield::{lowest_horizon, ElevationBand, HorizonAgainst, HorizonPyramid};
 use crate::logsh::Lobe;
 use crate::scene::camera::{dot, frame_around};
 use crate::scene::{PointLight, SunLight};
@@ -217,7 +221,7 @@ impl DiskDirections {
         let foot = lowest.clamp(-1.0, 1.0).asin() - patch - MARGIN;
         let top = highest.clamp(-1.0, 1.0).asin() + patch + MARGIN;
         ElevationBand {
-            below: if foot > 0.0 { foot.tan() } else { f64::NEG_INFINITY },
+            below: if foot > lowest_horizon(self.reach).atan() { foot.tan() } else { f64::NEG_INFINITY },
             above: if top < FRAC_PI_2 - MARGIN { top.tan() } else { f64::INFINITY },
         }
     }
@@ -240,11 +244,20 @@ impl DiskDirections {
     /// Whether `planes` alone hide the whole disk at `p` with unit normal `n` (a sun
     /// behind the surface): [`Self::visibility`] is then 0 without a march.
     pub fn hidden_by_planes(&self, planes: Planes, p: [f64; 3], n: [f64; 3]) -> bool {
-        let ground = planes.ground.is_some_and(|z| super::kernel::above_ground(p, z));
+        let ground = self.ground_counts(planes.ground, p);
         if self.planes_cover_nothing(planes.tangent, ground, n) {
             return false;
         }
         self.shares_of_planes(planes.tangent, ground, n).iter().all(|&share| share >= 1.0)
+    }
+
+    /// Whether the ground plane at `ground` hides the directions below the horizontal from
+    /// `p`: for a receiver above it, unless the light is a lamp above it too, whose light
+    /// reaches `p` without crossing the plane (a lantern over a valley floor, seen from
+    /// the slopes above it).
+    fn ground_counts(&self, ground: Option<f64>, p: [f64; 3]) -> bool {
+        let light_above = |z: f64| self.reach.is_finite() && p[2] + self.axis[2] * self.reach > z;
+        ground.is_some_and(|z| super::kernel::above_ground(p, z) && !light_above(z))
     }
 
     /// Whether every direction lies more than a patch above the tangent plane of normal
@@ -329,7 +342,7 @@ impl DiskDirections {
         let covered = |sin_x: f64| (0.5 + sin_x / two_patches).clamp(0.0, 1.0);
         // Blocked share per direction, the largest over the occluders; `None` while
         // nothing covers any (the planes counted being the tangent plane, clear of it).
-        let ground = planes.ground.is_some_and(|z| super::kernel::above_ground(p, z));
+        let ground = self.ground_counts(planes.ground, p);
         let mut blocked = if self.planes_cover_nothing(planes.tangent, ground, n) {
             (!planes.tangent).then_some([0.0; DISK_DIRECTIONS])
         } else {
@@ -355,10 +368,16 @@ impl DiskDirections {
                     let (sin_h, cos_h) = horizon.sin_cos();
                     let blocked = blocked.get_or_insert([0.0; DISK_DIRECTIONS]);
                     for (b, w) in blocked.iter_mut().zip(&self.directions) {
-                        // x = horizon - elevation, in [-pi/2, pi]: past pi/2 it is deep inside.
+                        // x = horizon - elevation, in [-pi, pi] (a lamp's horizon may lie
+                        // below the horizontal): past pi/2 either way it is deep inside or
+                        // far outside, as the horizon is above the direction or below it.
                         let (sin_e, cos_e) = (w[2], (1.0 - w[2] * w[2]).max(0.0).sqrt());
                         let cos_x = cos_h * cos_e + sin_h * sin_e;
-                        *b = b.max(if cos_x < 0.0 { 1.0 } else { covered(sin_h * cos_e - cos_h * sin_e) });
+                        let share = match cos_x < 0.0 {
+                            true => f64::from(u8::from(sin_h > sin_e)),
+                            false => covered(sin_h * cos_e - cos_h * sin_e),
+                        };
+                        *b = b.max(share);
                     }
                 }
             }

@@ -4,7 +4,7 @@
 use super::layers::{PixelTransfer, PrefilteredLobe, ShConvention, TransferFrame, TransferHeader};
 use super::SunLampInputs;
 use crate::heightfield::{HorizonPyramid, ScaleMax};
-use crate::scene::{Frame, Light, Scene};
+use crate::scene::{Frame, Light, LightSource, Scene};
 use crate::sh::Real;
 use crate::shade::compositing::{assemble, Pixel, ShadedPasses};
 use crate::shade::frame::mirrored_suns;
@@ -27,21 +27,23 @@ pub fn shade_with_transfer(
     let pyramid = plan.terrain.as_ref().map(|terrain| terrain.horizon_pyramid(&plan.settings));
     let blockers = (!plan.blockers.is_empty()).then_some(&plan.blockers);
     let occluders = Occluders { blockers, horizons: pyramid.as_ref() };
+    let light = scene.light_source(frame.number)?;
     Ok(match plan.kernel.as_ref() {
-        PlannedKernel::F32(kernel) => walk(kernel, occluders, &plan),
-        PlannedKernel::F64(kernel) => walk(kernel, occluders, &plan),
+        PlannedKernel::F32(kernel) => walk(kernel, occluders, &plan, light),
+        PlannedKernel::F64(kernel) => walk(kernel, occluders, &plan, light),
     })
 }
 
-/// The header of a frame shaded by `kernel` under `plan`.
-fn header<T: Real>(kernel: &ShadingKernel<T>, plan: &FramePlan) -> TransferHeader {
+/// The header of a frame shaded by `kernel` under `plan`, in `light` (the frame's, as
+/// [`Scene::light_source`] tells it).
+fn header<T: Real>(kernel: &ShadingKernel<T>, plan: &FramePlan, light: LightSource) -> TransferHeader {
     let window = plan.settings.light_window.to_possible_value().expect("every window has a name");
     TransferHeader {
         version: super::layers::TRANSFER_VERSION,
         scene: std::path::absolute(&plan.scene.dir).unwrap_or_else(|_| plan.scene.dir.clone()),
         frame: plan.frame.number,
         sh: ShConvention::of_order(kernel.order()),
-        light: plan.scene.light_source(plan.frame.number),
+        light,
         light_window: window.get_name().to_string(),
         sky_only: kernel.has_ground(),
         heightfield: plan.terrain.is_some(),
@@ -65,10 +67,15 @@ fn header<T: Real>(kernel: &ShadingKernel<T>, plan: &FramePlan) -> TransferHeade
     }
 }
 
-fn walk<T: Real>(kernel: &ShadingKernel<T>, occluders: Occluders, plan: &FramePlan) -> (ShadedPasses, TransferFrame) {
+fn walk<T: Real>(
+    kernel: &ShadingKernel<T>,
+    occluders: Occluders,
+    plan: &FramePlan,
+    light: LightSource,
+) -> (ShadedPasses, TransferFrame) {
     let frame = plan.frame;
     let g = &frame.gbuffer;
-    let header = header(kernel, plan);
+    let header = header(kernel, plan, light);
     let both = header.heightfield && header.blockers;
     let phong = plan.contents.phong;
     let scene_suns = frame.suns.len();
