@@ -13,7 +13,8 @@
 use crate::gpu::{Gpu, GpuError, Specialisation};
 use crate::scene::{Frame, Scene};
 use crate::shade::{
-    adaptive, bounce, Precision, Resolve, Resolving, ShadeError, ShadedFrame, ShadedPasses, ShadingSettings,
+    adaptive, bounce, Precision, Resolve, Resolving, SettingsError, ShadeError, ShadedFrame, ShadedPasses,
+    ShadingSettings,
 };
 use crate::timing::{Clock, StageTimings};
 use std::sync::Mutex;
@@ -102,11 +103,18 @@ impl Executor {
                 if settings.precision == Precision::F64 {
                     return Err(GpuError::double_precision().into());
                 }
+                if settings.visibility_grid > 1 {
+                    return Err(GpuError::visibility_grid(settings.visibility_grid).into());
+                }
                 Ok(Self::on(Device::Gpu { gpu: Box::new(Gpu::new()?), fallback: false }))
             }
             DeviceChoice::Auto if settings.precision == Precision::F64 => {
                 Ok(on_cpu("since the GPU pass runs in f32 and --precision f64 was asked".into()))
             }
+            DeviceChoice::Auto if settings.visibility_grid > 1 => Ok(on_cpu(format!(
+                "since the GPU pass computes visibility at every pixel and --visibility-grid {} was asked",
+                settings.visibility_grid
+            ))),
             DeviceChoice::Auto => match Gpu::new_hardware() {
                 Ok(gpu) => {
                     let executor = Self::on(Device::Gpu { gpu: Box::new(gpu), fallback: true });
@@ -116,6 +124,11 @@ impl Executor {
                 Err(e) => Ok(on_cpu(format!("since {e}"))),
             },
         }
+    }
+
+    /// Whether frames are shaded on a GPU.
+    pub fn on_gpu(&self) -> bool {
+        matches!(self.device, Device::Gpu { .. })
     }
 
     /// "cpu (N threads)" or "gpu: adapter".
@@ -202,7 +215,9 @@ impl Executor {
         let Some(plan) = bounce::SurroundingsPlan::new(scene, frame, &settings.bounce)? else {
             return Ok(None);
         };
-        let direct = self.shade_direct_passes(scene, plan.points(), settings)?;
+        // The secondary points are packed side by side, not neighbours: each is shaded alone.
+        let one_by_one = ShadingSettings { visibility_grid: 1, ..*settings };
+        let direct = self.shade_direct_passes(scene, plan.points(), &one_by_one)?;
         let surroundings = plan.lit(scene, &direct.diffuse, &direct.visibility);
         // A supersampled G-buffer gathers as densely per camera pixel as a plain one.
         let stride = settings.bounce.stride * frame.supersample.max(1);
@@ -239,6 +254,7 @@ impl Executor {
             ..Default::default()
         };
         let n = frame.supersample.max(1);
+        check_grid_keeps_pixels(settings, n, resolving)?;
         let started = std::time::Instant::now();
         let mut passes = if n == 1 || resolving.every_sample {
             let passes = self.shade_direct_passes(scene, frame, settings)?;
@@ -284,6 +300,7 @@ impl Executor {
         if n <= 1 {
             return self.shade_timed(scene, frame, settings, Specialisation::Full);
         }
+        check_grid_keeps_pixels(settings, n, resolving)?;
         if settings.bounce.bounces > 0 {
             let (passes, timings) = self.shade_passes_timed(scene, frame, settings, resolving)?;
             return Ok((ShadedFrame { width: passes.width, height: passes.height, rgba: passes.beauty }, timings));
@@ -353,4 +370,22 @@ impl Executor {
             },
         )
     }
+}
+
+/// A visibility grid interpolates between neighbouring pixels, which the adaptive
+/// selection of a supersampled frame's samples does not keep ([`adaptive`]): refused
+/// there, with the way out.
+fn check_grid_keeps_pixels(
+    settings: &ShadingSettings,
+    supersample: usize,
+    resolving: Resolving,
+) -> Result<(), ShadeError> {
+    if settings.visibility_grid > 1 && supersample > 1 && !resolving.every_sample {
+        return Err(ShadeError::Settings(SettingsError::VisibilityGridWithout {
+            grid: settings.visibility_grid,
+            why: "the adaptive selection of a supersampled frame's samples does not keep them side by side",
+            instead: "add --every-sample, or leave --visibility-grid at 1",
+        }));
+    }
+    Ok(())
 }

@@ -273,6 +273,9 @@ pub fn render(args: &crate::cli::RenderArgs) -> Result<()> {
     if args.threads == Some(0) {
         return Err(anyhow!("--threads 0: give at least 1, or leave it out for one thread per core"));
     }
+    if args.transfer {
+        crate::transfer::check_grid(&settings)?;
+    }
     let mut scene = Scene::load(&args.scene)?;
     scene.turn_light(args.shading.light_rotation)?;
     if args.transfer {

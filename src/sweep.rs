@@ -22,8 +22,9 @@ use std::time::Instant;
 #[derive(Clone, Debug, Serialize)]
 pub struct SweepRow {
     /// What was varied: "preset", "order", "epsilon", "exp", "directions", "level_step",
-    /// "level_offset", "ratio_attenuation", "fitted_depths" or "tangent_occlusion"; every
-    /// other knob is the base's (fitted caps on).
+    /// "level_offset", "ratio_attenuation", "fitted_depths", "tangent_occlusion" or
+    /// "visibility_grid" (on the CPU executor only); every other knob is the base's
+    /// (fitted caps on).
     pub knob: String,
     /// The value, as a user would type it.
     pub value: String,
@@ -84,6 +85,9 @@ pub fn configurations() -> Vec<(String, String, ShadingSettings)> {
     out.push(("ratio_attenuation".into(), "on".into(), ShadingSettings { ratio_attenuation: true, ..base }));
     out.push(("fitted_depths".into(), "off".into(), ShadingSettings { fitted_depths: false, ..base }));
     out.push(("tangent_occlusion".into(), "off".into(), ShadingSettings { tangent_occlusion: false, ..base }));
+    for visibility_grid in [2, 4] {
+        out.push(("visibility_grid".into(), visibility_grid.to_string(), ShadingSettings { visibility_grid, ..base }));
+    }
     for (_, _, settings) in &mut out {
         settings.bounce = crate::shade::bounce::BounceSettings::none();
     }
@@ -154,6 +158,11 @@ pub fn run(
     let total = configurations.len();
     let mut rows = Vec::with_capacity(total);
     for (done, (knob, value, settings)) in configurations.into_iter().enumerate() {
+        // The GPU pass computes visibility at every pixel: the grid is the CPU's alone.
+        if settings.visibility_grid > 1 && executor.on_gpu() {
+            progress(done + 1, total);
+            continue;
+        }
         let mut best = f64::INFINITY;
         let mut image = None;
         for _ in 0..repeats.max(1) {
@@ -284,6 +293,7 @@ mod tests {
             "ratio_attenuation",
             "fitted_depths",
             "tangent_occlusion",
+            "visibility_grid",
         ] {
             assert!(knobs.contains(k), "{k}");
         }

@@ -502,13 +502,15 @@ fn sun_lamps_turn_the_same_from_a_frame_read_once() {
     let scene = dunes(dir.path());
     let lights = serde_json::json!([{"type": "sun", "direction": [0.9, -0.2, 0.35], "angle": 2.0, "strength": 3.0}]);
     support::sharp::load_with_lights(&scene, lights).unwrap();
-    // The same scene with a height map per frame, frame 2's raised and steeper.
+    // The same scene with a height map per frame, frame 2's steeper, deepened from its
+    // crests down (so that no G-buffer pixel lies buried under it).
     let per_frame = dir.path().join("per_frame");
     support::copy_scene(&scene, &per_frame);
     let map = logsh::scene::HeightMap::read(&scene.join("heightmap.exr"), None, [0.0; 2], [1.0; 2]).unwrap();
+    let top = map.heights.iter().fold(f32::NEG_INFINITY, |a, &b| a.max(b));
     for (number, scale) in [(1, 1.0f32), (2, 1.6)] {
-        let steeper =
-            logsh::scene::HeightMap { heights: map.heights.iter().map(|h| h * scale).collect(), ..map.clone() };
+        let heights = map.heights.iter().map(|h| top - (top - h) * scale).collect();
+        let steeper = logsh::scene::HeightMap { heights, ..map.clone() };
         synth::write_height_map_exr(&per_frame.join(format!("heightmap.{number:04}.exr")), &steeper).unwrap();
     }
     let file = per_frame.join("scene.json");

@@ -157,6 +157,15 @@ fn bad_supersampling_is_refused() {
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert_eq!(output.status.code(), Some(1), "{stderr}");
     assert!(stderr.contains("--transfer") && stderr.contains("supersampled"), "{stderr}");
+
+    // A visibility grid needs the samples side by side: refused with the adaptive
+    // selection, shaded with --every-sample.
+    let grid = ["shade", path(&scene_dir), "--device", "cpu", "--visibility-grid", "2", "--out"];
+    let output = Command::cargo_bin("logsh").unwrap().args(grid).arg(dir.path().join("grid")).output().unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("--visibility-grid 2") && stderr.contains("--every-sample"), "{stderr}");
+    logsh(&[&grid[..], &[path(&dir.path().join("grid")), "--every-sample"]].concat());
 }
 
 /// Adaptive shading (the default) against shading every sample: the same resolved image

@@ -164,6 +164,9 @@ impl Gpu {
         specialisation: Specialisation,
         passes: bool,
     ) -> Result<PreparedFrame<'a>, GpuError> {
+        if settings.visibility_grid > 1 {
+            return Err(GpuError::visibility_grid(settings.visibility_grid));
+        }
         let mut plan = FramePlan::new(scene, frame, settings)?;
         let started = Instant::now();
         let PlannedKernel::F32(kernel) = plan.kernel.as_ref() else {

@@ -32,6 +32,13 @@ impl GpuError {
     pub fn double_precision() -> Self {
         Self::Unsupported("--precision f64 (the GPU pass runs in f32)".into())
     }
+
+    /// The GPU pass computes visibility at every pixel.
+    pub fn visibility_grid(grid: usize) -> Self {
+        Self::Unsupported(format!(
+            "--visibility-grid {grid} (the GPU pass computes visibility at every pixel; the grid is the CPU executor's)"
+        ))
+    }
 }
 
 #[derive(Debug, thiserror::Error)]

@@ -7,6 +7,7 @@ use super::frame::{pixel_work, PixelWork, ShadeError, ShadedFrame, Tint};
 use super::kernel::{Caps, Occluders, ShadingKernel, SurfacePoint};
 use super::plan::{FramePlan, PlannedKernel};
 use super::settings::ShadingSettings;
+use super::visibility_grid::{is_direct_surface, GridVisibility, VisibilityGrid};
 use crate::scene::{Frame, Scene};
 use crate::sh::Real;
 use crate::timing::StageTimings;
@@ -100,22 +101,56 @@ fn shade_plan<P: PixelResult>(plan: &FramePlan) -> (Vec<P>, StageTimings) {
     }
     let blockers = (!plan.blockers.is_empty()).then_some(&plan.blockers);
     let occluders = Occluders { blockers, horizons: pyramid.as_ref() };
-    let started = Instant::now();
     let pixels = match plan.kernel.as_ref() {
-        PlannedKernel::F32(kernel) => shade_pixels::<P, f32>(kernel, occluders, plan),
-        PlannedKernel::F64(kernel) => shade_pixels::<P, f64>(kernel, occluders, plan),
+        PlannedKernel::F32(kernel) => shade_pixels::<P, f32>(kernel, occluders, plan, &mut timings),
+        PlannedKernel::F64(kernel) => shade_pixels::<P, f64>(kernel, occluders, plan, &mut timings),
     };
-    timings.add_wall("shade", started);
     (pixels, timings)
 }
 
 /// Shades the frame row by row; the sphere caps of a row's points are summed first, in
 /// packets ([`ShadingKernel::sum_caps`]).
-fn shade_pixels<P: PixelResult, T: Real>(kernel: &ShadingKernel<T>, occluders: Occluders, plan: &FramePlan) -> Vec<P> {
-    let g = &plan.frame.gbuffer;
+///
+/// With a visibility grid ([`ShadingSettings::visibility_grid`] above 1, and something to
+/// occlude), the horizons and caps of one pixel per block are computed first (the stage
+/// "visibility grid"), and each pixel interpolates them ([`VisibilityGrid`]).
+fn shade_pixels<P: PixelResult, T: Real>(
+    kernel: &ShadingKernel<T>,
+    occluders: Occluders,
+    plan: &FramePlan,
+    timings: &mut StageTimings,
+) -> Vec<P> {
+    let (frame, materials) = (plan.frame, &plan.scene.materials);
+    let g = &frame.gbuffer;
+    let work_at = |x, y| pixel_work(materials, frame, x, y);
+    let occluded = occluders.horizons.is_some() || occluders.blockers.is_some();
+    let started = Instant::now();
+    let grid = (plan.settings.visibility_grid > 1 && occluded)
+        .then(|| VisibilityGrid::new(kernel, occluders, frame, materials, plan.settings.visibility_grid, work_at));
+    if grid.is_some() {
+        timings.add_wall("visibility grid", started);
+    }
+    let started = Instant::now();
     let mut pixels = vec![P::fixed([0.0; 4]); g.width * g.height];
     pixels.par_chunks_mut(g.width).enumerate().for_each(|(y, row)| {
-        let work: Vec<PixelWork> = (0..g.width).map(|x| pixel_work(&plan.scene.materials, plan.frame, x, y)).collect();
+        let work: Vec<PixelWork> = (0..g.width).map(|x| work_at(x, y)).collect();
+        if let Some(grid) = &grid {
+            let mut interpolated = GridVisibility::new();
+            for (x, (out, work)) in row.iter_mut().zip(work).enumerate() {
+                *out = match work {
+                    PixelWork::Fixed(colour) => P::fixed(colour),
+                    PixelWork::Shade { point, tint } => {
+                        let direct = is_direct_surface(materials, frame, g.index(x, y));
+                        let caps = match direct && grid.at(x, y, &point, &mut interpolated) {
+                            true => interpolated.caps(),
+                            false => Caps::Walk,
+                        };
+                        P::shaded(kernel, occluders, &point, caps, tint)
+                    }
+                };
+            }
+            return;
+        }
         let caps = kernel.sum_caps_of_work(occluders.blockers, &work);
         let mut shaded = 0;
         for (out, work) in row.iter_mut().zip(work) {
@@ -128,5 +163,6 @@ fn shade_pixels<P: PixelResult, T: Real>(kernel: &ShadingKernel<T>, occluders: O
             };
         }
     });
+    timings.add_wall("shade", started);
     pixels
 }

@@ -246,13 +246,21 @@ pub struct Occluders<'a> {
     pub horizons: Option<&'a HorizonPyramid>,
 }
 
-/// Where a point's sphere caps come from: walked for it alone, or summed ahead with the
-/// other receivers of its packet ([`ShadingKernel::sum_caps`]).
+/// Where a point's sphere caps (and height-field horizons) come from: walked and marched
+/// for it alone, the caps summed ahead with the other receivers of its packet
+/// ([`ShadingKernel::sum_caps`]), or both interpolated from a coarser grid of receivers
+/// ([`super::visibility_grid`]).
 #[derive(Clone, Copy, Debug)]
 pub enum Caps<'a> {
     Walk,
     /// The caps' log vector, `order^2` coefficients.
     Summed(&'a [f32]),
+    /// Interpolated: the caps' log vector (`None` without blockers) and the tangents of
+    /// the horizons along the kernel's azimuths (`None` without a height field).
+    Grid {
+        caps: Option<&'a [f64]>,
+        horizons: Option<&'a [f64]>,
+    },
 }
 
 /// The sphere caps of a run of points, summed in packets where the kernel runs in f32 on
@@ -607,7 +615,10 @@ impl<T: Real> ShadingKernel<T> {
             // The horizons and the tangent plane by the tangents of their elevations
             // (`banded_slice_of_tangents`).
             let mut horizons = [0.0f64; MAX_DIRECTIONS];
-            pyramid.horizon_tangents(p, &mut horizons[..directions]);
+            match caps {
+                Caps::Grid { horizons: Some(given), .. } => horizons[..directions].copy_from_slice(given),
+                _ => pyramid.horizon_tangents(p, &mut horizons[..directions]),
+            }
             if let Some(found) = horizons_found {
                 pyramid.sector_maxima(&horizons[..directions], found);
             }
@@ -639,18 +650,48 @@ impl<T: Real> ShadingKernel<T> {
         let Some(tree) = occluders.blockers else {
             return;
         };
-        if let Caps::Summed(sum) = caps {
-            for (a, c) in acc.iter_mut().zip(sum) {
-                *a = *a + T::of(f64::from(*c));
-            }
-            if let Some(occlusion) = occlusion {
-                for (a, c) in occlusion.iter_mut().zip(sum) {
-                    *a = *a + T::of(f64::from(*c));
+        // The caps summed ahead, or the walk.
+        let mut sum = [T::zero(); MAX_COEFFICIENTS];
+        let count = match caps {
+            Caps::Summed(given) => {
+                for (s, &c) in sum.iter_mut().zip(given) {
+                    *s = T::of(f64::from(c));
                 }
+                given.len()
             }
-            return;
+            Caps::Grid { caps: Some(given), .. } => {
+                for (s, &c) in sum.iter_mut().zip(given) {
+                    *s = T::of(c);
+                }
+                given.len()
+            }
+            Caps::Walk | Caps::Grid { caps: None, .. } => {
+                return self.add_blocker_caps(tree, p, n, object, acc, occlusion)
+            }
+        };
+        for (a, &c) in acc.iter_mut().zip(&sum[..count]) {
+            *a = *a + c;
         }
-        let pt = p.map(T::of);
+        if let Some(occlusion) = occlusion {
+            for (a, &c) in occlusion.iter_mut().zip(&sum[..count]) {
+                *a = *a + c;
+            }
+        }
+    }
+
+    /// The log vectors of the sphere caps `tree` casts on `p` with normal `n` on object
+    /// `object`, added to `acc` and, where given, to `occlusion`.
+    pub(crate) fn add_blocker_caps(
+        &self,
+        tree: &BlockerTree,
+        p: [f64; 3],
+        n: [f64; 3],
+        object: u32,
+        acc: &mut [T],
+        mut occlusion: Option<&mut [T]>,
+    ) {
+        let order = self.order;
+        let (pt, nt) = (p.map(T::of), n.map(T::of));
         let mut zonal = [T::zero(); crate::sh::MAX_ORDER];
         tree.visit(p, n, object, |sphere| {
             let view = view_blocker(pt, nt, sphere.center.map(T::of), T::of(sphere.radius), self.ratio_attenuation);

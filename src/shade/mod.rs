@@ -2,7 +2,8 @@
 //! for either executor (settings, checks, height field, pyramid plan, light, kernel
 //! tables, the blockers' [`blocker_tree`], each cap's fitted [`fitted_depth`]); [`frame`] says what each pixel is; [`kernel`] shades one surface point (the
 //! math both executors share; [`sun`] its sharp lights, [`sharp_lights`] the suns taken
-//! out of an environment map); [`cpu`] is the CPU executor (the GPU one is in
+//! out of an environment map; [`visibility_grid`] the occluders' visibility computed once
+//! per block of pixels); [`cpu`] is the CPU executor (the GPU one is in
 //! `src/gpu/`); [`compositing`] assembles the passes of `logsh render`.
 pub mod adaptive;
 pub mod blocker_tree;
@@ -19,6 +20,7 @@ pub mod resolve;
 pub mod settings;
 pub mod sharp_lights;
 pub mod sun;
+pub mod visibility_grid;
 
 pub use compositing::ShadedPasses;
 pub use cpu::{shade_frame, shade_frame_passes, shade_frame_timed};

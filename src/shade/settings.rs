@@ -65,7 +65,21 @@ pub struct ShadingSettings {
     /// existed, which was shaded without.
     #[serde(default = "BounceSettings::none")]
     pub bounce: BounceSettings,
+    /// Pixels per side of the blocks whose height-field horizons and sphere caps are
+    /// computed once, at one pixel of each, and interpolated between the blocks
+    /// ([`super::visibility_grid`]); 1 computes them at every pixel. Absent from a
+    /// transfer frame written before it existed, which was shaded per pixel.
+    #[serde(default = "one")]
+    pub visibility_grid: usize,
 }
+
+/// The visibility grid of settings that predate it.
+fn one() -> usize {
+    1
+}
+
+/// Largest `visibility_grid` accepted.
+pub const MAX_VISIBILITY_GRID: usize = 4;
 
 /// How the glossy lobe of a `phong` material is shaded (`--glossy`). The first two read
 /// a prefiltered environment scaled by a log-SH specular occlusion ([`super::glossy`]);
@@ -156,6 +170,10 @@ pub enum SettingsError {
     BounceGrid(usize),
     #[error("--bounce-stride {0} is outside 1..={MAX_BOUNCE_STRIDE}")]
     BounceStride(usize),
+    #[error("--visibility-grid {0} is outside 1..={MAX_VISIBILITY_GRID}")]
+    VisibilityGrid(usize),
+    #[error("--visibility-grid {grid} interpolates visibility between neighbouring pixels, but {why}; {instead}")]
+    VisibilityGridWithout { grid: usize, why: &'static str, instead: &'static str },
 }
 
 /// Default `cluster_ratio`: clusters spanning at most about 40 degrees are one cap. Against
@@ -208,6 +226,7 @@ impl ShadingSettings {
             horizon: HorizonSettings::default(),
             precision: Precision::F32,
             bounce: BounceSettings::DEFAULT,
+            visibility_grid: 1,
         }
     }
 
@@ -247,6 +266,9 @@ impl ShadingSettings {
         }
         if !(1..=MAX_BOUNCE_STRIDE).contains(&self.bounce.stride) {
             return Err(SettingsError::BounceStride(self.bounce.stride));
+        }
+        if !(1..=MAX_VISIBILITY_GRID).contains(&self.visibility_grid) {
+            return Err(SettingsError::VisibilityGrid(self.visibility_grid));
         }
         Ok(())
     }

@@ -86,7 +86,7 @@ pub use layers::{
 #[cfg(test)]
 pub(crate) use relight::relit_dunes;
 pub use relight::{relight, relight_reusing, RelightLight, RelightOptions, SampledMap, SAMPLED_MAP_WIDTH};
-pub use shade::shade_with_transfer;
+pub use shade::{check_grid, shade_with_transfer};
 pub use sun_lamps::{
     describe_sun_lamps, offering_soft_suns, offering_to_keep, SunLampFrame, SunLampInputs, SunLampTurn,
 };

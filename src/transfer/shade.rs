@@ -10,8 +10,8 @@ use crate::shade::compositing::{assemble, Pixel, ShadedPasses};
 use crate::shade::frame::mirrored_suns;
 use crate::shade::sun::SunDisk;
 use crate::shade::{
-    pixel_source, work_of, FramePlan, Occluders, PixelSource, PixelWork, PlannedKernel, ShadeError, ShadingKernel,
-    ShadingSettings,
+    pixel_source, work_of, FramePlan, Occluders, PixelSource, PixelWork, PlannedKernel, SettingsError, ShadeError,
+    ShadingKernel, ShadingSettings,
 };
 use clap::ValueEnum;
 use rayon::prelude::*;
@@ -23,6 +23,7 @@ pub fn shade_with_transfer(
     frame: &Frame,
     settings: &ShadingSettings,
 ) -> Result<(ShadedPasses, TransferFrame), ShadeError> {
+    check_grid(settings)?;
     let plan = FramePlan::new(scene, frame, settings)?;
     let pyramid = plan.terrain.as_ref().map(|terrain| terrain.horizon_pyramid(&plan.settings));
     let blockers = (!plan.blockers.is_empty()).then_some(&plan.blockers);
@@ -32,6 +33,18 @@ pub fn shade_with_transfer(
         PlannedKernel::F32(kernel) => walk(kernel, occluders, &plan, light),
         PlannedKernel::F64(kernel) => walk(kernel, occluders, &plan, light),
     })
+}
+
+/// Transfer layers record each pixel's own transfer: a visibility grid is refused.
+pub fn check_grid(settings: &ShadingSettings) -> Result<(), SettingsError> {
+    if settings.visibility_grid > 1 {
+        return Err(SettingsError::VisibilityGridWithout {
+            grid: settings.visibility_grid,
+            why: "--transfer records each pixel's own transfer",
+            instead: "leave --visibility-grid at 1 with --transfer",
+        });
+    }
+    Ok(())
 }
 
 /// The header of a frame shaded by `kernel` under `plan`, in `light` (the frame's, as

@@ -1,0 +1,230 @@
+//! Visibility on a coarser grid (`--visibility-grid`): NS09 (Section 7) and SN08
+//! (Section 8) compute visibility at a fraction of the pixels and shade with the
+//! full-resolution normals, which is how they reach their frame rates.
+//!
+//! Here the two costly parts of a pixel's log visibility, the height field's horizons
+//! (SN08's march, one tangent per azimuth) and the sphere caps' log vector, are computed
+//! at one surface pixel of each `g x g` block, and each pixel takes their mean over the
+//! four blocks around it: weighted bilinearly, and by how alike the two points are, so
+//! that visibility does not leak across an edge:
+//!
+//! - the same object (a sphere of the pixel's own object follows the self-shadowing
+//!   rule);
+//! - normals within about 25 degrees: `max(n . n_b, 0)^8`, 0.43 at 25 degrees;
+//! - the block's point near the pixel's tangent plane: `exp(-(r / 0.2)^2)`, `r` the sine
+//!   of the elevation of the block's point seen from the pixel, 0 on a plane, about 1
+//!   across a depth edge.
+//!
+//! Horizons are averaged as the tangents of their elevations, which the slices are built
+//! from (a wall at 75 degrees between neighbours at 60 comes out at 70 where its angle's
+//! mean is 67.5; one arctangent and one tangent per azimuth and pixel cost more than
+//! the rest of the interpolation). A pixel whose four blocks weigh
+//! less than [`MIN_WEIGHT`] in all (an edge of its own, water's reflected points) is
+//! computed alone. The tangent plane, the ground plane, the BRDF lobe, the
+//! exponentiation and the suns' and lamps' disks stay per pixel.
+
+use super::kernel::{Caps, Occluders, ShadingKernel, SurfacePoint};
+use super::settings::MAX_DIRECTIONS;
+use super::PixelWork;
+use crate::scene::camera::dot;
+use crate::scene::{Frame, Material};
+use crate::sh::{coefficient_count, Real, MAX_COEFFICIENTS};
+use rayon::prelude::*;
+use std::collections::BTreeMap;
+
+/// Least total weight of a pixel's blocks under which it is computed alone.
+pub const MIN_WEIGHT: f64 = 1e-3;
+
+/// The horizons and caps of one surface pixel per block of a frame.
+pub struct VisibilityGrid {
+    size: usize,
+    /// Blocks along x and y.
+    blocks: [usize; 2],
+    /// Per block, the point its visibility was computed at (`None`: no surface pixel).
+    points: Vec<Option<SurfacePoint>>,
+    /// Azimuths per block (0 without a height field).
+    directions: usize,
+    /// Per block, the tangents of its horizons' elevations.
+    tangents: Vec<f64>,
+    /// Coefficients per block (0 without blockers).
+    count: usize,
+    /// Per block, its caps' log vector.
+    caps: Vec<f64>,
+}
+
+/// A pixel's horizons and caps, interpolated ([`VisibilityGrid::at`]).
+pub struct GridVisibility {
+    horizons: [f64; MAX_DIRECTIONS],
+    caps: [f64; MAX_COEFFICIENTS],
+    directions: usize,
+    count: usize,
+}
+
+impl GridVisibility {
+    pub fn new() -> Self {
+        Self { horizons: [0.0; MAX_DIRECTIONS], caps: [0.0; MAX_COEFFICIENTS], directions: 0, count: 0 }
+    }
+
+    /// Where the kernel takes the pixel's horizons and caps from.
+    pub fn caps(&self) -> Caps<'_> {
+        Caps::Grid {
+            caps: (self.count > 0).then(|| &self.caps[..self.count]),
+            horizons: (self.directions > 0).then(|| &self.horizons[..self.directions]),
+        }
+    }
+}
+
+impl Default for GridVisibility {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+/// Whether pixel `i` of `frame` is a surface the grid serves: shaded where it is (not
+/// water, whose pixels shade the points they reflect).
+pub(crate) fn is_direct_surface(materials: &BTreeMap<u32, Material>, frame: &Frame, i: usize) -> bool {
+    let m = frame.gbuffer.material[i];
+    m != 0 && !matches!(materials.get(&m), Some(Material::Water { .. }) | None)
+}
+
+impl VisibilityGrid {
+    /// Computes the horizons and caps of each `size x size` block of `frame` at its
+    /// surface pixel nearest the block's centre pixel (`work` gives each pixel's point).
+    pub fn new<T: Real>(
+        kernel: &ShadingKernel<T>,
+        occluders: Occluders,
+        frame: &Frame,
+        materials: &BTreeMap<u32, Material>,
+        size: usize,
+        work: impl Fn(usize, usize) -> PixelWork + Sync,
+    ) -> Self {
+        let g = &frame.gbuffer;
+        let blocks = [g.width.div_ceil(size), g.height.div_ceil(size)];
+        let point_of = |bx: usize, by: usize| {
+            let centre = [(bx * size + size / 2).min(g.width - 1), (by * size + size / 2).min(g.height - 1)];
+            let mut pixels: Vec<[usize; 2]> = (by * size..((by + 1) * size).min(g.height))
+                .flat_map(|y| (bx * size..((bx + 1) * size).min(g.width)).map(move |x| [x, y]))
+                .collect();
+            pixels.sort_by_key(|&[x, y]| x.abs_diff(centre[0]).pow(2) + y.abs_diff(centre[1]).pow(2));
+            pixels.into_iter().find(|&[x, y]| is_direct_surface(materials, frame, g.index(x, y))).and_then(|[x, y]| {
+                match work(x, y) {
+                    PixelWork::Shade { point, .. } => Some(point),
+                    PixelWork::Fixed(_) => None,
+                }
+            })
+        };
+        let points: Vec<Option<SurfacePoint>> =
+            (0..blocks[0] * blocks[1]).into_par_iter().map(|b| point_of(b % blocks[0], b / blocks[0])).collect();
+
+        let directions = occluders.horizons.map_or(0, |pyramid| pyramid.settings().directions);
+        let mut tangents = vec![0.0; points.len() * directions];
+        if let Some(pyramid) = occluders.horizons {
+            tangents.par_chunks_mut(directions).zip(&points).for_each(|(out, point)| {
+                if let Some(point) = point {
+                    pyramid.horizon_tangents(point.position, out);
+                }
+            });
+        }
+        let count = if occluders.blockers.is_some() { coefficient_count(kernel.order()) } else { 0 };
+        let mut caps = vec![0.0; points.len() * count];
+        if let Some(tree) = occluders.blockers {
+            // Eight blocks a packet where the kernel can ([`ShadingKernel::sum_caps`]).
+            caps.par_chunks_mut(count * 64).zip(points.par_chunks(64)).for_each(|(out, run)| {
+                let present: Vec<SurfacePoint> = run.iter().flatten().copied().collect();
+                let sums = kernel.sum_caps(Some(tree), &present);
+                let mut k = 0;
+                for (out, point) in out.chunks_mut(count).zip(run) {
+                    let Some(point) = point else { continue };
+                    match sums.of(k) {
+                        Caps::Summed(sum) => {
+                            for (o, &c) in out.iter_mut().zip(sum) {
+                                *o = f64::from(c);
+                            }
+                        }
+                        _ => {
+                            let mut acc = [T::zero(); MAX_COEFFICIENTS];
+                            kernel.add_blocker_caps(
+                                tree,
+                                point.position,
+                                point.normal,
+                                point.object,
+                                &mut acc[..count],
+                                None,
+                            );
+                            for (o, c) in out.iter_mut().zip(&acc[..count]) {
+                                *o = c.to_f64().unwrap_or(0.0);
+                            }
+                        }
+                    }
+                    k += 1;
+                }
+            });
+        }
+        Self { size, blocks, points, directions, tangents, count, caps }
+    }
+
+    /// The horizons and caps of pixel `(x, y)`, whose point is `point`, interpolated
+    /// into `out` (module doc); `false` where no block is like it (the pixel is then
+    /// computed alone).
+    pub fn at(&self, x: usize, y: usize, point: &SurfacePoint, out: &mut GridVisibility) -> bool {
+        let size = self.size as f64;
+        // Block coordinates of the pixel, block `b`'s point standing at its centre pixel.
+        let half = (self.size / 2) as f64;
+        let (u, v) = ((x as f64 - half) / size, (y as f64 - half) / size);
+        let (b0, c0) = (u.floor(), v.floor());
+        let (tu, tv) = (u - b0, v - c0);
+        let mut total = 0.0;
+        out.horizons[..self.directions].fill(0.0);
+        out.caps[..self.count].fill(0.0);
+        for (db, wu) in [(0.0, 1.0 - tu), (1.0, tu)] {
+            for (dc, wv) in [(0.0, 1.0 - tv), (1.0, tv)] {
+                let (b, c) = (b0 + db, c0 + dc);
+                let bilinear = wu * wv;
+                if bilinear <= 0.0 || b < 0.0 || c < 0.0 {
+                    continue;
+                }
+                let (b, c) = (b as usize, c as usize);
+                if b >= self.blocks[0] || c >= self.blocks[1] {
+                    continue;
+                }
+                let block = c * self.blocks[0] + b;
+                let Some(other) = &self.points[block] else { continue };
+                let weight = bilinear * likeness(point, other);
+                if weight <= 0.0 {
+                    continue;
+                }
+                total += weight;
+                let tangents = &self.tangents[block * self.directions..(block + 1) * self.directions];
+                for (h, t) in out.horizons.iter_mut().zip(tangents) {
+                    *h += weight * t;
+                }
+                for (a, c) in out.caps.iter_mut().zip(&self.caps[block * self.count..(block + 1) * self.count]) {
+                    *a += weight * c;
+                }
+            }
+        }
+        if total < MIN_WEIGHT {
+            return false;
+        }
+        for h in &mut out.horizons[..self.directions] {
+            *h /= total;
+        }
+        for c in &mut out.caps[..self.count] {
+            *c /= total;
+        }
+        (out.directions, out.count) = (self.directions, self.count);
+        true
+    }
+}
+
+/// How alike two points are for their visibility (module doc): 0 to 1.
+fn likeness(point: &SurfacePoint, other: &SurfacePoint) -> f64 {
+    if point.object != other.object {
+        return 0.0;
+    }
+    let normals = dot(point.normal, other.normal).max(0.0).powi(8);
+    let d = [0, 1, 2].map(|k| other.position[k] - point.position[k]);
+    let distance = dot(d, d).sqrt();
+    let off_plane = if distance > 0.0 { dot(point.normal, d).abs() / distance } else { 0.0 };
+    normals * (-(off_plane / 0.2).powi(2)).exp()
+}
