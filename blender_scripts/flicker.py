@@ -98,6 +98,14 @@ def at_frame(path_template, frame):
     return re.sub(r"#+", lambda run: f"{frame:0{len(run.group(0))}d}", path_template)
 
 
+def existing_at_frame(path_template, frame):
+    """`at_frame`, which must exist: the script stops, naming it, where it does not."""
+    path = at_frame(path_template, frame)
+    if not os.path.isfile(path):
+        sys.exit(f"error: {path} does not exist")
+    return path
+
+
 def read_rgb(path):
     channels = read_exr_channels(path, RGB)
     return np.stack([channels[c] for c in RGB], axis=-1).astype(np.float64)
@@ -116,10 +124,7 @@ def read_alpha(path):
 def sequence(path_template, frames):
     images = {}
     for frame in frames:
-        path = at_frame(path_template, frame)
-        if not os.path.isfile(path):
-            sys.exit(f"error: {path} does not exist")
-        images[frame] = read_rgb(path)
+        images[frame] = read_rgb(existing_at_frame(path_template, frame))
     return images
 
 
@@ -164,9 +169,7 @@ def ladder_seconds(timing_template, frames):
     """{file name with #### for the frame: mean seconds per frame} from the ladder's JSONs."""
     per_file = {}
     for frame in frames:
-        path = at_frame(timing_template, frame)
-        if not os.path.isfile(path):
-            sys.exit(f"error: {path} does not exist")
+        path = existing_at_frame(timing_template, frame)
         with open(path) as f:
             timing = json.load(f)
         stem = os.path.basename(path)[:-len(".timing.json")]

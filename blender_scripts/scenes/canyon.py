@@ -18,7 +18,7 @@ import math
 import bpy
 import numpy as np
 
-from common import assign, camera, empty_scene, grid_object, material, parse_args, save
+from common import assign, camera, constant_world, empty_scene, grid_object, material, parse_args, save, sun_lamp
 
 args = parse_args(__doc__)
 empty_scene((1, 1), width=240, height=135)
@@ -67,19 +67,10 @@ for i, (y, offset, radius, squash, turn) in enumerate([(-1.5, 1.1, 0.55, 0.65, 1
     boulder.location = (x, y, float(floor_height(x, y)) + 0.8 * radius * squash)
     boulder["logsh_spheres"] = 4
 
-sun = bpy.data.objects.new("sun", bpy.data.lights.new("sun", "SUN"))
-sun.data.energy = 4.0
-sun.data.angle = math.radians(0.5)
-# the light travels along the lamp's -Z: tilted 68 deg from the zenith (elevation 22 deg),
-# the sun to the left of and behind the camera, 35 deg off the valley's axis (+y)
-sun.rotation_euler = (math.radians(68.0), 0.0, math.radians(-35.0))
-bpy.context.scene.collection.objects.link(sun)
-
-world = bpy.data.worlds.new("pale blue")
-world.use_nodes = True
-world.node_tree.nodes["Background"].inputs["Color"].default_value = (0.6, 0.75, 1.0, 1.0)
-world.node_tree.nodes["Background"].inputs["Strength"].default_value = 0.3
-bpy.context.scene.world = world
+# elevation 22 deg, the sun to the left of and behind the camera, 35 deg off the valley's
+# axis (+y)
+sun_lamp(68.0, -35.0)
+constant_world("pale blue", (0.6, 0.75, 1.0), 0.3)
 
 camera((float(centre(-9.0)), -9.0, 5.0), (float(centre(3.0)), 3.0, 0.0), lens=30.0)
 save(args.save)

@@ -5,6 +5,7 @@ command line every builder takes (`--save FILE.blend`, after `--` under `blender
 Nothing is downloaded: every mesh and image is made here.
 """
 import argparse
+import math
 import os
 import sys
 
@@ -145,13 +146,30 @@ def sky_world(path, sun_direction=(0.4, -0.3, 0.6), strength=1.0, width=256):
     return environment_world("sky", path, rgb, strength)
 
 
-def grey_world(value=1.0):
-    world = bpy.data.worlds.new("grey")
+def constant_world(name, colour, strength=1.0):
+    """The scene's World: one colour times `strength`."""
+    world = bpy.data.worlds.new(name)
     world.use_nodes = True
-    world.node_tree.nodes["Background"].inputs["Color"].default_value = (value, value, value, 1.0)
-    world.node_tree.nodes["Background"].inputs["Strength"].default_value = 1.0
+    world.node_tree.nodes["Background"].inputs["Color"].default_value = (*colour, 1.0)
+    world.node_tree.nodes["Background"].inputs["Strength"].default_value = strength
     bpy.context.scene.world = world
     return world
+
+
+def grey_world(value=1.0):
+    return constant_world("grey", (value, value, value))
+
+
+def sun_lamp(tilt, turn, strength=4.0, angle=0.5):
+    """A Sun lamp whose light travels along its -Z, tilted `tilt` degrees from the zenith
+    (the sun's elevation is 90 - `tilt`) and turned `turn` degrees about Z; `angle` is
+    its disk's diameter in degrees."""
+    sun = bpy.data.objects.new("sun", bpy.data.lights.new("sun", "SUN"))
+    sun.data.energy = strength
+    sun.data.angle = math.radians(angle)
+    sun.rotation_euler = (math.radians(tilt), 0.0, math.radians(turn))
+    bpy.context.scene.collection.objects.link(sun)
+    return sun
 
 
 def save(path):

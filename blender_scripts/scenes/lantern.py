@@ -14,12 +14,11 @@ frame. Frames 1-3, 240x135.
 Markup read by the exporter: the terrain has `logsh_heightfield`. Its material is a
 Principled BSDF, typed by the exporter's defaults.
 """
-import math
 
 import bpy
 import numpy as np
 
-from common import assign, camera, empty_scene, grid_object, material, parse_args, save
+from common import assign, camera, constant_world, empty_scene, grid_object, material, parse_args, save
 
 args = parse_args(__doc__)
 empty_scene((1, 3), width=240, height=135)
@@ -74,11 +73,7 @@ for frame, y in [(1, -1.5), (2, 0.0), (3, 1.5)]:
     lantern.location = (x, y, float(valley_height(x, y)) + 0.6)
     lantern.keyframe_insert("location", frame=frame)
 
-world = bpy.data.worlds.new("night")
-world.use_nodes = True
-world.node_tree.nodes["Background"].inputs["Color"].default_value = (0.25, 0.35, 0.7, 1.0)
-world.node_tree.nodes["Background"].inputs["Strength"].default_value = 0.02
-bpy.context.scene.world = world
+constant_world("night", (0.25, 0.35, 0.7), 0.02)
 
 camera((float(centre(-6.5)), -6.5, 3.2), (float(centre(0.5)), 0.5, 0.4), lens=24.0)
 save(args.save)

@@ -23,7 +23,7 @@ import bpy
 import numpy as np
 from bpy_extras import anim_utils
 
-from common import assign, camera, empty_scene, grid_object, material, parse_args, save
+from common import assign, camera, constant_world, empty_scene, grid_object, material, parse_args, save, sun_lamp
 
 args = parse_args(__doc__)
 empty_scene((1, 3), width=240, height=135)
@@ -84,20 +84,10 @@ for i, (start, drift) in enumerate([((-1.5, -4.0), (0.12, 0.08)), ((1.5, 3.0), (
         buoy.location = (x, y, float(sea_height(x, y, frame)) + 0.4 * RADIUS)
         buoy.keyframe_insert("location", frame=frame)
 
-sun = bpy.data.objects.new("sun", bpy.data.lights.new("sun", "SUN"))
-sun.data.energy = 4.0
-sun.data.angle = math.radians(0.5)
-# the light travels along the lamp's -Z: tilted 75 deg from the zenith (elevation 15 deg),
-# heading along (cos 20 deg, sin 20 deg), 10 deg off the swell's heading: from the
-# camera's left and a little behind it, across the crests
-sun.rotation_euler = (math.radians(75.0), 0.0, math.radians(-70.0))
-bpy.context.scene.collection.objects.link(sun)
-
-world = bpy.data.worlds.new("pale blue")
-world.use_nodes = True
-world.node_tree.nodes["Background"].inputs["Color"].default_value = (0.6, 0.75, 1.0, 1.0)
-world.node_tree.nodes["Background"].inputs["Strength"].default_value = 0.3
-bpy.context.scene.world = world
+# elevation 15 deg, the light heading along (cos 20 deg, sin 20 deg), 10 deg off the
+# swell's heading: from the camera's left and a little behind it, across the crests
+sun_lamp(75.0, -70.0)
+constant_world("pale blue", (0.6, 0.75, 1.0), 0.3)
 
 camera((0.0, -13.5, 4.0), (0.0, -3.9, 0.0), lens=35.0)
 save(args.save)

@@ -4,7 +4,7 @@
 
 use super::compositing::{assemble, Pixel, ShadedPasses};
 use super::frame::{pixel_work, PixelWork, ShadeError, ShadedFrame, Tint};
-use super::kernel::{Caps, Occluders, ShadingKernel, SurfacePoint};
+use super::kernel::{Caps, KnownAlongSun, Occluders, ShadingKernel, SurfacePoint};
 use super::plan::{FramePlan, PlannedKernel};
 use super::settings::ShadingSettings;
 use super::visibility_grid::{is_direct_surface, GridVisibility, VisibilityGrid};
@@ -46,11 +46,14 @@ pub fn shade_frame_passes(
 /// What the CPU executor writes per pixel.
 trait PixelResult: Copy + Send + Sync {
     fn fixed(colour: [f32; 4]) -> Self;
+    /// `known`: each sun's horizon at the point, marched with its row
+    /// ([`ShadingKernel::suns_along_row`]), or empty to march it here.
     fn shaded<T: Real>(
         kernel: &ShadingKernel<T>,
         occluders: Occluders,
         point: &SurfacePoint,
         caps: Caps,
+        known: &[KnownAlongSun],
         tint: Tint,
     ) -> Self;
 }
@@ -66,9 +69,10 @@ impl PixelResult for [f32; 4] {
         occluders: Occluders,
         point: &SurfacePoint,
         caps: Caps,
+        known: &[KnownAlongSun],
         tint: Tint,
     ) -> Self {
-        let (diffuse, specular) = kernel.shade_lobes(occluders, point, caps);
+        let (diffuse, specular) = kernel.shade_lobes_known(occluders, point, caps, Some(known));
         tint.beauty(diffuse, specular)
     }
 }
@@ -84,9 +88,10 @@ impl PixelResult for Pixel {
         occluders: Occluders,
         point: &SurfacePoint,
         caps: Caps,
+        known: &[KnownAlongSun],
         tint: Tint,
     ) -> Self {
-        Pixel::shaded(kernel.shade_passes(occluders, point, caps), tint)
+        Pixel::shaded(kernel.shade_passes_known(occluders, point, caps, Some(known)), tint)
     }
 }
 
@@ -132,33 +137,34 @@ fn shade_pixels<P: PixelResult, T: Real>(
     }
     let started = Instant::now();
     let mut pixels = vec![P::fixed([0.0; 4]); g.width * g.height];
+    let suns = kernel.suns.len();
     pixels.par_chunks_mut(g.width).enumerate().for_each(|(y, row)| {
         let work: Vec<PixelWork> = (0..g.width).map(|x| work_at(x, y)).collect();
-        if let Some(grid) = &grid {
-            let mut interpolated = GridVisibility::new();
-            for (x, (out, work)) in row.iter_mut().zip(work).enumerate() {
-                *out = match work {
-                    PixelWork::Fixed(colour) => P::fixed(colour),
-                    PixelWork::Shade { point, tint } => {
-                        let direct = is_direct_surface(materials, frame, g.index(x, y));
-                        let caps = match direct && grid.at(x, y, &point, &mut interpolated) {
-                            true => interpolated.caps(),
-                            false => Caps::Walk,
-                        };
-                        P::shaded(kernel, occluders, &point, caps, tint)
-                    }
-                };
-            }
-            return;
-        }
-        let caps = kernel.sum_caps_of_work(occluders.blockers, &work);
+        let points = PixelWork::points(&work);
+        let known = kernel.suns_along_row(occluders.horizons, &points);
+        let known_of = |k: usize| known.get(k * suns..(k + 1) * suns).unwrap_or(&[]);
+        let caps = match &grid {
+            Some(_) => Default::default(),
+            None => kernel.sum_caps(occluders.blockers, &points),
+        };
+        let mut interpolated = GridVisibility::new();
         let mut shaded = 0;
-        for (out, work) in row.iter_mut().zip(work) {
+        for (x, (out, work)) in row.iter_mut().zip(work).enumerate() {
             *out = match work {
                 PixelWork::Fixed(colour) => P::fixed(colour),
                 PixelWork::Shade { point, tint } => {
                     shaded += 1;
-                    P::shaded(kernel, occluders, &point, caps.of(shaded - 1), tint)
+                    let caps = match &grid {
+                        None => caps.of(shaded - 1),
+                        Some(grid) => {
+                            let direct = is_direct_surface(materials, frame, g.index(x, y));
+                            match direct && grid.at(x, y, &point, &mut interpolated) {
+                                true => interpolated.caps(),
+                                false => Caps::Walk,
+                            }
+                        }
+                    };
+                    P::shaded(kernel, occluders, &point, caps, known_of(shaded - 1), tint)
                 }
             };
         }

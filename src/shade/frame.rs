@@ -233,6 +233,18 @@ pub enum PixelWork {
     Shade { point: SurfacePoint, tint: Tint },
 }
 
+impl PixelWork {
+    /// The points to shade among `work` (a row's pixels), in their order.
+    pub fn points(work: &[PixelWork]) -> Vec<SurfacePoint> {
+        work.iter()
+            .filter_map(|w| match w {
+                PixelWork::Shade { point, .. } => Some(*point),
+                PixelWork::Fixed(_) => None,
+            })
+            .collect()
+    }
+}
+
 /// Where a pixel's colour comes from: the frame walk shared by the CPU and GPU executors
 /// and the transfer layers ([`crate::transfer`]).
 #[derive(Clone, Copy, Debug)]

@@ -533,14 +533,7 @@ impl<T: Real> ShadingKernel<T> {
     /// [`Self::sum_caps`] of the points to shade among `work` (a row's pixels), in their
     /// order: the `k`-th [`PixelWork::Shade`] takes [`CapSums::of`]`(k)`.
     pub fn sum_caps_of_work(&self, blockers: Option<&BlockerTree>, work: &[PixelWork]) -> CapSums {
-        let points: Vec<SurfacePoint> = work
-            .iter()
-            .filter_map(|w| match w {
-                PixelWork::Shade { point, .. } => Some(*point),
-                PixelWork::Fixed(_) => None,
-            })
-            .collect();
-        self.sum_caps(blockers, &points)
+        self.sum_caps(blockers, &PixelWork::points(work))
     }
 
     /// The sphere caps of each of `points` ([`Self::add_visibility`]'s blocker term), summed
@@ -806,12 +799,24 @@ impl<T: Real> ShadingKernel<T> {
     /// that [`Self::shade_passes`] adds: what a pixel whose colour passes tint the two
     /// apart needs.
     pub fn shade_lobes(&self, occluders: Occluders, point: &SurfacePoint, caps: Caps) -> ([f32; 3], [f32; 3]) {
+        self.shade_lobes_known(occluders, point, caps, None)
+    }
+
+    /// [`Self::shade_lobes`], each sun's horizon taken from `known` where given (marched
+    /// with the other pixels of its row: [`Self::suns_along_row`], the same bits).
+    pub fn shade_lobes_known(
+        &self,
+        occluders: Occluders,
+        point: &SurfacePoint,
+        caps: Caps,
+        known: Option<&[KnownAlongSun]>,
+    ) -> ([f32; 3], [f32; 3]) {
         let Some((visibility, occlusion)) = self.surface_visibility(occluders, point, caps, None) else {
             return ([0.0; 3], [0.0; 3]);
         };
         let lobes = &self.materials[&point.material];
         let (diffuse, glossy) = self.environment_radiance(occluders, &visibility, &occlusion, lobes, point);
-        let (sun_diffuse, sun_glossy) = self.sunlit(occluders, point, &lobes.material);
+        let (sun_diffuse, sun_glossy) = self.sharp_lit(occluders, point, &lobes.material, &self.suns, true, known).0;
         ([0, 1, 2].map(|i| diffuse[i] + sun_diffuse[i]), [0, 1, 2].map(|i| glossy[i] + sun_glossy[i]))
     }
 
@@ -975,20 +980,33 @@ impl<T: Real> ShadingKernel<T> {
         (albedo * share * by_cone, albedo * (1.0 - share))
     }
 
-    /// The sharp lights' diffuse and specular radiance at `point` ([`super::sun`]), each
-    /// times the material's albedo or specular colour.
-    pub(crate) fn sunlit(
-        &self,
-        occluders: Occluders,
-        point: &SurfacePoint,
-        material: &Material,
-    ) -> ([f32; 3], [f32; 3]) {
-        self.sharp_lit(occluders, point, material, &self.suns, true, None).0
+    /// The height field's horizon along each sun from each of `points` (a row's), marched
+    /// eight receivers at a time ([`HorizonPyramid::horizons_against`]: each the same bits
+    /// as marched alone), as [`Self::shade_lobes_known`] reads them: `known[i * suns + k]`
+    /// for point `i` and sun `k`. Empty without a height field or suns.
+    pub fn suns_along_row(&self, horizons: Option<&HorizonPyramid>, points: &[SurfacePoint]) -> Vec<KnownAlongSun> {
+        let Some(pyramid) = horizons.filter(|_| !self.suns.is_empty()) else {
+            return Vec::new();
+        };
+        let count = self.suns.len();
+        let mut known = vec![KnownAlongSun { horizon: None, blockers: true }; points.len() * count];
+        let positions: Vec<[f64; 3]> = points.iter().map(|p| p.position).collect();
+        let mut against = vec![HorizonAgainst::Below; points.len()];
+        for (k, sun) in self.suns.iter().enumerate() {
+            let Some(along) = sun.disk.march_band() else { continue };
+            pyramid.horizons_against(&positions, along.azimuth, along.horizontal_reach, along.band, &mut against);
+            for (i, horizon) in against.iter().enumerate() {
+                known[i * count + k].horizon = Some(*horizon);
+            }
+        }
+        known
     }
 
-    /// [`sunlit`](Self::sunlit) with `suns` (some of the kernel's), and with every point
-    /// lamp where `lamps`; and the share of `suns` alone in it (the sums before the point
-    /// lamps are added: the same bits as without lamps).
+    /// The sharp lights' diffuse and specular radiance at `point` ([`super::sun`]), each
+    /// times the material's albedo or specular colour: of `suns` (the kernel's, or some of
+    /// them), and of every point lamp where `lamps`; and the share of `suns` alone in it
+    /// (the sums before the point lamps are added: the same bits as without lamps). Sun
+    /// `k`'s horizon is `known[k]`'s where given, marched here otherwise.
     pub(crate) fn sharp_lit(
         &self,
         occluders: Occluders,

@@ -20,7 +20,7 @@
 //! (the combined numerator is the diffuse term's own); fewer when the scene has no
 //! height field or no blockers, whose ratio is then the combined one.
 
-use super::{Caps, Occluders, ShadingKernel, SurfacePoint};
+use super::{Caps, KnownAlongSun, Occluders, ShadingKernel, SurfacePoint};
 use crate::scene::Material;
 use crate::sh::{coefficient_count, Real, MAX_COEFFICIENTS};
 
@@ -68,6 +68,18 @@ pub(crate) fn ratio<T: Real>(numerator: [T; 3], unoccluded: [T; 3]) -> f32 {
 impl<T: Real> ShadingKernel<T> {
     /// [`shade`](Self::shade), split into passes, with the visibility terms (module doc).
     pub fn shade_passes(&self, occluders: Occluders, point: &SurfacePoint, caps: Caps) -> PixelPasses {
+        self.shade_passes_known(occluders, point, caps, None)
+    }
+
+    /// [`Self::shade_passes`], each sun's horizon taken from `known` where given
+    /// ([`Self::shade_lobes_known`]).
+    pub fn shade_passes_known(
+        &self,
+        occluders: Occluders,
+        point: &SurfacePoint,
+        caps: Caps,
+        known: Option<&[KnownAlongSun]>,
+    ) -> PixelPasses {
         let count = coefficient_count(self.order);
         let (p, n) = (point.position, point.normal);
         let Some((full, occlusion)) = self.surface_visibility(occluders, point, caps, None) else {
@@ -78,7 +90,7 @@ impl<T: Real> ShadingKernel<T> {
             return PixelPasses::UNSHADED;
         }
         let (lit_diffuse, diffuse, specular) = self.environment_lit(occluders, &full, &occlusion, lobes, point);
-        let (sun_diffuse, sun_glossy) = self.sunlit(occluders, point, &lobes.material);
+        let (sun_diffuse, sun_glossy) = self.sharp_lit(occluders, point, &lobes.material, &self.suns, true, known).0;
         let diffuse = [0, 1, 2].map(|i| diffuse[i] + sun_diffuse[i]);
         let specular = [0, 1, 2].map(|i| specular[i] + sun_glossy[i]);
 
