@@ -1415,3 +1415,54 @@ fn a_transfer_frame_reads_the_same_in_any_exr_layout() {
     write_frame(&stray, &unlit, &header.to_string());
     assert!(TransferFrame::read(&stray).unwrap().horizons.is_none(), "a frame without a Sun lamp reads");
 }
+
+/// A scene whose Sun lamp and World change per frame (`per_frame`): each frame's transfer
+/// records its own light, and a relight turns each frame's own lamp and World as a fresh
+/// render does.
+#[test]
+fn per_frame_lamps_and_world_relight_as_rendered() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = dunes(dir.path());
+    let sun = |azimuth: f64, elevation: f64, strength: f64| {
+        let (a, e) = (azimuth.to_radians(), elevation.to_radians());
+        serde_json::json!({"type": "sun", "direction": [e.cos() * a.cos(), e.cos() * a.sin(), e.sin()],
+                           "angle": 1.0, "strength": strength})
+    };
+    let frames = [
+        serde_json::json!({"frame": 1, "lights": [sun(30.0, 45.0, 3.0)]}),
+        serde_json::json!({"frame": 2, "lights": [sun(100.0, 35.0, 2.0)], "light": {"strength": 0.6, "rotation": [0, 0, 15]}}),
+    ];
+    for (n, changes) in frames.iter().enumerate() {
+        std::fs::write(scene.join(format!("frame.{:04}.json", n + 1)), changes.to_string()).unwrap();
+    }
+    let file = scene.join("scene.json");
+    let mut json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&file).unwrap()).unwrap();
+    json["per_frame"] = serde_json::json!("frame.####.json");
+    std::fs::write(&file, json.to_string()).unwrap();
+
+    let common =
+        ["--frames", "1-2", "--sharp-lights", "off", "--progress", "none", "--bounces", "0", "--device", "cpu"];
+    let transfer = dir.path().join("transfer");
+    run(&[&["render", path(&scene), "--out", path(&transfer), "--transfer", "--light-rotation", "20"], &common[..]]
+        .concat());
+    let shaded = dir.path().join("shaded");
+    run(&[&["render", path(&scene), "--out", path(&shaded), "--light-rotation", "80"], &common[..]].concat());
+    let frames = [1, 2].map(|n| transfer.join(format!("render.{n:04}.exr")));
+    let headers = frames.clone().map(|f| TransferFrame::read(&f).unwrap().header);
+    assert_eq!(headers[0].sun_lamps.len(), 1);
+    let [a, e] = headers[1].sun_lamps[0];
+    assert!((a - 120.0).abs() < 1e-6 && (e - 35.0).abs() < 1e-6, "frame 2's own lamp, turned 20 deg: {a}, {e}");
+    match &headers[1].light {
+        LightSource::Environment { strength, rotation, .. } => {
+            assert_eq!((*strength, rotation[2]), (0.6, 15.0), "frame 2's own World");
+        }
+        other => panic!("{other:?}"),
+    }
+    let relit = dir.path().join("relit");
+    run(&["relight", path(&frames[0]), path(&frames[1]), "--out", path(&relit), "--light-rotation", "60"]);
+    for n in [1, 2] {
+        let name = format!("render.{n:04}.exr");
+        let worst = compare(&scene, 80.0, &relit.join(&name), &shaded.join(&name), &format!("frame {n}"));
+        assert!(worst <= RELIT_TOLERANCE, "frame {n}: relit differs from shaded by {worst}");
+    }
+}
