@@ -41,8 +41,8 @@ What is written into the output directory, per frame `####`:
   of the bake and written as a sun of `lights`, `bake_world`); `scene.json`, whose
   `lights` holds every Sun lamp that renders (direction towards the sun, Angle, Strength, Color)
   and every Point lamp (world position, Radius, Power, Color, Soft Falloff), Exposure
-  folded into Strength or Power; a keyed lamp as it is on each frame. Any other lamp (Spot, Area), or a lamp
-  setting logsh does not model (nodes, Temperature, Cast Shadow off, Diffuse or
+  folded into Strength or Power; a keyed lamp as it is on each frame (`frame.####.json`).
+  Any other lamp (Spot, Area), or a lamp setting logsh does not model (nodes, Temperature, Cast Shadow off, Diffuse or
   Specular factors other than 1, Normalize off, hidden from Diffuse or Glossy rays),
   stops the export with the lamp's name.
 - `view_lut.exr` unless the Color Management is plain Standard: Blender's view transform,
@@ -545,6 +545,8 @@ def export_lamps(scene, view_layer, frames):
             if refused:
                 raise ExportError(f"{kind} lamp \"{obj.name}\" {why}")
         lamps.append(obj)
+    if not lamps:
+        return {frame: [] for frame in frames}
     by_frame = {}
     for frame in frames:
         scene.frame_set(frame)
