@@ -10,7 +10,7 @@
 //!
 //! - the same object (a sphere of the pixel's own object follows the self-shadowing
 //!   rule);
-//! - normals within about 25 degrees: `max(n . n_b, 0)^8`, 0.43 at 25 degrees;
+//! - normals within about 25 degrees: `max(n . n_b, 0)^8`, 0.46 at 25 degrees;
 //! - the block's point near the pixel's tangent plane: `exp(-(r / 0.2)^2)`, `r` the sine
 //!   of the elevation of the block's point seen from the pixel, 0 on a plane, about 1
 //!   across a depth edge.
