@@ -628,7 +628,7 @@ impl Scene {
         }
         if let Some(h) = &scene.heightfield {
             if !h.heights.is_per_frame() {
-                scene.static_height_map = Some(Arc::new(scene.read_height_map(frame)?));
+                scene.static_height_map = Some(Arc::new(scene.read_height_map(frame, None)?));
             }
         }
         Ok(scene)
@@ -868,12 +868,16 @@ impl Scene {
     /// [`Self::light`], with the CRC-32 of its map's file as it was read (`None` without
     /// a map): what a frame's transfer header records.
     pub fn light_as_read(&self, frame: i64) -> Result<(Arc<Light>, Option<u32>), SceneError> {
-        let changed = self.changes(frame)?.light;
+        self.light_changed(frame, self.changes(frame)?.light.as_ref())
+    }
+
+    /// [`Self::light_as_read`] with the frame's change of the light, `changed`, read.
+    fn light_changed(&self, frame: i64, changed: Option<&LightSpec>) -> Result<(Arc<Light>, Option<u32>), SceneError> {
         match (&self.static_light, changed) {
             (Some((light, crc)), None) => Ok((light.clone(), *crc)),
             (_, changed) => {
                 self.check_frame(frame)?;
-                let (light, crc) = self.read_light_of(changed.as_ref().unwrap_or(&self.light_spec), frame)?;
+                let (light, crc) = self.read_light_of(changed.unwrap_or(&self.light_spec), frame)?;
                 Ok((Arc::new(light), crc))
             }
         }
@@ -892,16 +896,26 @@ impl Scene {
 
     /// The height map of `frame`, if the scene has a height field.
     pub fn height_map(&self, frame: i64) -> Result<Option<Arc<HeightMap>>, SceneError> {
-        let Some(h) = &self.heightfield else {
+        if self.heightfield.is_none() {
             return Ok(None);
-        };
-        let rectangle = self.changes(frame)?.rectangle;
+        }
+        self.height_map_within(frame, self.changes(frame)?.rectangle)
+    }
+
+    /// [`Self::height_map`] with the frame's own rectangle, `rectangle`, read.
+    fn height_map_within(
+        &self,
+        frame: i64,
+        rectangle: Option<([f64; 2], [f64; 2])>,
+    ) -> Result<Option<Arc<HeightMap>>, SceneError> {
+        if self.heightfield.is_none() {
+            return Ok(None);
+        }
         if let (Some(map), None) = (&self.static_height_map, rectangle) {
             return Ok(Some(map.clone()));
         }
         self.check_frame(frame)?;
-        let (min, max) = rectangle.unwrap_or((h.min, h.max));
-        Ok(Some(Arc::new(HeightMap::read(&h.heights.resolve(&self.dir, frame), h.channel.as_deref(), min, max)?)))
+        Ok(Some(Arc::new(self.read_height_map(frame, rectangle)?)))
     }
 
     /// The light of `frame`, with the CRC-32 of its map's file taken just before the map
@@ -924,9 +938,11 @@ impl Scene {
         }
     }
 
-    fn read_height_map(&self, frame: i64) -> Result<HeightMap, SceneError> {
+    /// The height map of `frame` over `rectangle`, scene.json's where `None`.
+    fn read_height_map(&self, frame: i64, rectangle: Option<([f64; 2], [f64; 2])>) -> Result<HeightMap, SceneError> {
         let h = self.heightfield.as_ref().expect("caller checked");
-        HeightMap::read(&h.heights.resolve(&self.dir, frame), h.channel.as_deref(), h.min, h.max)
+        let (min, max) = rectangle.unwrap_or((h.min, h.max));
+        HeightMap::read(&h.heights.resolve(&self.dir, frame), h.channel.as_deref(), min, max)
     }
 
     /// Reads and validates everything of `frame`.
@@ -994,7 +1010,9 @@ impl Scene {
             None => Vec::new(),
             Some(t) => camera::read_blockers(&t.resolve(&self.dir, frame), frame)?,
         };
-        let height_map = self.height_map(frame)?;
+        // The frame's file read once, for the height map, the light and the lamps.
+        let changes = self.changes(frame)?;
+        let height_map = self.height_map_within(frame, changes.rectangle)?;
         if let (Some(map), Some(h)) = (&height_map, &self.heightfield) {
             if let Some(share) = map.buried_share(&gbuffer).filter(|&share| share > heightmap::MOST_BURIED) {
                 return Err(SceneError::invalid(
@@ -1010,8 +1028,8 @@ impl Scene {
                 ));
             }
         }
-        let (light, light_file_crc) = self.light_as_read(frame)?;
-        let (suns, points) = match self.changes(frame)?.lamps {
+        let (light, light_file_crc) = self.light_changed(frame, changes.light.as_ref())?;
+        let (suns, points) = match changes.lamps {
             Some((suns, points)) => (suns.iter().map(|sun| sun.turned(self.light_turn)).collect(), points),
             None => (self.suns.clone(), self.points.clone()),
         };
