@@ -15,16 +15,6 @@ fn cap_log_zh(log_depth: f32, alpha: f32) -> array<f32, ORDER_CAP> {
     return out;
 }
 
-// The log depth for an angle (a cap's radius, a band's width), interpolated linearly in
-// the fitted table at `table` (src/shade/fitted_depth.rs, depth_at).
-fn fitted_depth(table: u32, angle: f32) -> f32 {
-    let x = clamp(angle / 1.5707963, 0.0, 1.0) * f32(DEPTH_INTERVALS);
-    let k = min(u32(x), DEPTH_INTERVALS - 1u);
-    let t = x - f32(k);
-    let below = tables[table + k];
-    return below + t * (tables[table + k + 1u] - below);
-}
-
 // Adds one sphere's cap as seen from receiver p with normal n (cap.rs, view_blocker):
 // culled when its centre is on or behind the tangent plane (paper 000, end of Section
 // 4.2); a receiver inside the sphere sees the hemisphere towards its centre.

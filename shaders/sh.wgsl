@@ -6,6 +6,16 @@ fn table_u32(i: u32) -> u32 {
     return bitcast<u32>(tables[i]);
 }
 
+// The log depth for an angle (a cap's radius, a band's width), interpolated linearly in
+// the fitted table at `table` (src/shade/fitted_depth.rs, depth_at).
+fn fitted_depth(table: u32, angle: f32) -> f32 {
+    let x = clamp(angle / 1.5707963, 0.0, 1.0) * f32(DEPTH_INTERVALS);
+    let k = min(u32(x), DEPTH_INTERVALS - 1u);
+    let t = x - f32(k);
+    let below = tables[table + k];
+    return below + t * (tables[table + k + 1u] - below);
+}
+
 // y_i(dir) for the COUNT basis functions (basis.rs, eval_basis): associated Legendre
 // polynomials by upward recurrence in l, (x + iy)^m for the azimuthal part.
 fn eval_basis(d: vec3<f32>, y: ptr<function, array<f32, COUNT_CAP>>) {
