@@ -148,16 +148,12 @@ fn disk_blocked(disk: ptr<function, Disk>, p: vec3<f32>, n: vec3<f32>, object: u
 // farther than `reach` (pyramid.rs, horizon_along): add_heightfield's march for one
 // azimuth.
 fn horizon_along(p: vec3<f32>, dir: vec2<f32>, reach: f32) -> f32 {
-    let finite = all(abs(p) < vec3<f32>(3.0e38));
-    if STEPS == 0u || !finite {
+    var above = 0.0;
+    var receiver: array<f32, LEVELS>;
+    var ceilings: array<f32, STEP_ARRAY>;
+    if !march_start(p, &above, &receiver, &ceilings) {
         return 0.0;
     }
-    var receiver: array<f32, LEVELS>;
-    let above = max(p.z - sample_bilinear(level_table[0], p.x, p.y), 0.0);
-    for (var level = 0u; level < LEVELS; level++) {
-        receiver[level] = sample_level(level, p.x, p.y);
-    }
-    var ceilings = step_ceilings(above, &receiver);
     return horizon(p.x, p.y, above, dir, reach, &receiver, &ceilings);
 }
 //#endif

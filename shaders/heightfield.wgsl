@@ -246,38 +246,56 @@ fn add_wedge(k: u32, first: ptr<function, array<f32, ORDER_CAP>>, second: ptr<fu
     }
 }
 
+// Where the march from p starts (pyramid.rs, receiver_of): its height above level 0, the
+// receiver terms per level and the step ceilings; false where p is not finite or the
+// pyramid has no steps, whose horizons are all 0.
+fn march_start(p: vec3<f32>, above: ptr<function, f32>, receiver: ptr<function, array<f32, LEVELS>>, ceilings: ptr<function, array<f32, STEP_ARRAY>>) -> bool {
+    if STEPS == 0u || !all(abs(p) < vec3<f32>(3.0e38)) {
+        return false;
+    }
+    *above = max(p.z - sample_bilinear(level_table[0], p.x, p.y), 0.0);
+    for (var level = 0u; level < LEVELS; level++) {
+        (*receiver)[level] = sample_level(level, p.x, p.y);
+    }
+    *ceilings = step_ceilings(*above, receiver);
+    return true;
+}
+
+fn azimuth(k: u32) -> vec2<f32> {
+    return vec2<f32>(tables[T_AZIMUTHS + 2u * k], tables[T_AZIMUTHS + 2u * k + 1u]);
+}
+
+// The slice of azimuth k under the horizon at elevation sigma: the band from the
+// horizontal (or the tangent plane, where higher, when `fold_tangent`) up to the horizon
+// takes its fitted depth.
+fn horizon_slice(k: u32, sigma: f32, n: vec3<f32>, fold_tangent: bool, log_epsilon: f32) -> array<f32, ORDER_CAP> {
+    var top = sigma;
+    var base = 0.0;
+    if fold_tangent {
+        let dir = azimuth(k);
+        let tangent_elevation = atan(-(n.x * dir.x + n.y * dir.y) / n.z);
+        top = max(top, tangent_elevation);
+        base = max(base, tangent_elevation);
+    }
+    return banded_slice(log_epsilon, base, top);
+}
+
 // The height field's log visibility at p, normal n (kernel.rs, add_visibility): one
 // horizon and slice per azimuth, the tangent plane folded into the horizons when
 // `fold_tangent`, wedges between neighbouring slices.
 fn add_heightfield(p: vec3<f32>, n: vec3<f32>, fold_tangent: bool, log_epsilon: f32, acc: ptr<function, array<f32, COUNT_CAP>>) {
-    let finite = all(abs(p) < vec3<f32>(3.0e38));
+    var above = 0.0;
     var receiver: array<f32, LEVELS>;
     var ceilings: array<f32, STEP_ARRAY>;
-    var above = 0.0;
-    if STEPS > 0u && finite {
-        above = max(p.z - sample_bilinear(level_table[0], p.x, p.y), 0.0);
-        for (var level = 0u; level < LEVELS; level++) {
-            receiver[level] = sample_level(level, p.x, p.y);
-        }
-        ceilings = step_ceilings(above, &receiver);
-    }
+    let marchable = march_start(p, &above, &receiver, &ceilings);
     var first: array<f32, ORDER_CAP>;
     var previous: array<f32, ORDER_CAP>;
     for (var k = 0u; k < DIRECTIONS; k++) {
-        let dir = vec2<f32>(tables[T_AZIMUTHS + 2u * k], tables[T_AZIMUTHS + 2u * k + 1u]);
         var sigma = 0.0;
-        if STEPS > 0u && finite {
-            sigma = horizon(p.x, p.y, above, dir, 3.0e38, &receiver, &ceilings);
+        if marchable {
+            sigma = horizon(p.x, p.y, above, azimuth(k), 3.0e38, &receiver, &ceilings);
         }
-        // The band from the horizontal (or the tangent plane, where higher) up to the
-        // horizon takes its fitted depth.
-        var base = 0.0;
-        if fold_tangent {
-            let tangent_elevation = atan(-(n.x * dir.x + n.y * dir.y) / n.z);
-            sigma = max(sigma, tangent_elevation);
-            base = max(base, tangent_elevation);
-        }
-        var slice = banded_slice(log_epsilon, base, sigma);
+        var slice = horizon_slice(k, sigma, n, fold_tangent, log_epsilon);
         if k == 0u {
             first = slice;
         } else {
@@ -287,3 +305,38 @@ fn add_heightfield(p: vec3<f32>, n: vec3<f32>, fold_tangent: bool, log_epsilon: 
     }
     add_wedge(DIRECTIONS - 1u, &previous, &first, acc);
 }
+
+//#if GRID
+// The tangents of the horizons' elevations at p, one per azimuth, into the visibility
+// grid's record at `record` (visibility_grid.rs; pyramid.rs, horizon_tangents).
+fn store_horizon_tangents(p: vec3<f32>, record: u32) {
+    var above = 0.0;
+    var receiver: array<f32, LEVELS>;
+    var ceilings: array<f32, STEP_ARRAY>;
+    let marchable = march_start(p, &above, &receiver, &ceilings);
+    for (var k = 0u; k < GRID_HORIZONS; k++) {
+        var sigma = 0.0;
+        if marchable {
+            sigma = horizon(p.x, p.y, above, azimuth(k), 3.0e38, &receiver, &ceilings);
+        }
+        grid[record + k] = tan(sigma);
+    }
+}
+
+// The height field's log visibility from given horizon elevations (add_heightfield
+// without the march).
+fn add_given_horizons(sigmas: ptr<function, array<f32, DIRECTIONS>>, n: vec3<f32>, fold_tangent: bool, log_epsilon: f32, acc: ptr<function, array<f32, COUNT_CAP>>) {
+    var first: array<f32, ORDER_CAP>;
+    var previous: array<f32, ORDER_CAP>;
+    for (var k = 0u; k < DIRECTIONS; k++) {
+        var slice = horizon_slice(k, (*sigmas)[k], n, fold_tangent, log_epsilon);
+        if k == 0u {
+            first = slice;
+        } else {
+            add_wedge(k - 1u, &previous, &slice, acc);
+        }
+        previous = slice;
+    }
+    add_wedge(DIRECTIONS - 1u, &previous, &first, acc);
+}
+//#endif

@@ -21,6 +21,11 @@
 @group(0) @binding(7) var<storage, read> level_table: array<GpuLevel>;
 @group(0) @binding(8) var<storage, read> steps: array<GpuStep>;
 //#endif
+//#if GRID
+// The visibility grid's block records (src/gpu/program.rs, VisibilityBlocks): written by
+// the pre-pass `grid_visibility`, read by `shade`.
+@group(0) @binding(9) var<storage, read_write> grid: array<f32>;
+//#endif
 
 // Whether the frame has a feature: decided when the program is generated, except in the
 // generic program that measures what specialisation saves.
@@ -118,9 +123,10 @@ fn exp_dot_light(f: ptr<function, array<f32, COUNT_CAP>>, v: ptr<function, array
 // Log visibility at p with unit normal n (kernel.rs, add_visibility): the tangent plane
 // clamped once (a hemisphere cap around -n, or folded into the height field's horizons
 // for an upward-facing receiver), the height field's wedges, the caps of the blocker
-// tree's spheres and clusters the receiver sees. The
-// caps' sum goes to `caps` too, which the visibility passes read.
-fn visibility(p: vec3<f32>, n: vec3<f32>, object: u32, caps: ptr<function, array<f32, COUNT_CAP>>) -> array<f32, COUNT_CAP> {
+// tree's spheres and clusters the receiver sees. Where `from_grid`, the horizon
+// elevations and the caps are the visibility grid's (`grid_at`) and nothing is marched
+// or walked. The caps' sum goes to `caps` too, which the visibility passes read.
+fn visibility(p: vec3<f32>, n: vec3<f32>, object: u32, from_grid: bool, horizons: ptr<function, array<f32, DIRECTIONS>>, caps: ptr<function, array<f32, COUNT_CAP>>) -> array<f32, COUNT_CAP> {
     var acc: array<f32, COUNT_CAP>;
     var fold_tangent = false;
 //#if HEIGHTFIELD
@@ -132,17 +138,139 @@ fn visibility(p: vec3<f32>, n: vec3<f32>, object: u32, caps: ptr<function, array
     add_ground(p, &acc);
 //#if HEIGHTFIELD
     if enabled(FEATURE_HEIGHTFIELD) {
-        add_heightfield(p, n, fold_tangent, params.log_epsilon, &acc);
+        add_horizons(p, n, fold_tangent, from_grid, horizons, &acc);
     }
 //#endif
 //#if BLOCKERS
-    visit_blockers(p, n, object, caps);
+    if !(from_grid && GRID_CAPS > 0u) {
+        visit_blockers(p, n, object, caps);
+    }
     for (var i = 0u; i < COUNT; i++) {
         acc[i] += (*caps)[i];
     }
 //#endif
     return acc;
 }
+
+//#if HEIGHTFIELD
+// The height field's log visibility at p: from the grid's horizon elevations where
+// `from_grid`, else marched.
+fn add_horizons(p: vec3<f32>, n: vec3<f32>, fold_tangent: bool, from_grid: bool, horizons: ptr<function, array<f32, DIRECTIONS>>, acc: ptr<function, array<f32, COUNT_CAP>>) {
+//#if GRID
+    if from_grid && GRID_HORIZONS > 0u {
+        add_given_horizons(horizons, n, fold_tangent, params.log_epsilon, acc);
+        return;
+    }
+//#endif
+    add_heightfield(p, n, fold_tangent, params.log_epsilon, acc);
+}
+//#endif
+
+//#if GRID
+// The visibility grid's pre-pass (src/shade/visibility_grid.rs, VisibilityGrid::new):
+// the tangents of the horizons' elevations and the caps' log vector at each block's
+// point, into its record.
+@compute @workgroup_size(WORKGROUP_SIZE)
+fn grid_visibility(@builtin(global_invocation_id) id: vec3<u32>) {
+    if id.x >= params.grid_columns * params.grid_rows {
+        return;
+    }
+    let record = id.x * GRID_STRIDE;
+    if grid[record + 7u] == 0.0 {
+        return;
+    }
+    let p = vec3<f32>(grid[record], grid[record + 1u], grid[record + 2u]);
+//#if HEIGHTFIELD
+    if GRID_HORIZONS > 0u {
+        store_horizon_tangents(p, record + GRID_HEADER);
+    }
+//#endif
+//#if BLOCKERS
+    if GRID_CAPS > 0u {
+        let n = vec3<f32>(grid[record + 4u], grid[record + 5u], grid[record + 6u]);
+        var caps: array<f32, COUNT_CAP>;
+        visit_blockers(p, n, bitcast<u32>(grid[record + 3u]), &caps);
+        for (var i = 0u; i < GRID_CAPS; i++) {
+            grid[record + GRID_HEADER + GRID_HORIZONS + i] = caps[i];
+        }
+    }
+//#endif
+}
+
+// How alike the block's point q (normal m) is to the pixel's p (normal n) for their
+// visibility (visibility_grid.rs, likeness), the objects already the same: 0 to 1.
+fn likeness(p: vec3<f32>, n: vec3<f32>, q: vec3<f32>, m: vec3<f32>) -> f32 {
+    let normals = pow(max(dot(n, m), 0.0), GRID_NORMAL_POWER);
+    let d = q - p;
+    let distance = length(d);
+    var off_plane = 0.0;
+    if distance > 0.0 {
+        off_plane = abs(dot(n, d)) / distance;
+    }
+    let x = off_plane / GRID_PLANE_WIDTH;
+    return normals * exp(-x * x);
+}
+
+// The horizon elevations and caps of point `point` (at p, normal n, on `object`),
+// interpolated from the four blocks around its pixel, weighted bilinearly and by
+// likeness (visibility_grid.rs, VisibilityGrid::at; horizons averaged as tangents);
+// false where the grid does not serve the point or no block is like it, which is then
+// computed alone.
+fn grid_at(point: u32, p: vec3<f32>, n: vec3<f32>, object: u32, served: bool, horizons: ptr<function, array<f32, DIRECTIONS>>, caps: ptr<function, array<f32, COUNT_CAP>>) -> bool {
+    if !served {
+        return false;
+    }
+    let pixel = params.tile_start + point;
+    let size = f32(GRID_SIZE);
+    let half = f32(GRID_SIZE / 2u);
+    let u = (f32(pixel % params.image_width) - half) / size;
+    let v = (f32(pixel / params.image_width) - half) / size;
+    let b0 = floor(u);
+    let c0 = floor(v);
+    let tu = u - b0;
+    let tv = v - c0;
+    var total = 0.0;
+    var tangents: array<f32, DIRECTIONS>;
+    var sum: array<f32, COUNT_CAP>;
+    for (var corner = 0u; corner < 4u; corner++) {
+        let db = f32(corner / 2u);
+        let dc = f32(corner % 2u);
+        let bilinear = mix(1.0 - tu, tu, db) * mix(1.0 - tv, tv, dc);
+        let b = b0 + db;
+        let c = c0 + dc;
+        if bilinear <= 0.0 || b < 0.0 || c < 0.0 || b >= f32(params.grid_columns) || c >= f32(params.grid_rows) {
+            continue;
+        }
+        let record = (u32(c) * params.grid_columns + u32(b)) * GRID_STRIDE;
+        if grid[record + 7u] == 0.0 || bitcast<u32>(grid[record + 3u]) != object {
+            continue;
+        }
+        let q = vec3<f32>(grid[record], grid[record + 1u], grid[record + 2u]);
+        let m = vec3<f32>(grid[record + 4u], grid[record + 5u], grid[record + 6u]);
+        let weight = bilinear * likeness(p, n, q, m);
+        if weight <= 0.0 {
+            continue;
+        }
+        total += weight;
+        for (var k = 0u; k < GRID_HORIZONS; k++) {
+            tangents[k] += weight * grid[record + GRID_HEADER + k];
+        }
+        for (var i = 0u; i < GRID_CAPS; i++) {
+            sum[i] += weight * grid[record + GRID_HEADER + GRID_HORIZONS + i];
+        }
+    }
+    if total < GRID_MIN_WEIGHT {
+        return false;
+    }
+    for (var k = 0u; k < GRID_HORIZONS; k++) {
+        (*horizons)[k] = atan(tangents[k] / total);
+    }
+    for (var i = 0u; i < GRID_CAPS; i++) {
+        (*caps)[i] = sum[i] / total;
+    }
+    return true;
+}
+//#endif
 
 // The ground plane (kernel.rs, add_visibility): the hemisphere below the horizontal for a
 // receiver above it (kernel.rs, above_ground).
@@ -403,8 +531,14 @@ fn shade(@builtin(global_invocation_id) id: vec3<u32>) {
     var terms = vec3<f32>(1.0);
     if slot != SLOT_NONE {
         let n = record.normal.xyz;
+        let object = bitcast<u32>(record.normal.w);
         var caps: array<f32, COUNT_CAP>;
-        var v = visibility(a.xyz, n, bitcast<u32>(record.normal.w), &caps);
+        var horizons: array<f32, DIRECTIONS>;
+        var from_grid = false;
+//#if GRID
+        from_grid = grid_at(point, a.xyz, n, object, record.reflected.w > 0.5, &horizons, &caps);
+//#endif
+        var v = visibility(a.xyz, n, object, from_grid, &horizons, &caps);
         if slot != SLOT_UNKNOWN {
             let material = materials[slot];
             let lit_diffuse = lit(&v, T_DIFFUSE, n);
@@ -419,10 +553,9 @@ fn shade(@builtin(global_invocation_id) id: vec3<u32>) {
                     var occlusion = caps;
 //#if HEIGHTFIELD
                     if enabled(FEATURE_HEIGHTFIELD) && tables[material.sharp_tables + 4u] < 1.0 {
-                        add_heightfield(a.xyz, n, false, params.log_epsilon, &occlusion);
+                        add_horizons(a.xyz, n, false, from_grid, &horizons, &occlusion);
                     }
 //#endif
-                    let object = bitcast<u32>(record.normal.w);
                     specular = prefiltered_glossy(&occlusion, material, a.xyz, n, object, reflected) * material.specular.xyz;
                     prefiltered = true;
                 }
@@ -465,7 +598,7 @@ fn shade(@builtin(global_invocation_id) id: vec3<u32>) {
             }
 //#endif
 //#if SUNS
-            sunlit(a.xyz, n, bitcast<u32>(record.normal.w), record.reflected.xyz, material, &diffuse, &specular);
+            sunlit(a.xyz, n, object, record.reflected.xyz, material, &diffuse, &specular);
 //#endif
         }
     }

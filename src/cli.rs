@@ -217,7 +217,7 @@ pub struct ShadingArgs {
     /// Pixels between the points where bounce light is gathered, along each axis, 1 (every pixel) to 16; the pixels between interpolate it and reflect it with their own normals [default: from --quality].
     #[arg(long)]
     pub bounce_stride: Option<usize>,
-    /// Pixels per side of the blocks whose height-field and blocker visibility is computed once and interpolated between blocks, across no depth or normal edge (NS09 Section 7); the lobes, the exponentiation and the suns and lamps stay per pixel. 1 (every pixel) to 4; the CPU executor only [default: 1].
+    /// Pixels per side of the blocks whose height-field and blocker visibility is computed once and interpolated between blocks, across no depth or normal edge (NS09 Section 7); the lobes, the exponentiation and the suns and lamps stay per pixel. 1 (every pixel) to 4, on either device [default: 1].
     #[arg(long)]
     pub visibility_grid: Option<usize>,
     /// Precision of the per-pixel kernel (the GPU pass is f32 only).

@@ -103,18 +103,11 @@ impl Executor {
                 if settings.precision == Precision::F64 {
                     return Err(GpuError::double_precision().into());
                 }
-                if settings.visibility_grid > 1 {
-                    return Err(GpuError::visibility_grid(settings.visibility_grid).into());
-                }
                 Ok(Self::on(Device::Gpu { gpu: Box::new(Gpu::new()?), fallback: false }))
             }
             DeviceChoice::Auto if settings.precision == Precision::F64 => {
                 Ok(on_cpu("since the GPU pass runs in f32 and --precision f64 was asked".into()))
             }
-            DeviceChoice::Auto if settings.visibility_grid > 1 => Ok(on_cpu(format!(
-                "since the GPU pass computes visibility at every pixel and --visibility-grid {} was asked",
-                settings.visibility_grid
-            ))),
             DeviceChoice::Auto => match Gpu::new_hardware() {
                 Ok(gpu) => {
                     let executor = Self::on(Device::Gpu { gpu: Box::new(gpu), fallback: true });

@@ -23,7 +23,7 @@ use std::time::Instant;
 pub struct SweepRow {
     /// What was varied: "preset", "order", "epsilon", "exp", "directions", "level_step",
     /// "level_offset", "ratio_attenuation", "fitted_depths", "tangent_occlusion" or
-    /// "visibility_grid" (on the CPU executor only); every other knob is the base's
+    /// "visibility_grid"; every other knob is the base's
     /// (fitted caps on).
     pub knob: String,
     /// The value, as a user would type it.
@@ -158,11 +158,6 @@ pub fn run(
     let total = configurations.len();
     let mut rows = Vec::with_capacity(total);
     for (done, (knob, value, settings)) in configurations.into_iter().enumerate() {
-        // The GPU pass computes visibility at every pixel: the grid is the CPU's alone.
-        if settings.visibility_grid > 1 && executor.on_gpu() {
-            progress(done + 1, total);
-            continue;
-        }
         let mut best = f64::INFINITY;
         let mut image = None;
         for _ in 0..repeats.max(1) {

@@ -265,7 +265,10 @@ fn generic_program_gives_the_specialised_image() {
     let Some(gpu) = gpu() else { return };
     let dir = tempfile::tempdir().unwrap();
     let scene = small_dunes(dir.path());
-    let spheres = Scene::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("gbuffers/spheres")).unwrap();
+    let spheres_dir = dir.path().join("spheres");
+    synth::example_scene("spheres", &spheres_dir, ExampleOptions { width: 64, height: 36, ..Default::default() })
+        .expect("write spheres");
+    let spheres = Scene::load(&spheres_dir).unwrap();
     for scene in [&scene, &spheres] {
         let frame = scene.frame(scene.default_frame()).unwrap();
         let settings = ShadingSettings::default();
@@ -698,4 +701,72 @@ fn bounce_light_matches() {
             assert!(worst.is_finite() && worst <= TOLERANCE, "{name}: {pass} differs by {worst}");
         }
     }
+}
+
+/// `--visibility-grid` on both executors (the grid's pre-pass and each pixel's
+/// interpolation, `grid_visibility` and `grid_at` in shaders/shade.wgsl, against
+/// src/shade/visibility_grid.rs): the dunes (height field, blockers, water, Phong), with a
+/// sun too and without its blockers, and the spheres example (blockers alone), at 2 and
+/// 4; the compositing passes;
+/// a frame in tiles, each of which reads the whole frame's grid; and an adapter that binds
+/// too few storage buffers, which refuses the grid by name.
+#[test]
+fn visibility_grid_matches() {
+    let Some(gpu) = gpu() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let dunes = small_dunes(dir.path());
+    let spheres_dir = dir.path().join("spheres");
+    synth::example_scene("spheres", &spheres_dir, ExampleOptions { width: 64, height: 36, ..Default::default() })
+        .expect("write spheres");
+    let spheres = Scene::load(&spheres_dir).unwrap();
+    let mut sunlit = dunes.frame(dunes.default_frame()).unwrap();
+    sunlit.suns.push(logsh::scene::SunLight {
+        direction: [0.48, -0.6, 0.64],
+        half_angle: 1f64.to_radians(),
+        strength: 3.0,
+        color: [1.0, 0.9, 0.8],
+    });
+    // A height field alone composes the program without the blockers' module.
+    let mut bare = dunes.frame(dunes.default_frame()).unwrap();
+    bare.blockers.clear();
+    let cases = [
+        ("dunes 64x36", &dunes, dunes.frame(dunes.default_frame()).unwrap()),
+        ("dunes 64x36 with a sun", &dunes, sunlit),
+        ("dunes 64x36 without blockers", &dunes, bare),
+        ("spheres 64x36", &spheres, spheres.frame(spheres.default_frame()).unwrap()),
+    ];
+    for (name, scene, frame) in &cases {
+        let unit = unoccluded_value(&frame.light).max(1e-12);
+        let per_pixel = gpu.shade_frame(scene, frame, &ShadingSettings::default()).unwrap();
+        for grid in [2, 4] {
+            let settings = ShadingSettings { visibility_grid: grid, ..ShadingSettings::default() };
+            let gridded = gpu.shade_frame(scene, frame, &settings).unwrap();
+            let cpu = shade_frame(scene, frame, &settings).unwrap();
+            let d = difference(&gridded, &cpu, unit);
+            eprintln!("{name}, visibility grid {grid}: worst {:.2e}, mean {:.2e}", d.worst, d.mean);
+            assert!(d.worst <= TOLERANCE, "{name}, grid {grid}: pixel {} differs by {}", d.worst_pixel, d.worst);
+            // The grid took effect: some pixel differs from visibility at every pixel.
+            let apart = difference(&gridded, &per_pixel, unit).worst;
+            assert!(apart > 1e-3, "{name}, grid {grid}: within {apart} of every pixel's image");
+        }
+    }
+
+    let (_, scene, frame) = &cases[0];
+    let settings = ShadingSettings { visibility_grid: 2, ..ShadingSettings::default() };
+    let cpu = logsh::shade::shade_frame_passes(scene, frame, &settings).unwrap();
+    let on_gpu = gpu.shade_frame_passes(scene, frame, &settings).unwrap();
+    let unit = unoccluded_value(&frame.light).max(1e-12) as f32;
+    let rgba = |v: &[[f32; 4]]| v.iter().flat_map(|c| c.iter().map(|x| x / unit)).collect::<Vec<f32>>();
+    assert_close!(rgba(&on_gpu.beauty), rgba(&cpu.beauty), TOLERANCE, "grid 2: beauty");
+    assert_close!(on_gpu.visibility, cpu.visibility, TOLERANCE, "grid 2: visibility");
+    assert_close!(on_gpu.visibility_heightfield, cpu.visibility_heightfield, TOLERANCE, "grid 2: heightfield");
+    assert_close!(on_gpu.visibility_blockers, cpu.visibility_blockers, TOLERANCE, "grid 2: blockers");
+
+    let whole = gpu.shade_frame(scene, frame, &settings).unwrap();
+    let tiled = Gpu::new().unwrap().with_max_tile_points(500);
+    let pieces = tiled.shade_frame(scene, frame, &settings).unwrap();
+    assert_eq!(whole.rgba, pieces.rgba, "grid 2: five tiles of 500 points and one frame-sized tile differ");
+
+    let refused = own_device().shade_frame(scene, frame, &settings).err().map(|e| e.to_string()).unwrap_or_default();
+    assert!(refused.contains("--visibility-grid 2") && refused.contains("storage buffers"), "{refused}");
 }

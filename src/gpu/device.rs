@@ -25,6 +25,13 @@ fn describe(info: &wgpu::AdapterInfo) -> String {
     format!("{} ({:?}, {} {})", info.name, info.backend, info.driver, info.driver_info).trim_end().to_string()
 }
 
+/// The pipelines of one shading program: the pass, and the visibility grid's pre-pass
+/// where the program has a grid.
+pub(super) struct ShadePipelines {
+    pub shade: wgpu::ComputePipeline,
+    pub grid: Option<wgpu::ComputePipeline>,
+}
+
 /// A GPU adapter and device with the pipelines built so far.
 pub struct Gpu {
     pub(super) info: wgpu::AdapterInfo,
@@ -35,7 +42,7 @@ pub struct Gpu {
     /// Errors wgpu reports outside an error scope (validation, out of memory, device
     /// lost), turned into [`GpuError`]s after each submission instead of a panic.
     errors: Arc<Mutex<Vec<String>>>,
-    shade_pipelines: Mutex<HashMap<String, Arc<wgpu::ComputePipeline>>>,
+    shade_pipelines: Mutex<HashMap<String, Arc<ShadePipelines>>>,
     pyramid_pipelines: Mutex<Option<Arc<(wgpu::ComputePipeline, wgpu::ComputePipeline)>>>,
     /// Held while a frame is on the device, from its plan to its last read-back, so that
     /// threads sharing one `Gpu` take turns: frames shaded from 16 threads at once never
@@ -228,14 +235,19 @@ impl Gpu {
     }
 
     /// The shading pipeline of `source`, compiled once per distinct program.
-    pub(super) fn shade_pipeline(&self, source: &str) -> Result<Arc<wgpu::ComputePipeline>, GpuError> {
+    /// The shading pass of `source` and, where the source has one, the visibility grid's
+    /// pre-pass, compiled once per source.
+    pub(super) fn shade_pipelines(&self, source: &str, grid: bool) -> Result<Arc<ShadePipelines>, GpuError> {
         if let Some(p) = self.shade_pipelines.lock().expect("pipeline cache").get(source) {
             return Ok(p.clone());
         }
         let module = self.compile("shade.wgsl", source)?;
-        let pipeline = Arc::new(self.pipeline(&module, "shade")?);
-        self.shade_pipelines.lock().expect("pipeline cache").insert(source.to_string(), pipeline.clone());
-        Ok(pipeline)
+        let pipelines = Arc::new(ShadePipelines {
+            shade: self.pipeline(&module, "shade")?,
+            grid: grid.then(|| self.pipeline(&module, "grid_visibility")).transpose()?,
+        });
+        self.shade_pipelines.lock().expect("pipeline cache").insert(source.to_string(), pipelines.clone());
+        Ok(pipelines)
     }
 
     pub(super) fn pyramid_pipelines(&self) -> Result<Arc<(wgpu::ComputePipeline, wgpu::ComputePipeline)>, GpuError> {

@@ -2,23 +2,26 @@
 //! turned into a program and its pipeline), bind (tables, pyramid and tile buffers), then
 //! per tile: pack (the frame walk writes the points) and run (dispatch, read back).
 
+use super::device::ShadePipelines;
 use super::device::{entry, PassTimer};
 use super::layout::{
     GpuBlockerNode, GpuLevel, GpuPoint, GpuShaded, GpuStep, ShadeParams, FEATURE_BLOCKERS, FEATURE_HEIGHTFIELD,
     FEATURE_PHONG, SLOT_NONE, SLOT_UNKNOWN, WORKGROUP_SIZE,
 };
-use super::program::{Features, MarchShape, ShadeProgram, Specialisation, LAVAPIPE_LOOP_LIMIT};
+use super::program::{Features, MarchShape, ShadeProgram, Specialisation, VisibilityBlocks, LAVAPIPE_LOOP_LIMIT};
 use super::pyramid::HeightFieldBuffers;
 use super::{Gpu, GpuError};
 use crate::scene::{Frame, Scene};
 use crate::shade::compositing::{assemble, Pixel};
 use crate::shade::kernel::reflect_view;
+use crate::shade::visibility_grid::{is_direct_surface, BlockPoints};
 use crate::shade::ShadingSettings;
 use crate::shade::{pixel_work, FramePlan, PixelPasses, PixelWork, PlannedKernel, ShadedFrame, ShadedPasses, Tint};
 use crate::timing::{Clock, StageTimings};
 use rayon::prelude::*;
 use std::sync::Arc;
 use std::time::Instant;
+use wgpu::util::DeviceExt;
 
 /// What a pixel of a tile is: a colour known without shading, or a shaded point whose
 /// result is multiplied by a tint.
@@ -32,16 +35,16 @@ enum TileWork {
 /// points.
 type ConsumeTile<'c> = dyn FnMut(usize, &[TileWork], &[GpuShaded]) + 'c;
 
-/// A frame's plan with the program generated from it and its compiled pipeline.
+/// A frame's plan with the program generated from it and its compiled pipelines.
 struct PreparedFrame<'a> {
     plan: FramePlan<'a>,
     program: ShadeProgram,
-    pipeline: Arc<wgpu::ComputePipeline>,
+    pipelines: Arc<ShadePipelines>,
 }
 
 /// The buffers of one frame's shading pass and the bind group over them.
 struct BoundFrame {
-    pipeline: Arc<wgpu::ComputePipeline>,
+    pipelines: Arc<ShadePipelines>,
     /// Points per tile.
     tile: usize,
     points: wgpu::Buffer,
@@ -55,6 +58,7 @@ struct BoundFrame {
     /// The frame's read-only inputs, alive as long as the bind group.
     _inputs: Vec<wgpu::Buffer>,
     _heightfield: Option<HeightFieldBuffers>,
+    _grid: Option<wgpu::Buffer>,
 }
 
 impl Gpu {
@@ -149,7 +153,9 @@ impl Gpu {
             let started = Instant::now();
             pack_tile(&prepared, start, &mut points[..count], &mut work[..count]);
             timings.add_wall("frame walk", started);
-            self.run_tile(&bound, &points[..count], &mut timings, |shaded| consume(start, &work[..count], shaded))?;
+            self.run_tile(&bound, start, &points[..count], &mut timings, |shaded| {
+                consume(start, &work[..count], shaded)
+            })?;
         }
         Ok(timings)
     }
@@ -164,9 +170,6 @@ impl Gpu {
         specialisation: Specialisation,
         passes: bool,
     ) -> Result<PreparedFrame<'a>, GpuError> {
-        if settings.visibility_grid > 1 {
-            return Err(GpuError::visibility_grid(settings.visibility_grid));
-        }
         let mut plan = FramePlan::new(scene, frame, settings)?;
         let started = Instant::now();
         let PlannedKernel::F32(kernel) = plan.kernel.as_ref() else {
@@ -174,15 +177,22 @@ impl Gpu {
         };
         kernel.prepare_glossy(&scene.materials, frame);
         let march = plan.terrain.as_ref().map(|t| MarchShape::of(&t.pyramid, &settings.horizon));
-        let program = ShadeProgram::new(kernel, Features { contents: plan.contents, specialisation, passes }, march);
+        // The grid where there is something to occlude, as on the CPU (cpu.rs, shade_pixels).
+        let occluded = plan.contents.heightfield || plan.contents.blockers;
+        let grid = if occluded { settings.visibility_grid } else { 1 };
+        let features = Features { contents: plan.contents, specialisation, passes, grid };
+        let program = ShadeProgram::new(kernel, features, march);
         plan.timings.add_wall("tables", started);
         if self.is_lavapipe() {
             self.check_loop_budget(&program, &plan, march)?;
         }
+        if grid > 1 {
+            self.check_grid_bindings(grid)?;
+        }
         let started = Instant::now();
-        let pipeline = self.shade_pipeline(&program.source)?;
+        let pipelines = self.shade_pipelines(&program.source, grid > 1)?;
         plan.timings.add_wall("compile", started);
-        Ok(PreparedFrame { plan, program, pipeline })
+        Ok(PreparedFrame { plan, program, pipelines })
     }
 
     /// lavapipe ends an invocation's loops after [`LAVAPIPE_LOOP_LIMIT`] iterations: a
@@ -215,7 +225,7 @@ impl Gpu {
     /// Uploads the program's tables, the spheres and the pyramid, allocates the tile
     /// buffers and binds them all, timing "upload" (and "pyramid").
     fn bind(&self, prepared: &PreparedFrame, timings: &mut StageTimings) -> Result<BoundFrame, GpuError> {
-        let PreparedFrame { plan, program, pipeline } = prepared;
+        let PreparedFrame { plan, program, pipelines } = prepared;
         let features = program.features;
         let generic = features.specialisation != Specialisation::Full;
         let started = Instant::now();
@@ -256,26 +266,39 @@ impl Gpu {
         if let Some(h) = heightfield.as_ref().or(placeholders.as_ref()) {
             entries.extend([entry(6, &h.levels), entry(7, &h.level_table), entry(8, &h.steps)]);
         }
+        let mut frame_params = frame_params(plan, program);
+        let grid = match &pipelines.grid {
+            Some(pre_pass) => {
+                let (grid, blocks) = self.visibility_grid(plan, program, pre_pass, &entries, timings)?;
+                [frame_params.grid_columns, frame_params.grid_rows] = blocks.map(|b| b as u32);
+                Some(grid)
+            }
+            None => None,
+        };
+        if let Some(grid) = &grid {
+            entries.push(entry(9, grid));
+        }
         let bind_group = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("shade"),
-            layout: &pipeline.get_bind_group_layout(0),
+            layout: &pipelines.shade.get_bind_group_layout(0),
             entries: &entries,
         });
         self.check_errors("binding the shading pass")?;
         drop(entries);
 
         Ok(BoundFrame {
-            pipeline: pipeline.clone(),
+            pipelines: pipelines.clone(),
             tile,
             points,
             shaded,
             readback,
             params,
             bind_group,
-            frame_params: frame_params(plan, program),
+            frame_params,
             timer: self.timer(),
             _inputs: vec![tables, materials, spheres],
             _heightfield: heightfield.or(placeholders),
+            _grid: grid,
         })
     }
 
@@ -292,19 +315,126 @@ impl Gpu {
         ])
     }
 
+    /// An adapter binds at most so many storage buffers to a pass; the grid's is a ninth.
+    fn check_grid_bindings(&self, grid: usize) -> Result<(), GpuError> {
+        let limit = self.limits.max_storage_buffers_per_shader_stage;
+        if limit < GRID_STORAGE_BUFFERS {
+            return Err(GpuError::Unsupported(format!(
+                "--visibility-grid {grid} on {}, which binds {limit} storage buffers to a pass where the grid needs \
+                 {GRID_STORAGE_BUFFERS}",
+                self.info.name
+            )));
+        }
+        Ok(())
+    }
+
+    /// The visibility grid's pre-pass (`grid_visibility` in shaders/shade.wgsl): each
+    /// block's point ([`BlockPoints`]) uploaded, its horizons and caps computed on the
+    /// device into the buffer the shading pass then reads, timing "visibility grid".
+    /// Returns the buffer and the blocks along x and y.
+    fn visibility_grid(
+        &self,
+        plan: &FramePlan,
+        program: &ShadeProgram,
+        pre_pass: &wgpu::ComputePipeline,
+        shade_entries: &[wgpu::BindGroupEntry],
+        timings: &mut StageTimings,
+    ) -> Result<(wgpu::Buffer, [usize; 2]), GpuError> {
+        let started = Instant::now();
+        let (frame, materials) = (plan.frame, &plan.scene.materials);
+        let size = program.features.grid;
+        let BlockPoints { blocks, points } =
+            BlockPoints::new(frame, materials, size, |x, y| pixel_work(materials, frame, x, y));
+        let stride = program.blocks.stride();
+        let mut records = vec![0.0f32; points.len() * stride];
+        records.par_chunks_mut(stride).zip(&points).for_each(|(record, point)| {
+            if let Some(p) = point {
+                let [x, y, z] = p.position.map(|v| v as f32);
+                let [nx, ny, nz] = p.normal.map(|v| v as f32);
+                record[..VisibilityBlocks::HEADER].copy_from_slice(&[
+                    x,
+                    y,
+                    z,
+                    f32::from_bits(p.object),
+                    nx,
+                    ny,
+                    nz,
+                    1.0,
+                ]);
+            }
+        });
+        let max_dimension = self.limits.max_compute_workgroups_per_dimension as usize;
+        let groups = points.len().div_ceil(WORKGROUP_SIZE as usize);
+        if groups > max_dimension {
+            return Err(GpuError::TooLarge {
+                what: format!("the visibility grid's pre-pass over {} x {} blocks", blocks[0], blocks[1]),
+                needed: groups as u64,
+                limit: max_dimension as u64,
+                adapter: self.info.name.clone(),
+            });
+        }
+        self.check_size("the visibility grid", (records.len() * 4) as u64)?;
+        let grid = self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("visibility grid"),
+            contents: bytemuck::cast_slice(&records),
+            usage: wgpu::BufferUsages::STORAGE,
+        });
+        let params =
+            ShadeParams { grid_columns: blocks[0] as u32, grid_rows: blocks[1] as u32, ..frame_params(plan, program) };
+        let params = self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("visibility grid params"),
+            contents: bytemuck::bytes_of(&params),
+            usage: wgpu::BufferUsages::UNIFORM,
+        });
+        // The pre-pass reads the shading pass's inputs but its points, results and
+        // materials.
+        let mut entries: Vec<wgpu::BindGroupEntry> =
+            shade_entries.iter().filter(|e| ![0, 2, 3, 4].contains(&e.binding)).cloned().collect();
+        entries.extend([entry(0, &params), entry(9, &grid)]);
+        let bind_group = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("visibility grid"),
+            layout: &pre_pass.get_bind_group_layout(0),
+            entries: &entries,
+        });
+        self.check_errors("binding the visibility grid's pre-pass")?;
+        let timer = self.timer();
+        let mut encoder =
+            self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("visibility grid") });
+        {
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("visibility grid"),
+                timestamp_writes: timer.as_ref().map(|t| t.writes()),
+            });
+            pass.set_pipeline(pre_pass);
+            pass.set_bind_group(0, &bind_group, &[]);
+            pass.dispatch_workgroups(groups as u32, 1, 1);
+        }
+        if let Some(t) = &timer {
+            t.resolve(&mut encoder);
+        }
+        self.queue.submit([encoder.finish()]);
+        self.wait("the visibility grid's pre-pass")?;
+        match timer.as_ref().map(|t| t.read(self)).transpose()? {
+            Some(ms) => timings.add("visibility grid", ms, Clock::Gpu),
+            None => timings.add_wall("visibility grid", started),
+        }
+        Ok((grid, blocks))
+    }
+
     /// Shades one tile of packed points and hands the shaded points to `consume`, timing
     /// "shade" (GPU timestamps where the adapter has them), "upload + readback" and
     /// "readback".
     fn run_tile(
         &self,
         bound: &BoundFrame,
+        start: usize,
         points: &[GpuPoint],
         timings: &mut StageTimings,
         consume: impl FnOnce(&[GpuShaded]),
     ) -> Result<(), GpuError> {
         let count = points.len();
         let started = Instant::now();
-        let params = ShadeParams { point_count: count as u32, ..bound.frame_params };
+        let params = ShadeParams { point_count: count as u32, tile_start: start as u32, ..bound.frame_params };
         self.queue.write_buffer(&bound.params, 0, bytemuck::bytes_of(&params));
         self.queue.write_buffer(&bound.points, 0, bytemuck::cast_slice(points));
         let mut encoder = self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("shade") });
@@ -313,7 +443,7 @@ impl Gpu {
                 label: Some("shade"),
                 timestamp_writes: bound.timer.as_ref().map(|t| t.writes()),
             });
-            pass.set_pipeline(&bound.pipeline);
+            pass.set_pipeline(&bound.pipelines.shade);
             pass.set_bind_group(0, &bound.bind_group, &[]);
             pass.dispatch_workgroups((count as u32).div_ceil(WORKGROUP_SIZE), 1, 1);
         }
@@ -371,9 +501,14 @@ fn frame_params(plan: &FramePlan, program: &ShadeProgram) -> ShadeParams {
         quad_rows: program.quadrature.rows as u32,
         quad_azimuths: program.quadrature.azimuths as u32,
         cluster_ratio: settings.cluster_ratio as f32,
+        image_width: plan.frame.gbuffer.width as u32,
         ..Default::default()
     }
 }
+
+/// Storage buffers the shading pass binds with a visibility grid: tables, points, results,
+/// materials, the blocker tree, the pyramid's three, and the grid.
+const GRID_STORAGE_BUFFERS: u32 = 9;
 
 /// The frame walk (shared with the CPU executor) over pixels `start..start + points.len()`:
 /// fixed colours wait in `work` with the tint of each shaded point until its result is
@@ -390,12 +525,13 @@ fn pack_tile(prepared: &PreparedFrame, start: usize, points: &mut [GpuPoint], wo
             }
             PixelWork::Shade { point: p, tint } => {
                 *out = TileWork::Shaded(tint);
+                let served = is_direct_surface(&plan.scene.materials, plan.frame, pixel);
                 let slot = program.slots.get(&p.material).copied().unwrap_or(SLOT_UNKNOWN);
                 let vec4 = |v: [f64; 3], w: f32| [v[0] as f32, v[1] as f32, v[2] as f32, w];
                 *point = GpuPoint {
                     position_slot: vec4(p.position, f32::from_bits(slot)),
                     normal: vec4(p.normal, f32::from_bits(p.object)),
-                    reflected: vec4(reflect_view(p.view_origin, p.position, p.normal), 0.0),
+                    reflected: vec4(reflect_view(p.view_origin, p.position, p.normal), if served { 1.0 } else { 0.0 }),
                 };
             }
         }

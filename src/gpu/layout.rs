@@ -81,7 +81,14 @@ gpu_struct! {
         /// The height field's highest sample: no level of the pyramid (tent-filtered,
         /// nonnegative weights) and no read of one rises above it.
         heightfield_peak: f32,
-        pad2: u32,
+        /// The pixel of the tile's first point: point `i` is pixel `tile_start + i`.
+        tile_start: u32,
+        /// The G-buffer's width in pixels.
+        image_width: u32,
+        /// The visibility grid's blocks along x and y ([`crate::shade::visibility_grid`]).
+        grid_columns: u32,
+        grid_rows: u32,
+        pad: u32,
     }
 }
 
@@ -93,7 +100,9 @@ gpu_struct! {
         position_slot: [f32; 4],
         /// Unit normal (xyz) and the bits of the object index (w).
         normal: [f32; 4],
-        /// The view direction mirrored about the normal (xyz): the Phong lobe's axis.
+        /// The view direction mirrored about the normal (xyz): the Phong lobe's axis; 1
+        /// (w) where the visibility grid serves the point (a surface seen directly,
+        /// [`crate::shade::visibility_grid::is_direct_surface`]), else 0.
         reflected: [f32; 4],
     }
 }
@@ -292,7 +301,11 @@ mod tests {
             cluster_ratio,
             quad_azimuths,
             heightfield_peak,
-            pad2
+            tile_start,
+            image_width,
+            grid_columns,
+            grid_rows,
+            pad
         ));
         check::<GpuPoint>(&offsets!(GpuPoint, position_slot, normal, reflected));
         check::<GpuShaded>(&offsets!(GpuShaded, diffuse, specular, visibility));

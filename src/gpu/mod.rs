@@ -1,14 +1,15 @@
 //! The GPU executor: the per-pixel pipeline of [`crate::shade`] as one wgpu compute pass
 //! over the frame (tiled where the frame exceeds the adapter's buffer limits), after a
-//! pre-pass that builds the height-field pyramid on the GPU.
+//! pre-pass that builds the height-field pyramid on the GPU and, with a visibility grid
+//! ([`crate::shade::visibility_grid`]), one that computes each block's horizons and caps.
 //!
 //! - [`layout`]: the structs shared with WGSL, declared once.
 //! - [`program`]: the WGSL composed for what the scene contains, and the tables it
 //!   reads, generated from the CPU kernel (`shaders/` holds the modules).
 //! - `device`: [`Gpu`], the adapter and device, buffers, the pipeline cache, timing. A
 //!   `Gpu` shared between threads shades one frame at a time.
-//! - `frame`: one frame's shading pass (prepare, bind, pack a tile, run a tile), from the
-//!   same [`crate::shade::FramePlan`] as the CPU executor.
+//! - `frame`: one frame's shading pass (prepare, bind with the grid's pre-pass, pack a
+//!   tile, run a tile), from the same [`crate::shade::FramePlan`] as the CPU executor.
 //! - `pyramid`: the height-field pyramid pre-pass.
 //!
 //! Which executor shades a frame is chosen above this module, in `src/executor.rs`.
@@ -31,13 +32,6 @@ impl GpuError {
     /// The GPU pass runs in f32 only.
     pub fn double_precision() -> Self {
         Self::Unsupported("--precision f64 (the GPU pass runs in f32)".into())
-    }
-
-    /// The GPU pass computes visibility at every pixel.
-    pub fn visibility_grid(grid: usize) -> Self {
-        Self::Unsupported(format!(
-            "--visibility-grid {grid} (the GPU pass computes visibility at every pixel; the grid is the CPU executor's)"
-        ))
     }
 }
 

@@ -46,10 +46,14 @@ pub struct Features {
     /// The visibility terms of `logsh render`'s compositing passes (three more diffuse
     /// exponentiations per point; src/shade/kernel/pixel_passes.rs).
     pub passes: bool,
+    /// The visibility grid's block size ([`crate::shade::visibility_grid`]): 1 computes
+    /// visibility at every point; above 1, a pre-pass computes it per block and each point
+    /// interpolates it.
+    pub grid: usize,
 }
 
 /// The feature names the `//#if` blocks of `shaders/` test.
-const FLAG_NAMES: [&str; 10] = [
+const FLAG_NAMES: [&str; 11] = [
     "HEIGHTFIELD",
     "BLOCKERS",
     "PHONG",
@@ -60,6 +64,7 @@ const FLAG_NAMES: [&str; 10] = [
     "EXP_HYB",
     "EXP_SERIES",
     "PASSES",
+    "GRID",
 ];
 
 impl Features {
@@ -76,6 +81,7 @@ impl Features {
             exp == ExpMethod::Hyb,
             exp == ExpMethod::Series,
             self.passes,
+            self.grid > 1,
         ];
         FLAG_NAMES.into_iter().zip(on).collect()
     }
@@ -118,6 +124,37 @@ impl MarchShape {
     }
 }
 
+/// The record of one block of the visibility grid in the pre-pass's buffer
+/// (`shaders/shade.wgsl`, `grid_visibility`): a header of [`Self::HEADER`] values (the
+/// block's point, the bits of its object, its normal, 1 where it has a surface pixel),
+/// then the tangents of its horizons' elevations and its caps' log vector.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct VisibilityBlocks {
+    /// Azimuths (0 without a height field or a grid).
+    pub horizons: usize,
+    /// Coefficients (0 without blockers or a grid).
+    pub caps: usize,
+}
+
+impl VisibilityBlocks {
+    pub const HEADER: usize = 8;
+
+    pub fn of(kernel: &ShadingKernel<f32>, features: Features, march: Option<MarchShape>) -> Self {
+        if features.grid <= 1 {
+            return Self::default();
+        }
+        Self {
+            horizons: march.map_or(0, |m| m.directions),
+            caps: if features.contents.blockers { coefficient_count(kernel.order) } else { 0 },
+        }
+    }
+
+    /// Values per block.
+    pub fn stride(&self) -> usize {
+        Self::HEADER + self.horizons + self.caps
+    }
+}
+
 /// Named offsets into one flat `f32` table buffer; integers are stored as their bits.
 #[derive(Default)]
 struct TableBuilder {
@@ -152,6 +189,8 @@ pub struct ShadeProgram {
     pub slots: BTreeMap<u32, u32>,
     /// The exponentiation's quadrature grid.
     pub quadrature: QuadratureGrid,
+    /// The visibility grid's block records (empty without a grid).
+    pub blocks: VisibilityBlocks,
     order: usize,
     exp: ExpMethod,
     march: Option<MarchShape>,
@@ -173,6 +212,7 @@ impl ShadeProgram {
             materials: tables.materials,
             slots: tables.slots,
             quadrature: tables.quadrature,
+            blocks: VisibilityBlocks::of(kernel, features, march),
             order: kernel.order,
             exp: kernel.exp.method,
             march,
@@ -432,7 +472,13 @@ impl Constant {
 
 /// The constants every module reads: the order and loop bounds, the march's shape, the
 /// switches, and the exponentiation's limits (each from the module that defines it).
-fn prelude(kernel: &ShadingKernel<f32>, features: Features, march: Option<MarchShape>, grid: QuadratureGrid) -> String {
+fn prelude(
+    kernel: &ShadingKernel<f32>,
+    features: Features,
+    march: Option<MarchShape>,
+    grid: QuadratureGrid,
+    blocks: VisibilityBlocks,
+) -> String {
     use Constant::*;
     let order = kernel.order;
     let march = march.unwrap_or_default();
@@ -485,6 +531,14 @@ fn prelude(kernel: &ShadingKernel<f32>, features: Features, march: Option<MarchS
         ("LOBE_PHONG", U32(LOBE_PHONG as usize)),
         ("LOBE_SH", U32(LOBE_SH as usize)),
         ("LOBE_HEAD", U32(LOBE_HEAD)),
+        ("GRID_SIZE", U32(features.grid.max(1))),
+        ("GRID_HEADER", U32(VisibilityBlocks::HEADER)),
+        ("GRID_HORIZONS", U32(blocks.horizons)),
+        ("GRID_CAPS", U32(blocks.caps)),
+        ("GRID_STRIDE", U32(blocks.stride())),
+        ("GRID_MIN_WEIGHT", F32(crate::shade::visibility_grid::MIN_WEIGHT)),
+        ("GRID_NORMAL_POWER", F32(f64::from(crate::shade::visibility_grid::NORMAL_POWER))),
+        ("GRID_PLANE_WIDTH", F32(crate::shade::visibility_grid::PLANE_WIDTH)),
     ];
     constants.iter().map(|(name, value)| value.declare(name)).collect()
 }
@@ -498,7 +552,8 @@ fn compose_source(
     tables: &ProgramTables,
 ) -> String {
     let exp = kernel.exp.method;
-    let mut source = wgsl_declarations() + &prelude(kernel, features, march, tables.quadrature);
+    let blocks = VisibilityBlocks::of(kernel, features, march);
+    let mut source = wgsl_declarations() + &prelude(kernel, features, march, tables.quadrature, blocks);
     for (name, offset) in &tables.builder.offsets {
         source += &Constant::U32(*offset).declare(name);
     }
@@ -583,7 +638,16 @@ impl ShadeProgram {
         let prefiltered =
             if self.features.contents.prefiltered { disk + quads + heightfield + add_rotated + c } else { 0 };
         let suns = self.suns as u64 * (disk + quads);
-        1 + tangent + heightfield + spheres as u64 * sphere + 2 * lit + passes + prefiltered + suns
+        // The grid's four blocks, read and weighed; a point no block is like is computed
+        // alone, so the march and the caps above stay in the bound (the pre-pass runs
+        // fewer: one point's march and caps).
+        let grid = if self.features.grid > 1 {
+            let values = (self.blocks.horizons + self.blocks.caps) as u64;
+            4 * (1 + values) + values
+        } else {
+            0
+        };
+        1 + tangent + heightfield + spheres as u64 * sphere + 2 * lit + passes + prefiltered + suns + grid
     }
 }
 

@@ -22,6 +22,11 @@
 //! less than [`MIN_WEIGHT`] in all (an edge of its own, water's reflected points) is
 //! computed alone. The tangent plane, the ground plane, the BRDF lobe, the
 //! exponentiation and the suns' and lamps' disks stay per pixel.
+//!
+//! The GPU executor runs the same steps: the blocks' points ([`BlockPoints`]) are chosen
+//! here, a pre-pass computes their horizons and caps on the device (`grid_visibility` in
+//! `shaders/shade.wgsl`), and each pixel interpolates them there (`grid_at`), with the
+//! weights' constants below.
 
 use super::kernel::{Caps, Occluders, ShadingKernel, SurfacePoint};
 use super::settings::MAX_DIRECTIONS;
@@ -87,12 +92,18 @@ pub(crate) fn is_direct_surface(materials: &BTreeMap<u32, Material>, frame: &Fra
     m != 0 && !matches!(materials.get(&m), Some(Material::Water { .. }) | None)
 }
 
-impl VisibilityGrid {
-    /// Computes the horizons and caps of each `size x size` block of `frame` at its
-    /// surface pixel nearest the block's centre pixel (`work` gives each pixel's point).
-    pub fn new<T: Real>(
-        kernel: &ShadingKernel<T>,
-        occluders: Occluders,
+/// The surface pixel each `size x size` block of a frame computes its visibility at: the
+/// one nearest the block's centre pixel that the grid serves ([`is_direct_surface`]).
+pub struct BlockPoints {
+    /// Blocks along x and y.
+    pub blocks: [usize; 2],
+    /// Per block, row by row, its point (`None`: no surface pixel).
+    pub points: Vec<Option<SurfacePoint>>,
+}
+
+impl BlockPoints {
+    /// The blocks of `frame` (`work` gives each pixel's point).
+    pub fn new(
         frame: &Frame,
         materials: &BTreeMap<u32, Material>,
         size: usize,
@@ -113,9 +124,24 @@ impl VisibilityGrid {
                 }
             })
         };
-        let points: Vec<Option<SurfacePoint>> =
+        let points =
             (0..blocks[0] * blocks[1]).into_par_iter().map(|b| point_of(b % blocks[0], b / blocks[0])).collect();
+        Self { blocks, points }
+    }
+}
 
+impl VisibilityGrid {
+    /// Computes the horizons and caps of each `size x size` block of `frame` at its
+    /// surface pixel nearest the block's centre pixel (`work` gives each pixel's point).
+    pub fn new<T: Real>(
+        kernel: &ShadingKernel<T>,
+        occluders: Occluders,
+        frame: &Frame,
+        materials: &BTreeMap<u32, Material>,
+        size: usize,
+        work: impl Fn(usize, usize) -> PixelWork + Sync,
+    ) -> Self {
+        let BlockPoints { blocks, points } = BlockPoints::new(frame, materials, size, work);
         let directions = occluders.horizons.map_or(0, |pyramid| pyramid.settings().directions);
         let mut tangents = vec![0.0; points.len() * directions];
         if let Some(pyramid) = occluders.horizons {
@@ -217,14 +243,20 @@ impl VisibilityGrid {
     }
 }
 
+/// The power of `n . n_b` in a block's likeness (module doc): 0.46 at 25 degrees.
+pub const NORMAL_POWER: i32 = 8;
+/// The sine of the elevation of a block's point off the pixel's tangent plane at which
+/// its likeness falls by `1 / e` (module doc).
+pub const PLANE_WIDTH: f64 = 0.2;
+
 /// How alike two points are for their visibility (module doc): 0 to 1.
 fn likeness(point: &SurfacePoint, other: &SurfacePoint) -> f64 {
     if point.object != other.object {
         return 0.0;
     }
-    let normals = dot(point.normal, other.normal).max(0.0).powi(8);
+    let normals = dot(point.normal, other.normal).max(0.0).powi(NORMAL_POWER);
     let d = [0, 1, 2].map(|k| other.position[k] - point.position[k]);
     let distance = dot(d, d).sqrt();
     let off_plane = if distance > 0.0 { dot(point.normal, d).abs() / distance } else { 0.0 };
-    normals * (-(off_plane / 0.2).powi(2)).exp()
+    normals * (-(off_plane / PLANE_WIDTH).powi(2)).exp()
 }
