@@ -1089,3 +1089,141 @@ fn moving_terrain_lamps_and_world_export_per_frame() {
     assert!(stderr.contains("the World changes within frames 1-2"), "{stderr}");
     assert!(!refused.exists());
 }
+
+/// Runs `script` (Python statements, after the add-on under `package_parent` is imported
+/// and registered as Blender registers it, and `blend` is opened) with `LOGSH_BINARY` set
+/// to `binary` or, where `None`, removed and `logsh` kept off PATH.
+fn run_engine(python: &Path, package_parent: &Path, blend: &Path, binary: Option<&Path>, script: &str) -> Output {
+    let code = format!(
+        "import os, sys, time\nsys.path.insert(0, {:?})\nimport bpy\nimport logsh_exporter\n\
+         from logsh_exporter import engine\nlogsh_exporter.register()\n\
+         bpy.ops.wm.open_mainfile(filepath={:?})\nscene = bpy.context.scene\nscene.render.engine = 'LOGSH'\n\
+         image = scene.render.image_settings\n\
+         if hasattr(image, 'media_type'):\n    image.media_type = 'MULTI_LAYER_IMAGE'\n\
+         image.file_format = 'OPEN_EXR_MULTILAYER'\nimage.color_depth = '32'\n{script}\n",
+        package_parent.to_str().unwrap(),
+        blend.to_str().unwrap()
+    );
+    let mut command = std::process::Command::new(python);
+    command.args(["-c", &code]);
+    match binary {
+        Some(binary) => command.env("LOGSH_BINARY", binary),
+        None => command.env_remove("LOGSH_BINARY").env("PATH", "/usr/bin:/bin"),
+    };
+    command.output().unwrap()
+}
+
+/// The render engine (`blender_scripts/logsh_exporter/engine.py`): F12 on the tiny scene
+/// gives `logsh shade`'s beauty of the same scene exported by hand, within 1e-3, and every
+/// logsh pass as a render pass; Ctrl+F12's path renders frames 1 and 2 from one export;
+/// an Area lamp stops the render with its name in Blender's report.
+#[test]
+fn render_engine_matches_logsh_shade_and_writes_its_passes() {
+    let Some(python) = bpy_python() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let blend = dir.path().join("tiny.blend");
+    assert_ok(&run_python(&python, "blender_scripts/scenes/tiny.py", &[Path::new("--save"), &blend]), "tiny.py");
+    let binary = Path::new(env!("CARGO_BIN_EXE_logsh"));
+    let scripts = Path::new(REPO).join("blender_scripts");
+
+    let still = dir.path().join("still.exr");
+    let script = format!(
+        "scene.render.filepath = {:?}\nscene.render.use_file_extension = False\n\
+         bpy.ops.render.render(write_still=True)",
+        still.to_str().unwrap()
+    );
+    assert_ok(&run_engine(&python, &scripts, &blend, Some(binary), &script), "F12 with the logsh engine");
+    let scene = dir.path().join("scene");
+    assert_ok(&export_frame_1(&python, &blend, &scene, "64x36"), "export_scene.py");
+    let shaded = dir.path().join("shaded");
+    Command::new(binary).arg("shade").arg(&scene).arg("--out").arg(&shaded).assert().success();
+    let engine = raw_channels(&still);
+    let by_hand = raw_channels(&shaded.join("beauty.0001.exr"));
+    let mut worst = 0.0f32;
+    for c in ["R", "G", "B", "A"] {
+        let (a, b) = (&engine[&format!("ViewLayer.Combined.{c}")], &by_hand[c]);
+        assert_eq!(a.len(), b.len(), "{c}: the engine's frame is {} pixels", a.len());
+        worst = a.iter().zip(b).fold(worst, |w, (x, y)| w.max((x - y).abs()));
+    }
+    println!("F12 against logsh shade: worst difference {worst:.2e}");
+    assert!(worst <= 1e-3, "F12's beauty is {worst} from logsh shade's");
+    for pass in ["Diffuse.R", "Specular.G", "Environment.B", "Indirect.R", "Visibility.X", "Visibility Blockers.X"] {
+        assert!(engine.contains_key(&format!("ViewLayer.{pass}")), "no pass {pass}: {:?}", engine.keys());
+    }
+
+    let frames = dir.path().join("frames");
+    let script = format!(
+        "exports = []\noriginal = engine.Job._export\n\
+         engine.Job._export = lambda job, e: (exports.append(list(job.frames)), original(job, e))[1]\n\
+         scene.frame_start, scene.frame_end = 1, 2\nscene.render.filepath = {:?}\n\
+         bpy.ops.render.render(animation=True)\nassert exports == [[1, 2]], exports\n\
+         assert engine._JOB is None, 'the work directory is removed after the render'",
+        frames.join("frame.####").to_str().unwrap()
+    );
+    assert_ok(&run_engine(&python, &scripts, &blend, Some(binary), &script), "Ctrl+F12 with the logsh engine");
+    for frame in [1, 2] {
+        let channels = raw_channels(&frames.join(format!("frame.{frame:04}.exr")));
+        assert!(channels.contains_key("ViewLayer.Diffuse.R"), "frame {frame}: {:?}", channels.keys());
+    }
+
+    let script = "bpy.ops.object.light_add(type='AREA')\nbpy.context.object.name = 'Panel'\n\
+                  try:\n    bpy.ops.render.render(write_still=False)\nexcept RuntimeError as e:\n    \
+                  print('reported:', e)\nelse:\n    sys.exit('rendered with an Area lamp')";
+    let output = run_engine(&python, &scripts, &blend, Some(binary), script);
+    assert_ok(&output, "F12 with an Area lamp");
+    let reported = String::from_utf8_lossy(&output.stdout);
+    assert!(reported.contains("reported:") && reported.contains("Panel"), "{reported}");
+}
+
+/// The extension zip (`blender_scripts/build_extension.py`, which runs Blender's own
+/// `extension validate` on it) carries the logsh binary: installed by Blender's extension
+/// installer (which keeps no file modes) and registered, it renders with neither
+/// `LOGSH_BINARY` nor `logsh` on PATH.
+#[test]
+fn extension_zip_installs_and_renders() {
+    let Some(python) = bpy_python() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let binary = Path::new(env!("CARGO_BIN_EXE_logsh"));
+    let out = dir.path().join("zip");
+    let built = run_python(
+        &python,
+        "blender_scripts/build_extension.py",
+        &[Path::new("--binary"), binary, Path::new("--out"), &out],
+    );
+    assert_ok(&built, "build_extension.py");
+    let zip = PathBuf::from(String::from_utf8_lossy(&built.stdout).trim());
+    assert!(zip.starts_with(&out) && zip.extension().is_some_and(|e| e == "zip"), "{}", zip.display());
+
+    let extensions = dir.path().join("extensions");
+    let package = extensions.join("logsh_exporter");
+    std::fs::create_dir(&extensions).unwrap();
+    let install = format!(
+        "import bpy, os, platform, subprocess, sys, tomllib\n\
+         cli = os.path.join(bpy.utils.system_resource('SCRIPTS'), 'addons_core', 'bl_pkg', 'cli', 'blender_ext.py')\n\
+         subprocess.run([sys.executable, cli, 'install-files', '--local-dir', {:?}, '--blender-version', \
+         '%d.%d.%d' % bpy.app.version, '--python-version', platform.python_version(), {:?}], check=True)\n\
+         manifest = tomllib.loads(open({:?}).read())\nassert manifest['platforms'] == ['linux-x64'], manifest\n\
+         assert os.path.isfile({:?})",
+        extensions.to_str().unwrap(),
+        zip.to_str().unwrap(),
+        package.join("blender_manifest.toml").to_str().unwrap(),
+        package.join("bin/logsh").to_str().unwrap()
+    );
+    assert_ok(
+        &std::process::Command::new(&python).args(["-c", &install]).output().unwrap(),
+        "installing the zip with Blender's extension installer",
+    );
+
+    let blend = dir.path().join("tiny.blend");
+    assert_ok(&run_python(&python, "blender_scripts/scenes/tiny.py", &[Path::new("--save"), &blend]), "tiny.py");
+    let still = dir.path().join("still.exr");
+    let script = format!(
+        "scene.render.filepath = {:?}\nscene.render.use_file_extension = False\n\
+         assert engine.logsh_binary() == os.path.join({:?}, 'bin', 'logsh'), engine.logsh_binary()\n\
+         bpy.ops.render.render(write_still=True)",
+        still.to_str().unwrap(),
+        package.to_str().unwrap()
+    );
+    assert_ok(&run_engine(&python, &extensions, &blend, None, &script), "rendering from the installed zip");
+    assert!(raw_channels(&still).contains_key("ViewLayer.Combined.R"));
+}

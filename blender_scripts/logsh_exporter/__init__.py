@@ -1,10 +1,16 @@
-"""logsh scene exporter, as a Blender extension (Blender 4.2 and later).
+"""logsh for Blender, as an extension (Blender 4.2 and later): a render engine and an
+exporter.
 
-Adds File > Export > logsh scene (format v1). The operator sets up Cycles' data passes,
-renders every frame of the chosen range and writes G-buffers, reflection G-buffers,
-blockers, cameras, the height map, the material table and the light into a directory,
-with the same code the command line uses (`exporter.py`; its top comment documents the
-scene markup and the conversions). Render settings are restored afterwards.
+The render engine (`engine.py`) appears as "logsh" in Render Properties > Render Engine;
+F12, Ctrl+F12 and `blender -b file.blend -E LOGSH -a` render with it, and its settings
+sit in the Render Properties' logsh panel.
+
+File > Export > logsh scene (format v1) writes a scene directory for the command line.
+The operator sets up Cycles' data passes, renders every frame of the chosen range and
+writes G-buffers, reflection G-buffers, blockers, cameras, the height map, the material
+table and the light into a directory, with the same code the command line uses
+(`exporter.py`; its top comment documents the scene markup and the conversions). Render
+settings are restored afterwards.
 
 Install: zip this folder (`blender --command extension build` inside it, or any zip of
 the folder), then Edit > Preferences > Get Extensions > Install from Disk.
@@ -13,7 +19,7 @@ import bpy
 from bpy.props import BoolProperty, FloatProperty, IntProperty, StringProperty
 from bpy_extras.io_utils import ExportHelper
 
-from . import exporter
+from . import engine, exporter
 
 
 _ITEMS = []  # Blender keeps no reference to dynamic enum strings: Python must (bpy.props docs)
@@ -111,8 +117,10 @@ def _menu(self, context):
 def register():
     bpy.utils.register_class(LOGSH_OT_export_scene)
     bpy.types.TOPBAR_MT_file_export.append(_menu)
+    engine.register()
 
 
 def unregister():
+    engine.unregister()
     bpy.types.TOPBAR_MT_file_export.remove(_menu)
     bpy.utils.unregister_class(LOGSH_OT_export_scene)

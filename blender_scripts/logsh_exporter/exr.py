@@ -115,20 +115,20 @@ def _channel_list(payload):
 
 def _unzip_chunk(packed, size):
     """The inverse of `_zip_chunk`: inflate, undo the delta, de-interleave."""
-    delta = np.frombuffer(zlib.decompress(packed), dtype=np.uint8)[:size]
-    # The first byte is as stored; each next one is the previous plus its delta - 128.
-    interleaved = (np.cumsum(np.concatenate([[delta[0]], delta[1:].astype(np.int64) - 128])) & 0xFF).astype(np.uint8)
+    delta = np.frombuffer(zlib.decompress(packed), dtype=np.uint8)[:size].copy()
+    # The first byte is as stored; each next one is the previous plus its delta - 128,
+    # modulo 256 (uint8 arithmetic wraps).
+    delta[1:] -= np.uint8(128)
+    interleaved = np.cumsum(delta, dtype=np.uint8)
     half = (size + 1) // 2
     out = np.empty(size, dtype=np.uint8)
     out[0::2], out[1::2] = interleaved[:half], interleaved[half:]
     return out.tobytes()
 
 
-def read_exr_channels(path, wanted):
-    """The channels `wanted` (full dotted names, as the G-buffer reader names them: a
-    multi-part file's channels prefixed with their part's name unless they already are)
-    of a scan-line EXR with no, ZIPS or ZIP compression, as 2-D float32 arrays (row 0 the
-    top scan line); a channel not in the file is an error naming it."""
+def _headers(path):
+    """The file's bytes, whether it is multi-part, each part's header attributes, and the
+    offset after the headers."""
     with open(path, "rb") as f:
         data = f.read()
     magic, flags = struct.unpack_from("<ii", data, 0)
@@ -140,7 +140,28 @@ def read_exr_channels(path, wanted):
         headers.append(attributes)
         if not multipart or data[at] == 0:
             break
-    at += 1 if multipart else 0
+    return data, multipart, headers, at + (1 if multipart else 0)
+
+
+def _full_names(attributes, multipart):
+    """A part's channels as (full name, pixel type): prefixed with the part's name in a
+    multi-part file unless they already are."""
+    prefix = attributes["name"][1].rstrip(b"\0").decode() + "." if multipart else ""
+    return [(n if n.startswith(prefix) else prefix + n, t) for n, t in _channel_list(attributes["channels"][1])]
+
+
+def channel_names(path):
+    """The full channel names of a scan-line EXR, as `read_exr_channels` names them."""
+    _, multipart, headers, _ = _headers(path)
+    return [name for attributes in headers for name, _ in _full_names(attributes, multipart)]
+
+
+def read_exr_channels(path, wanted):
+    """The channels `wanted` (full dotted names, as the G-buffer reader names them: a
+    multi-part file's channels prefixed with their part's name unless they already are)
+    of a scan-line EXR with no, ZIPS or ZIP compression, as 2-D float32 arrays (row 0 the
+    top scan line); a channel not in the file is an error naming it."""
+    data, multipart, headers, at = _headers(path)
     parts = []
     for attributes in headers:
         x0, y0, x1, y1 = struct.unpack("<iiii", attributes["dataWindow"][1])
@@ -153,8 +174,7 @@ def read_exr_channels(path, wanted):
         chunks = (height + lines - 1) // lines
         offsets = struct.unpack_from(f"<{chunks}Q", data, at)
         at += 8 * chunks
-        prefix = attributes["name"][1].rstrip(b"\0").decode() + "." if multipart else ""
-        channels = [(n if n.startswith(prefix) else prefix + n, t) for n, t in _channel_list(attributes["channels"][1])]
+        channels = _full_names(attributes, multipart)
         parts.append((width, height, y0, lines, compression, offsets, channels))
     out = {}
     for k, (width, height, y0, lines, compression, offsets, channels) in enumerate(parts):
@@ -169,6 +189,14 @@ def read_exr_channels(path, wanted):
             rows = min(lines, y0 + height - y)
             raw_size = rows * width * sum(_SAMPLE_TYPES[t].itemsize for _, t in channels)
             raw = packed if compression == _NO_COMPRESSION or size == raw_size else _unzip_chunk(packed, raw_size)
+            if len({t for _, t in channels}) == 1:
+                # One sample type: the chunk is rows x channels x width of it.
+                block = np.frombuffer(raw, dtype=_SAMPLE_TYPES[channels[0][1]], count=rows * len(channels) * width)
+                block = block.reshape(rows, len(channels), width)
+                for c, (name, _) in enumerate(channels):
+                    if name in values:
+                        values[name][y - y0:y - y0 + rows] = block[:, c]
+                continue
             at = 0
             for row in range(rows):
                 for name, pixel_type in channels:
