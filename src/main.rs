@@ -3,6 +3,7 @@ use logsh::cli::{Cli, Command};
 
 fn main() {
     quiet_mesa_device_select();
+    end_quietly_on_a_closed_pipe();
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Shade(args) => logsh::run::shade(&args),
@@ -18,6 +19,19 @@ fn main() {
     if let Err(error) = result {
         eprintln!("error: {error:#}");
         std::process::exit(1);
+    }
+}
+
+/// `logsh info FILE | head -3` closes logsh's standard output early. Rust ignores SIGPIPE,
+/// so the next write fails and `println!` panics with a backtrace; C tools end quietly
+/// there, killed by the signal. logsh does the same: SIGPIPE back to its default action.
+/// Sockets are unaffected (the standard library sends with `MSG_NOSIGNAL` on Linux and
+/// sets `SO_NOSIGPIPE` on macOS), so the viewer's server survives a client that leaves.
+fn end_quietly_on_a_closed_pipe() {
+    #[cfg(unix)]
+    // SAFETY: before any other thread exists; SIG_DFL is a valid disposition for SIGPIPE.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
     }
 }
 

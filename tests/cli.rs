@@ -247,3 +247,27 @@ fn visibility_grid_is_checked_and_renders() {
     assert!(!stderr_of(&auto).contains("--visibility-grid 2 was asked"), "{}", stderr_of(&auto));
     assert!(out.join("beauty.0001.exr").is_file());
 }
+
+/// `logsh info FILE ... | head -1`: a standard output closed early ends logsh quietly, as
+/// it ends C tools (SIGPIPE), with no panic and no backtrace. The listing of 300 files
+/// overflows the pipe's buffer, so a write meets the closed pipe whatever the timing.
+#[test]
+fn a_closed_pipe_ends_quietly() {
+    let file = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("gbuffers/dunes/gbuffer.0001.exr");
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_logsh"))
+        .arg("info")
+        .args(std::iter::repeat_n(&file, 300))
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    drop(child.stdout.take());
+    let output = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(!stderr.contains("panicked") && !stderr.contains("Broken pipe"), "{stderr}");
+    #[cfg(unix)]
+    {
+        use std::os::unix::process::ExitStatusExt;
+        assert_eq!(output.status.signal(), Some(libc::SIGPIPE), "{:?}: {stderr}", output.status);
+    }
+}

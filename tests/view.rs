@@ -611,3 +611,62 @@ fn the_page_relights_in_a_headless_browser() {
         let _ = std::io::stderr().write_all(format!("tests/view.rs: {timing}\n").as_bytes());
     }
 }
+
+/// The server's bounds (src/view/server.rs): a request naming another host, or sent from
+/// another origin, gets 403 (DNS rebinding); 500 idle connections and a 10 MB header line
+/// leave the page served within a second; a port already taken is said so.
+#[test]
+fn the_server_answers_its_own_host_only_and_within_bounds() {
+    let dir = tempfile::tempdir().unwrap();
+    let frames = rendered_cones(dir.path(), serde_json::json!([]), false);
+    let server = Server::start(&frames);
+    let host = server.address.trim_start_matches("http://").trim_end_matches('/').to_string();
+    let port = host.rsplit(':').next().unwrap().to_string();
+    let status_of = |head: &str| {
+        let mut stream = TcpStream::connect(&host).unwrap();
+        write!(stream, "GET / HTTP/1.1\r\n{head}Connection: close\r\n\r\n").unwrap();
+        let mut response = Vec::new();
+        stream.read_to_end(&mut response).unwrap();
+        String::from_utf8_lossy(&response).split_whitespace().nth(1).unwrap_or("none").to_string()
+    };
+    assert_eq!(status_of("Host: evil.example.com\r\n"), "403");
+    assert_eq!(status_of(&format!("Host: evil.example.com:{port}\r\n")), "403");
+    assert_eq!(status_of(""), "403", "no Host");
+    assert_eq!(status_of(&format!("Host: {host}\r\nOrigin: http://evil.example.com\r\n")), "403");
+    assert_eq!(status_of(&format!("Host: localhost:{port}\r\nOrigin: http://{host}\r\n")), "200");
+    assert_eq!(status_of(&format!("Host: {host}\r\nX-Many: {}\r\n", "a".repeat(20_000))), "431");
+
+    let idle: Vec<TcpStream> = (0..500).map(|_| TcpStream::connect(&host).unwrap()).collect();
+    let flood = {
+        let host = host.clone();
+        std::thread::spawn(move || {
+            let mut stream = TcpStream::connect(&host).unwrap();
+            let _ = stream.write_all(b"GET / HTTP/1.1\r\nX-Flood: ");
+            let line = vec![b'a'; 1 << 20];
+            for _ in 0..10 {
+                if stream.write_all(&line).is_err() {
+                    break; // the server answered 431 and closed
+                }
+            }
+        })
+    };
+    std::thread::sleep(std::time::Duration::from_millis(200));
+    let started = std::time::Instant::now();
+    let (status, page) = server.request("GET", "/");
+    let took = started.elapsed();
+    println!("the page beside 500 idle connections and a 10 MB header line: {took:?}");
+    assert_eq!(status, 200);
+    assert!(String::from_utf8_lossy(&page).contains("<canvas"));
+    assert!(took.as_secs_f64() < 1.0, "the page took {took:?} beside 500 idle connections and a 10 MB header");
+    flood.join().unwrap();
+    drop(idle);
+
+    let taken = Command::new(cargo_bin("logsh"))
+        .args(["view", frames.to_str().unwrap(), "--port", &port, "--no-open"])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&taken.stderr);
+    assert!(!taken.status.success() && stderr.contains(&format!("port {port} is taken")), "{stderr}");
+    let printed = server.stop();
+    assert!(!printed.contains("panicked"), "{printed}");
+}

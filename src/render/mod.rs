@@ -3,9 +3,11 @@
 //!
 //! A farm runs this unattended, so one bad frame costs only itself: its error is recorded
 //! and the next frame starts; a panic inside a frame is caught and reported the same way.
-//! Outputs are written atomically (a killed run leaves whole files or none), which is what
-//! makes `--skip-existing` a safe resume: a frame counts as done when its EXR header reads
-//! and its PNG exists.
+//! Outputs are written atomically and flushed to the disk (a killed run or node leaves
+//! whole files or none, [`output::write_atomically`]), which is what makes
+//! `--skip-existing` a safe resume: a frame counts as done when its EXR is whole (its
+//! header reads, every chunk lies inside the file, the last one decodes) and so is its
+//! PNG. The temporary files of a killed run are removed when the next one starts.
 //!
 //! # The output of a frame (`<name>.NNNN.exr`, one part, ZIP)
 //!
@@ -128,14 +130,15 @@ pub fn check_outputs(scene: &Scene, options: &SequenceOptions) -> Result<(), Sce
     Ok(())
 }
 
-/// True when both outputs exist, the EXR's header reads (and records transfer layers,
-/// where `transfer` asks for them: a frame rendered without is rendered again), and the
-/// PNG is not empty.
+/// True when both outputs are whole ([`output::exr_is_whole`], [`output::png_is_whole`])
+/// and the EXR records transfer layers where `transfer` asks for them (a frame rendered
+/// without is rendered again).
 pub fn is_complete(outputs: &[PathBuf; 2], transfer: bool) -> bool {
     let [exr, png] = outputs;
-    exr::meta::MetaData::read_from_file(exr, false)
-        .is_ok_and(|meta| !transfer || crate::transfer::holds_transfer(&meta))
-        && std::fs::metadata(png).is_ok_and(|m| m.len() > 0)
+    output::exr_is_whole(exr)
+        && (!transfer
+            || exr::meta::MetaData::read_from_file(exr, false).is_ok_and(|meta| crate::transfer::holds_transfer(&meta)))
+        && output::png_is_whole(png)
 }
 
 /// Renders `options.frames` in order, reporting to `progress`; never stops early.
@@ -155,6 +158,16 @@ pub fn render_sequence(
 ) -> Vec<FrameOutcome> {
     let total = options.frames.len();
     progress.start(total);
+    let outputs: Vec<PathBuf> =
+        options.frames.iter().flat_map(|&frame| frame_outputs(&options.out, &options.name, frame)).collect();
+    let leftovers = output::remove_leftovers(&outputs);
+    if let Some(first) = leftovers.first() {
+        progress.notice(&format!(
+            "removed {} temporary file(s) a killed render left in {}",
+            leftovers.len(),
+            first.parent().unwrap_or(Path::new(".")).display()
+        ));
+    }
     let mut outcomes = Vec::with_capacity(total);
     std::thread::scope(|threads| {
         let (read_tx, read_rx) = std::sync::mpsc::sync_channel::<Job<Read>>(0);

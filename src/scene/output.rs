@@ -1,9 +1,12 @@
 //! Writing output images: linear float EXR (single- and multi-layer) and an sRGB 8-bit
 //! PNG preview.
 //!
-//! Every write is atomic: the image goes to a temporary file in the destination's
-//! directory (`.<name>.<pid>.<n>.tmp`), which is then renamed over the destination, so a
-//! reader never sees half a file and a failed write leaves the old file in place. These
+//! Every write is atomic and durable: the image goes to a temporary file in the
+//! destination's directory (`.<name>.<pid>.<n>.tmp`), flushed to the disk, then renamed
+//! over the destination, and the directory flushed after it; so a reader never sees half a
+//! file, a failed write leaves the old file in place, and a power loss or a killed node
+//! leaves the old file or the new one, never a renamed file of zeros. A process killed
+//! mid-write leaves its temporary file, which [`remove_leftovers`] clears. These
 //! functions do not know the scene; call [`super::Scene::check_output_path`] first so
 //! that no input is ever overwritten.
 //!
@@ -54,10 +57,121 @@ pub fn write_atomically<E>(
         let _ = std::fs::remove_file(&temp);
         return Err(wrap(e));
     }
-    std::fs::rename(&temp, path).map_err(|source| {
+    let renamed = std::fs::OpenOptions::new()
+        .write(true)
+        .open(&temp)
+        .and_then(|file| file.sync_all())
+        .and_then(|()| std::fs::rename(&temp, path));
+    if let Err(cause) = renamed {
         let _ = std::fs::remove_file(&temp);
-        OutputError::Io { file: path.to_path_buf(), cause: source }
-    })
+        return Err(OutputError::Io { file: path.to_path_buf(), cause });
+    }
+    sync_directory(&dir).map_err(|cause| OutputError::Io { file: path.to_path_buf(), cause })
+}
+
+/// Flushes a directory's entries (the rename of [`write_atomically`]) to the disk. Only
+/// Unix opens a directory as a file; elsewhere the rename is left to the file system.
+fn sync_directory(dir: &Path) -> std::io::Result<()> {
+    #[cfg(unix)]
+    std::fs::File::open(dir)?.sync_all()?;
+    #[cfg(not(unix))]
+    let _ = dir;
+    Ok(())
+}
+
+/// Removes the temporary files that writes of `outputs` left in their directories when
+/// their process was killed (`.<name>.<pid>.<n>.tmp` of a process that no longer runs);
+/// returns what it removed.
+pub fn remove_leftovers(outputs: &[PathBuf]) -> Vec<PathBuf> {
+    let mut removed = Vec::new();
+    let mut by_directory: std::collections::BTreeMap<PathBuf, Vec<String>> = Default::default();
+    for path in outputs {
+        let dir = path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new(".")).to_path_buf();
+        if let Some(name) = path.file_name() {
+            by_directory.entry(dir).or_default().push(format!(".{}.", name.to_string_lossy()));
+        }
+    }
+    for (dir, prefixes) in by_directory {
+        let Ok(entries) = std::fs::read_dir(&dir) else { continue };
+        for entry in entries.flatten() {
+            let file = entry.file_name().to_string_lossy().into_owned();
+            let Some(rest) = prefixes.iter().find_map(|p| file.strip_prefix(p.as_str())) else { continue };
+            let Some(pid) = rest.strip_suffix(".tmp").and_then(|r| r.split('.').next()?.parse::<u32>().ok()) else {
+                continue;
+            };
+            if !process_runs(pid) && std::fs::remove_file(entry.path()).is_ok() {
+                removed.push(entry.path());
+            }
+        }
+    }
+    removed
+}
+
+/// Whether process `pid` runs (this one always does). Where that cannot be told (no
+/// `/proc`), only this process's own files count as running.
+fn process_runs(pid: u32) -> bool {
+    pid == std::process::id() || (Path::new("/proc/self").exists() && Path::new(&format!("/proc/{pid}")).exists())
+}
+
+/// Whether an EXR written by [`write_exr_layers`] is whole: its header reads, every chunk
+/// of its offset table lies inside the file, and its last chunk decodes. A file cut short
+/// by a crash, or one of zeros, is not.
+pub fn exr_is_whole(path: &Path) -> bool {
+    whole_exr(path).unwrap_or(false)
+}
+
+fn whole_exr(path: &Path) -> std::io::Result<bool> {
+    use exr::block::reader::{ChunksReader, Reader};
+    use std::io::{BufRead, Read, Seek, SeekFrom};
+    let mut file = std::io::BufReader::new(std::fs::File::open(path)?);
+    let length = file.get_ref().metadata()?.len();
+    let Ok(reader) = Reader::read_from_buffered(&mut file, true) else { return Ok(false) };
+    let [header] = reader.headers() else { return Ok(false) };
+    let (chunks, height) = (header.chunk_count as u64, header.layer_size.height());
+    let last = reader.filter_chunks(true, |_, _, block| block.pixel_position.y() + block.pixel_size.height() == height);
+    if !last.is_ok_and(|last| last.decompress_sequential(true, |_, _| Ok(())).is_ok()) {
+        return Ok(false);
+    }
+    // The offset table follows the header: the magic number and version (8 bytes), then
+    // attributes (name, type, a 4-byte size, the value) up to an empty name.
+    file.seek(SeekFrom::Start(8))?;
+    loop {
+        let mut name = Vec::new();
+        file.read_until(0, &mut name)?;
+        if name.as_slice() == [0] {
+            break;
+        }
+        let mut kind = Vec::new();
+        file.read_until(0, &mut kind)?;
+        let mut size = [0u8; 4];
+        file.read_exact(&mut size)?;
+        if name.last() != Some(&0) || kind.last() != Some(&0) {
+            return Ok(false);
+        }
+        file.seek_relative(i64::from(u32::from_le_bytes(size)))?;
+    }
+    let mut offsets = vec![0u8; 8 * chunks as usize];
+    file.read_exact(&mut offsets)?;
+    for offset in offsets.chunks_exact(8).map(|b| u64::from_le_bytes(b.try_into().expect("8 bytes"))) {
+        // A scan-line chunk: its first line (4 bytes), its size (4 bytes), its data.
+        let mut head = [0u8; 8];
+        if offset.checked_add(8).is_none_or(|end| end > length) {
+            return Ok(false);
+        }
+        file.seek(SeekFrom::Start(offset))?;
+        file.read_exact(&mut head)?;
+        if offset + 8 + u64::from(u32::from_le_bytes(head[4..].try_into().expect("4 bytes"))) > length {
+            return Ok(false);
+        }
+    }
+    Ok(true)
+}
+
+/// Whether a PNG is whole: its signature opens it and its `IEND` chunk closes it.
+pub fn png_is_whole(path: &Path) -> bool {
+    const SIGNATURE: [u8; 8] = [0x89, b'P', b'N', b'G', 0x0d, 0x0a, 0x1a, 0x0a];
+    const IEND: [u8; 12] = [0, 0, 0, 0, b'I', b'E', b'N', b'D', 0xae, 0x42, 0x60, 0x82];
+    std::fs::read(path).is_ok_and(|bytes| bytes.starts_with(&SIGNATURE) && bytes.ends_with(&IEND))
 }
 
 fn check_len(path: &Path, width: usize, height: usize, count: usize) -> Result<(), OutputError> {

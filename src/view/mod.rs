@@ -1,7 +1,9 @@
 //! `logsh view`: a local web page that shows the frames of a render and relights them in
 //! the browser from their transfer layers ([`crate::transfer`]).
 //!
-//! The server listens on 127.0.0.1 only and answers GET requests:
+//! The server ([`server`]) listens on 127.0.0.1 only, within bounds on connections,
+//! header sizes and time, answers requests addressed to 127.0.0.1, `localhost` or `[::1]`
+//! only, and GET requests only:
 //!
 //! | path | body |
 //! |---|---|
@@ -48,10 +50,12 @@ use crate::shade::bounce::IndirectParts;
 use crate::transfer::{RelightLight, RelightOptions, SunLampFrame, SunLampTurn, TransferFrame};
 use anyhow::{anyhow, Context, Result};
 use std::borrow::Cow;
-use std::io::{BufRead, BufReader, Write};
-use std::net::{TcpListener, TcpStream};
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
+
+mod server;
+
+use server::Response;
 
 /// The page, with its script inline.
 const PAGE: &str = include_str!("page.html");
@@ -227,47 +231,16 @@ impl Viewer {
         }
     }
 
-    /// Listens on 127.0.0.1:`port` (0: any free port) and serves until the process ends;
-    /// `ready` receives the page's address once the socket listens.
+    /// Listens on 127.0.0.1:`port` (0: any free port) and serves until the process ends
+    /// ([`server`]); `ready` receives the page's address once the socket listens.
     pub fn serve(self, port: u16, ready: impl FnOnce(&str)) -> Result<()> {
-        let listener =
-            TcpListener::bind(("127.0.0.1", port)).with_context(|| format!("cannot listen on port {port}"))?;
-        let address = format!("http://{}/", listener.local_addr()?);
-        ready(&address);
+        let listener = server::bind(port)?;
+        ready(&server::address(&listener)?);
         let viewer = Arc::new(self);
-        for stream in listener.incoming() {
-            let Ok(stream) = stream else { continue };
-            let viewer = viewer.clone();
-            std::thread::spawn(move || {
-                if let Err(e) = viewer.answer(stream) {
-                    eprintln!("view: {e:#}");
-                }
-            });
-        }
-        Ok(())
-    }
-
-    fn answer(&self, stream: TcpStream) -> Result<()> {
-        let mut reader = BufReader::new(stream.try_clone()?);
-        let mut request = String::new();
-        reader.read_line(&mut request)?;
-        loop {
-            let mut header = String::new();
-            if reader.read_line(&mut header)? == 0 || header.trim().is_empty() {
-                break;
-            }
-        }
-        let mut parts = request.split_whitespace();
-        let (method, target) = (parts.next().unwrap_or(""), parts.next().unwrap_or(""));
-        let (path, query) = target.split_once('?').unwrap_or((target, ""));
-        let response = if method != "GET" {
-            Response::error(405, "only GET is served")
-        } else if path.starts_with("/bench/") {
-            self.bench(path, query)
-        } else {
-            self.route(path, query)
-        };
-        response.send(stream)
+        server::serve(listener, move |request| match request.path {
+            path if path.starts_with("/bench/") => viewer.bench(path, request.query),
+            path => viewer.route(path, request.query),
+        })
     }
 
     /// Times the page's benchmark by the server's clock and prints it.
@@ -659,44 +632,6 @@ fn frame_bodies(
     });
     let cycles_files = cycles_candidates(file, frame).into_iter().map(|path| (path.clone(), written(&path))).collect();
     FrameBodies { meta: meta.to_string(), pixels, maps, cycles, cycles_files, sharp: None }
-}
-
-/// An HTTP response.
-struct Response {
-    status: u16,
-    content_type: &'static str,
-    body: Vec<u8>,
-}
-
-impl Response {
-    fn ok(content_type: &'static str, body: Vec<u8>) -> Self {
-        Self { status: 200, content_type, body }
-    }
-
-    fn error(status: u16, message: &str) -> Self {
-        Self { status, content_type: "text/plain; charset=utf-8", body: message.as_bytes().to_vec() }
-    }
-
-    fn send(self, mut stream: TcpStream) -> Result<()> {
-        let reason = match self.status {
-            200 => "OK",
-            400 => "Bad Request",
-            404 => "Not Found",
-            405 => "Method Not Allowed",
-            409 => "Conflict",
-            _ => "Internal Server Error",
-        };
-        write!(
-            stream,
-            "HTTP/1.1 {} {reason}\r\nContent-Type: {}\r\nContent-Length: {}\r\nCache-Control: no-store\r\nConnection: close\r\n\r\n",
-            self.status,
-            self.content_type,
-            self.body.len()
-        )?;
-        stream.write_all(&self.body)?;
-        stream.flush()?;
-        Ok(())
-    }
 }
 
 #[cfg(test)]
