@@ -352,6 +352,196 @@ fn kills_at_any_point_resume_to_identical_frames() {
     same_as_full(&out, "damaged outputs");
 }
 
+/// Stops the local Slurm cluster of [`the_slurm_job_array_renders_on_a_local_cluster`]
+/// when dropped.
+struct LocalCluster(PathBuf);
+
+impl Drop for LocalCluster {
+    fn drop(&mut self) {
+        let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("farm/slurm/local-cluster.sh");
+        let _ = std::process::Command::new("bash").arg(script).arg("stop").arg(&self.0).output();
+    }
+}
+
+/// The farm path on a real Slurm cluster: `farm/slurm/local-cluster.sh` starts one node
+/// on this machine, the repository's sbatch job array renders a three-frame shot, one
+/// array task per frame, to the bytes of a plain `logsh render`; with frame 2's G-buffer
+/// cut short, its task fails with the file named in its log and the others render.
+/// Skipped, with the reason, where the cluster cannot start (no Slurm, not root), unless
+/// `LOGSH_REQUIRE_SLURM=1` (which `.ci/run` sets once it has installed Slurm): then that
+/// is a failure.
+#[test]
+fn the_slurm_job_array_renders_on_a_local_cluster() {
+    let required = std::env::var("LOGSH_REQUIRE_SLURM").is_ok_and(|v| v == "1");
+    let repo = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let dir = tempfile::tempdir().unwrap();
+    let cluster = dir.path().join("cluster");
+    let started = std::process::Command::new("bash")
+        .arg(repo.join("farm/slurm/local-cluster.sh"))
+        .arg("start")
+        .arg(&cluster)
+        .output()
+        .unwrap();
+    let _stop = LocalCluster(cluster.clone());
+    if !started.status.success() {
+        let why = stderr_of(&started);
+        assert!(!required, "LOGSH_REQUIRE_SLURM=1 but the local cluster did not start: {why}");
+        let line = format!("tests/render_cli.rs: the Slurm test skipped: {}\n", why.trim());
+        let _ = std::io::Write::write_all(&mut std::io::stderr(), line.as_bytes());
+        return;
+    }
+    let bin = assert_cmd::cargo::cargo_bin("logsh");
+    let submit = |scene: &Path, out: &Path| {
+        std::fs::create_dir_all(out).unwrap();
+        std::process::Command::new("timeout")
+            .args(["300", "sbatch", "--wait", "--array=0-2", "--cpus-per-task=1", "--mem=1M", "--time=5"])
+            .arg(format!("--output={}/logsh-%A_%a.log", out.display()))
+            .arg(repo.join("farm/slurm/logsh-render.sbatch"))
+            .env("SLURM_CONF", cluster.join("slurm.conf"))
+            .env("SCENE", scene)
+            .env("OUT", out)
+            .env("FIRST", "1")
+            .env("LAST", "3")
+            .env("CHUNK", "1")
+            .env("LOGSH", &bin)
+            .output()
+            .unwrap()
+    };
+    let log_of = |out: &Path, task: u32| {
+        let name = std::fs::read_dir(out)
+            .unwrap()
+            .flatten()
+            .map(|e| e.file_name().to_string_lossy().into_owned())
+            .find(|n| n.starts_with("logsh-") && n.ends_with(&format!("_{task}.log")))
+            .unwrap_or_else(|| panic!("no log of array task {task} in {}", out.display()));
+        std::fs::read_to_string(out.join(name)).unwrap()
+    };
+
+    let shot = three_frame_scene(dir.path(), 64, 36);
+    let plain = dir.path().join("plain");
+    let output = logsh().arg("render").arg(&shot).args(["--progress", "none", "--out"]).arg(&plain).output().unwrap();
+    assert!(output.status.success(), "{}", stderr_of(&output));
+    let farmed = dir.path().join("farmed");
+    let output = submit(&shot, &farmed);
+    assert!(output.status.success(), "sbatch: {}\n{}", stderr_of(&output), log_of(&farmed, 0));
+    for f in 1..=3 {
+        for ext in ["exr", "png"] {
+            let name = format!("render.{f:04}.{ext}");
+            let (a, b) = (std::fs::read(plain.join(&name)).unwrap(), std::fs::read(farmed.join(&name)));
+            assert!(b.is_ok_and(|b| b == a), "{name}: the array task's frame differs from logsh render's");
+        }
+    }
+
+    let gbuffer = shot.join("gbuffer.0002.exr");
+    let bytes = std::fs::read(&gbuffer).unwrap();
+    std::fs::write(&gbuffer, &bytes[..bytes.len() / 2]).unwrap();
+    let broken = dir.path().join("broken");
+    let output = submit(&shot, &broken);
+    assert!(!output.status.success(), "the array failed: one of its tasks did");
+    let log = log_of(&broken, 1);
+    assert!(log.contains("gbuffer.0002.exr") && log.contains("1 failed"), "task 1's log:\n{log}");
+    for f in [1, 3] {
+        assert!(broken.join(format!("render.{f:04}.exr")).is_file(), "frame {f} rendered beside the failure");
+    }
+}
+
+/// Flamenco's authoring API as its documentation defines it, stubbed for Node: a script
+/// that loads a job type, checks its settings, compiles a job of `settings` and prints the
+/// tasks as JSON. `frameChunker` splits a frame list into chunks of consecutive frames,
+/// written `a-b` (or `a` alone).
+const FLAMENCO_STUB: &str = r#"
+const fs = require("fs"), vm = require("vm");
+const [file, settings] = [process.argv[1], JSON.parse(process.argv[2])]; // node -e: no script path
+function frameChunker(frames, size) {
+    const all = [];
+    for (const part of frames.split(",")) {
+        const [a, b] = part.split("-").map(Number);
+        for (let f = a; f <= (b === undefined ? a : b); f++) all.push(f);
+    }
+    const chunks = [];
+    for (let i = 0; i < all.length; i += size) {
+        const c = all.slice(i, i + size);
+        chunks.push(c.length > 1 ? `${c[0]}-${c[c.length - 1]}` : `${c[0]}`);
+    }
+    return chunks;
+}
+const author = {
+    Task: (name, type) => ({ name, type, commands: [], addCommand(c) { this.commands.push(c); } }),
+    Command: (type, parameters) => ({ type, parameters }),
+};
+const tasks = [];
+const job = { settings, addTask: (t) => tasks.push(t) };
+const context = { author, frameChunker, job, console };
+vm.createContext(context);
+vm.runInContext(fs.readFileSync(file, "utf8") + "\nthis.JOB_TYPE = JOB_TYPE; compileJob(job);", context);
+for (const s of context.JOB_TYPE.settings) {
+    if (!["string", "int32", "float", "bool"].includes(s.type)) throw new Error(`setting ${s.key}: type ${s.type}`);
+    if (s.required && !(s.key in settings)) throw new Error(`required setting ${s.key} missing`);
+}
+console.log(JSON.stringify(tasks));
+"#;
+
+/// The Flamenco job type (`farm/flamenco/logsh-render.js`) parsed and compiled by Node
+/// with Flamenco's authoring API stubbed ([`FLAMENCO_STUB`]); its tasks' commands, run as
+/// a Worker runs `exec` commands, render a three-frame shot in chunks of two to the bytes
+/// of a plain `logsh render`. Skipped without `node`, unless `LOGSH_REQUIRE_NODE=1`
+/// (which `.ci/run` sets once it has installed Debian's nodejs).
+#[test]
+fn the_flamenco_job_type_compiles_to_tasks_that_render() {
+    let node_runs = std::process::Command::new("node").arg("--version").output().is_ok_and(|o| o.status.success());
+    if !node_runs {
+        let required = std::env::var("LOGSH_REQUIRE_NODE").is_ok_and(|v| v == "1");
+        assert!(!required, "LOGSH_REQUIRE_NODE=1 but there is no node");
+        let line = b"tests/render_cli.rs: the Flamenco test skipped: no node (apt-get install nodejs)\n";
+        let _ = std::io::Write::write_all(&mut std::io::stderr(), line);
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let shot = three_frame_scene(dir.path(), 32, 18);
+    let (plain, farmed) = (dir.path().join("plain"), dir.path().join("farmed"));
+    assert!(logsh()
+        .arg("render")
+        .arg(&shot)
+        .args(["--progress", "none", "--out"])
+        .arg(&plain)
+        .output()
+        .unwrap()
+        .status
+        .success());
+    let bin = assert_cmd::cargo::cargo_bin("logsh");
+    let settings = serde_json::json!({
+        "scene_dir": shot, "frames": "1-3", "chunk_size": 2, "render_output": farmed,
+        "quality": "default", "extra_args": "--threads 1", "logsh_exe": bin,
+    });
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("farm/flamenco/logsh-render.js");
+    let output = std::process::Command::new("node")
+        .args(["-e", FLAMENCO_STUB])
+        .arg(&script)
+        .arg(settings.to_string())
+        .output()
+        .unwrap();
+    assert!(output.status.success(), "node: {}", stderr_of(&output));
+    let tasks: Vec<serde_json::Value> = serde_json::from_slice(&output.stdout).unwrap();
+    let names: Vec<&str> = tasks.iter().map(|t| t["name"].as_str().unwrap()).collect();
+    assert_eq!(names, ["logsh-1-2", "logsh-3"]);
+    for task in &tasks {
+        for command in task["commands"].as_array().unwrap() {
+            assert_eq!(command["type"], "exec");
+            let parameters = &command["parameters"];
+            let args: Vec<&str> = parameters["args"].as_array().unwrap().iter().map(|a| a.as_str().unwrap()).collect();
+            let run = std::process::Command::new(parameters["exe"].as_str().unwrap()).args(&args).output().unwrap();
+            assert!(run.status.success(), "{args:?}: {}", stderr_of(&run));
+        }
+    }
+    for f in 1..=3 {
+        for ext in ["exr", "png"] {
+            let name = format!("render.{f:04}.{ext}");
+            let (a, b) = (std::fs::read(plain.join(&name)).unwrap(), std::fs::read(farmed.join(&name)));
+            assert!(b.is_ok_and(|b| b == a), "{name}: the Flamenco tasks' frame differs from logsh render's");
+        }
+    }
+}
+
 #[test]
 fn one_bad_frame_fails_alone_and_is_named() {
     let dir = tempfile::tempdir().unwrap();
