@@ -4,6 +4,7 @@
 use super::layout::{wgsl_declarations, GpuPoint, GpuShaded, WORKGROUP_SIZE};
 use super::program::PYRAMID_WGSL;
 use super::GpuError;
+use crate::timing::{Clock, StageTimings};
 use parking_lot::ReentrantMutex;
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
@@ -264,6 +265,37 @@ impl Gpu {
 
     pub(super) fn timer(&self) -> Option<PassTimer> {
         self.timestamps.then(|| PassTimer::new(&self.device))
+    }
+
+    /// Records one compute pass (`record` sets its pipelines and dispatches), submits it
+    /// and waits for it, timing it as `stage`: by GPU timestamps where the adapter has
+    /// them, else by the wall clock from `started`.
+    pub(super) fn run_pass(
+        &self,
+        stage: &'static str,
+        started: std::time::Instant,
+        timings: &mut StageTimings,
+        record: impl FnOnce(&mut wgpu::ComputePass),
+    ) -> Result<(), GpuError> {
+        let timer = self.timer();
+        let mut encoder = self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(stage) });
+        {
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some(stage),
+                timestamp_writes: timer.as_ref().map(|t| t.writes()),
+            });
+            record(&mut pass);
+        }
+        if let Some(t) = &timer {
+            t.resolve(&mut encoder);
+        }
+        self.queue.submit([encoder.finish()]);
+        self.wait(&format!("the {stage} pass"))?;
+        match timer.as_ref().map(|t| t.read(self)).transpose()? {
+            Some(ms) => timings.add(stage, ms, Clock::Gpu),
+            None => timings.add_wall(stage, started),
+        }
+        Ok(())
     }
 }
 

@@ -397,27 +397,11 @@ impl Gpu {
             entries: &entries,
         });
         self.check_errors("binding the visibility grid's pre-pass")?;
-        let timer = self.timer();
-        let mut encoder =
-            self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("visibility grid") });
-        {
-            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some("visibility grid"),
-                timestamp_writes: timer.as_ref().map(|t| t.writes()),
-            });
+        self.run_pass("visibility grid", started, timings, |pass| {
             pass.set_pipeline(pre_pass);
             pass.set_bind_group(0, &bind_group, &[]);
             pass.dispatch_workgroups(groups as u32, 1, 1);
-        }
-        if let Some(t) = &timer {
-            t.resolve(&mut encoder);
-        }
-        self.queue.submit([encoder.finish()]);
-        self.wait("the visibility grid's pre-pass")?;
-        match timer.as_ref().map(|t| t.read(self)).transpose()? {
-            Some(ms) => timings.add("visibility grid", ms, Clock::Gpu),
-            None => timings.add_wall("visibility grid", started),
-        }
+        })?;
         Ok((grid, blocks))
     }
 

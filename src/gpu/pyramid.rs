@@ -8,7 +8,7 @@ use super::layout::{GpuDecimation, GpuLevel, GpuStep, GpuTap, WORKGROUP_SIZE};
 use super::{Gpu, GpuError};
 use crate::heightfield::{decimation_taps, PyramidPlan};
 use crate::shade::Terrain;
-use crate::timing::{Clock, StageTimings};
+use crate::timing::StageTimings;
 use std::time::Instant;
 
 /// The height field's buffers for the shading pass.
@@ -174,43 +174,31 @@ impl Gpu {
         let ranges = self.storage("tap ranges", bytemuck::cast_slice(&tables.ranges))?;
         let taps = self.storage("taps", bytemuck::cast_slice(&tables.taps))?;
         let scratch = self.buffer("pyramid scratch", tables.scratch as u64 * 4, wgpu::BufferUsages::STORAGE);
-        let timer = self.timer();
-        let mut encoder =
-            self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("pyramid") });
-        {
-            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+        let columns = tables.decimations.iter().map(|d| d.out_columns).max().unwrap_or(1);
+        let rows_x = tables.base[1] as u32;
+        let rows_y = tables.decimations.iter().map(|d| d.out_rows).max().unwrap_or(1);
+        let bind_groups = [&pipelines.0, &pipelines.1].map(|pipeline| {
+            self.device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("pyramid"),
-                timestamp_writes: timer.as_ref().map(|t| t.writes()),
-            });
-            let columns = tables.decimations.iter().map(|d| d.out_columns).max().unwrap_or(1);
-            let rows_x = tables.base[1] as u32;
-            let rows_y = tables.decimations.iter().map(|d| d.out_rows).max().unwrap_or(1);
-            for (pipeline, rows) in [(&pipelines.0, rows_x), (&pipelines.1, rows_y)] {
-                let bind_group = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
-                    label: Some("pyramid"),
-                    layout: &pipeline.get_bind_group_layout(0),
-                    entries: &[
-                        entry(0, &decimations),
-                        entry(1, &ranges),
-                        entry(2, &taps),
-                        entry(3, &scratch),
-                        entry(4, levels),
-                    ],
-                });
+                layout: &pipeline.get_bind_group_layout(0),
+                entries: &[
+                    entry(0, &decimations),
+                    entry(1, &ranges),
+                    entry(2, &taps),
+                    entry(3, &scratch),
+                    entry(4, levels),
+                ],
+            })
+        });
+        self.run_pass("pyramid", started, timings, |pass| {
+            for ((pipeline, bind_group), rows) in
+                [&pipelines.0, &pipelines.1].into_iter().zip(&bind_groups).zip([rows_x, rows_y])
+            {
                 pass.set_pipeline(pipeline);
-                pass.set_bind_group(0, &bind_group, &[]);
+                pass.set_bind_group(0, bind_group, &[]);
                 pass.dispatch_workgroups(columns.div_ceil(WORKGROUP_SIZE), rows, tables.decimations.len() as u32);
             }
-        }
-        if let Some(t) = &timer {
-            t.resolve(&mut encoder);
-        }
-        self.queue.submit([encoder.finish()]);
-        self.wait("the pyramid pre-pass")?;
-        match timer.as_ref().map(|t| t.read(self)).transpose()? {
-            Some(ms) => timings.add("pyramid", ms, Clock::Gpu),
-            None => timings.add_wall("pyramid", started),
-        }
+        })?;
         Ok(())
     }
 }
