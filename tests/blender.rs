@@ -6,7 +6,7 @@
 //! The interpreter is the one named by `LOGSH_BPY_PYTHON` (`.ci/bpy-setup` makes one in
 //! `.venv-bpy`). Unset, or unable to import bpy, each test prints why it is skipped and
 //! passes, unless `LOGSH_REQUIRE_BPY=1`, where that is a failure (CI sets both).
-mod support;
+use crate::support;
 
 use assert_cmd::Command;
 use exr::prelude::{read, FlatSamples, ReadChannels, ReadLayers};

@@ -7,9 +7,9 @@
 //!
 //! Every shaded value must be finite and `>= 0`, alpha 1 on surfaces and 0 on the
 //! background, below a stated bound, and the f32 kernel must agree with the f64 kernel
-//! within a stated tolerance. `cargo test --test extremes -- --nocapture` prints the
+//! within a stated tolerance. `cargo test --test suite extremes:: -- --nocapture` prints the
 //! measured worst values next to each bound.
-mod support;
+use crate::support;
 
 use logsh::executor::Executor;
 use logsh::scene::{Frame, GBuffer, HeightMap, Material, Scene, SceneError, Sphere, SunLight};

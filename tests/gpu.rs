@@ -8,7 +8,7 @@
 //!
 //! Without an adapter these tests say so and pass, unless `LOGSH_REQUIRE_GPU=1` (which
 //! `.ci/run` sets after installing lavapipe): then they fail.
-mod support;
+use crate::support;
 
 use logsh::gpu::{Gpu, GpuError, Specialisation};
 use logsh::scene::{Frame, GBuffer, Scene};

@@ -4,7 +4,7 @@
 //! The error tables behind `HorizonSettings::default` come from
 //! `measure_error_vs_settings`:
 //!
-//!     cargo test --release --test heightfield -- --ignored --nocapture measure
+//!     cargo test --release --test suite heightfield::measure -- --ignored --nocapture
 
 use logsh::heightfield::{
     brute_force_horizon, HeightField, HeightFieldError, HorizonPyramid, HorizonSettings, LevelReconstruction, ScaleMax,

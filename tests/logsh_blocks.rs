@@ -1,5 +1,5 @@
 //! Log-SH building blocks of paper 000 against brute-force quadrature, orders 3 to 8.
-mod support;
+use crate::support;
 
 use logsh::logsh::*;
 use logsh::sh::basis::{eval_basis_spherical, legendre, nlp_scale};

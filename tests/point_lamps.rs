@@ -2,7 +2,7 @@
 //! disk facing the receiver, shaded as a disk of directions per pixel with only the
 //! occluders nearer than the lamp (src/shade/sun.rs, src/scene/light.rs `PointLight`).
 
-mod support;
+use crate::support;
 
 use logsh::scene::{HeightMap, Light, PointLight, Scene, Sphere};
 use logsh::shade::sun::cap_overlap;

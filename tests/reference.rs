@@ -2,7 +2,7 @@
 //! unoccluded plane, height-field horizons of a wall and a V valley, and an
 //! environment-map scene in both light modes.
 //!
-//! `cargo test --test reference -- --nocapture` prints the measured figures.
+//! `cargo test --test suite reference:: -- --nocapture` prints the measured figures.
 
 use logsh::heightfield::HeightField;
 use logsh::logsh::Lobe;

@@ -2,7 +2,7 @@
 //! fresh shade under the same light held in SH (turned, scaled or swapped), beauty and
 //! every pass; the scene's lamps are kept; bad inputs end in a clear error.
 
-mod support;
+use crate::support;
 
 use assert_cmd::Command;
 use logsh::compare::unoccluded_value;

@@ -1,5 +1,5 @@
 //! The SH core against brute-force quadrature, at orders 3 to 8.
-mod support;
+use crate::support;
 
 use logsh::sh::basis::{eval_basis_spherical, funk_hecke_factor, legendre};
 use logsh::sh::exp::{exp_hyb, exp_series, ExactExp, OlTable, ONE_DC, Y0};
@@ -186,7 +186,7 @@ fn exact_exp_is_converged_and_exact_for_constants() {
 
 /// Worst relative L2 error of each approximate exponentiation against exact quadrature
 /// over 24 training vectors per magnitude, as this test prints at orders 3-8
-/// (`cargo test --test sh_math -- --nocapture`), rounded up by about half.
+/// (`cargo test --test suite sh_math:: -- --nocapture`), rounded up by about half.
 /// These are the methods' own approximation errors (each truncated product drops bands
 /// above n - 1; OL is linear in f^), not rounding; the bounds catch regressions. Past
 /// |f^| = 2 all three drift far from the projection of exp(f) (relative errors of 0.3 to

@@ -1,6 +1,5 @@
 //! Whole pixels against closed-form answers on analytic scenes in format v1, shaded
 //! through the same reader and kernel as `logsh shade`.
-mod support;
 
 use logsh::reference::{render_reference, ReferenceOptions};
 use logsh::scene::{Scene, Sphere};
@@ -37,8 +36,8 @@ fn errors(shaded: &ShadedFrame, expected: &[Option<f64>], scale: f64) -> (f64, f
 /// Bounds on the mean absolute error over sphere-over-plane scenes with default settings
 /// (unoccluded value 1): the acceptance bounds, 0.10 at order 4 and 0.06 at order 8, and
 /// the same at the neighbouring orders. Measured (`examples/sphere_accuracy.rs`): 0.021,
-/// 0.017, 0.025, 0.011, 0.008, 0.007 for orders 3 to 8; `cargo test --test shading --
-/// --nocapture` prints this test's own figures.
+/// 0.017, 0.025, 0.011, 0.008, 0.007 for orders 3 to 8; `cargo test --test suite
+/// shading:: -- --nocapture` prints this test's own figures.
 fn mean_error_bound(order: usize) -> f64 {
     if order <= 4 {
         0.10

@@ -2,9 +2,9 @@
 //! the CPU path and by the reference renderer, against the closed-form disk occlusion
 //! (the overlap of the sun's cap with the sphere's), and the scene-format checks.
 //!
-//! `cargo test --release --test suns -- --nocapture` prints the measured figures.
+//! `cargo test --release --test suite suns:: -- --nocapture` prints the measured figures.
 
-mod support;
+use crate::support;
 
 use logsh::reference::{render_reference, ReferenceOptions};
 use logsh::scene::{Light, Scene, Sphere, SunLight};

@@ -3,7 +3,7 @@
 //! still adding up to the beauty, position and normal from the nearest sample, and bad
 //! sizes refused.
 
-mod support;
+use crate::support;
 
 use assert_cmd::Command;
 use logsh::synth::{self, ExampleOptions, SynthScene};

@@ -6,7 +6,7 @@
 //! unless `LOGSH_REQUIRE_BROWSER=1` (which `.ci/run` sets once it has installed Debian's
 //! `chromium`).
 
-mod support;
+use crate::support;
 
 use assert_cmd::cargo::cargo_bin;
 use std::io::{BufRead, BufReader, Read, Write};

@@ -218,7 +218,7 @@ impl Default for HorizonSettings {
     /// over steps.
     ///
     /// Chosen from `measure_error_vs_settings` in `tests/heightfield.rs`
-    /// (`cargo test --release --test heightfield -- --ignored --nocapture measure`):
+    /// (`cargo test --release --test suite heightfield::measure -- --ignored --nocapture`):
     /// horizon error against [`super::brute_force_horizon`] in radians at 16
     /// azimuths, on four 65^2-129^2 scenes (rough terrain of RMS slope ~1 with points
     /// on and 0.1 above it, a cone, a sine grating, one-sample-thick walls). Mean

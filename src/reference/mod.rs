@@ -107,7 +107,7 @@
 //! 1.4e-5, 5e-6, 1.6e-6 for 64 .. 2048 meridians), not spectrally; visibility is never
 //! sampled, so there is no `N^-1/2` or `N^-1` noise from shadow edges.
 //!
-//! Measured (`cargo test --test reference -- --nocapture`, tolerance 1e-3, max level 8):
+//! Measured (`cargo test --test suite reference:: -- --nocapture`, tolerance 1e-3, max level 8):
 //! over the five sphere-over-plane placements (5898 plane pixels at 48x27) the mean
 //! absolute error against `1 - sin^2(alpha) cos(beta)` is 4.6e-5, the largest 9.8e-4,
 //! every pixel converged; an unoccluded plane is 1 to rounding; height-field horizons
