@@ -269,9 +269,7 @@ impl Gpu {
         let mut frame_params = frame_params(plan, program);
         let grid = match &pipelines.grid {
             Some(pre_pass) => {
-                let (grid, blocks) = self.visibility_grid(plan, program, pre_pass, &entries, timings)?;
-                [frame_params.grid_columns, frame_params.grid_rows] = blocks.map(|b| b as u32);
-                Some(grid)
+                Some(self.visibility_grid(plan, program, pre_pass, &entries, &mut frame_params, timings)?)
             }
             None => None,
         };
@@ -331,15 +329,16 @@ impl Gpu {
     /// The visibility grid's pre-pass (`grid_visibility` in shaders/shade.wgsl): each
     /// block's point ([`BlockPoints`]) uploaded, its horizons and caps computed on the
     /// device into the buffer the shading pass then reads, timing "visibility grid".
-    /// Returns the buffer and the blocks along x and y.
+    /// Returns the buffer, and sets the blocks along x and y in `frame_params`.
     fn visibility_grid(
         &self,
         plan: &FramePlan,
         program: &ShadeProgram,
         pre_pass: &wgpu::ComputePipeline,
         shade_entries: &[wgpu::BindGroupEntry],
+        frame_params: &mut ShadeParams,
         timings: &mut StageTimings,
-    ) -> Result<(wgpu::Buffer, [usize; 2]), GpuError> {
+    ) -> Result<wgpu::Buffer, GpuError> {
         let started = Instant::now();
         let (frame, materials) = (plan.frame, &plan.scene.materials);
         let size = program.features.grid;
@@ -379,11 +378,10 @@ impl Gpu {
             contents: bytemuck::cast_slice(&records),
             usage: wgpu::BufferUsages::STORAGE,
         });
-        let params =
-            ShadeParams { grid_columns: blocks[0] as u32, grid_rows: blocks[1] as u32, ..frame_params(plan, program) };
+        [frame_params.grid_columns, frame_params.grid_rows] = blocks.map(|b| b as u32);
         let params = self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("visibility grid params"),
-            contents: bytemuck::bytes_of(&params),
+            contents: bytemuck::bytes_of(frame_params),
             usage: wgpu::BufferUsages::UNIFORM,
         });
         // The pre-pass reads the shading pass's inputs but its points, results and
@@ -402,7 +400,7 @@ impl Gpu {
             pass.set_bind_group(0, &bind_group, &[]);
             pass.dispatch_workgroups(groups as u32, 1, 1);
         })?;
-        Ok((grid, blocks))
+        Ok(grid)
     }
 
     /// Shades one tile of packed points and hands the shaded points to `consume`, timing

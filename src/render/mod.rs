@@ -130,14 +130,12 @@ pub fn check_outputs(scene: &Scene, options: &SequenceOptions) -> Result<(), Sce
     Ok(())
 }
 
-/// True when both outputs are whole ([`output::exr_is_whole`], [`output::png_is_whole`])
+/// True when both outputs are whole ([`output::whole_exr`], [`output::png_is_whole`])
 /// and the EXR records transfer layers where `transfer` asks for them (a frame rendered
 /// without is rendered again).
 pub fn is_complete(outputs: &[PathBuf; 2], transfer: bool) -> bool {
     let [exr, png] = outputs;
-    output::exr_is_whole(exr)
-        && (!transfer
-            || exr::meta::MetaData::read_from_file(exr, false).is_ok_and(|meta| crate::transfer::holds_transfer(&meta)))
+    output::whole_exr(exr).is_some_and(|meta| !transfer || crate::transfer::holds_transfer(&meta))
         && output::png_is_whole(png)
 }
 

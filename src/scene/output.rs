@@ -107,30 +107,41 @@ pub fn remove_leftovers(outputs: &[PathBuf]) -> Vec<PathBuf> {
     removed
 }
 
-/// Whether process `pid` runs (this one always does). Where that cannot be told (no
-/// `/proc`), only this process's own files count as running.
+/// Whether process `pid` runs: on Unix, whether a signal could be sent to it (`kill` with
+/// no signal); elsewhere every process counts as running, so its files stay.
 fn process_runs(pid: u32) -> bool {
-    pid == std::process::id() || (Path::new("/proc/self").exists() && Path::new(&format!("/proc/{pid}")).exists())
+    #[cfg(unix)]
+    {
+        let Ok(pid) = libc::pid_t::try_from(pid) else { return false };
+        // SAFETY: signal 0 sends nothing; it only checks that the process exists.
+        unsafe { libc::kill(pid, 0) == 0 || std::io::Error::last_os_error().raw_os_error() == Some(libc::EPERM) }
+    }
+    #[cfg(not(unix))]
+    {
+        let _ = pid;
+        true
+    }
 }
 
-/// Whether an EXR written by [`write_exr_layers`] is whole: its header reads, every chunk
-/// of its offset table lies inside the file, and its last chunk decodes. A file cut short
-/// by a crash, or one of zeros, is not.
-pub fn exr_is_whole(path: &Path) -> bool {
-    whole_exr(path).unwrap_or(false)
+/// The header of an EXR written by [`write_exr_layers`] where the file is whole: its
+/// header reads, every chunk of its offset table lies inside the file, and its last chunk
+/// decodes. `None` for a file cut short by a crash, or one of zeros.
+pub fn whole_exr(path: &Path) -> Option<exr::meta::MetaData> {
+    whole_exr_checked(path).ok().flatten()
 }
 
-fn whole_exr(path: &Path) -> std::io::Result<bool> {
+fn whole_exr_checked(path: &Path) -> std::io::Result<Option<exr::meta::MetaData>> {
     use exr::block::reader::{ChunksReader, Reader};
     use std::io::{BufRead, Read, Seek, SeekFrom};
     let mut file = std::io::BufReader::new(std::fs::File::open(path)?);
     let length = file.get_ref().metadata()?.len();
-    let Ok(reader) = Reader::read_from_buffered(&mut file, true) else { return Ok(false) };
-    let [header] = reader.headers() else { return Ok(false) };
+    let Ok(reader) = Reader::read_from_buffered(&mut file, true) else { return Ok(None) };
+    let meta = reader.meta_data().clone();
+    let [header] = meta.headers.as_slice() else { return Ok(None) };
     let (chunks, height) = (header.chunk_count as u64, header.layer_size.height());
     let last = reader.filter_chunks(true, |_, _, block| block.pixel_position.y() + block.pixel_size.height() == height);
     if !last.is_ok_and(|last| last.decompress_sequential(true, |_, _| Ok(())).is_ok()) {
-        return Ok(false);
+        return Ok(None);
     }
     // The offset table follows the header: the magic number and version (8 bytes), then
     // attributes (name, type, a 4-byte size, the value) up to an empty name.
@@ -146,7 +157,7 @@ fn whole_exr(path: &Path) -> std::io::Result<bool> {
         let mut size = [0u8; 4];
         file.read_exact(&mut size)?;
         if name.last() != Some(&0) || kind.last() != Some(&0) {
-            return Ok(false);
+            return Ok(None);
         }
         file.seek_relative(i64::from(u32::from_le_bytes(size)))?;
     }
@@ -156,15 +167,15 @@ fn whole_exr(path: &Path) -> std::io::Result<bool> {
         // A scan-line chunk: its first line (4 bytes), its size (4 bytes), its data.
         let mut head = [0u8; 8];
         if offset.checked_add(8).is_none_or(|end| end > length) {
-            return Ok(false);
+            return Ok(None);
         }
         file.seek(SeekFrom::Start(offset))?;
         file.read_exact(&mut head)?;
         if offset + 8 + u64::from(u32::from_le_bytes(head[4..].try_into().expect("4 bytes"))) > length {
-            return Ok(false);
+            return Ok(None);
         }
     }
-    Ok(true)
+    Ok(Some(meta))
 }
 
 /// Whether a PNG is whole: its signature opens it and its `IEND` chunk closes it.
