@@ -340,6 +340,9 @@ pub struct RenderArgs {
     /// Also write each pixel's transfer vectors (diffuse and specular, order^2 coefficients each), its colours and glossy lookup as EXR layers, for `logsh relight` and `logsh view`; shaded on the CPU.
     #[arg(long)]
     pub transfer: bool,
+    /// Shade, resolve and write each frame in bands of this many G-buffer rows (rounded up to whole blocks), so that a frame of any size holds one band in memory; the images are the same. 0 shades every frame whole [default: bands of about 4 million G-buffer samples; smaller frames whole].
+    #[arg(long)]
+    pub band_rows: Option<usize>,
     #[command(flatten)]
     pub shading: ShadingArgs,
 }

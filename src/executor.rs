@@ -178,7 +178,7 @@ impl Executor {
         frame: &Frame,
         settings: &ShadingSettings,
     ) -> Result<ShadedPasses, ExecutorError> {
-        Ok(self.shade_passes_timed(scene, frame, settings, Resolving::default())?.0)
+        Ok(self.shade_passes_timed(scene, frame, settings, Resolving::default(), Bounce::OfFrame)?.0)
     }
 
     /// [`shade_passes`](Self::shade_passes) with direct light only.
@@ -208,13 +208,36 @@ impl Executor {
         let Some(plan) = bounce::SurroundingsPlan::new(scene, frame, &settings.bounce)? else {
             return Ok(None);
         };
+        let surroundings = self.light_surroundings(scene, plan, settings)?;
+        Ok(Some(indirect(&surroundings, scene, frame, settings, visibility)))
+    }
+
+    /// The surroundings of `plan` lit: their secondary points shaded with direct light on
+    /// this executor, then the bounces before the last gathered on the CPU.
+    pub fn light_surroundings(
+        &self,
+        scene: &Scene,
+        plan: bounce::SurroundingsPlan,
+        settings: &ShadingSettings,
+    ) -> Result<bounce::Surroundings, ExecutorError> {
         // The secondary points are packed side by side, not neighbours: each is shaded alone.
         let one_by_one = ShadingSettings { visibility_grid: 1, ..*settings };
         let direct = self.shade_direct_passes(scene, plan.points(), &one_by_one)?;
-        let surroundings = plan.lit(scene, &direct.diffuse, &direct.visibility);
-        // A supersampled G-buffer gathers as densely per camera pixel as a plain one.
-        let stride = settings.bounce.stride * frame.supersample.max(1);
-        Ok(Some(surroundings.indirect(scene, frame, stride, Some(visibility))))
+        Ok(plan.lit(scene, &direct.diffuse, &direct.visibility))
+    }
+
+    /// [`shade_passes_resolved`](Self::shade_passes_resolved) of a band of a frame's rows
+    /// ([`crate::render::bands`]), its bounce light gathered from `surroundings`, those of
+    /// the whole frame (`None`: nothing bounces).
+    pub fn shade_band_resolved(
+        &self,
+        scene: &Scene,
+        band: &Frame,
+        settings: &ShadingSettings,
+        resolving: Resolving,
+        surroundings: Option<&bounce::Surroundings>,
+    ) -> Result<ShadedPasses, ExecutorError> {
+        Ok(self.shade_passes_timed(scene, band, settings, resolving, Bounce::Given(surroundings))?.0)
     }
 
     /// [`shade_passes`](Self::shade_passes) at the camera's resolution: a supersampled
@@ -228,7 +251,7 @@ impl Executor {
         settings: &ShadingSettings,
         resolving: Resolving,
     ) -> Result<ShadedPasses, ExecutorError> {
-        Ok(self.shade_passes_timed(scene, frame, settings, resolving)?.0)
+        Ok(self.shade_passes_timed(scene, frame, settings, resolving, Bounce::OfFrame)?.0)
     }
 
     /// [`shade_passes_resolved`](Self::shade_passes_resolved), timed: the stages "shade",
@@ -240,6 +263,7 @@ impl Executor {
         frame: &Frame,
         settings: &ShadingSettings,
         resolving: Resolving,
+        bounce: Bounce,
     ) -> Result<(ShadedPasses, StageTimings), ExecutorError> {
         let mut timings = StageTimings {
             device: self.describe(),
@@ -266,7 +290,13 @@ impl Executor {
             passes
         };
         let started = std::time::Instant::now();
-        if let Some(indirect) = self.bounce(scene, frame, settings, &passes.visibility)? {
+        let indirect = match bounce {
+            Bounce::OfFrame => self.bounce(scene, frame, settings, &passes.visibility)?,
+            Bounce::Given(surroundings) => {
+                surroundings.map(|surroundings| indirect(surroundings, scene, frame, settings, &passes.visibility))
+            }
+        };
+        if let Some(indirect) = indirect {
             passes.add_indirect(indirect);
             timings.add_wall("bounce", started);
         }
@@ -295,7 +325,7 @@ impl Executor {
         }
         check_grid_keeps_pixels(settings, n, resolving)?;
         if settings.bounce.bounces > 0 {
-            let (passes, timings) = self.shade_passes_timed(scene, frame, settings, resolving)?;
+            let (passes, timings) = self.shade_passes_timed(scene, frame, settings, resolving, Bounce::OfFrame)?;
             return Ok((ShadedFrame { width: passes.width, height: passes.height, rgba: passes.beauty }, timings));
         }
         let (rgba, mut timings) = if resolving.every_sample {
@@ -336,7 +366,8 @@ impl Executor {
         if settings.bounce.bounces == 0 {
             return self.shade_direct_timed(scene, frame, settings, specialisation);
         }
-        let (passes, timings) = self.shade_passes_timed(scene, frame, settings, Resolving::default())?;
+        let (passes, timings) =
+            self.shade_passes_timed(scene, frame, settings, Resolving::default(), Bounce::OfFrame)?;
         Ok((ShadedFrame { width: passes.width, height: passes.height, rgba: passes.beauty }, timings))
     }
 
@@ -363,6 +394,27 @@ impl Executor {
             },
         )
     }
+}
+
+/// Where a frame's bounce light comes from: surroundings built from its own pixels, or
+/// given (those of the whole frame a band belongs to; `None`: nothing bounces).
+#[derive(Clone, Copy)]
+enum Bounce<'a> {
+    OfFrame,
+    Given(Option<&'a bounce::Surroundings>),
+}
+
+/// The bounce light `surroundings` leave on `frame`'s pixels, gathered as densely per
+/// camera pixel in a supersampled G-buffer as in a plain one.
+pub fn indirect(
+    surroundings: &bounce::Surroundings,
+    scene: &Scene,
+    frame: &Frame,
+    settings: &ShadingSettings,
+    visibility: &[f32],
+) -> bounce::IndirectParts {
+    let stride = settings.bounce.stride * frame.supersample.max(1);
+    surroundings.indirect(scene, frame, stride, Some(visibility))
 }
 
 /// A visibility grid interpolates between neighbouring pixels, which the adaptive

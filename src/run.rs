@@ -337,6 +337,7 @@ pub fn render(args: &crate::cli::RenderArgs) -> Result<()> {
         colour: args.colour_type,
         transfer: args.transfer,
         resolving: args.shading.resolving(),
+        band_rows: args.band_rows,
         settings,
     };
     if args.transfer && scene.supersample > 1 {

@@ -165,6 +165,7 @@ fn point_frame(base: &Frame, points: &[([f64; 3], [f64; 3], u32)]) -> Frame {
         material: points.iter().map(|p| p.2).collect(),
         object: None,
         colours: None,
+        first_row: 0,
     };
     frame
 }

@@ -24,7 +24,7 @@ const TOLERANCE: f64 = 0.002;
 
 /// The adapter, once per test binary; `None` (and a line saying so) without one, unless
 /// `LOGSH_REQUIRE_GPU=1`.
-fn gpu() -> Option<&'static Gpu> {
+pub(crate) fn gpu() -> Option<&'static Gpu> {
     static GPU: OnceLock<Option<Gpu>> = OnceLock::new();
     GPU.get_or_init(|| match Gpu::new() {
         Ok(gpu) => {
@@ -358,6 +358,7 @@ fn frame_of_8192_squared_is_shaded_in_tiles() {
         material: vec![0; SIDE * SIDE],
         object: None,
         colours: None,
+        first_row: 0,
     };
     for y in 0..h {
         for x in 0..w {

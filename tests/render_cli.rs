@@ -719,3 +719,72 @@ fn a_bar_that_cannot_be_drawn_falls_back_to_lines() {
         assert!(stderr_of(&output).contains(line), "no {line:?} in\n{}", stderr_of(&output));
     }
 }
+
+/// A frame shaded, resolved and written in bands of rows (`--band-rows`) is byte for
+/// byte the frame shaded whole: with bounce light (whose surroundings summarise the
+/// whole frame), transfer layers, a visibility grid, a supersampled G-buffer under both
+/// pixel filters, and on the GPU where there is one.
+#[test]
+fn frames_in_bands_are_byte_identical_to_frames_shaded_whole() {
+    let dir = tempfile::tempdir().unwrap();
+    let plain = three_frame_scene(dir.path(), 96, 80);
+    let scene = synth::example("dunes", ExampleOptions { width: 48, height: 40, ..Default::default() }).unwrap();
+    let supersampled = dir.path().join("supersampled");
+    synth::write_scene_supersampled(&supersampled, &scene, 2).unwrap();
+    let mut cases: Vec<(&Path, Vec<&str>)> = vec![
+        (&plain, vec![]),
+        (&plain, vec!["--transfer"]),
+        (&plain, vec!["--visibility-grid", "2", "--bounces", "1"]),
+        (&supersampled, vec![]),
+        (&supersampled, vec!["--pixel-filter", "blackman-harris", "--every-sample", "--visibility-grid", "2"]),
+    ];
+    if crate::gpu::gpu().is_some() {
+        cases.push((&plain, vec!["--device", "gpu"]));
+    }
+    for (k, (scene, flags)) in cases.into_iter().enumerate() {
+        let render = |band_rows: &str| {
+            let out = dir.path().join(format!("case{k}-{band_rows}"));
+            let output = logsh()
+                .arg("render")
+                .arg(scene)
+                .args(["--frames", "1", "--progress", "none", "--band-rows", band_rows, "--out"])
+                .arg(&out)
+                .args(&flags)
+                .output()
+                .unwrap();
+            assert!(output.status.success(), "{flags:?} --band-rows {band_rows}: {}", stderr_of(&output));
+            out
+        };
+        let (whole, bands) = (render("0"), render("16"));
+        for name in ["render.0001.exr", "render.0001.png"] {
+            let same = std::fs::read(whole.join(name)).unwrap() == std::fs::read(bands.join(name)).unwrap();
+            assert!(same, "{name} {flags:?}: in bands of 16 rows it is not the frame shaded whole");
+        }
+    }
+}
+
+/// A bad pixel in a band is named by its place in the frame, and the frame fails
+/// without leaving an output.
+#[test]
+fn a_bad_pixel_in_a_band_is_named_in_the_frame() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = three_frame_scene(dir.path(), 64, 48);
+    let file = scene.join("gbuffer.0001.exr");
+    let names = logsh::scene::ChannelNames::default();
+    let materials = logsh::scene::Scene::load(&scene).unwrap().materials;
+    let mut g = logsh::scene::GBuffer::read(&file, &names, &materials, false).unwrap();
+    let bad = (0..g.material.len()).rev().find(|&i| g.material[i] != 0).expect("a surface pixel");
+    g.normal[bad][1] = f32::NAN;
+    synth::write_gbuffer_exr(&file, &g, synth::GBufferLayout::Blender5).unwrap();
+    let out = dir.path().join("out");
+    let output = logsh()
+        .arg("render")
+        .arg(&scene)
+        .args(["--frames", "1", "--progress", "none", "--band-rows", "16", "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    let pixel = format!("pixel ({}, {})", bad % g.width, bad / g.width);
+    assert_fails_with(&output, 1, &["gbuffer.0001.exr", &pixel]);
+    assert!(!out.join("render.0001.exr").exists() && !out.join("render.0001.png").exists());
+}

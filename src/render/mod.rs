@@ -30,6 +30,7 @@
 //! `--transfer` the file also holds the transfer layers of [`crate::transfer`] and their
 //! header, and the frame is shaded on the CPU.
 
+pub mod bands;
 pub mod frames;
 pub mod progress;
 
@@ -59,6 +60,9 @@ pub struct SequenceOptions {
     pub transfer: bool,
     /// How a supersampled scene is shaded and resolved ([`crate::shade::resolve`]).
     pub resolving: crate::shade::Resolving,
+    /// G-buffer rows per band of a frame shaded in bands ([`bands`]); 0: every frame
+    /// whole; `None`: bands of [`bands::BAND_SAMPLES`] samples, smaller frames whole.
+    pub band_rows: Option<usize>,
     pub settings: ShadingSettings,
 }
 
@@ -178,7 +182,7 @@ pub fn render_sequence(
                 let work = if options.skip_existing && is_complete(&outputs, options.transfer) {
                     Read::Skipped
                 } else {
-                    Read::Frame(guarded(|| Ok(Box::new(scene.frame(frame)?))))
+                    Read::Frame(guarded(|| read_frame(scene, frame, options)))
                 };
                 let seconds = started.elapsed().as_secs_f64();
                 if read_tx.send(Job { index, frame, outputs, seconds, work }).is_err() {
@@ -191,6 +195,7 @@ pub fn render_sequence(
                 let status = match job.work {
                     Shaded::Skipped => FrameStatus::Skipped { outputs: job.outputs.to_vec() },
                     Shaded::Failed(error) => FrameStatus::Failed { error },
+                    Shaded::Written => FrameStatus::Done { seconds: job.seconds, outputs: job.outputs.to_vec() },
                     Shaded::Passes(shaded) => {
                         let started = Instant::now();
                         match guarded(|| write_frame(scene, job.frame, options, &job.outputs, &shaded)) {
@@ -217,7 +222,18 @@ pub fn render_sequence(
             let work = match job.work {
                 Read::Skipped => Shaded::Skipped,
                 Read::Frame(Err(e)) => Shaded::Failed(format!("{e:#}")),
-                Read::Frame(Ok(data)) => {
+                Read::Frame(Ok(ReadFrame::InBands(opened, bands))) => {
+                    let written =
+                        guarded(|| bands::render_in_bands(executor, scene, &opened, &bands, options, &job.outputs));
+                    for notice in executor.take_notices() {
+                        progress.notice(&notice.0);
+                    }
+                    match written {
+                        Ok(()) => Shaded::Written,
+                        Err(e) => Shaded::Failed(format!("{e:#}")),
+                    }
+                }
+                Read::Frame(Ok(ReadFrame::Whole(data))) => {
                     let shaded = guarded(|| shade_frame(executor, scene, &data, options));
                     for notice in executor.take_notices() {
                         progress.notice(&notice.0);
@@ -260,13 +276,34 @@ struct Job<W> {
 /// the frame read.
 enum Read {
     Skipped,
-    Frame(anyhow::Result<Box<crate::scene::Frame>>),
+    Frame(anyhow::Result<ReadFrame>),
+}
+
+/// A frame read whole, or opened to be read, shaded and written in bands ([`bands`]),
+/// which the shading stage does itself.
+enum ReadFrame {
+    Whole(Box<crate::scene::Frame>),
+    InBands(Box<crate::scene::OpenFrame>, Vec<bands::Band>),
+}
+
+/// Frame `frame` of `scene`, whole, or opened for its bands where it is larger than one.
+fn read_frame(scene: &Scene, frame: i64, options: &SequenceOptions) -> anyhow::Result<ReadFrame> {
+    let (width, height) = bands::gbuffer_size(scene, frame)?;
+    Ok(match bands::bands(width, height, scene.supersample, &options.settings, options.band_rows) {
+        None => ReadFrame::Whole(Box::new(scene.frame(frame)?)),
+        Some(bands) => {
+            let opened = scene.open_frame(frame, crate::scene::Reading::InBands)?;
+            ReadFrame::InBands(Box::new(opened), bands)
+        }
+    })
 }
 
 /// What the shading hands on to the writer.
 enum Shaded {
     Skipped,
     Failed(String),
+    /// Shaded and written in bands.
+    Written,
     Passes(Box<FramePasses>),
 }
 

@@ -209,7 +209,7 @@ fn samples_to_f32(samples: &FlatSamples, first: usize, out: &mut [f32]) {
 pub(crate) enum ChannelFile {
     /// `part_sizes[p]` is part `p`'s width and height.
     Blocks {
-        bytes: Vec<u8>,
+        source: BlockSource,
         part_sizes: Vec<(usize, usize)>,
         directory: ChannelDirectory,
         size: (usize, usize),
@@ -217,11 +217,32 @@ pub(crate) enum ChannelFile {
     Decoded(ExrChannels),
 }
 
+/// Where [`ChannelFile::Blocks`] reads its blocks from: the file's bytes, read whole, or
+/// the file itself, from which only the blocks of the lines asked for are read.
+pub(crate) enum BlockSource {
+    Bytes(Vec<u8>),
+    File,
+}
+
 impl ChannelFile {
     /// Reads `file`, whose channels taken must all have the size of `size_of`'s part.
     pub fn read(file: &Path, what: &str, size_of: &str) -> Result<Self, SceneError> {
         let (bytes, meta) = read_with_headers(file, what)?;
         Self::new(file, what, bytes, &meta, size_of)
+    }
+
+    /// Opens `file` for reading its lines in bands ([`ChannelFile::fill_lines`]): only
+    /// its headers are read now, and each band reads only its own blocks, so that the
+    /// memory a frame of any size takes is that of its bands. A file whose parts the
+    /// blocks do not decode (tiles, other compressions) is decoded whole.
+    pub fn open(file: &Path, what: &str, size_of: &str) -> Result<Self, SceneError> {
+        let meta = exr::meta::MetaData::read_from_file(file, false).map_err(|e| exr_error(file, what, e))?;
+        if !meta.headers.iter().all(exr_zip::decodes) {
+            let bytes = std::fs::read(file).map_err(|e| SceneError::io(file, what, e))?;
+            return Self::new(file, what, bytes, &meta, size_of);
+        }
+        let length = std::fs::metadata(file).map_err(|e| SceneError::io(file, what, e))?.len();
+        Self::blocks(file, BlockSource::File, usize::try_from(length).unwrap_or(usize::MAX), &meta, size_of)
     }
 
     /// `file` as `bytes`, its header already read as `meta`; `size_of` names the channel
@@ -238,6 +259,17 @@ impl ChannelFile {
             exr.use_size_of(size_of);
             return Ok(Self::Decoded(exr));
         }
+        let length = bytes.len();
+        Self::blocks(file, BlockSource::Bytes(bytes), length, meta, size_of)
+    }
+
+    fn blocks(
+        file: &Path,
+        source: BlockSource,
+        length: usize,
+        meta: &exr::meta::MetaData,
+        size_of: &str,
+    ) -> Result<Self, SceneError> {
         check_parts(file, &meta.headers)?;
         // Deflate packs at most 1032 bytes into one, so a file whose pixels could not fit
         // in it is refused before they are allocated.
@@ -246,19 +278,18 @@ impl ChannelFile {
             .iter()
             .map(|h| (h.layer_size.0 * h.layer_size.1).saturating_mul(h.channels.bytes_per_pixel))
             .fold(0, usize::saturating_add);
-        if raw / exr_zip::MOST_DEFLATED > bytes.len() {
+        if raw / exr_zip::MOST_DEFLATED > length {
             return Err(SceneError::Image {
                 file: file.to_path_buf(),
                 message: format!(
-                    "its pixels, {raw} bytes decoded, cannot fit in its {} bytes; write or copy it again",
-                    bytes.len()
+                    "its pixels, {raw} bytes decoded, cannot fit in its {length} bytes; write or copy it again"
                 ),
             });
         }
         let directory = ChannelDirectory::new(&meta.headers);
         let part_sizes: Vec<(usize, usize)> = meta.headers.iter().map(|h| (h.layer_size.0, h.layer_size.1)).collect();
         let size = part_sizes[directory.find(size_of).map_or(0, |at| at.part)];
-        Ok(Self::Blocks { bytes, part_sizes, directory, size })
+        Ok(Self::Blocks { source, part_sizes, directory, size })
     }
 
     pub fn size(&self) -> (usize, usize) {
@@ -278,26 +309,50 @@ impl ChannelFile {
     /// Fills every target with its channels ([`exr_zip::Target`]); each target holds
     /// `stride` values for each of the [`size`](Self::size)'s pixels. A channel the file
     /// lacks, or whose part is of another size, is an error naming it.
-    pub fn fill(self, file: &Path, what: &str, targets: &mut [exr_zip::Target]) -> Result<(), SceneError> {
+    pub fn fill(&self, file: &Path, what: &str, targets: &mut [exr_zip::Target]) -> Result<(), SceneError> {
+        self.fill_lines(file, what, 0..self.size().1, targets)
+    }
+
+    /// [`fill`](Self::fill) with the scan lines `lines` only: each target holds `stride`
+    /// values for each of their pixels. `lines` starts on a multiple of
+    /// [`exr_zip::LINES_PER_BLOCK`] and ends on one or at the bottom.
+    pub fn fill_lines(
+        &self,
+        file: &Path,
+        what: &str,
+        lines: std::ops::Range<usize>,
+        targets: &mut [exr_zip::Target],
+    ) -> Result<(), SceneError> {
         match self {
-            Self::Blocks { bytes, part_sizes, directory, size } => {
+            Self::Blocks { source, part_sizes, directory, size } => {
                 let mut parts = Vec::new();
                 for target in targets.iter() {
                     let mut found = Vec::new();
                     for (name, _) in &target.channels {
                         let at = directory.find(name).ok_or_else(|| directory.missing(file, name))?;
                         let part = part_sizes[at.part];
-                        if part != size {
-                            return Err(size_mismatch(file, name, part, size));
+                        if part != *size {
+                            return Err(size_mismatch(file, name, part, *size));
                         }
                         found.push(at);
                     }
                     parts.push(found);
                 }
-                exr_zip::read_into(file, what, &bytes, size, targets, &parts)
+                match source {
+                    BlockSource::Bytes(bytes) => {
+                        let source = std::io::Cursor::new(bytes.as_slice());
+                        exr_zip::read_into(file, what, source, *size, lines, targets, &parts)
+                    }
+                    BlockSource::File => {
+                        let opened = std::fs::File::open(file).map_err(|e| SceneError::io(file, what, e))?;
+                        let source = std::io::BufReader::new(opened);
+                        exr_zip::read_into(file, what, source, *size, lines, targets, &parts)
+                    }
+                }
             }
             Self::Decoded(exr) => {
                 const PIXELS: usize = 256;
+                let first = lines.start * exr.width;
                 for target in targets {
                     for (name, offset) in &target.channels {
                         let samples = exr.samples(file, name)?;
@@ -305,7 +360,7 @@ impl ChannelFile {
                         target.values.par_chunks_mut(stride * PIXELS).enumerate().for_each(|(block, out)| {
                             let mut values = [0.0f32; PIXELS];
                             let values = &mut values[..out.len() / stride];
-                            samples_to_f32(samples, block * PIXELS, values);
+                            samples_to_f32(samples, first + block * PIXELS, values);
                             for (pixel, &value) in out.chunks_exact_mut(stride).zip(values.iter()) {
                                 pixel[*offset] = value;
                             }

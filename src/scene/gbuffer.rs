@@ -34,6 +34,7 @@ use super::exr_zip::Target;
 use super::Material;
 use serde::Deserialize;
 use std::collections::BTreeMap;
+use std::ops::Range;
 use std::path::{Path, PathBuf};
 
 /// The `"channels"` object of `scene.json`; every key optional.
@@ -177,6 +178,9 @@ pub struct GBuffer {
     /// Blender's colour passes ([module doc](self)), where the scene reads them and the
     /// file has them.
     pub colours: Option<SurfaceColours>,
+    /// The image row its first row is: 0, unless it holds a band of the rows of a larger
+    /// image ([`GBufferFile::read_rows`]).
+    pub first_row: usize,
 }
 
 impl GBuffer {
@@ -194,16 +198,65 @@ impl GBuffer {
         materials: &BTreeMap<u32, Material>,
         colours_required: bool,
     ) -> Result<GBuffer, SceneError> {
-        const WHAT: &str = "a G-buffer";
-        let channels = ChannelFile::read(file, WHAT, &names.position[0])?;
+        let opened = GBufferFile::open(file, names, colours_required, Reading::Whole)?;
+        opened.read_rows(materials, 0..opened.height)
+    }
+    /// The Diffuse Color and Glossy Color of pixel `i`, where the G-buffer has them.
+    pub fn colours_at(&self, i: usize) -> Option<([f32; 3], [f32; 3])> {
+        self.colours.as_ref().map(|c| (c.diffuse[i], c.glossy[i]))
+    }
+
+    /// The object index of pixel `i`, 0 when the G-buffer has none.
+    pub fn object_at(&self, i: usize) -> u32 {
+        self.object.as_ref().map_or(0, |o| o[i])
+    }
+}
+
+/// How a G-buffer file is read: whole into memory, or a band of rows at a time from the
+/// file (only the band's blocks are read).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Reading {
+    Whole,
+    InBands,
+}
+
+/// A G-buffer file opened and its channels found, read whole or a band of rows at a time
+/// ([`Self::read_rows`]).
+pub struct GBufferFile {
+    file: PathBuf,
+    channels: ChannelFile,
+    pub width: usize,
+    pub height: usize,
+    position: [String; 3],
+    normal: [String; 3],
+    uv: Option<[String; 2]>,
+    material_index: String,
+    object_index: Option<String>,
+    colours: Option<([String; 3], [String; 3])>,
+}
+
+const WHAT: &str = "a G-buffer";
+
+impl GBufferFile {
+    /// Opens `file` and finds its channels ([`GBuffer::read`]); reads its pixels now
+    /// with [`Reading::Whole`], else band by band.
+    pub fn open(
+        file: &Path,
+        names: &ChannelNames,
+        colours_required: bool,
+        reading: Reading,
+    ) -> Result<Self, SceneError> {
+        let channels = match reading {
+            Reading::Whole => ChannelFile::read(file, WHAT, &names.position[0])?,
+            Reading::InBands => ChannelFile::open(file, WHAT, &names.position[0])?,
+        };
         let (width, height) = channels.size();
-        let n = width * height;
         let has_uv = names.uv_required || channels.has(&names.uv[0]) || channels.has(&names.uv[1]);
-        let index_name =
-            names.material_index.iter().find(|name| channels.has(name)).unwrap_or(&names.material_index[0]);
-        let object_name = match names.object_index.iter().find(|name| channels.has(name)) {
-            None if names.object_index_required => Some(&names.object_index[0]),
-            found => found,
+        let material_index =
+            names.material_index.iter().find(|name| channels.has(name)).unwrap_or(&names.material_index[0]).clone();
+        let object_index = match names.object_index.iter().find(|name| channels.has(name)) {
+            None if names.object_index_required => Some(names.object_index[0].clone()),
+            found => found.cloned(),
         };
         let present = |lists: &Vec<[String; 3]>| -> Option<[String; 3]> {
             match lists.iter().find(|names| names.iter().all(|name| channels.has(name))) {
@@ -211,42 +264,71 @@ impl GBuffer {
                 found => found.cloned(),
             }
         };
-        let colour_names = names.colours.as_ref().and_then(|c| Some((present(&c.diffuse)?, present(&c.glossy)?)));
-        let mut colours = colour_names
+        let colours = names.colours.as_ref().and_then(|c| Some((present(&c.diffuse)?, present(&c.glossy)?)));
+        Ok(Self {
+            file: file.to_path_buf(),
+            channels,
+            width,
+            height,
+            position: names.position.clone(),
+            normal: names.normal.clone(),
+            uv: has_uv.then(|| names.uv.clone()),
+            material_index,
+            object_index,
+            colours,
+        })
+    }
+
+    /// The file it reads.
+    pub fn file(&self) -> &Path {
+        &self.file
+    }
+
+    /// The image rows `rows` (starting on a multiple of 16, ending on one or at the
+    /// bottom), validated as [`GBuffer::read`] validates a whole file; errors name pixels
+    /// by their place in the image.
+    pub fn read_rows(&self, materials: &BTreeMap<u32, Material>, rows: Range<usize>) -> Result<GBuffer, SceneError> {
+        let (file, width) = (self.file.as_path(), self.width);
+        let n = width * rows.len();
+        let mut colours = self
+            .colours
             .as_ref()
             .map(|_| SurfaceColours { diffuse: vec![[0.0f32; 3]; n], glossy: vec![[0.0f32; 3]; n] });
         let (mut position, mut normal) = (vec![[0.0f32; 3]; n], vec![[0.0f32; 3]; n]);
-        let mut uv = vec![[0.0f32; 2]; if has_uv { n } else { 0 }];
+        let mut uv = vec![[0.0f32; 2]; if self.uv.is_some() { n } else { 0 }];
         let mut raw_index = vec![0.0f32; n];
-        let mut raw_object = vec![0.0f32; if object_name.is_some() { n } else { 0 }];
+        let mut raw_object = vec![0.0f32; if self.object_index.is_some() { n } else { 0 }];
         let in_order = |channel_names: &[String]| channel_names.iter().cloned().zip(0..).collect::<Vec<_>>();
         let mut targets = vec![
-            Target { values: position.as_flattened_mut(), stride: 3, channels: in_order(&names.position) },
-            Target { values: normal.as_flattened_mut(), stride: 3, channels: in_order(&names.normal) },
+            Target { values: position.as_flattened_mut(), stride: 3, channels: in_order(&self.position) },
+            Target { values: normal.as_flattened_mut(), stride: 3, channels: in_order(&self.normal) },
         ];
-        if has_uv {
-            targets.push(Target { values: uv.as_flattened_mut(), stride: 2, channels: in_order(&names.uv) });
+        if let Some(names) = &self.uv {
+            targets.push(Target { values: uv.as_flattened_mut(), stride: 2, channels: in_order(names) });
         }
         targets.push(Target {
             values: &mut raw_index,
             stride: 1,
-            channels: in_order(std::slice::from_ref(index_name)),
+            channels: in_order(std::slice::from_ref(&self.material_index)),
         });
-        if let Some(name) = object_name {
+        if let Some(name) = &self.object_index {
             targets.push(Target { values: &mut raw_object, stride: 1, channels: in_order(std::slice::from_ref(name)) });
         }
-        if let (Some((diffuse, glossy)), Some(colours)) = (&colour_names, &mut colours) {
+        if let (Some((diffuse, glossy)), Some(colours)) = (&self.colours, &mut colours) {
             targets.push(Target { values: colours.diffuse.as_flattened_mut(), stride: 3, channels: in_order(diffuse) });
             targets.push(Target { values: colours.glossy.as_flattened_mut(), stride: 3, channels: in_order(glossy) });
         }
-        channels.fill(file, WHAT, &mut targets)?;
-        let uv = has_uv.then_some(uv);
-        let object =
-            object_name.is_some().then(|| whole_indices(file, &raw_object, width, "object index")).transpose()?;
+        self.channels.fill_lines(file, WHAT, rows.clone(), &mut targets)?;
+        let uv = self.uv.is_some().then_some(uv);
+        let object = self
+            .object_index
+            .is_some()
+            .then(|| whole_indices(file, &raw_object, width, rows.start, "object index"))
+            .transpose()?;
 
         let mut material = Vec::with_capacity(raw_index.len());
         for (i, &value) in raw_index.iter().enumerate() {
-            let (x, y) = (i % width, i / width);
+            let (x, y) = (i % width, rows.start + i / width);
             let bad = |reason: &str| SceneError::MaterialIndex {
                 file: file.to_path_buf(),
                 x,
@@ -308,23 +390,24 @@ impl GBuffer {
             }
             material.push(m);
         }
-        Ok(GBuffer { file: file.to_path_buf(), width, height, position, normal, uv, material, object, colours })
-    }
-
-    /// The Diffuse Color and Glossy Color of pixel `i`, where the G-buffer has them.
-    pub fn colours_at(&self, i: usize) -> Option<([f32; 3], [f32; 3])> {
-        self.colours.as_ref().map(|c| (c.diffuse[i], c.glossy[i]))
-    }
-
-    /// The object index of pixel `i`, 0 when the G-buffer has none.
-    pub fn object_at(&self, i: usize) -> u32 {
-        self.object.as_ref().map_or(0, |o| o[i])
+        Ok(GBuffer {
+            file: file.to_path_buf(),
+            width,
+            height: rows.len(),
+            position,
+            normal,
+            uv,
+            material,
+            object,
+            colours,
+            first_row: rows.start,
+        })
     }
 }
 
 /// An index pass as whole numbers `>= 0`; a value off a whole number by more than 1e-3,
 /// negative or not finite is an error naming the pixel.
-fn whole_indices(file: &Path, raw: &[f32], width: usize, what: &str) -> Result<Vec<u32>, SceneError> {
+fn whole_indices(file: &Path, raw: &[f32], width: usize, first_row: usize, what: &str) -> Result<Vec<u32>, SceneError> {
     raw.iter()
         .enumerate()
         .map(|(i, &value)| {
@@ -332,7 +415,11 @@ fn whole_indices(file: &Path, raw: &[f32], width: usize, what: &str) -> Result<V
             if !value.is_finite() || (value - rounded).abs() > 1e-3 || rounded < 0.0 || rounded > u32::MAX as f32 {
                 return Err(SceneError::invalid(
                     file,
-                    format!("{what} {value} of pixel ({}, {}) is not a whole number >= 0", i % width, i / width),
+                    format!(
+                        "{what} {value} of pixel ({}, {}) is not a whole number >= 0",
+                        i % width,
+                        first_row + i / width
+                    ),
                 ));
             }
             Ok(rounded as u32)

@@ -119,6 +119,13 @@ impl HeightMap {
     /// corners of, reach 0.63 spacings below it; a swell exported as it was on another
     /// frame puts 37 to 53 % of its pixels deeper. `None` without such pixels.
     pub fn buried_share(&self, gbuffer: &super::GBuffer) -> Option<f64> {
+        let (pixels, buried) = self.buried_pixels(gbuffer);
+        (pixels > 0).then(|| buried as f64 / pixels as f64)
+    }
+
+    /// The surface pixels of `gbuffer` over the map, and how many of them lie buried
+    /// ([`Self::buried_share`]).
+    pub fn buried_pixels(&self, gbuffer: &super::GBuffer) -> (usize, usize) {
         let depth = BURIED_DEPTH * self.cell_size()[0].max(self.cell_size()[1]);
         let over = |p: &[f32; 3]| {
             let [x, y] = [f64::from(p[0]), f64::from(p[1])];
@@ -129,7 +136,7 @@ impl HeightMap {
             pixels += 1;
             buried += usize::from(self.height_at(f64::from(p[0]), f64::from(p[1])) - f64::from(p[2]) > depth);
         }
-        (pixels > 0).then(|| buried as f64 / pixels as f64)
+        (pixels, buried)
     }
 
     /// Lowest and highest sample.

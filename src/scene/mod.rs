@@ -97,7 +97,7 @@ pub mod view;
 
 pub use camera::{Camera, Sphere};
 pub use error::{SceneError, MAX_IMAGE_PIXELS, MAX_IMAGE_SIDE};
-pub use gbuffer::{ChannelNames, GBuffer};
+pub use gbuffer::{ChannelNames, GBuffer, GBufferFile, Reading};
 pub use heightmap::HeightMap;
 pub use light::{EnvironmentMap, Light, LightSource, PointLight, SunLight, MAX_SUNS};
 pub use view::{ViewSpec, ViewTransform};
@@ -261,6 +261,107 @@ pub struct Frame {
     pub ground: Option<f64>,
     /// G-buffer samples per output pixel along each axis ([`Scene::supersample`]).
     pub supersample: usize,
+}
+
+/// A frame whose files are read but for the pixels of its G-buffers ([`Scene::open_frame`]).
+pub struct OpenFrame {
+    pub number: i64,
+    gbuffer: GBufferFile,
+    reflection: Option<GBufferFile>,
+    camera: Option<Camera>,
+    blockers: Vec<Sphere>,
+    height_map: Option<Arc<HeightMap>>,
+    light: Arc<Light>,
+    light_file_crc: Option<u32>,
+    suns: Vec<SunLight>,
+    points: Vec<PointLight>,
+}
+
+/// The surface pixels over the height field, and how many of them lie buried below it
+/// ([`HeightMap::buried_share`]), counted over a frame's bands.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct BuriedCount {
+    pub over: usize,
+    pub buried: usize,
+}
+
+impl OpenFrame {
+    /// The G-buffer's width and height.
+    pub fn size(&self) -> (usize, usize) {
+        (self.gbuffer.width, self.gbuffer.height)
+    }
+
+    /// The frame with the G-buffers' rows `rows` (starting on a multiple of 16, ending
+    /// on one or at the bottom; all of them for the whole frame). A water pixel needs a
+    /// reflection G-buffer.
+    pub fn rows(&self, scene: &Scene, rows: std::ops::Range<usize>) -> Result<Frame, SceneError> {
+        let gbuffer = self.gbuffer.read_rows(&scene.materials, rows.clone())?;
+        let reflection = self.reflection.as_ref().map(|r| r.read_rows(&scene.materials, rows)).transpose()?;
+        if reflection.is_none() {
+            let water: Vec<u32> =
+                scene.materials.iter().filter(|(_, m)| matches!(m, Material::Water { .. })).map(|(&i, _)| i).collect();
+            if let Some(p) = gbuffer.material.iter().position(|m| water.contains(m)) {
+                return Err(SceneError::invalid(
+                    &gbuffer.file,
+                    format!(
+                        "pixel ({}, {}) is water (material {}) but scene.json has no \"reflection_gbuffer\"",
+                        p % gbuffer.width,
+                        gbuffer.first_row + p / gbuffer.width,
+                        gbuffer.material[p]
+                    ),
+                ));
+            }
+        }
+        Ok(Frame {
+            number: self.number,
+            gbuffer,
+            reflection,
+            camera: self.camera.clone(),
+            blockers: self.blockers.clone(),
+            height_map: self.height_map.clone(),
+            light: self.light.clone(),
+            light_file_crc: self.light_file_crc,
+            suns: self.suns.clone(),
+            points: self.points.clone(),
+            ground: scene.ground,
+            supersample: scene.supersample,
+        })
+    }
+
+    /// Adds the surface pixels of `gbuffer` (rows of this frame's) to `count`.
+    pub fn count_buried(&self, gbuffer: &GBuffer, count: &mut BuriedCount) {
+        if let Some(map) = &self.height_map {
+            let (over, buried) = map.buried_pixels(gbuffer);
+            count.over += over;
+            count.buried += buried;
+        }
+    }
+
+    /// Refuses a frame whose surface pixels over the height field, counted over all its
+    /// rows, lie buried below it: the map is not this frame's terrain.
+    pub fn check_buried(&self, scene: &Scene, count: BuriedCount) -> Result<(), SceneError> {
+        let share = (count.over > 0).then(|| count.buried as f64 / count.over as f64);
+        let (Some(share), Some(h)) = (share, &scene.heightfield) else { return Ok(()) };
+        if share <= heightmap::MOST_BURIED {
+            return Ok(());
+        }
+        Err(SceneError::invalid(
+            &self.gbuffer_file(),
+            format!(
+                "{:.0} % of the surface pixels over the height field lie more than {} sample spacing(s) \
+                 below {}: the map is not this frame's terrain. A terrain that moves needs one map per \
+                 frame (\"heightmap.####.exr\", which the exporter writes when it moves)",
+                100.0 * share,
+                heightmap::BURIED_DEPTH,
+                h.heights.for_frame(self.number)
+            ),
+        ))
+    }
+
+    /// The G-buffer file.
+    pub fn gbuffer_file(&self) -> PathBuf {
+        self.gbuffer.file().to_path_buf()
+    }
 }
 
 /// Most G-buffer samples per camera pixel along each axis (`supersample`).
@@ -949,16 +1050,29 @@ impl Scene {
     ///
     /// Checks, beyond those of each file: the frame lies in `frames`; the reflection
     /// G-buffer has the G-buffer's size; the camera's `resolution` equals the G-buffer
-    /// size; a water pixel needs a reflection G-buffer.
+    /// size; a water pixel needs a reflection G-buffer; the surface pixels over the
+    /// height field lie on it ([`OpenFrame::check_buried`]).
     pub fn frame(&self, frame: i64) -> Result<Frame, SceneError> {
+        let opened = self.open_frame(frame, Reading::Whole)?;
+        let whole = opened.rows(self, 0..opened.size().1)?;
+        let mut buried = BuriedCount::default();
+        opened.count_buried(&whole.gbuffer, &mut buried);
+        opened.check_buried(self, buried)?;
+        Ok(whole)
+    }
+
+    /// Reads everything of `frame` but the pixels of its G-buffers, which
+    /// [`OpenFrame::rows`] reads (whole with [`Reading::Whole`], else only the blocks of
+    /// the rows asked for), with the checks of [`Scene::frame`] that need no pixel.
+    pub fn open_frame(&self, frame: i64, reading: Reading) -> Result<OpenFrame, SceneError> {
         self.check_frame(frame)?;
         let gfile = self.gbuffer.resolve(&self.dir, frame);
-        let gbuffer = GBuffer::read(&gfile, &self.channels, &self.materials, true)?;
+        let gbuffer = GBufferFile::open(&gfile, &self.channels, true, reading)?;
         let reflection = match &self.reflection_gbuffer {
             None => None,
             Some(t) => {
                 let rfile = t.resolve(&self.dir, frame);
-                let r = GBuffer::read(&rfile, &self.channels, &self.materials, false)?;
+                let r = GBufferFile::open(&rfile, &self.channels, false, reading)?;
                 if [r.width, r.height] != [gbuffer.width, gbuffer.height] {
                     return Err(SceneError::SizeMismatch {
                         file: rfile,
@@ -970,21 +1084,6 @@ impl Scene {
                 Some(r)
             }
         };
-        if reflection.is_none() {
-            let water: Vec<u32> =
-                self.materials.iter().filter(|(_, m)| matches!(m, Material::Water { .. })).map(|(&i, _)| i).collect();
-            if let Some(p) = gbuffer.material.iter().position(|m| water.contains(m)) {
-                return Err(SceneError::invalid(
-                    &gfile,
-                    format!(
-                        "pixel ({}, {}) is water (material {}) but scene.json has no \"reflection_gbuffer\"",
-                        p % gbuffer.width,
-                        p / gbuffer.width,
-                        gbuffer.material[p]
-                    ),
-                ));
-            }
-        }
         let camera = match &self.camera {
             None => None,
             Some(t) => {
@@ -1013,27 +1112,12 @@ impl Scene {
         // The frame's file read once, for the height map, the light and the lamps.
         let changes = self.changes(frame)?;
         let height_map = self.height_map_within(frame, changes.rectangle)?;
-        if let (Some(map), Some(h)) = (&height_map, &self.heightfield) {
-            if let Some(share) = map.buried_share(&gbuffer).filter(|&share| share > heightmap::MOST_BURIED) {
-                return Err(SceneError::invalid(
-                    &gfile,
-                    format!(
-                        "{:.0} % of the surface pixels over the height field lie more than {} sample spacing(s) \
-                         below {}: the map is not this frame's terrain. A terrain that moves needs one map per \
-                         frame (\"heightmap.####.exr\", which the exporter writes when it moves)",
-                        100.0 * share,
-                        heightmap::BURIED_DEPTH,
-                        h.heights.for_frame(frame)
-                    ),
-                ));
-            }
-        }
         let (light, light_file_crc) = self.light_changed(frame, changes.light.as_ref())?;
         let (suns, points) = match changes.lamps {
             Some((suns, points)) => (suns.iter().map(|sun| sun.turned(self.light_turn)).collect(), points),
             None => (self.suns.clone(), self.points.clone()),
         };
-        Ok(Frame {
+        Ok(OpenFrame {
             number: frame,
             gbuffer,
             reflection,
@@ -1044,8 +1128,6 @@ impl Scene {
             light_file_crc,
             suns,
             points,
-            ground: self.ground,
-            supersample: self.supersample,
         })
     }
 

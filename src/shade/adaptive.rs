@@ -128,6 +128,7 @@ fn pack(frame: &Frame, picked: &[Pick]) -> Frame {
                 diffuse: vec![[0.0; 3]; width * height],
                 glossy: vec![[0.0; 3]; width * height],
             }),
+            first_row: 0,
         };
         for (k, pick) in picked.iter().enumerate() {
             let samples = match pick {

@@ -317,6 +317,10 @@ pub struct SurroundingsPlan {
     bounces: usize,
 }
 
+/// Calls its argument with a frame's G-buffer rows, band after band in order, every row
+/// once ([`SurroundingsPlan::surveyed`]).
+pub type EachBand<'a> = dyn FnMut(&mut dyn FnMut(&GBuffer)) -> Result<(), ShadeError> + 'a;
+
 /// A frame's surroundings with their radiance after all but the last bounce.
 pub struct Surroundings {
     terrain: Option<TerrainGrid>,
@@ -344,37 +348,54 @@ pub struct SurfaceAlbedos {
     pub frame: [f32; 3],
 }
 
+/// The sums behind [`SurfaceAlbedos`], added pixel by pixel in the frame's order.
+#[derive(Default)]
+struct AlbedoSums {
+    by_object: BTreeMap<u32, ([f64; 3], usize)>,
+    terrain: ([f64; 3], usize),
+    all: ([f64; 3], usize),
+}
+
+impl AlbedoSums {
+    /// Adds surface pixel `i` of `g` (not water, not the background).
+    fn add(&mut self, scene: &Scene, g: &GBuffer, i: usize, on_terrain: bool) {
+        let a = diffuse_albedo(scene, g, i);
+        let add = |sum: &mut ([f64; 3], usize)| {
+            (0..3).for_each(|c| sum.0[c] += f64::from(a[c]));
+            sum.1 += 1;
+        };
+        add(&mut self.all);
+        if on_terrain {
+            add(&mut self.terrain);
+        }
+        if g.object_at(i) != 0 {
+            add(self.by_object.entry(g.object_at(i)).or_default());
+        }
+    }
+
+    fn means(self) -> SurfaceAlbedos {
+        let mean = |(sum, n): ([f64; 3], usize)| (n > 0).then(|| sum.map(|v| (v / n as f64) as f32));
+        let frame = mean(self.all).unwrap_or([0.0; 3]);
+        SurfaceAlbedos {
+            by_object: self.by_object.into_iter().filter_map(|(object, sum)| Some((object, mean(sum)?))).collect(),
+            terrain: mean(self.terrain).unwrap_or(frame),
+            frame,
+        }
+    }
+}
+
 impl SurfaceAlbedos {
     /// The albedos of `frame`'s pixels; `on_terrain(i)` tells whether pixel `i` lies on
     /// the terrain.
     pub fn of(scene: &Scene, frame: &Frame, on_terrain: impl Fn(usize) -> bool) -> Self {
         let g = &frame.gbuffer;
-        let mut sums = BTreeMap::<u32, ([f64; 3], usize)>::new();
-        let (mut terrain, mut all) = (([0.0f64; 3], 0usize), ([0.0f64; 3], 0usize));
-        let add = |sum: &mut ([f64; 3], usize), a: [f32; 3]| {
-            (0..3).for_each(|c| sum.0[c] += f64::from(a[c]));
-            sum.1 += 1;
-        };
+        let mut sums = AlbedoSums::default();
         for i in 0..g.material.len() {
-            if !matches!(scene.materials.get(&g.material[i]), Some(m) if !matches!(m, Material::Water { .. })) {
-                continue;
-            }
-            let a = diffuse_albedo(scene, g, i);
-            add(&mut all, a);
-            if on_terrain(i) {
-                add(&mut terrain, a);
-            }
-            if g.object_at(i) != 0 {
-                add(sums.entry(g.object_at(i)).or_default(), a);
+            if matches!(scene.materials.get(&g.material[i]), Some(m) if !matches!(m, Material::Water { .. })) {
+                sums.add(scene, g, i, on_terrain(i));
             }
         }
-        let mean = |(sum, n): ([f64; 3], usize)| (n > 0).then(|| sum.map(|v| (v / n as f64) as f32));
-        let frame = mean(all).unwrap_or([0.0; 3]);
-        Self {
-            by_object: sums.into_iter().filter_map(|(object, sum)| Some((object, mean(sum)?))).collect(),
-            terrain: mean(terrain).unwrap_or(frame),
-            frame,
-        }
+        sums.means()
     }
 
     /// The albedo of the spheres of `object`.
@@ -387,24 +408,46 @@ impl SurroundingsPlan {
     /// The secondary points of `frame`, or `None` where nothing bounces: no bounce asked,
     /// or neither terrain (height field or ground plane) nor blockers.
     pub fn new(scene: &Scene, frame: &Frame, settings: &BounceSettings) -> Result<Option<Self>, ShadeError> {
+        Self::surveyed(scene, frame, settings, &mut |visit| {
+            visit(&frame.gbuffer);
+            Ok(())
+        })
+    }
+
+    /// [`Self::new`] for a frame read in bands: `each_band(visit)` calls `visit` with the
+    /// G-buffer's bands of rows in order, every row once (`frame` is any of them, which
+    /// lends the frame's camera, light and blockers). The surroundings are the same as
+    /// those of the whole frame, which they summarise: their bounds, albedos and
+    /// materials are sums and counts over its pixels in order.
+    pub fn surveyed(
+        scene: &Scene,
+        frame: &Frame,
+        settings: &BounceSettings,
+        each_band: &mut EachBand,
+    ) -> Result<Option<Self>, ShadeError> {
         if settings.bounces == 0 {
             return Ok(None);
         }
-        let g = &frame.gbuffer;
-        let surface: Vec<usize> = (0..g.material.len())
-            .filter(|&i| matches!(scene.materials.get(&g.material[i]), Some(m) if !matches!(m, Material::Water { .. })))
-            .collect();
-        let Some(fallback_material) = surface.first().map(|&i| g.material[i]) else { return Ok(None) };
-        let most_common = |pixels: &mut dyn Iterator<Item = usize>| {
-            let mut counts = BTreeMap::<u32, usize>::new();
-            pixels.for_each(|i| *counts.entry(g.material[i]).or_default() += 1);
-            counts.into_iter().max_by_key(|&(_, n)| n).map_or(fallback_material, |(m, _)| m)
-        };
-
-        let terrain = match height_field(scene, frame)? {
+        let is_surface = |g: &GBuffer, i: usize| matches!(scene.materials.get(&g.material[i]), Some(m) if !matches!(m, Material::Water { .. }));
+        let field = height_field(scene, frame)?;
+        // The first pass: the first surface pixel's material, and where a ground plane is
+        // the terrain, the surface pixels' places over it.
+        let ground_grid = field.is_none() && frame.ground.is_some();
+        let mut fallback = None;
+        let mut places: [Vec<f32>; 2] = [Vec::new(), Vec::new()];
+        each_band(&mut |g| {
+            for i in (0..g.material.len()).filter(|&i| is_surface(g, i)) {
+                fallback.get_or_insert(g.material[i]);
+                if ground_grid {
+                    (0..2).for_each(|a| places[a].push(g.position[i][a]));
+                }
+            }
+        })?;
+        let Some(fallback_material) = fallback else { return Ok(None) };
+        let terrain = match field {
             Some(field) => Some((field.min(), field.max(), Some(field), 0.0)),
             None => frame.ground.map(|ground| {
-                let (min, max) = neighbourhood(frame, &surface);
+                let (min, max) = neighbourhood(places, &frame.blockers);
                 (min, max, None, ground)
             }),
         };
@@ -419,36 +462,39 @@ impl SurroundingsPlan {
             radiance: vec![[0.0; 3]; side * side],
             material: fallback_material,
         });
-        let mut on_terrain = vec![false; g.material.len()];
-        if let Some(grid) = &terrain {
-            for &i in &surface {
-                on_terrain[i] = grid.holds(g.position[i].map(f64::from));
+        // The second pass: the albedos, and the materials of the terrain and the objects.
+        let mut albedo_sums = AlbedoSums::default();
+        let mut texel_sums = vec![([0.0f64; 3], 0usize); side * side];
+        let mut grid_materials = BTreeMap::<u32, usize>::new();
+        let mut materials = BTreeMap::<u32, BTreeMap<u32, usize>>::new();
+        each_band(&mut |g| {
+            for i in (0..g.material.len()).filter(|&i| is_surface(g, i)) {
+                let on_terrain = terrain.as_ref().is_some_and(|grid| grid.holds(g.position[i].map(f64::from)));
+                albedo_sums.add(scene, g, i, on_terrain);
+                if let (true, Some(grid)) = (on_terrain, &terrain) {
+                    let p = g.position[i];
+                    let texel = &mut texel_sums[grid.texel_of(f64::from(p[0]), f64::from(p[1]))];
+                    let a = diffuse_albedo(scene, g, i);
+                    (0..3).for_each(|c| texel.0[c] += f64::from(a[c]));
+                    texel.1 += 1;
+                    *grid_materials.entry(g.material[i]).or_default() += 1;
+                }
+                if g.object_at(i) != 0 {
+                    *materials.entry(g.object_at(i)).or_default().entry(g.material[i]).or_default() += 1;
+                }
             }
-        }
-        let albedos = SurfaceAlbedos::of(scene, frame, |i| on_terrain[i]);
+        })?;
+        let albedos = albedo_sums.means();
         let terrain = terrain.map(|mut grid| {
-            let on_grid: Vec<usize> = surface.iter().copied().filter(|&i| on_terrain[i]).collect();
-            grid.material = most_common(&mut on_grid.iter().copied());
-            let mut sums = vec![([0.0f64; 3], 0usize); side * side];
-            for &i in &on_grid {
-                let p = g.position[i];
-                let texel = &mut sums[grid.texel_of(f64::from(p[0]), f64::from(p[1]))];
-                let a = diffuse_albedo(scene, g, i);
-                (0..3).for_each(|c| texel.0[c] += f64::from(a[c]));
-                texel.1 += 1;
-            }
-            grid.albedo = sums
+            grid.material = grid_materials.into_iter().max_by_key(|&(_, n)| n).map_or(fallback_material, |(m, _)| m);
+            grid.albedo = texel_sums
                 .iter()
                 .map(|&(s, n)| if n > 0 { s.map(|v| (v / n as f64) as f32) } else { albedos.terrain })
                 .collect();
             grid
         });
 
-        // Each object's most common material, in one pass over the pixels.
-        let mut materials = BTreeMap::<u32, BTreeMap<u32, usize>>::new();
-        for &i in surface.iter().filter(|&&i| g.object_at(i) != 0) {
-            *materials.entry(g.object_at(i)).or_default().entry(g.material[i]).or_default() += 1;
-        }
+        // Each object's most common material.
         let material_of = |object: u32| {
             let counts = materials.get(&object).filter(|_| object != 0);
             counts.and_then(|c| c.iter().max_by_key(|&(_, n)| n).map(|(&m, _)| m)).unwrap_or(fallback_material)
@@ -511,7 +557,7 @@ impl SurroundingsPlan {
         albedo.resize(padded, [0.0; 3]);
         let colours = scene.colour_passes().then(|| SurfaceColours { diffuse: albedo, glossy: vec![[0.0; 3]; padded] });
         let gbuffer = GBuffer {
-            file: g.file.with_extension("surroundings"),
+            file: frame.gbuffer.file.with_extension("surroundings"),
             width,
             height,
             position,
@@ -520,6 +566,7 @@ impl SurroundingsPlan {
             material,
             object: Some(object),
             colours,
+            first_row: 0,
         };
         let points = Frame {
             number: frame.number,
@@ -598,21 +645,20 @@ impl SurroundingsPlan {
 /// The rectangle of the ground plane the grid covers: the middle 96 % of the frame's
 /// surface points along each axis (a plane seen out to the horizon would stretch the
 /// grid over kilometres) and the blockers, widened by half its size on each side.
-fn neighbourhood(frame: &Frame, surface: &[usize]) -> ([f64; 2], [f64; 2]) {
+fn neighbourhood(places: [Vec<f32>; 2], blockers: &[crate::scene::Sphere]) -> ([f64; 2], [f64; 2]) {
     let mut min = [f64::INFINITY; 2];
     let mut max = [f64::NEG_INFINITY; 2];
-    for a in 0..2 {
-        let mut values: Vec<f64> =
-            surface.iter().map(|&i| f64::from(frame.gbuffer.position[i][a])).filter(|v| v.is_finite()).collect();
+    for (a, values) in places.into_iter().enumerate() {
+        let mut values: Vec<f32> = values.into_iter().filter(|v| v.is_finite()).collect();
         if values.is_empty() {
             continue;
         }
         let last = values.len() - 1;
         let (low, high) = (last / 50, last - last / 50);
-        min[a] = *values.select_nth_unstable_by(low, f64::total_cmp).1;
-        max[a] = *values.select_nth_unstable_by(high, f64::total_cmp).1;
+        min[a] = f64::from(*values.select_nth_unstable_by(low, f32::total_cmp).1);
+        max[a] = f64::from(*values.select_nth_unstable_by(high, f32::total_cmp).1);
     }
-    for sphere in &frame.blockers {
+    for sphere in blockers {
         for a in 0..2 {
             min[a] = min[a].min(sphere.center[a] - sphere.radius);
             max[a] = max[a].max(sphere.center[a] + sphere.radius);

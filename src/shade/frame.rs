@@ -275,7 +275,10 @@ pub fn pixel_source(materials: &BTreeMap<u32, Material>, frame: &Frame, x: usize
     let own_colours = g.colours_at(i);
     match g.material[i] {
         0 => PixelSource::Background {
-            ray: frame.camera.as_ref().map(|camera| camera.ray_direction(x as f64 + 0.5, y as f64 + 0.5)),
+            ray: frame
+                .camera
+                .as_ref()
+                .map(|camera| camera.ray_direction(x as f64 + 0.5, (g.first_row + y) as f64 + 0.5)),
         },
         m => match materials.get(&m) {
             Some(Material::Water { tint }) => {

@@ -270,6 +270,7 @@ fn gbuffer_from(width: usize, height: usize, samples: Vec<Sample>) -> GBuffer {
         material: samples.iter().map(|s| s.3).collect(),
         object: None,
         colours: None,
+        first_row: 0,
     }
 }
 

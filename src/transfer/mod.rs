@@ -88,7 +88,7 @@ pub(crate) use relight::relit_dunes;
 pub use relight::{relight, relight_reusing, RelightLight, RelightOptions, SampledMap, SAMPLED_MAP_WIDTH};
 pub use shade::{check_grid, shade_with_transfer};
 pub use sun_lamps::{
-    describe_sun_lamps, offering_soft_suns, offering_to_keep, SunLampFrame, SunLampInputs, SunLampTurn,
+    describe_sun_lamps, offering_soft_suns, offering_to_keep, GBufferDigest, SunLampFrame, SunLampInputs, SunLampTurn,
 };
 
 /// `glossy_lobe` codes (module doc).

@@ -369,6 +369,63 @@ pub struct SunLampInputs {
     pub terrain: u32,
 }
 
+/// The CRC-32 of a frame's camera and G-buffers that [`SunLampInputs::gbuffer`] records:
+/// each part (the camera; each G-buffer's positions, normals, materials and objects) its
+/// length in bytes and its bytes, added band after band of rows.
+#[derive(Clone)]
+pub struct GBufferDigest {
+    camera: Option<Vec<u8>>,
+    /// Per part, its length so far and the CRC of its bytes so far.
+    parts: Vec<(usize, crc32fast::Hasher)>,
+}
+
+impl GBufferDigest {
+    /// The digest of `frame`'s camera, before any of its rows.
+    pub fn new(frame: &Frame) -> Self {
+        let camera = frame.camera.as_ref().map(|camera| {
+            let mut values = camera.position.to_vec();
+            values.extend(camera.matrix_world.as_flattened());
+            values.extend([camera.lens_mm, camera.sensor_width_mm]);
+            values.iter().flat_map(|v| v.to_le_bytes()).collect()
+        });
+        Self { camera, parts: Vec::new() }
+    }
+
+    /// Adds the G-buffer rows of `frame` (the whole frame, or its next band).
+    pub fn add(&mut self, frame: &Frame) {
+        let mut parts: Vec<&[u8]> = Vec::new();
+        for g in [Some(&frame.gbuffer), frame.reflection.as_ref()].into_iter().flatten() {
+            let object = g.object.as_deref().unwrap_or(&[]);
+            parts.extend([
+                bytemuck::cast_slice(&g.position),
+                bytemuck::cast_slice(&g.normal),
+                bytemuck::cast_slice(&g.material),
+                bytemuck::cast_slice(object),
+            ]);
+        }
+        if self.parts.is_empty() {
+            self.parts = parts.iter().map(|_| (0, crc32fast::Hasher::new())).collect();
+        }
+        for ((length, hasher), part) in self.parts.iter_mut().zip(parts) {
+            *length += part.len();
+            hasher.update(part);
+        }
+    }
+
+    pub fn finish(&self) -> u32 {
+        let mut hasher = crc32fast::Hasher::new();
+        if let Some(camera) = &self.camera {
+            hasher.update(&camera.len().to_le_bytes());
+            hasher.update(camera);
+        }
+        for (length, part) in &self.parts {
+            hasher.update(&length.to_le_bytes());
+            hasher.combine(part);
+        }
+        hasher.finalize()
+    }
+}
+
 impl SunLampInputs {
     /// The parts of `frame` of `scene`, its Sun lamps as they are (after any turn).
     pub fn of(scene: &Scene, frame: &Frame) -> Self {
@@ -391,22 +448,8 @@ impl SunLampInputs {
             .collect();
         // Debug prints every float so that it reads back exactly.
         let materials = format!("{:?}", scene.materials);
-        let camera = frame.camera.as_ref().map(|camera| {
-            let mut values = camera.position.to_vec();
-            values.extend(camera.matrix_world.as_flattened());
-            values.extend([camera.lens_mm, camera.sensor_width_mm]);
-            f64s(&values)
-        });
-        let mut gbuffer: Vec<&[u8]> = camera.as_deref().into_iter().collect();
-        for g in [Some(&frame.gbuffer), frame.reflection.as_ref()].into_iter().flatten() {
-            let object = g.object.as_deref().unwrap_or(&[]);
-            gbuffer.extend([
-                bytemuck::cast_slice(&g.position),
-                bytemuck::cast_slice(&g.normal),
-                bytemuck::cast_slice(&g.material),
-                bytemuck::cast_slice(object),
-            ]);
-        }
+        let mut digest = GBufferDigest::new(frame);
+        digest.add(frame);
         let spheres: Vec<f64> = frame
             .blockers
             .iter()
@@ -423,10 +466,16 @@ impl SunLampInputs {
         Self {
             lamps: sum(&[&f64s(&lamps)]),
             materials: sum(&[materials.as_bytes()]),
-            gbuffer: sum(&gbuffer),
+            gbuffer: digest.finish(),
             blockers: sum(&[&f64s(&spheres)]),
             terrain,
         }
+    }
+
+    /// These inputs with the G-buffer's sum taken over the whole frame, `digest`, where
+    /// they were taken from a band of it ([`crate::render::bands`]).
+    pub fn with_gbuffer(self, digest: &GBufferDigest) -> Self {
+        Self { gbuffer: digest.finish(), ..self }
     }
 
     /// The parts in which `self` and `other` differ, named for a message.
