@@ -2,7 +2,7 @@
 # Rebuilds the Blender sample scenes in gbuffers/ from nothing: each scene is built by its
 # script in blender_scripts/scenes/, exported with export_scene.py, rendered by Cycles
 # with direct lighting only (render_cycles.py), and finally compared with logsh
-# (examples/cycles_compare.rs), whose table goes into the README.
+# (examples/cycles_compare.rs), whose table goes into docs/accuracy.md.
 #
 #     bash blender_scripts/build_samples.sh [OUT_DIR]     # default: gbuffers
 #

@@ -4,7 +4,7 @@
 # --bounces default; the export without colour passes), the bounce apart from the
 # materials; and on the .blend as authored (--as-authored --bounces default; the export
 # with its colour passes), what the user renders. Prints examples/cycles_compare.rs's
-# table (the README's "Bounce light"):
+# table (docs/method/bounce-light.md):
 #
 #     bash blender_scripts/measure_bounce.sh [OUT_DIR]     # default: target/bounce
 #

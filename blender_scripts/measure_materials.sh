@@ -2,7 +2,7 @@
 # logsh against the user's truth for materials: Cycles rendering each .blend as authored
 # with direct light only (render_cycles.py --as-authored --bounces 0), on scenes built
 # here, exported with their colour passes (the exporter's default); prints
-# examples/cycles_compare.rs's table (the README's "Materials as Blender evaluates them",
+# examples/cycles_compare.rs's table (docs/method/materials.md,
 # its "default, --bounces 0" rows: the truth has no bounce light):
 #
 #     bash blender_scripts/measure_materials.sh [OUT_DIR]     # default: target/materials

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # logsh against Cycles in time at equal error, on the same .blend, in one run
-# (examples/cycles_timing.rs; the README's "Against Cycles in time" table):
+# (examples/cycles_timing.rs; the "Against Cycles in time" table of docs/accuracy.md):
 #
 #     bash blender_scripts/time_against_cycles.sh [OUT_DIR]     # default: target/cycles-timing
 #

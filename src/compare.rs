@@ -1,5 +1,5 @@
 //! The measure every comparison with Cycles uses (`examples/cycles_compare.rs`,
-//! `examples/cycles_timing.rs`, the README's tables): mean absolute error over the
+//! `examples/cycles_timing.rs`, the tables of docs/accuracy.md): mean absolute error over the
 //! non-background pixels and over R, G, B, divided by the unoccluded value, the radiance an
 //! open, upward-facing white diffuse floor receives from the scene's light, suns and lamps,
 //! so that 0.01 reads as 1 % of an unshadowed white floor whatever the light's brightness.

@@ -312,7 +312,7 @@ fn tiles_give_the_untiled_image() {
 /// One `Gpu` shared by eight frames at once over two scenes (two programs compiled at once
 /// on a device that has none yet), from eight threads and then from eight jobs of a pool of
 /// four: every frame equals the same frame shaded alone, bit for bit. Frames take turns on
-/// the device; shading at once, 16 threads never finished on an NVIDIA H200 (README, GPU).
+/// the device; shading at once, 16 threads never finished on an NVIDIA H200 (docs/guide/gpu.md).
 #[test]
 fn frames_from_many_threads_take_turns() {
     let Some(_) = gpu() else { return };

@@ -133,7 +133,7 @@ fn compare(scene: &Path, turn: f64, relit: &Path, shaded: &Path, what: &str) -> 
     worst
 }
 
-/// A relight keeps the render's bounce light as rendered (README, "Bounce light"):
+/// A relight keeps the render's bounce light as rendered (docs/method/bounce-light.md):
 /// unturned, the relit frame is the render, bounce included; turned, its bounce passes
 /// are still the render's, and the direct light turns under them.
 #[test]

@@ -11,6 +11,7 @@ mod support;
 
 mod blender;
 mod cli;
+mod docs;
 mod extremes;
 mod gpu;
 mod heightfield;

@@ -1106,7 +1106,7 @@ impl HorizonPyramid {
     /// field's edges only shortens the way), so by the steepest cell's. With the rounding
     /// of the tangents (`ClimbBound`). Where it is below a sun's disk, the field casts
     /// no shadow on it. The Sun-lamp scene's field (256x256) climbs at most 0.39, 0.49 and
-    /// 0.43 along its lamp and the two added in the README's "Several Sun lamps", turned 75
+    /// 0.43 along its lamp and the two added in the "Several Sun lamps" of docs/performance-log.md, turned 75
     /// deg (elevations 50, 35 and 25 deg, 2 deg disks whose feet are at tangents 1.15, 0.67
     /// and 0.44); the largest differences of each level along x and along y, of any two
     /// cells, would give 0.44, 0.57 and 0.50. For a `dir` of another length, the bound is

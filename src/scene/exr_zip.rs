@@ -15,7 +15,7 @@
 //! 693 ms for 14.63 MB and zlib-rs, at the same level, 357 ms for 14.82 MB; the relit
 //! passes of that frame (29.0 MB raw) 207 ms against 113 ms, both 5.56 MB. Here channels
 //! are read in place from pixel-major data ([`OutputChannel::stride`]) and decoded
-//! straight into it ([`Target`]); the README's Relighting section times both ends.
+//! straight into it ([`Target`]); docs/performance-log.md times both ends.
 
 use exr::block::chunk::{Chunk, CompressedBlock, CompressedScanLineBlock};
 use exr::block::writer::ChunksWriter;

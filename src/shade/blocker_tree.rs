@@ -138,9 +138,8 @@ impl BlockerTree {
     /// sharp lights need the spheres themselves. A subtree is skipped when its bounds lie
     /// wholly behind the tangent plane of `n` or wholly outside the cone. The receiver's own
     /// spheres follow the same rule as [`Self::visit`]; once `see` breaks (the disk
-    /// wholly covered), the rest are skipped. Inlined into its callers: called, a turn of
-    /// three low Sun lamps took 9 % longer (one thread, `sun3low` of the README, where the
-    /// compiler had stopped inlining it).
+    /// wholly covered), the rest are skipped. Inlined into its callers, where the compiler
+    /// had stopped inlining it (its cost: docs/performance-log.md, "Several Sun lamps").
     #[inline(always)]
     pub fn visit_cone(
         &self,

@@ -1,6 +1,6 @@
 //! Bounce light: what the terrain (the height field, or the ground plane) and the sphere
-//! blockers reflect onto each surface point, added outside the exponential (README,
-//! "Bounce light").
+//! blockers reflect onto each surface point, added outside the exponential
+//! (docs/method/bounce-light.md).
 //!
 //! The surroundings are shaded as secondary lights at points of their own: the texels of
 //! a grid over the terrain and fourteen points around each blocker sphere. Their direct
@@ -85,7 +85,7 @@ pub struct BounceSettings {
 }
 
 impl BounceSettings {
-    /// The presets' bounce (chosen by measurement: README, "Bounce light").
+    /// The presets' bounce (chosen by measurement: docs/method/bounce-light.md).
     pub const DEFAULT: Self = Self { bounces: 2, grid: 64, stride: 8 };
 
     fn default_stride() -> usize {

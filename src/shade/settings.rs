@@ -179,7 +179,7 @@ pub enum SettingsError {
 /// Default `cluster_ratio`: clusters spanning at most about 40 degrees are one cap. Against
 /// seeing every sphere, it changes the mean pixel by 0.0006 (largest 0.02) on a scene of
 /// 32 spheres and by 0.0015 (largest 0.01) with 10,000 particles added, which then cost
-/// 3.4x the frame without them instead of 179x (`README.md`, "Blockers").
+/// 3.4x the frame without them instead of 179x (`docs/method/blockers.md`).
 pub const DEFAULT_CLUSTER_RATIO: f64 = 0.35;
 
 /// Largest `cluster_ratio` accepted: beyond it a cluster spans more than 60 degrees.

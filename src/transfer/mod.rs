@@ -66,14 +66,14 @@
 //! default) no layer holds: a default relight takes them out of its light with the
 //! render's decomposition, holds the residual in SH, and shades them again from the scene
 //! ([`RelightLight::with_sharp_suns`], [`SunLampTurn::shade_again`]), as the render does
-//! (4e-5 from the default render on the README's sunny dunes); held in SH they come back
+//! (4e-5 from the default render on the sunny dunes of docs/performance-log.md); held in SH they come back
 //! with the soft shadows SH gives them (0.054 there). The scene's own point lamps stay as
 //! they were rendered (`lamps_*`), as `--light-rotation` leaves them. A render's `--light-rotation` turns Sun lamps with the map; a
 //! relight does too by shading them again from the scene ([`SunLampTurn`], about a Sun
 //! lamp's share of a render; the `horizon` layer answers most pixels' horizons along the
 //! turned lamps without a march, [`crate::heightfield::HorizonsBetween`]), or keeps them
 //! as rendered (`--sun-lamps keep`: on a scene with a 2 deg Sun lamp, 0.050 from the
-//! turned render, README).
+//! turned render, docs/performance-log.md).
 
 mod layers;
 mod relight;

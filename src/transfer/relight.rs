@@ -213,7 +213,7 @@ impl RelightLight {
     /// share of the map's power, which this light holds in SH with the rest of the map;
     /// empty for a light without a map or one that takes them out itself
     /// ([`Self::with_sharp_suns`]). Held in SH their shadows come out soft: on the
-    /// HDRI-sun primitives of the README the relit frame is 0.090 from Cycles against the
+    /// HDRI-sun primitives of docs/performance-log.md the relit frame is 0.090 from Cycles against the
     /// render's 0.015. The decomposition is the render's, so it costs what the render's
     /// first frame pays for it: 9 ms for a 1024x512 map.
     pub fn suns_in_sh(&self) -> Vec<(SunLight, f64)> {
@@ -481,7 +481,7 @@ unsafe fn relight_by(
             normal: frame.normal.clone(),
         }
     };
-    // The render's bounce light, kept as rendered (README, "Bounce light": what turning
+    // The render's bounce light, kept as rendered (docs/method/bounce-light.md: what turning
     // the light does to it).
     if let Some(bounce) = &frame.bounce {
         passes.add_indirect(bounce.clone());
