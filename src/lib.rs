@@ -16,6 +16,7 @@ pub mod cli;
 pub mod compare;
 pub mod executor;
 pub mod gpu;
+pub mod gpu_layout;
 pub mod heightfield;
 pub mod info;
 pub mod logsh;
@@ -30,6 +31,7 @@ pub mod sweep;
 pub mod synth;
 pub mod timing;
 pub mod transfer;
+pub mod vector;
 pub mod view;
 #[cfg(target_arch = "x86_64")]
 mod x86;

@@ -15,6 +15,7 @@ mod docs;
 mod extremes;
 mod gpu;
 mod heightfield;
+mod layers;
 mod logsh_blocks;
 mod point_lamps;
 mod reference;

@@ -19,7 +19,7 @@
 
 mod device;
 mod frame;
-pub mod layout;
+pub use crate::gpu_layout as layout;
 pub mod program;
 mod pyramid;
 

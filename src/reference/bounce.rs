@@ -17,9 +17,9 @@
 use super::Context;
 use crate::logsh::{own_sphere_holds, Lobe};
 use crate::reference::LobeTerm;
-use crate::scene::camera::{dot, frame_around};
 use crate::shade::bounce::{ray_hits_sphere, terrain_hit, SurfaceAlbedos};
 use crate::shade::kernel::above_ground;
+use crate::vector::{dot, frame_around};
 use std::f64::consts::TAU;
 
 /// What a bounce ray met: the point, its unit normal, its object and its albedo.

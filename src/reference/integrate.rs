@@ -4,9 +4,9 @@
 
 use crate::heightfield::{brute_force_horizon, HeightField};
 use crate::logsh::{own_sphere_holds, Lobe};
-use crate::scene::camera::{dot, frame_around};
 use crate::scene::{Light, Sphere};
 use crate::sh::quadrature::gauss_legendre;
+use crate::vector::{dot, frame_around};
 use std::f64::consts::{FRAC_PI_2, PI, TAU};
 use std::sync::OnceLock;
 
@@ -193,7 +193,7 @@ pub struct PointEstimate {
 }
 
 impl PointEstimate {
-    fn exact(rgb: [f64; 3]) -> Self {
+    pub(super) fn exact(rgb: [f64; 3]) -> Self {
         PointEstimate { rgb, error: 0.0, level: 0, converged: true, meridians: 0, evaluations: 0 }
     }
 
@@ -227,7 +227,7 @@ fn rules() -> &'static Rules {
     })
 }
 
-fn unit(v: [f64; 3]) -> Option<[f64; 3]> {
+pub(super) fn unit(v: [f64; 3]) -> Option<[f64; 3]> {
     let l = dot(v, v).sqrt();
     (l > 1e-300 && l.is_finite()).then(|| v.map(|c| c / l))
 }
@@ -475,81 +475,6 @@ pub fn integrate_point(
         .map_or_else(|exact| exact, |point| integrate_prepared(point, light, tolerance, max_level))
 }
 
-/// The same integral as [`integrate_point`] by importance sampling (`super::sampled`):
-/// directions drawn from `environment` (the light's texel sampler, if it has one) and from
-/// every lobe, with the same exact visibility. `seed` fixes the randomisation.
-#[allow(clippy::too_many_arguments)]
-pub fn sample_point(
-    occluders: ReferenceOccluders,
-    light: &LightModel,
-    environment: Option<&super::TexelSampler>,
-    p: [f64; 3],
-    n: [f64; 3],
-    terms: &[LobeTerm],
-    tolerance: f64,
-    max_level: u32,
-    seed: u64,
-) -> PointEstimate {
-    PreparedPoint::new(occluders, p, n, terms).map_or_else(
-        |exact| exact,
-        |point| super::sampled::sample_point(&point, light, environment, tolerance, max_level, seed),
-    )
-}
-
-/// The sharp lights' part of the integral (each sun's disk, exact visibility), by
-/// sampling the disks (`super::sampled`); added to either integration's environment part.
-#[allow(clippy::too_many_arguments)]
-pub fn sample_suns(
-    occluders: ReferenceOccluders,
-    suns: &[crate::scene::SunLight],
-    p: [f64; 3],
-    n: [f64; 3],
-    terms: &[LobeTerm],
-    tolerance: f64,
-    max_level: u32,
-    seed: u64,
-) -> PointEstimate {
-    if suns.is_empty() {
-        return PointEstimate::exact([0.0; 3]);
-    }
-    PreparedPoint::new(occluders, p, n, terms)
-        .map_or_else(|exact| exact, |point| super::sampled::sample_suns(&point, suns, tolerance, max_level, seed))
-}
-
-/// The point lamps' part of the integral: each lamp's disk as seen from `p`
-/// ([`crate::scene::PointLight::seen_from`]), sampled as [`sample_suns`] samples a sun's,
-/// with only the occluders nearer than the lamp; `tolerance` is shared between them.
-#[allow(clippy::too_many_arguments)]
-pub fn sample_lamps(
-    occluders: ReferenceOccluders,
-    lamps: &[crate::scene::PointLight],
-    p: [f64; 3],
-    n: [f64; 3],
-    terms: &[LobeTerm],
-    tolerance: f64,
-    max_level: u32,
-    seed: u64,
-) -> PointEstimate {
-    let mut total = PointEstimate::exact([0.0; 3]);
-    let share = tolerance / lamps.len().max(1) as f64;
-    for (i, lamp) in lamps.iter().enumerate() {
-        let (disk, reach) = lamp.seen_from(p, unit(n).unwrap_or([0.0, 0.0, 1.0]));
-        let seed = seed ^ (i as u64 + 1).wrapping_mul(0x9e37_79b9_7f4a_7c15);
-        let one = PreparedPoint::within(occluders, p, n, terms, reach).map_or_else(
-            |exact| exact,
-            |mut point| {
-                // A lamp above the ground plane sends no light through it (a ray towards
-                // the part of its sphere below the plane would; none in practice).
-                let lamp_height = point.p[2] + disk.direction[2] * reach;
-                point.above_ground &= occluders.ground.is_none_or(|z| lamp_height <= z);
-                super::sampled::sample_suns(&point, &[disk], share, max_level, seed)
-            },
-        );
-        total = total.plus(&one);
-    }
-    total
-}
-
 /// A receiver ready to integrate: unit normal and lobe axes, the point lifted onto the
 /// height field, and the caps of the spheres that can block it.
 pub(super) struct PreparedPoint<'a> {
@@ -569,7 +494,7 @@ pub(super) struct PreparedPoint<'a> {
 impl<'a> PreparedPoint<'a> {
     /// `Err` holds the exact answer when there is nothing to integrate: no lobe with a
     /// nonzero scale, or a receiver enclosed by a sphere (black).
-    fn new(
+    pub(super) fn new(
         occluders: ReferenceOccluders<'a>,
         p: [f64; 3],
         n: [f64; 3],
@@ -579,7 +504,7 @@ impl<'a> PreparedPoint<'a> {
     }
 
     /// [`Self::new`] for light from no farther than `reach` (a point lamp's distance).
-    fn within(
+    pub(super) fn within(
         occluders: ReferenceOccluders<'a>,
         p: [f64; 3],
         n: [f64; 3],

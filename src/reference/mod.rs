@@ -127,10 +127,9 @@ mod integrate;
 mod sampled;
 
 pub use integrate::{
-    integrate_point, sample_lamps, sample_point, sample_suns, LightModel, LobeTerm, PointEstimate, ReferenceOccluders,
-    MAX_REFERENCE_SH_ORDER, SURFACE_BAND,
+    integrate_point, LightModel, LobeTerm, PointEstimate, ReferenceOccluders, MAX_REFERENCE_SH_ORDER, SURFACE_BAND,
 };
-pub use sampled::{TexelSampler, BASE_POINTS, REPLICATES};
+pub use sampled::{sample_lamps, sample_point, sample_suns, TexelSampler, BASE_POINTS, REPLICATES};
 
 use crate::logsh::Lobe;
 use crate::scene::{Frame, Material, Scene};

@@ -30,12 +30,12 @@
 //! one texel's extent reads those neighbours) times its solid angle, then a direction
 //! uniformly over the texel's extent on the sphere: density `P(texel) / Omega(texel)`.
 
-use super::integrate::{lobe_sum, LightModel, LobeTerm, PointEstimate, PreparedPoint};
+use super::integrate::{lobe_sum, unit, LightModel, LobeTerm, PointEstimate, PreparedPoint, ReferenceOccluders};
 use crate::heightfield::horizon_reaches_within;
 use crate::logsh::Lobe;
-use crate::scene::camera::{dot, frame_around};
 use crate::scene::light::direction_to_equirectangular;
 use crate::scene::{EnvironmentMap, Light, SunLight};
+use crate::vector::{dot, frame_around};
 use std::f64::consts::{PI, TAU};
 
 /// Independent randomisations whose spread estimates the error.
@@ -141,6 +141,79 @@ impl TexelSampler {
     }
 }
 
+/// The same integral as [`super::integrate_point`] by importance sampling :
+/// directions drawn from `environment` (the light's texel sampler, if it has one) and from
+/// every lobe, with the same exact visibility. `seed` fixes the randomisation.
+#[allow(clippy::too_many_arguments)]
+pub fn sample_point(
+    occluders: ReferenceOccluders,
+    light: &LightModel,
+    environment: Option<&TexelSampler>,
+    p: [f64; 3],
+    n: [f64; 3],
+    terms: &[LobeTerm],
+    tolerance: f64,
+    max_level: u32,
+    seed: u64,
+) -> PointEstimate {
+    PreparedPoint::new(occluders, p, n, terms)
+        .map_or_else(|exact| exact, |point| sample_prepared(&point, light, environment, tolerance, max_level, seed))
+}
+
+/// The sharp lights' part of the integral (each sun's disk, exact visibility), by
+/// sampling the disks ; added to either integration's environment part.
+#[allow(clippy::too_many_arguments)]
+pub fn sample_suns(
+    occluders: ReferenceOccluders,
+    suns: &[crate::scene::SunLight],
+    p: [f64; 3],
+    n: [f64; 3],
+    terms: &[LobeTerm],
+    tolerance: f64,
+    max_level: u32,
+    seed: u64,
+) -> PointEstimate {
+    if suns.is_empty() {
+        return PointEstimate::exact([0.0; 3]);
+    }
+    PreparedPoint::new(occluders, p, n, terms)
+        .map_or_else(|exact| exact, |point| sample_prepared_suns(&point, suns, tolerance, max_level, seed))
+}
+
+/// The point lamps' part of the integral: each lamp's disk as seen from `p`
+/// ([`crate::scene::PointLight::seen_from`]), sampled as [`sample_suns`] samples a sun's,
+/// with only the occluders nearer than the lamp; `tolerance` is shared between them.
+#[allow(clippy::too_many_arguments)]
+pub fn sample_lamps(
+    occluders: ReferenceOccluders,
+    lamps: &[crate::scene::PointLight],
+    p: [f64; 3],
+    n: [f64; 3],
+    terms: &[LobeTerm],
+    tolerance: f64,
+    max_level: u32,
+    seed: u64,
+) -> PointEstimate {
+    let mut total = PointEstimate::exact([0.0; 3]);
+    let share = tolerance / lamps.len().max(1) as f64;
+    for (i, lamp) in lamps.iter().enumerate() {
+        let (disk, reach) = lamp.seen_from(p, unit(n).unwrap_or([0.0, 0.0, 1.0]));
+        let seed = seed ^ (i as u64 + 1).wrapping_mul(0x9e37_79b9_7f4a_7c15);
+        let one = PreparedPoint::within(occluders, p, n, terms, reach).map_or_else(
+            |exact| exact,
+            |mut point| {
+                // A lamp above the ground plane sends no light through it (a ray towards
+                // the part of its sphere below the plane would; none in practice).
+                let lamp_height = point.p[2] + disk.direction[2] * reach;
+                point.above_ground &= occluders.ground.is_none_or(|z| lamp_height <= z);
+                sample_prepared_suns(&point, &[disk], share, max_level, seed)
+            },
+        );
+        total = total.plus(&one);
+    }
+    total
+}
+
 /// The index `i` with `cdf[i] <= u < cdf[i + 1]`, skipping empty bins.
 fn pick(cdf: &[f64], u: f64) -> usize {
     let bins = cdf.len() - 1;
@@ -236,7 +309,7 @@ fn split_mix(state: &mut u64) -> u64 {
 /// The integral of [`super::integrate_point`] at an already prepared point, by importance
 /// sampling (see the module doc), to `tolerance` with at most `max_level` refinements.
 /// `seed` makes the pixel's randomisation reproducible.
-pub(super) fn sample_point(
+pub(super) fn sample_prepared(
     point: &PreparedPoint,
     light: &LightModel,
     environment: Option<&TexelSampler>,
@@ -276,7 +349,7 @@ fn pilot_then_fresh(
 /// point: directions uniform over each disk (randomised Sobol' points mapped by solid
 /// angle), each with the exact visibility of [`Estimator::integrand`]. The same pilot and
 /// fresh final estimate as [`sample_point`].
-pub(super) fn sample_suns(
+pub(super) fn sample_prepared_suns(
     point: &PreparedPoint,
     suns: &[SunLight],
     tolerance: f64,

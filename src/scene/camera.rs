@@ -10,6 +10,7 @@
 
 use super::error::SceneError;
 use super::read_json;
+use crate::vector::{cross, normalize, sub};
 use serde::Deserialize;
 use std::path::Path;
 
@@ -41,12 +42,17 @@ struct BlockersFile {
     spheres: Vec<Sphere>,
 }
 
+/// Most blocker spheres a frame may hold: the tree of a million spheres
+/// ([`crate::shade::blocker_tree`]) takes about 100 MB, the most one GPU storage binding
+/// is guaranteed to hold (WebGPU's default 128 MiB).
+pub const MAX_BLOCKERS: usize = 1_000_000;
+
 /// Reads `blockers.####.json`: `frame` (optional; when present must equal `frame`) and
 /// `spheres`. A negative radius or a non-finite number is an error naming the sphere.
 pub fn read_blockers(file: &Path, frame: i64) -> Result<Vec<Sphere>, SceneError> {
     let raw: BlockersFile = read_json(file, "the sphere blockers")?;
     check_frame_key(file, raw.frame, frame)?;
-    let most = crate::shade::blocker_tree::MAX_BLOCKERS;
+    let most = MAX_BLOCKERS;
     if raw.spheres.len() > most {
         return Err(SceneError::invalid(
             file,
@@ -205,24 +211,4 @@ pub fn blockers_json(frame: i64, spheres: &[Sphere]) -> serde_json::Value {
         })
         .collect();
     serde_json::json!({"frame": frame, "spheres": list})
-}
-
-pub(crate) fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-pub(crate) fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-pub(crate) fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
-}
-pub(crate) fn normalize(a: [f64; 3]) -> [f64; 3] {
-    let l = dot(a, a).sqrt();
-    [a[0] / l, a[1] / l, a[2] / l]
-}
-/// Two unit vectors completing unit `e3` to a right-handed orthonormal frame.
-pub(crate) fn frame_around(e3: [f64; 3]) -> ([f64; 3], [f64; 3]) {
-    let helper = if e3[2].abs() < 0.9 { [0.0, 0.0, 1.0] } else { [1.0, 0.0, 0.0] };
-    let e1 = normalize(cross(helper, e3));
-    (e1, cross(e3, e1))
 }

@@ -17,19 +17,13 @@
 
 use super::error::{check_image_size, exr_error, SceneError};
 use super::exr_zip;
+pub(crate) use super::exr_zip::PartChannel;
 use exr::meta::header::Header;
 use exr::prelude::{read, FlatSamples, ReadChannels, ReadLayers};
 use half::slice::HalfFloatSliceExt;
 use rayon::prelude::*;
 use std::collections::HashMap;
 use std::path::Path;
-
-/// Where a channel lies in a file: its part, and its place in that part's channel list.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(crate) struct PartChannel {
-    pub part: usize,
-    pub channel: usize,
-}
 
 /// Every channel of a file by its full dotted name (the module doc), and by its name as
 /// stored where no full name is the same.

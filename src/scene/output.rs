@@ -21,6 +21,7 @@
 //! multilayer files accepts it (Blender 4 and 5, Nuke, oiiotool, the `exr` crate).
 //! Compression ZIP (16 scan lines per block), lossless.
 
+pub use super::exr_zip::{OutputChannel, SampleType};
 use exr::meta::attribute::{AttributeValue, Text};
 use exr::prelude::LayerAttributes;
 use rayon::prelude::*;
@@ -215,62 +216,6 @@ pub fn write_exr_channels(
     let list: Vec<OutputChannel> =
         channels.iter().map(|(name, values)| OutputChannel::new(name, SampleType::Float, values)).collect();
     write_exr_layers(path, width, height, &list, &[])
-}
-
-/// How a channel is stored (`logsh render --colour-type`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
-pub enum SampleType {
-    /// 16-bit float: half the size, 11 significant bits, plenty for colour (relative error below 5e-4).
-    Half,
-    /// 32-bit float: for data (positions, normals) that needs its precision.
-    Float,
-}
-
-/// One output channel: full name, storage type, values row-major from the top row,
-/// pixel `i`'s at `values[i * stride]` (a channel of pixel-major data is written from it
-/// without a copy).
-pub struct OutputChannel<'a> {
-    pub name: String,
-    pub sample_type: SampleType,
-    pub values: &'a [f32],
-    pub stride: usize,
-}
-
-impl<'a> OutputChannel<'a> {
-    /// A channel of one value per pixel.
-    pub fn new(name: &str, sample_type: SampleType, values: &'a [f32]) -> Self {
-        Self { name: name.to_string(), sample_type, values, stride: 1 }
-    }
-
-    /// Value `offset` of each pixel's `stride` values in `values`.
-    pub fn interleaved(name: String, sample_type: SampleType, values: &'a [f32], stride: usize, offset: usize) -> Self {
-        Self { name, sample_type, values: values.get(offset..).unwrap_or_default(), stride }
-    }
-
-    /// The channels `layer.<name>` (plain `<name>` for an empty layer) of pixel-major
-    /// `values`, each pixel's values in the order of `names`.
-    pub fn layer(layer: &str, names: &[&str], values: &'a [f32], sample_type: SampleType) -> Vec<Self> {
-        let name = |channel: &str| if layer.is_empty() { channel.to_string() } else { format!("{layer}.{channel}") };
-        (names.iter().enumerate())
-            .map(|(k, channel)| Self::interleaved(name(channel), sample_type, values, names.len(), k))
-            .collect()
-    }
-
-    /// The channel's rows `rows` of an image `width` pixels wide, without a copy.
-    pub fn rows(&self, width: usize, rows: std::ops::Range<usize>) -> OutputChannel<'a> {
-        let at = |row: usize| (row * width * self.stride).min(self.values.len());
-        let values = &self.values[at(rows.start)..at(rows.end)];
-        OutputChannel { name: self.name.clone(), sample_type: self.sample_type, values, stride: self.stride }
-    }
-
-    /// The number of pixels `values` holds (none at a stride of 0, which is refused).
-    fn pixels(&self) -> usize {
-        if self.stride == 0 {
-            0
-        } else {
-            self.values.len().div_ceil(self.stride)
-        }
-    }
 }
 
 /// Writes `channels` as one ZIP-compressed part, atomically (see the module doc), with

@@ -29,7 +29,7 @@
 //! `cluster_ratio = 0` merges nothing: every sphere in front of the tangent plane is
 //! seen, as without the tree.
 
-use crate::gpu::layout::GpuBlockerNode;
+use crate::gpu_layout::GpuBlockerNode;
 use crate::logsh::own_sphere_holds;
 use crate::scene::Sphere;
 use std::cell::Cell;
@@ -48,10 +48,7 @@ pub const NEGLIGIBLE_RATIO: f64 = 0.004;
 /// What rises less than this above the plane blocks only a sliver along the horizon.
 pub const BEHIND_TOLERANCE: f64 = 1e-4;
 
-/// Most blocker spheres a frame may hold: the tree of a million spheres takes about
-/// 100 MB, the most one GPU storage binding is guaranteed to hold (WebGPU's default
-/// 128 MiB), and about a second to build per frame on 2 cores.
-pub const MAX_BLOCKERS: usize = 1_000_000;
+pub use crate::scene::camera::MAX_BLOCKERS;
 
 /// One node of the flattened tree.
 #[derive(Clone, Copy, Debug, PartialEq)]

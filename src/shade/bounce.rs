@@ -30,7 +30,8 @@
 //! approximations of paper 000's Section 7.
 
 use super::frame::{height_field, unit_or_up, ShadeError};
-use super::kernel::SurfacePoint;
+use super::point::SurfacePoint;
+pub use super::settings::{BounceSettings, MAX_BOUNCES, MAX_BOUNCE_GRID, MAX_BOUNCE_STRIDE, MIN_BOUNCE_GRID};
 use crate::heightfield::HeightField;
 use crate::logsh::{cap_log_zh, nlp_slice_of_sine, WedgeOperator, WedgeTurn};
 use crate::scene::gbuffer::SurfaceColours;
@@ -41,8 +42,6 @@ use rayon::prelude::*;
 use std::collections::BTreeMap;
 use std::f64::consts::PI;
 
-/// Most bounces `--bounces` accepts.
-pub const MAX_BOUNCES: usize = 3;
 /// The SH order of the gathered radiance.
 const ORDER: usize = 5;
 const COUNT: usize = ORDER * ORDER;
@@ -61,43 +60,10 @@ const CHANNELS: usize = 4;
 /// diagonals.
 const SPHERE_DIRECTIONS: usize = 14;
 
-/// Fewest and most texels per side of the terrain's grid (`--bounce-grid`).
-pub const MIN_BOUNCE_GRID: usize = 8;
-pub const MAX_BOUNCE_GRID: usize = 512;
 /// Most blocker spheres that reflect light, the largest: each is 14 points to shade and a
 /// cap to gather at every receiver, and a particle system's thousands of small spheres
 /// reflect little (they still shadow).
 pub const MAX_SPHERE_LIGHTS: usize = 256;
-/// Most pixels between gathers (`--bounce-stride`).
-pub const MAX_BOUNCE_STRIDE: usize = 16;
-
-/// How bounce light is computed (`--bounces`, `--bounce-grid`).
-#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct BounceSettings {
-    /// 0 (direct light only) to [`MAX_BOUNCES`].
-    pub bounces: usize,
-    /// Texels per side of the grid the terrain's radiance is shaded on.
-    pub grid: usize,
-    /// Pixels between the points where bounce light is gathered, along each axis
-    /// ([`Surroundings::indirect`]).
-    #[serde(default = "BounceSettings::default_stride")]
-    pub stride: usize,
-}
-
-impl BounceSettings {
-    /// The presets' bounce (chosen by measurement: docs/method/bounce-light.md).
-    pub const DEFAULT: Self = Self { bounces: 2, grid: 64, stride: 8 };
-
-    fn default_stride() -> usize {
-        Self::DEFAULT.stride
-    }
-
-    /// No bounce.
-    pub fn none() -> Self {
-        Self { bounces: 0, ..Self::DEFAULT }
-    }
-}
-
 /// The terrain as a secondary light: a grid of texels over the height field (or over the
 /// frame's neighbourhood of the ground plane), each with its surface point, albedo and
 /// radiance.
@@ -963,7 +929,7 @@ impl Receiver {
         let g = &frame.gbuffer;
         let material = scene.materials.get(&g.material[i])?;
         let point = super::frame::surface_at(g, i, None, frame);
-        let mirror = super::kernel::reflect_view(point.view_origin, point.position, point.normal);
+        let mirror = super::point::reflect_view(point.view_origin, point.position, point.normal);
         let (albedo, specular) = match (material, g.colours_at(i)) {
             (Material::Water { tint }, Some((_, fresnel))) => {
                 // The view ray crosses the surface once (`1 - F`, the tint), and the light
@@ -1176,7 +1142,7 @@ mod tests {
             let length = (dx * dx + dy * dy + 1.0f64).sqrt();
             let n = [-dx / length, -dy / length, 1.0 / length];
             let [gathered, _] = surroundings.irradiance(p, n, 0, None);
-            let (e1, e2) = crate::scene::camera::frame_around(n);
+            let (e1, e2) = crate::vector::frame_around(n);
             let strata = 64;
             let mut hits = 0usize;
             for i in 0..strata * strata {

@@ -24,7 +24,7 @@
 
 use super::blocker_tree::{BlockerTree, BEHIND_TOLERANCE, NEGLIGIBLE_RATIO};
 use super::fitted_depth::DEPTH_INTERVALS;
-use crate::gpu::layout::GpuBlockerNode;
+use crate::gpu_layout::GpuBlockerNode;
 use crate::logsh::OWN_SPHERE_REACH;
 use crate::sh::MAX_COEFFICIENTS;
 

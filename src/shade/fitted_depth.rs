@@ -31,7 +31,7 @@
 //!
 //! Both executors read the same tables (`T_CAP_DEPTH` and `T_BAND_DEPTH` on the GPU).
 
-use super::kernel::Exponentiator;
+use super::exponentiator::Exponentiator;
 use crate::logsh::minimise::scan_then_golden;
 use crate::logsh::{cap_log_zh, lobe_log_zh, nlp_slice, nlp_slice_of_sine, Lobe, WedgeOperator};
 use crate::sh::{add_rotated_zonal, coefficient_count, ExpMethod, Real, MAX_COEFFICIENTS};

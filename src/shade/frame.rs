@@ -2,7 +2,7 @@
 //! and what each pixel is (the background from the light, water through the reflection
 //! G-buffer, or a surface point to shade).
 
-use super::kernel::SurfacePoint;
+use super::point::SurfacePoint;
 use super::settings::SettingsError;
 use crate::heightfield::{HeightField, HeightFieldError};
 use crate::scene::{Frame, GBuffer, Material, Scene, SceneError};
@@ -144,9 +144,9 @@ pub fn mirrored_suns(frame: &Frame, mirror: [f64; 3]) -> [f32; 3] {
 /// [`mirrored_suns`] reads for a frame's Sun lamps).
 pub fn suns_along(suns: &[crate::scene::SunLight], mirror: [f64; 3]) -> [f32; 3] {
     let mut out = [0.0f32; 3];
-    let dir = crate::scene::camera::normalize(mirror);
+    let dir = crate::vector::normalize(mirror);
     for sun in suns {
-        if crate::scene::camera::dot(dir, sun.direction) >= sun.half_angle.cos() {
+        if crate::vector::dot(dir, sun.direction) >= sun.half_angle.cos() {
             let radiance = sun.strength / (std::f64::consts::PI * sun.half_angle.sin().powi(2)) as f32;
             for (o, c) in out.iter_mut().zip(sun.color) {
                 *o += radiance * c;
@@ -165,7 +165,7 @@ pub fn mirrored_lamp(
     reflection: &GBuffer,
     i: usize,
 ) -> Option<[f32; 3]> {
-    let dir = crate::scene::camera::normalize(mirror);
+    let dir = crate::vector::normalize(mirror);
     let surface = (reflection.material[i] != 0).then(|| {
         let p = reflection.position[i].map(f64::from);
         (0..3).map(|k| (p[k] - origin[k]).powi(2)).sum::<f64>().sqrt()
@@ -285,7 +285,7 @@ pub fn pixel_source(materials: &BTreeMap<u32, Material>, frame: &Frame, x: usize
                 let tint = own_colours.map_or(*tint, |(_, glossy)| glossy);
                 let reflection = frame.reflection.as_ref().expect("checked before shading");
                 let water = surface_at(g, i, None, frame);
-                let mirror = super::kernel::reflect_view(water.view_origin, water.position, water.normal);
+                let mirror = super::point::reflect_view(water.view_origin, water.position, water.normal);
                 // A lamp the mirror ray meets before the reflected surface (Cycles shows
                 // lamps to glossy rays): the pixel is its radiance.
                 if let Some(radiance) = mirrored_lamp(frame, water.position, mirror, reflection, i) {

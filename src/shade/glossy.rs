@@ -37,8 +37,8 @@
 //! both lobes have the same peak, `(r + 1/2) / (2 pi)` against `(r + 1) / (2 pi)`.
 
 use super::sun::{disk_pattern, DISK_DIRECTIONS};
-use crate::scene::camera::dot;
 use crate::scene::light::{lookup_coordinates, BilinearTaps, EnvironmentMap};
+use crate::vector::dot;
 use std::f64::consts::{FRAC_PI_2, PI};
 use std::sync::{Arc, OnceLock};
 

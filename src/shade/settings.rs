@@ -1,7 +1,6 @@
 //! What a user chooses: order, clamp, exponentiation, attenuation and the height-field
 //! march, with defaults chosen by measurement.
 
-use super::bounce::{BounceSettings, MAX_BOUNCES, MAX_BOUNCE_GRID, MAX_BOUNCE_STRIDE, MIN_BOUNCE_GRID};
 use crate::heightfield::HorizonSettings;
 use crate::sh::{ExpMethod, MAX_ORDER, MIN_ORDER};
 
@@ -325,5 +324,40 @@ impl Quality {
         settings.horizon.level_step = level_step;
         settings.horizon.level_offset = level_offset;
         settings
+    }
+}
+
+/// Most bounces `--bounces` accepts.
+pub const MAX_BOUNCES: usize = 3;
+/// Fewest and most texels per side of the terrain's grid (`--bounce-grid`).
+pub const MIN_BOUNCE_GRID: usize = 8;
+pub const MAX_BOUNCE_GRID: usize = 512;
+/// Most pixels between gathers (`--bounce-stride`).
+pub const MAX_BOUNCE_STRIDE: usize = 16;
+
+/// How bounce light is computed (`--bounces`, `--bounce-grid`).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct BounceSettings {
+    /// 0 (direct light only) to [`MAX_BOUNCES`].
+    pub bounces: usize,
+    /// Texels per side of the grid the terrain's radiance is shaded on.
+    pub grid: usize,
+    /// Pixels between the points where bounce light is gathered, along each axis
+    /// ([`super::bounce::Surroundings::indirect`]).
+    #[serde(default = "BounceSettings::default_stride")]
+    pub stride: usize,
+}
+
+impl BounceSettings {
+    /// The presets' bounce (chosen by measurement: docs/method/bounce-light.md).
+    pub const DEFAULT: Self = Self { bounces: 2, grid: 64, stride: 8 };
+
+    fn default_stride() -> usize {
+        Self::DEFAULT.stride
+    }
+
+    /// No bounce.
+    pub fn none() -> Self {
+        Self { bounces: 0, ..Self::DEFAULT }
     }
 }

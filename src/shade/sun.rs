@@ -44,8 +44,8 @@
 use super::blocker_tree::BlockerTree;
 use crate::heightfield::{lowest_horizon, ElevationBand, HorizonAgainst, HorizonPyramid};
 use crate::logsh::Lobe;
-use crate::scene::camera::{dot, frame_around};
 use crate::scene::{PointLight, SunLight};
+use crate::vector::{dot, frame_around};
 use std::f64::consts::{FRAC_PI_2, PI};
 use std::ops::ControlFlow;
 
@@ -257,7 +257,7 @@ impl DiskDirections {
     /// the slopes above it).
     fn ground_counts(&self, ground: Option<f64>, p: [f64; 3]) -> bool {
         let light_above = |z: f64| self.reach.is_finite() && p[2] + self.axis[2] * self.reach > z;
-        ground.is_some_and(|z| super::kernel::above_ground(p, z) && !light_above(z))
+        ground.is_some_and(|z| super::point::above_ground(p, z) && !light_above(z))
     }
 
     /// Whether every direction lies more than a patch above the tangent plane of normal

@@ -31,9 +31,9 @@
 use super::kernel::{Caps, Occluders, ShadingKernel, SurfacePoint};
 use super::settings::MAX_DIRECTIONS;
 use super::PixelWork;
-use crate::scene::camera::dot;
 use crate::scene::{Frame, Material};
 use crate::sh::{coefficient_count, Real, MAX_COEFFICIENTS};
+use crate::vector::dot;
 use rayon::prelude::*;
 use std::collections::BTreeMap;
 

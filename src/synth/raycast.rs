@@ -1,7 +1,7 @@
 //! Analytic primitives and the ray caster that turns them into G-buffers.
 
-use crate::scene::camera::{cross, dot, normalize, sub};
 use crate::scene::{Camera, GBuffer, HeightMap};
+use crate::vector::{cross, dot, normalize, sub};
 use rayon::prelude::*;
 use std::path::PathBuf;
 use std::sync::Arc;

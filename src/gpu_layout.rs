@@ -1,4 +1,5 @@
-//! Every struct the host and the shaders share, declared once: `gpu_struct!` emits the
+//! Every struct the host and the shaders share, declared once (the GPU executor reads it
+//! as `gpu::layout`; the CPU's blocker tree keeps its nodes in the same record): `gpu_struct!` emits the
 //! `#[repr(C)]` Rust struct and its WGSL declaration from the same field list, and the
 //! tests check with naga's layouter that both sides agree on every offset and the size.
 //!
