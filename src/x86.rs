@@ -8,10 +8,8 @@
 //! wider than 16 registers then spills less: the height-field march (sixteen taps, their
 //! weights and two groups of lanes), the slices of the fitted depth (a Legendre
 //! recurrence per lane group) and a relight's chunk of pixels (a pixel's two to five
-//! transfer vectors dotted with three colour channels of light). `dunes` at 240x135,
-//! shading stage on 2 cores of an AMD EPYC (Zen 4), medians of 15 over four alternating
-//! rounds: 38.5-39.1 ms with both kernels in the AVX2 build, 33.3-33.6 ms in the wide
-//! build.
+//! transfer vectors dotted with three colour channels of light); the gain is timed in
+//! docs/performance-log.md.
 
 /// Whether the processor has AVX2 (once per process): the lanes that need no FMA.
 pub static AVX2: std::sync::LazyLock<bool> = std::sync::LazyLock::new(|| is_x86_feature_detected!("avx2"));

@@ -67,8 +67,8 @@
 //! under a map it must resolve every texel column: a 240x135 frame under a 256x128 sky
 //! ran for more than 8 minutes on 2 cores at tolerance 5e-3. [`Integration::Sampled`]
 //! (`sampled.rs`) importance-samples the map and every lobe with the same exact
-//! visibility test per direction, and stops on a statistical error estimate: the same
-//! frame takes 6 s at 5e-3 and 11 s at 3e-3. `Auto` samples under maps and SH lights and
+//! visibility test per direction, and stops on a statistical error estimate, far sooner
+//! (docs/performance-log.md). `Auto` samples under maps and SH lights and
 //! keeps the meridians for a constant light, where they are fast and the analytic tests
 //! hold them to 5e-5.
 //!
@@ -117,10 +117,6 @@
 //!
 //! One pixel costs `meridians x (visible pieces x 18)` light evaluations plus, with a
 //! height field, one exact horizon per meridian (about `columns + rows` grid cells).
-//! Sphere-over-plane under constant light, tolerance 1e-3: about 1 ms per pixel (2
-//! cores, opt-level 2). The dunes scene (161 x 161 height map, 128 x 64 sky with a
-//! sun, tolerance 1e-2): about 30 ms per pixel with the map, 25 ms with the order-8
-//! projection.
 
 mod bounce;
 mod integrate;

@@ -10,10 +10,9 @@
 //! reader recognises by its length.
 //!
 //! Why not the crate's encoder and decoder: it deflates with `miniz_oxide` at level 4,
-//! and it copies every channel into a buffer of its own on the way in and out. On the
-//! transfer layers of `cones` at 960x540 (101.6 MB raw, one thread), `miniz_oxide` takes
-//! 693 ms for 14.63 MB and zlib-rs, at the same level, 357 ms for 14.82 MB; the relit
-//! passes of that frame (29.0 MB raw) 207 ms against 113 ms, both 5.56 MB. Here channels
+//! and it copies every channel into a buffer of its own on the way in and out; zlib-rs at
+//! the same level writes files within 1.3 % of its sizes in about half its time
+//! (docs/performance-log.md). Here channels
 //! are read in place from pixel-major data ([`OutputChannel::stride`]) and decoded
 //! straight into it ([`Target`]); docs/performance-log.md times both ends.
 

@@ -31,8 +31,8 @@ pub struct Exponentiator {
 }
 
 /// Training vectors for the OL fit: 64 of them, a fixed seed (the table is the same on
-/// every run). The fit runs once per frame setting; with 64 vectors it takes about 40 ms
-/// at order 4 (256 took half a second and made `ol` slower per frame than `quad`).
+/// every run). The fit runs once per frame setting; 256 vectors made `ol` slower per
+/// frame than `quad`.
 const OL_TRAINING_COUNT: usize = 64;
 const OL_TRAINING_SEED: u64 = 0x1065_5a11;
 

@@ -79,7 +79,7 @@ pub struct FittedDepths {
 }
 
 /// Fits the tables of `key`, or returns the ones this process already fitted: once per
-/// setting, not once per frame (0.06 s at order 4 and 0.5 s at order 8 on 2 cores).
+/// setting, not once per frame.
 pub fn fitted_depths(key: DepthKey, exp: &Exponentiator) -> Arc<FittedDepths> {
     static FITTED: OnceLock<Mutex<HashMap<DepthKey, Arc<FittedDepths>>>> = OnceLock::new();
     let cache = FITTED.get_or_init(Default::default);

@@ -663,10 +663,7 @@ impl Prefiltered {
     ///
     /// Once a frame has computed the texels it reads, each lookup checks its four texels
     /// together and blends them, the computing path out of line: where each texel was
-    /// read through its own `get_or_init`, a lookup of the Phong-floor `glossy` frame's
-    /// lobe cost 17 ns on its own and 12 ns so (one thread, AMD EPYC); the frame's relight
-    /// took 7 to 8 % less time (one thread, minimum of 1000) and its shade about a tenth
-    /// less.
+    /// read through its own `get_or_init`.
     #[inline(always)]
     pub fn lookup_at(&self, coordinates: [f64; 2]) -> [f32; 3] {
         match &self.source {

@@ -64,8 +64,7 @@ static LAST_SPLIT: Mutex<Option<(Arc<Light>, Arc<LightSplit>)>> = Mutex::new(Non
 
 /// [`extract_suns`] of `light`'s map, or `None` for a light without one; made once for
 /// consecutive calls on the same light, so `logsh render` and `logsh shade` print the
-/// suns and their first frame's plan takes them out of one decomposition (9 ms for the
-/// HDRI-sun scene's 1024x512 map, 22 ms for `glossy`'s, which the first frame paid twice).
+/// suns and their first frame's plan takes them out of one decomposition.
 pub fn decomposition(light: &Arc<Light>) -> Option<Arc<LightSplit>> {
     let Light::Environment { map, strength } = light.as_ref() else {
         return None;
@@ -88,9 +87,7 @@ pub fn decomposition(light: &Arc<Light>) -> Option<Arc<LightSplit>> {
 /// [`equirectangular_to_direction`](crate::scene::light::equirectangular_to_direction)),
 /// the median by selection, and a region's masks are cleared where they were set: the
 /// same suns and residual, bit for bit, as a luminance and a direction per visit, a sorted
-/// copy and fresh masks per region tried. Minimum of 7, one thread of an AMD EPYC, same
-/// run: the 1024x512 sky of the `glossy` scene (sixteen regions tried, none a sun) 48 to
-/// 52 ms before, 22 to 23 ms now; the HDRI-sun scene's map 11.0 to 11.3 ms, 8.9 to 9.2 ms.
+/// copy and fresh masks per region tried.
 pub fn extract_suns(map: &EnvironmentMap, strength: f32) -> Decomposition {
     let (width, height) = (map.width, map.height);
     let lum = |t: [f32; 3]| (0..3).map(|k| LUMINANCE[k] * f64::from(t[k])).sum::<f64>();

@@ -203,9 +203,7 @@ impl DiskDirections {
     /// share of the module doc, clamped), to the bit; 1e-9 rad of margin each way, far
     /// above the rounding of the share's terms. The march stops once it knows the horizon
     /// is outside ([`HorizonPyramid::horizon_against`]). With the march's other stop (no
-    /// later step can raise the horizon), a relight of the Sun-lamp scene (320x180, a Sun
-    /// lamp at 50 deg over a height field) turns its lamps in 75 to 95 ms a frame against
-    /// 130 to 162 ms, the same bits (2 cores, alternating runs).
+    /// later step can raise the horizon), the horizons are the same bits.
     fn horizon_band(&self) -> ElevationBand {
         *self.band.get_or_init(|| self.computed_horizon_band())
     }

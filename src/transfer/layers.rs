@@ -867,7 +867,7 @@ impl TransferFrame {
 
 /// Whether `test` holds for every one of `values`: each chunk checked whole, which runs
 /// in vector lanes (one value at a time, the finite check was a tenth of a sequence's
-/// relight, and the horizons' check 4.7 ms of a 12 ms read).
+/// relight).
 fn every_value(values: &[f32], test: impl Fn(f32) -> bool + Sync) -> bool {
     values.par_chunks(1 << 14).all(|chunk| chunk.iter().fold(true, |all, &x| all & test(x)))
 }

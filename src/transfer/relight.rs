@@ -215,7 +215,7 @@ impl RelightLight {
     /// ([`Self::with_sharp_suns`]). Held in SH their shadows come out soft: on the
     /// HDRI-sun primitives of docs/performance-log.md the relit frame is 0.090 from Cycles against the
     /// render's 0.015. The decomposition is the render's, so it costs what the render's
-    /// first frame pays for it: 9 ms for a 1024x512 map.
+    /// first frame pays for it.
     pub fn suns_in_sh(&self) -> Vec<(SunLight, f64)> {
         match &self.light {
             Light::Environment { map, strength } if !self.sharp => {
@@ -402,8 +402,8 @@ pub fn relight(frame: &TransferFrame, light: &RelightLight) -> ShadedPasses {
 /// any size), where there is one.
 ///
 /// A frame's passes are 33 MB at 960x540. Freshly allocated, each of their 8,100 pages
-/// faults as it is first written, which makes a relight twice as long: `cones` at
-/// 960x540 on 2 threads, 17 ms against 8.5 ms into the passes of the frame before.
+/// faults as it is first written, which makes a relight about twice as long as one into
+/// the passes of the frame before.
 pub fn relight_reusing(frame: &TransferFrame, light: &RelightLight, spare: Option<ShadedPasses>) -> ShadedPasses {
     #[cfg(target_arch = "x86_64")]
     if *crate::x86::AVX2_FMA {
@@ -841,8 +841,7 @@ unsafe fn open_lights_of_lanes<const N: usize>(
 crate::x86::with_wide_registers! {
     /// [`relight_chunk`] compiled for AVX2 and FMA, its dot products in those registers;
     /// `relight_chunk_wide` is the same with AVX-512's 32 registers where the processor
-    /// has them ([`crate::x86`]), with the same bits (`cmp` of relit frames): one thread,
-    /// minimum of 1000, `cones` 0.82 to 0.75 ms and `glossy` 1.07 to 0.97 ms (AMD EPYC).
+    /// has them ([`crate::x86`]), with the same bits (`cmp` of relit frames).
     unsafe fn relight_chunk_avx2 / relight_chunk_wide(frame: &TransferFrame, light: &RelightLight, first: usize, out: RelitChunk) {
         // SAFETY: this function's features are what `Avx2Dots` needs.
         unsafe { relight_chunk::<Avx2Dots>(frame, light, first, out) }
@@ -859,9 +858,7 @@ crate::x86::with_wide_registers! {
 /// `spheres` was relit 20x to 24x faster than the GPU shaded it, where it was 16x to 21x
 /// (`relight_accuracy --device gpu`, three alternating runs each). The prefiltered maps
 /// are read in a loop of their own after it, whose reads no longer wait behind each
-/// pixel's dot products (the `glossy` scene at 960x540 with a Phong floor, nearly every
-/// pixel a read: relit in 23.8 to 24.2 ms against 26.7 to 26.9 ms on one thread, the same
-/// bits). Then the open lobes' light of the pixels that need it ([`Dots::open_lights`]),
+/// pixel's dot products (the same bits). Then the open lobes' light of the pixels that need it ([`Dots::open_lights`]),
 /// eight at a time where the processor has AVX2, then the pixels.
 ///
 /// # Safety

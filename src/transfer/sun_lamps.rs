@@ -49,17 +49,14 @@ pub struct SunLampTurn {
     scene: Scene,
     settings: ShadingSettings,
     /// The last frame's height map and its filtered pyramid, which the frames after it
-    /// share where the scene's height map is one for all frames (4.5 to 6.5 ms of a turn of
-    /// the Sun-lamp scene's frames).
+    /// share where the scene's height map is one for all frames.
     pyramid: Mutex<Option<(Arc<HeightMap>, Arc<HorizonPyramid>)>>,
 }
 
 /// A frame's Sun lamps made ready to turn ([`SunLampTurn::prepare`]): its frame of the
 /// scene read and checked against what the frame records, its kernel and blockers'
 /// hierarchy planned, and its height field's pyramid filtered, which every turn of the
-/// frame shares (the viewer's turns of one frame). A turn planned the frame again: 0.07
-/// ms of the Sun-lamp scene's 3.4 ms turn on one thread, 0.1 to 0.2 ms of its 1.8 ms on
-/// two.
+/// frame shares (the viewer's turns of one frame).
 pub struct SunLampFrame {
     /// The frame of the scene, its point lamps taken out.
     scene_frame: Frame,
@@ -222,8 +219,7 @@ impl SunLampTurn {
     }
 
     /// The frame's kernel with the lamps as rendered and no point lamp, which the frames
-    /// and turns after it share ([`FramePlan`]'s cache: the viewer's turns of the
-    /// Sun-lamp scene took 70 to 76 ms each so, 95 to 101 ms with a kernel per turn); the
+    /// and turns after it share ([`FramePlan`]'s cache); the
     /// turned lamps are shaded through it.
     fn plan<'a>(&'a self, scene_frame: &'a Frame, file: &Path) -> Result<FramePlan<'a>, SceneError> {
         FramePlan::new(&self.scene, scene_frame, &self.settings)

@@ -105,9 +105,8 @@ struct SharpLights {
     /// tries again at the frame's next request).
     turn: std::result::Result<Arc<SunLampTurn>, String>,
     /// The frame's scene frame, read and checked at its first turn, with the scene that
-    /// read it, which the turns after it share: a turn of the Sun-lamp scene's frame
-    /// (320x180) 62 to 67 ms against 84 to 92 ms reading the G-buffer and filtering the
-    /// pyramid at every turn (medians of 11 turns, three runs alternating, 2 busy cores).
+    /// read it, which the turns after it share rather than reading the G-buffer and
+    /// filtering the pyramid at every turn.
     /// Held while it is read, so that turns asked for together read it once.
     prepared: Mutex<Option<(Arc<SunLampTurn>, Arc<SunLampFrame>)>>,
 }
@@ -502,8 +501,8 @@ fn at_pixels<'a>(pixels: &'a [usize], values: &'a [f32], components: usize) -> i
 }
 
 /// `values` appended to `bytes` as little-endian f32s, as the page reads them (a
-/// `Float32Array`): their own bytes on a little-endian processor, which a 960 x 540 turn's
-/// 12 MB took 31 to 49 ms to write a value at a time, more than its suns' shading.
+/// `Float32Array`): their own bytes on a little-endian processor, copied whole rather
+/// than a value at a time.
 fn put_f32s(bytes: &mut Vec<u8>, values: &[f32]) {
     if cfg!(target_endian = "little") {
         bytes.extend_from_slice(bytemuck::cast_slice(values));

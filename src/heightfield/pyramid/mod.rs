@@ -77,7 +77,7 @@
 //! with the defaults, 41 levels and at most 64 steps for 1025^2. A level read is 16
 //! samples (bicubic B-spline) or 4 (bilinear). Building costs about `4 n^2`
 //! multiply-adds per level and `gamma(k) = 1/(1 - 2^(-2/k))` times the map's memory
-//! (3.4x at k = 4, SN08 Section 4); 92 ms for a 1025^2 map on 2 cores.
+//! (3.4x at k = 4, SN08 Section 4).
 //!
 //! A march with the maximum over steps stops once no later step can raise its horizon
 //! (each level's highest and lowest samples bound its reads), and one along a single
@@ -373,10 +373,7 @@ impl HorizonPyramid {
     /// `out`: a frame's pixels against one sun. Where the environment's horizons are
     /// marched in lanes, eight receivers are marched at once, one per lane, each with the
     /// bits it gets alone (so a pixel's horizon does not depend on the pixels marched
-    /// beside it, nor on whether it was marched with any). The Sun-lamp scene's frame
-    /// (320x180, a Sun lamp at 50 deg over a height field): its turned lamps' horizons
-    /// took 65 % of their shading marched one pixel at a time in f64, and the turn took 47
-    /// ms; marched so, 24 ms (2 cores, the frame read beforehand).
+    /// beside it, nor on whether it was marched with any).
     pub fn horizons_against(
         &self,
         points: &[[f64; 3]],

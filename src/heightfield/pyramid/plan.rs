@@ -538,8 +538,7 @@ impl ReceiverTerms {
 /// scene's three lamps lowered to 15, 20 and 12 deg would march, sixteen answer 84 to 92
 /// %, eight 76 to 89 % and four 62 to 82 % ([`HorizonsBetween`]); a pixel reads only the
 /// sectors that can answer ([`HorizonsUnder`]), so more cost a relight only in reading the
-/// frame (the three lamps' at their default heights in 12.0 to 13.3 ms against 10.9 to
-/// 11.5 ms for four, 2 cores).
+/// frame.
 pub const HORIZON_SECTORS: usize = 16;
 
 /// A bound on the horizon along one azimuth `u` from the horizons found at the W azimuths
