@@ -264,9 +264,7 @@ fn shade_band(
 
 /// The G-buffer's size, from its header alone.
 pub fn gbuffer_size(scene: &Scene, frame: i64) -> Result<(usize, usize), crate::scene::SceneError> {
-    let file = scene.gbuffer.resolve(&scene.dir, frame);
-    let opened = crate::scene::GBufferFile::open(&file, &scene.channels, false, crate::scene::Reading::InBands)?;
-    Ok((opened.width, opened.height))
+    crate::scene::GBufferFile::size(&scene.gbuffer.resolve(&scene.dir, frame), &scene.channels)
 }
 
 #[cfg(test)]

@@ -239,6 +239,16 @@ impl ChannelFile {
         Self::blocks(file, BlockSource::File, usize::try_from(length).unwrap_or(usize::MAX), &meta, size_of)
     }
 
+    /// The size of `size_of`'s part of `file` (its first part's where it lacks the
+    /// channel), from its headers alone.
+    pub fn size_from_headers(file: &Path, what: &str, size_of: &str) -> Result<(usize, usize), SceneError> {
+        let meta = exr::meta::MetaData::read_from_file(file, false).map_err(|e| exr_error(file, what, e))?;
+        check_parts(file, &meta.headers)?;
+        let part = ChannelDirectory::new(&meta.headers).find(size_of).map_or(0, |at| at.part);
+        let size = meta.headers[part].layer_size;
+        Ok((size.0, size.1))
+    }
+
     /// `file` as `bytes`, its header already read as `meta`; `size_of` names the channel
     /// whose part gives the size every channel taken must have.
     pub fn new(

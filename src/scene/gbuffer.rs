@@ -279,6 +279,11 @@ impl GBufferFile {
         })
     }
 
+    /// The width and height of the G-buffer `file`, from its headers alone.
+    pub fn size(file: &Path, names: &ChannelNames) -> Result<(usize, usize), SceneError> {
+        ChannelFile::size_from_headers(file, WHAT, &names.position[0])
+    }
+
     /// The file it reads.
     pub fn file(&self) -> &Path {
         &self.file
