@@ -195,21 +195,32 @@ impl Executor {
         )
     }
 
-    /// The bounce light of `frame` ([`bounce`]), `None` where nothing bounces: the
-    /// surroundings' secondary points are shaded with direct light on this executor, then
-    /// gathered on the CPU. `visibility`: the frame's `visibility` pass.
+    /// The bounce light of `frame` ([`bounce`]), `None` where nothing bounces: from
+    /// surroundings planned from its own pixels (their secondary points shaded with direct
+    /// light on this executor, then gathered on the CPU), or from those `bounce` gives.
+    /// `visibility`: the frame's `visibility` pass.
     pub fn bounce(
         &self,
+        bounce: Bounce,
         scene: &Scene,
         frame: &Frame,
         settings: &ShadingSettings,
         visibility: &[f32],
     ) -> Result<Option<bounce::IndirectParts>, ExecutorError> {
-        let Some(plan) = bounce::SurroundingsPlan::new(scene, frame, &settings.bounce)? else {
-            return Ok(None);
+        let planned;
+        let surroundings = match bounce {
+            Bounce::Given(surroundings) => surroundings,
+            Bounce::OfFrame => match bounce::SurroundingsPlan::new(scene, frame, &settings.bounce)? {
+                Some(plan) => {
+                    planned = self.light_surroundings(scene, plan, settings)?;
+                    Some(&planned)
+                }
+                None => None,
+            },
         };
-        let surroundings = self.light_surroundings(scene, plan, settings)?;
-        Ok(Some(indirect(&surroundings, scene, frame, settings, visibility)))
+        // A supersampled G-buffer gathers as densely per camera pixel as a plain one.
+        let stride = settings.bounce.stride * frame.supersample.max(1);
+        Ok(surroundings.map(|surroundings| surroundings.indirect(scene, frame, stride, Some(visibility))))
     }
 
     /// The surroundings of `plan` lit: their secondary points shaded with direct light on
@@ -226,32 +237,19 @@ impl Executor {
         Ok(plan.lit(scene, &direct.diffuse, &direct.visibility))
     }
 
-    /// [`shade_passes_resolved`](Self::shade_passes_resolved) of a band of a frame's rows
-    /// ([`crate::render::bands`]), its bounce light gathered from `surroundings`, those of
-    /// the whole frame (`None`: nothing bounces).
-    pub fn shade_band_resolved(
-        &self,
-        scene: &Scene,
-        band: &Frame,
-        settings: &ShadingSettings,
-        resolving: Resolving,
-        surroundings: Option<&bounce::Surroundings>,
-    ) -> Result<ShadedPasses, ExecutorError> {
-        Ok(self.shade_passes_timed(scene, band, settings, resolving, Bounce::Given(surroundings))?.0)
-    }
-
     /// [`shade_passes`](Self::shade_passes) at the camera's resolution: a supersampled
     /// frame shaded where its samples differ ([`crate::shade::adaptive`], unless
-    /// `resolving.every_sample`), its bounce light gathered over every sample, then
-    /// resolved ([`crate::shade::resolve`]).
+    /// `resolving.every_sample`), its bounce light ([`Self::bounce`]) gathered over every
+    /// sample, then resolved ([`crate::shade::resolve`]).
     pub fn shade_passes_resolved(
         &self,
         scene: &Scene,
         frame: &Frame,
         settings: &ShadingSettings,
         resolving: Resolving,
+        bounce: Bounce,
     ) -> Result<ShadedPasses, ExecutorError> {
-        Ok(self.shade_passes_timed(scene, frame, settings, resolving, Bounce::OfFrame)?.0)
+        Ok(self.shade_passes_timed(scene, frame, settings, resolving, bounce)?.0)
     }
 
     /// [`shade_passes_resolved`](Self::shade_passes_resolved), timed: the stages "shade",
@@ -290,13 +288,7 @@ impl Executor {
             passes
         };
         let started = std::time::Instant::now();
-        let indirect = match bounce {
-            Bounce::OfFrame => self.bounce(scene, frame, settings, &passes.visibility)?,
-            Bounce::Given(surroundings) => {
-                surroundings.map(|surroundings| indirect(surroundings, scene, frame, settings, &passes.visibility))
-            }
-        };
-        if let Some(indirect) = indirect {
+        if let Some(indirect) = self.bounce(bounce, scene, frame, settings, &passes.visibility)? {
             passes.add_indirect(indirect);
             timings.add_wall("bounce", started);
         }
@@ -396,25 +388,13 @@ impl Executor {
     }
 }
 
-/// Where a frame's bounce light comes from: surroundings built from its own pixels, or
-/// given (those of the whole frame a band belongs to; `None`: nothing bounces).
+/// Where a frame's bounce light comes from: surroundings planned from its own pixels, or
+/// given (those of the whole frame a band belongs to, [`crate::render::bands`]; `None`:
+/// nothing bounces).
 #[derive(Clone, Copy)]
-enum Bounce<'a> {
+pub enum Bounce<'a> {
     OfFrame,
     Given(Option<&'a bounce::Surroundings>),
-}
-
-/// The bounce light `surroundings` leave on `frame`'s pixels, gathered as densely per
-/// camera pixel in a supersampled G-buffer as in a plain one.
-pub fn indirect(
-    surroundings: &bounce::Surroundings,
-    scene: &Scene,
-    frame: &Frame,
-    settings: &ShadingSettings,
-    visibility: &[f32],
-) -> bounce::IndirectParts {
-    let stride = settings.bounce.stride * frame.supersample.max(1);
-    surroundings.indirect(scene, frame, stride, Some(visibility))
 }
 
 /// A visibility grid interpolates between neighbouring pixels, which the adaptive

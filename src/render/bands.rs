@@ -16,8 +16,8 @@
 //! The EXR is written a band at a time ([`exr_zip::write_in_bands`]); the PNG preview's
 //! 8-bit pixels are kept until the last band.
 
-use super::{pass_channels, FramePasses, SequenceOptions};
-use crate::executor::Executor;
+use super::{pass_channels, shade_frame, FramePasses, SequenceOptions};
+use crate::executor::{Bounce, Executor};
 use crate::scene::output::{self, OutputChannel};
 use crate::scene::{exr_zip, BuriedCount, Frame, OpenFrame, Scene};
 use crate::shade::bounce::{Surroundings, SurroundingsPlan};
@@ -108,10 +108,10 @@ pub fn render_in_bands(
     let [exr, png] = outputs;
     let shade = |band: &Band| -> anyhow::Result<FramePasses> {
         let frame = opened.rows(scene, band.read.clone())?;
-        let mut shaded = shade_band(executor, scene, &frame, options, surroundings.as_ref())?;
-        if let Some(transfer) = &mut shaded.transfer {
+        let mut shaded = shade_frame(executor, scene, &frame, options, Bounce::Given(surroundings.as_ref()))?;
+        if let (Some(transfer), Some(digest)) = (&mut shaded.transfer, &digest) {
             let inputs = transfer.header.sun_lamp_inputs.take();
-            transfer.header.sun_lamp_inputs = inputs.map(|inputs| inputs.with_gbuffer(&digest));
+            transfer.header.sun_lamp_inputs = inputs.map(|inputs| inputs.with_gbuffer(digest));
         }
         Ok(shaded)
     };
@@ -195,13 +195,14 @@ fn channels<'a>(shaded: &'a FramePasses, options: &SequenceOptions) -> Vec<Outpu
 struct Survey {
     /// The surroundings its bounce light comes from, lit (`None`: nothing bounces).
     surroundings: Option<Surroundings>,
-    /// The sum of its G-buffers that its transfer header records.
-    digest: GBufferDigest,
+    /// With transfer layers, the sum of its G-buffers that their header records.
+    digest: Option<GBufferDigest>,
 }
 
-/// Reads the frame's bands once or twice before any is shaded: for the check that its
-/// G-buffer lies on its height map, the surroundings of its bounce light and the sum of
-/// its G-buffers.
+/// Reads the frame's bands before any is shaded, for the check that its G-buffer lies on
+/// its height map, the sum of its G-buffers (with transfer layers) and the surroundings
+/// of its bounce light (which read the bands twice); the check and the sum take the
+/// first reading.
 fn survey(
     executor: &Executor,
     scene: &Scene,
@@ -211,55 +212,40 @@ fn survey(
 ) -> anyhow::Result<Survey> {
     let settings = &options.settings;
     let first: Frame = opened.rows(scene, bands[0].keep.clone())?;
-    let counted = std::cell::RefCell::new(None::<(BuriedCount, GBufferDigest)>);
+    let mut summed = None::<(BuriedCount, Option<GBufferDigest>)>;
     let mut each_band = |visit: &mut dyn FnMut(&crate::scene::GBuffer)| -> Result<(), crate::shade::ShadeError> {
-        let (mut buried, mut digest) = (BuriedCount::default(), GBufferDigest::new(&first));
+        let first_reading = summed.is_none();
+        let (mut buried, mut digest) = (BuriedCount::default(), options.transfer.then(|| GBufferDigest::new(&first)));
         for band in bands {
             let frame = opened.rows(scene, band.keep.clone())?;
-            opened.count_buried(&frame.gbuffer, &mut buried);
-            digest.add(&frame);
+            if first_reading {
+                opened.count_buried(&frame.gbuffer, &mut buried);
+                if let Some(digest) = &mut digest {
+                    digest.add(&frame);
+                }
+            }
             visit(&frame.gbuffer);
         }
-        counted.replace(Some((buried, digest)));
+        if first_reading {
+            summed = Some((buried, digest));
+        }
         Ok(())
     };
     let plan = if settings.bounce.bounces > 0 {
         SurroundingsPlan::surveyed(scene, &first, &settings.bounce, &mut each_band)?
     } else {
+        if scene.heightfield.is_some() || options.transfer {
+            each_band(&mut |_| {})?;
+        }
         None
     };
-    if counted.borrow().is_none() && (scene.heightfield.is_some() || options.transfer) {
-        each_band(&mut |_| {})?;
-    }
-    let (buried, digest) = counted.take().unwrap_or_else(|| (BuriedCount::default(), GBufferDigest::new(&first)));
+    let (buried, digest) = summed.unwrap_or_default();
     opened.check_buried(scene, buried)?;
     let surroundings = match plan {
         Some(plan) => Some(executor.light_surroundings(scene, plan, settings)?),
         None => None,
     };
     Ok(Survey { surroundings, digest })
-}
-
-/// Shades one band ([`super::shade_frame`]), its bounce light from the whole frame's
-/// `surroundings`.
-fn shade_band(
-    executor: &Executor,
-    scene: &Scene,
-    band: &Frame,
-    options: &SequenceOptions,
-    surroundings: Option<&Surroundings>,
-) -> anyhow::Result<FramePasses> {
-    let settings = &options.settings;
-    Ok(if options.transfer {
-        let (mut passes, transfer) = crate::transfer::shade_with_transfer(scene, band, settings)?;
-        if let Some(surroundings) = surroundings {
-            passes.add_indirect(crate::executor::indirect(surroundings, scene, band, settings, &passes.visibility));
-        }
-        FramePasses { passes, transfer: Some(transfer) }
-    } else {
-        let passes = executor.shade_band_resolved(scene, band, settings, options.resolving, surroundings)?;
-        FramePasses { passes, transfer: None }
-    })
 }
 
 /// The G-buffer's size, from its header alone.

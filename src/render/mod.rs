@@ -34,7 +34,7 @@ pub mod bands;
 pub mod frames;
 pub mod progress;
 
-use crate::executor::Executor;
+use crate::executor::{Bounce, Executor};
 use crate::scene::output::{write_exr_layers, OutputChannel, SampleType};
 use crate::scene::{output, Scene, SceneError};
 use crate::shade::{ShadedPasses, ShadingSettings};
@@ -225,25 +225,22 @@ pub fn render_sequence(
                 Read::Frame(Ok(ReadFrame::InBands(opened, bands))) => {
                     let written =
                         guarded(|| bands::render_in_bands(executor, scene, &opened, &bands, options, &job.outputs));
-                    for notice in executor.take_notices() {
-                        progress.notice(&notice.0);
-                    }
                     match written {
                         Ok(()) => Shaded::Written,
                         Err(e) => Shaded::Failed(format!("{e:#}")),
                     }
                 }
                 Read::Frame(Ok(ReadFrame::Whole(data))) => {
-                    let shaded = guarded(|| shade_frame(executor, scene, &data, options));
-                    for notice in executor.take_notices() {
-                        progress.notice(&notice.0);
-                    }
+                    let shaded = guarded(|| shade_frame(executor, scene, &data, options, Bounce::OfFrame));
                     match shaded {
                         Ok(shaded) => Shaded::Passes(Box::new(shaded)),
                         Err(e) => Shaded::Failed(format!("{e:#}")),
                     }
                 }
             };
+            for notice in executor.take_notices() {
+                progress.notice(&notice.0);
+            }
             let Job { index, frame, outputs, seconds, .. } = job;
             let seconds = seconds + started.elapsed().as_secs_f64();
             if write_tx.send(Job { index, frame, outputs, seconds, work }).is_err() {
@@ -330,21 +327,24 @@ fn panic_message(panic: &Box<dyn std::any::Any + Send>) -> String {
         .unwrap_or_else(|| "a panic without a message".into())
 }
 
-/// Shades one frame read from `scene`.
+/// Shades one frame read from `scene` (or a band of one, [`bands`]), its bounce light
+/// from `bounce`.
 fn shade_frame(
     executor: &Executor,
     scene: &Scene,
     data: &crate::scene::Frame,
     options: &SequenceOptions,
+    bounce: Bounce,
 ) -> anyhow::Result<FramePasses> {
+    let settings = &options.settings;
     Ok(if options.transfer {
-        let (mut passes, transfer) = crate::transfer::shade_with_transfer(scene, data, &options.settings)?;
-        if let Some(indirect) = executor.bounce(scene, data, &options.settings, &passes.visibility)? {
+        let (mut passes, transfer) = crate::transfer::shade_with_transfer(scene, data, settings)?;
+        if let Some(indirect) = executor.bounce(bounce, scene, data, settings, &passes.visibility)? {
             passes.add_indirect(indirect);
         }
         FramePasses { passes, transfer: Some(transfer) }
     } else {
-        let passes = executor.shade_passes_resolved(scene, data, &options.settings, options.resolving)?;
+        let passes = executor.shade_passes_resolved(scene, data, settings, options.resolving, bounce)?;
         FramePasses { passes, transfer: None }
     })
 }

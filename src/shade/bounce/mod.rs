@@ -297,6 +297,12 @@ pub struct Surroundings {
     turn: WedgeTurn<f64>,
 }
 
+/// Whether pixel `i` of `g` is a surface the surroundings summarise: a material, not
+/// water.
+fn is_surface(scene: &Scene, g: &GBuffer, i: usize) -> bool {
+    matches!(scene.materials.get(&g.material[i]), Some(m) if !matches!(m, Material::Water { .. }))
+}
+
 /// What a pixel reflects diffusely: its Diffuse Color pass, or its material's albedo;
 /// black for water and the background.
 pub fn diffuse_albedo(scene: &Scene, gbuffer: &GBuffer, i: usize) -> [f32; 3] {
@@ -360,7 +366,7 @@ impl SurfaceAlbedos {
         let g = &frame.gbuffer;
         let mut sums = AlbedoSums::default();
         for i in 0..g.material.len() {
-            if matches!(scene.materials.get(&g.material[i]), Some(m) if !matches!(m, Material::Water { .. })) {
+            if is_surface(scene, g, i) {
                 sums.add(scene, g, i, on_terrain(i));
             }
         }
@@ -397,7 +403,6 @@ impl SurroundingsPlan {
         if settings.bounces == 0 {
             return Ok(None);
         }
-        let is_surface = |g: &GBuffer, i: usize| matches!(scene.materials.get(&g.material[i]), Some(m) if !matches!(m, Material::Water { .. }));
         let field = height_field(scene, frame)?;
         // The first pass: the first surface pixel's material, and where a ground plane is
         // the terrain, the surface pixels' places over it.
@@ -405,7 +410,7 @@ impl SurroundingsPlan {
         let mut fallback = None;
         let mut places: [Vec<f32>; 2] = [Vec::new(), Vec::new()];
         each_band(&mut |g| {
-            for i in (0..g.material.len()).filter(|&i| is_surface(g, i)) {
+            for i in (0..g.material.len()).filter(|&i| is_surface(scene, g, i)) {
                 fallback.get_or_insert(g.material[i]);
                 if ground_grid {
                     (0..2).for_each(|a| places[a].push(g.position[i][a]));
@@ -437,7 +442,7 @@ impl SurroundingsPlan {
         let mut grid_materials = BTreeMap::<u32, usize>::new();
         let mut materials = BTreeMap::<u32, BTreeMap<u32, usize>>::new();
         each_band(&mut |g| {
-            for i in (0..g.material.len()).filter(|&i| is_surface(g, i)) {
+            for i in (0..g.material.len()).filter(|&i| is_surface(scene, g, i)) {
                 let on_terrain = terrain.as_ref().is_some_and(|grid| grid.holds(g.position[i].map(f64::from)));
                 albedo_sums.add(scene, g, i, on_terrain);
                 if let (true, Some(grid)) = (on_terrain, &terrain) {
