@@ -36,12 +36,13 @@
 //! difference over non-background pixels and R, G, B, the figure the issues quote.
 
 use logsh::compare::{frame_error, read_rgb, unoccluded_value};
-use logsh::executor::Executor;
+use logsh::executor::{Executor, ShadeJob};
 use logsh::reference::{render_reference, ReferenceOptions};
 use logsh::scene::{Light, Material, Scene};
 use logsh::shade::bounce::BounceSettings;
 use logsh::shade::sharp_lights::extract_suns;
-use logsh::shade::{GlossyMethod, LightWindow, Quality, ShadingSettings};
+use logsh::shade::{GlossyMethod, LightWindow, Quality, ShadedFrame, ShadingSettings};
+use logsh::timing::StageTimings;
 use std::path::PathBuf;
 
 /// The Cycles renders compared against, where present: file stem and what it is.
@@ -143,7 +144,9 @@ fn main() {
             .chain(if is_map && !quick { &windowed[..] } else { &[] })
             .collect();
         for (name, settings) in runs {
-            let shaded = executor.shade(&scene, &frame, settings).unwrap_or_else(|e| panic!("{e}"));
+            let job = ShadeJob::new(&scene, &frame, settings);
+            let shaded: ShadedFrame =
+                executor.shade(&job, &mut StageTimings::default()).unwrap_or_else(|e| panic!("{e}"));
             assert_eq!(
                 [width, height],
                 [shaded.width, shaded.height],

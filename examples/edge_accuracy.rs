@@ -13,9 +13,10 @@
 //! in one run on the CPU.
 
 use logsh::compare::{read_rgb, unoccluded_value};
-use logsh::executor::Executor;
+use logsh::executor::{Executor, ShadeJob};
 use logsh::scene::{Frame, Scene};
-use logsh::shade::{PixelFilter, Resolving, ShadingSettings};
+use logsh::shade::{PixelFilter, Resolving, ShadedFrame, ShadingSettings};
+use logsh::timing::StageTimings;
 use std::path::Path;
 use std::time::Instant;
 
@@ -25,7 +26,8 @@ fn shade(executor: &Executor, scene: &Scene, frame: &Frame, resolving: Resolving
     let mut image = Vec::new();
     for _ in 0..3 {
         let started = Instant::now();
-        let (shaded, _) = executor.shade_resolved_timed(scene, frame, &settings, resolving).expect("shaded");
+        let job = ShadeJob { resolving: Some(resolving), ..ShadeJob::new(scene, frame, &settings) };
+        let shaded: ShadedFrame = executor.shade(&job, &mut StageTimings::default()).expect("shaded");
         times.push(started.elapsed().as_secs_f64());
         image = shaded.rgba.iter().map(|p| [p[0], p[1], p[2]]).collect();
     }

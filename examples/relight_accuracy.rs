@@ -44,10 +44,11 @@
 //! `blender_scripts/turn_light.py` turns by `DEG`.
 
 use logsh::compare::{frame_error, unoccluded_value};
-use logsh::executor::{DeviceChoice, Executor};
+use logsh::executor::{DeviceChoice, Executor, ShadeJob};
 use logsh::scene::output::SampleType;
 use logsh::scene::{EnvironmentMap, LightSource, Scene};
-use logsh::shade::ShadingSettings;
+use logsh::shade::{ShadedPasses, ShadingSettings};
+use logsh::timing::StageTimings;
 use logsh::transfer::{relight_reusing, shade_with_transfer, RelightLight, RelightOptions, SunLampTurn, TransferFrame};
 use std::path::PathBuf;
 use std::time::Instant;
@@ -158,7 +159,9 @@ fn main() -> anyhow::Result<()> {
         for round in 0..repeats {
             for timed in [false, true] {
                 let started = Instant::now();
-                truth = Some(executor.shade_passes(&turned, &turned_frame, &settings)?);
+                truth = Some::<ShadedPasses>(
+                    executor.shade(&ShadeJob::new(&turned, &turned_frame, &settings), &mut StageTimings::default())?,
+                );
                 match (round, timed) {
                     (0, false) => cold_shade = started.elapsed().as_secs_f64(),
                     (_, true) => shade_times.push(started.elapsed().as_secs_f64()),
@@ -190,7 +193,9 @@ fn main() -> anyhow::Result<()> {
         }
         let truth = truth.expect("one repeat at least");
         let relit = relit.expect("one repeat at least");
-        let auto = executor.shade_passes(&turned, &turned_frame, &ShadingSettings::default())?;
+        let auto_settings = ShadingSettings::default();
+        let auto: ShadedPasses =
+            executor.shade(&ShadeJob::new(&turned, &turned_frame, &auto_settings), &mut StageTimings::default())?;
         let rgb = |p: &logsh::shade::ShadedPasses| p.beauty.iter().map(|c| [c[0], c[1], c[2]]).collect::<Vec<_>>();
         let material = &frame.gbuffer.material;
         let off = frame_error(material, &rgb(&relit), &rgb(&truth), unoccluded);

@@ -6,10 +6,12 @@
 //! defaults' method and tangent setting (`quad`, tangent occlusion on) over every order and
 //! eps, a minute instead of an hour; `--defaults` runs every method at each order's
 //! default eps.
+use logsh::executor::{Executor, ShadeJob};
 use logsh::scene::Scene;
 use logsh::sh::ExpMethod;
-use logsh::shade::{shade_frame, ShadingSettings};
+use logsh::shade::{ShadedFrame, ShadingSettings};
 use logsh::synth::{analytic_placements, sphere_over_plane, SphereOverPlane};
+use logsh::timing::StageTimings;
 
 fn main() {
     let quick = std::env::args().any(|a| a == "--quick");
@@ -43,9 +45,13 @@ fn main() {
                     settings.epsilon = epsilon;
                     settings.exp = method;
                     settings.tangent_occlusion = tangent;
+                    // The closed forms are direct light.
+                    settings.bounce.bounces = 0;
                     let (mut sum, mut count, mut worst_mean, mut max_abs) = (0.0, 0usize, 0.0f64, 0.0f64);
                     for (scene, frame, expected) in &scenes {
-                        let shaded = shade_frame(scene, frame, &settings).expect("shade");
+                        let job = ShadeJob::new(scene, frame, &settings);
+                        let shaded: ShadedFrame =
+                            Executor::cpu().shade(&job, &mut StageTimings::default()).expect("shade");
                         let (mut s, mut c) = (0.0, 0usize);
                         for (px, e) in shaded.rgba.iter().zip(expected) {
                             if let Some(e) = e {

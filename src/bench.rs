@@ -1,10 +1,10 @@
 //! `logsh bench`: one warm-up run, then timed runs of the same frame; the median of
 //! each stage, the median wall time of a frame and megapixels per second.
 
-use crate::executor::Executor;
+use crate::executor::{Executor, ShadeJob};
 use crate::gpu::Specialisation;
 use crate::scene::{Frame, GBuffer, Scene};
-use crate::shade::ShadingSettings;
+use crate::shade::{ShadedFrame, ShadingSettings};
 use crate::timing::{Clock, Stage, StageTimings};
 use std::time::Instant;
 
@@ -18,12 +18,15 @@ pub fn measure(
     specialisation: Specialisation,
     repeats: usize,
 ) -> Result<BenchReport, crate::executor::ExecutorError> {
-    executor.shade_timed(scene, frame, settings, specialisation)?;
+    // Every sample of a supersampled frame, as it is: what shading a pixel costs.
+    let job = ShadeJob { resolving: None, specialisation, ..ShadeJob::new(scene, frame, settings) };
+    executor.shade::<ShadedFrame>(&job, &mut StageTimings::default())?;
     let mut runs = Vec::new();
     let mut walls = Vec::new();
     for _ in 0..repeats.max(1) {
         let started = Instant::now();
-        let (_, timings) = executor.shade_timed(scene, frame, settings, specialisation)?;
+        let mut timings = StageTimings::default();
+        executor.shade::<ShadedFrame>(&job, &mut timings)?;
         walls.push(started.elapsed().as_secs_f64() * 1e3);
         runs.push(timings);
     }

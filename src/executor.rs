@@ -13,8 +13,8 @@
 use crate::gpu::{Gpu, GpuError, Specialisation};
 use crate::scene::{Frame, Scene};
 use crate::shade::{
-    adaptive, bounce, Precision, Resolve, Resolving, SettingsError, ShadeError, ShadedFrame, ShadedPasses,
-    ShadingSettings,
+    adaptive, bounce, FramePlan, Outputs, Precision, Resolve, Resolving, SettingsError, ShadeError, Shaded,
+    ShadedFrame, ShadedPasses, ShadingSettings,
 };
 use crate::timing::{Clock, StageTimings};
 use std::sync::Mutex;
@@ -141,58 +141,75 @@ impl Executor {
         self.notices.lock().expect("notice list").push(Notice(message));
     }
 
-    /// Runs `on_gpu` on the GPU, or `on_cpu` on the CPU executor: by choice, or as the
-    /// fall-back of `--device auto` for a frame the adapter cannot shade correctly.
-    fn run<R>(
-        &self,
-        frame: &Frame,
-        on_gpu: impl FnOnce(&Gpu) -> Result<R, GpuError>,
-        on_cpu: impl FnOnce() -> Result<R, ShadeError>,
-    ) -> Result<R, ExecutorError> {
-        match &self.device {
-            Device::Cpu => Ok(on_cpu()?),
-            Device::Gpu { gpu, fallback } => match on_gpu(gpu) {
-                Err(e @ GpuError::LoopBudget { .. }) if *fallback => {
-                    self.notify(format!("--device auto: shading frame {} on the CPU: {e}", frame.number));
-                    Ok(on_cpu()?)
-                }
-                other => Ok(other?),
-            },
+    /// Shades `job` into `O`, the beauty ([`ShadedFrame`]) or the passes
+    /// ([`ShadedPasses`]), adding each stage's time to `timings` and naming the executor
+    /// that ran there.
+    ///
+    /// A supersampled frame with [`ShadeJob::resolving`] is shaded where its samples
+    /// differ ([`adaptive`], unless `every_sample`), its bounce light ([`Self::bounce`])
+    /// gathered over every sample, then resolved ([`crate::shade::resolve`]). The stages
+    /// are the executor's own (GPU timestamps where the adapter has them), then
+    /// "adaptive" (choosing, packing and scattering the samples), "bounce" and "resolve"
+    /// on the wall clock.
+    pub fn shade<O: ShadedOutputs>(&self, job: &ShadeJob, timings: &mut StageTimings) -> Result<O, ExecutorError> {
+        timings.device = self.describe();
+        timings.on_gpu = self.on_gpu();
+        // The bounce gather reads the visibility pass.
+        let outputs = match O::OUTPUTS == Outputs::Passes || job.settings.bounce.bounces > 0 {
+            true => Outputs::Passes,
+            false => Outputs::Beauty,
+        };
+        let (scene, frame) = (job.scene, job.frame);
+        let n = frame.supersample.max(1);
+        let adaptive = match job.resolving {
+            Some(resolving) if n > 1 => {
+                check_grid_keeps_pixels(job.settings, n, resolving)?;
+                !resolving.every_sample
+            }
+            _ => false,
+        };
+        let mut shaded = if adaptive {
+            let started = std::time::Instant::now();
+            let selection = adaptive::select(frame);
+            let select_time = started.elapsed();
+            let packed = self.shade_direct(job.with_frame(&selection.packed), outputs, timings)?;
+            let started = std::time::Instant::now();
+            let shaded = match packed {
+                Shaded::Beauty(packed) => Shaded::Beauty(ShadedFrame {
+                    rgba: selection.scatter_rgba(&scene.materials, frame, &packed.rgba),
+                    width: frame.gbuffer.width,
+                    height: frame.gbuffer.height,
+                }),
+                Shaded::Passes(packed) => Shaded::Passes(selection.scatter_passes(&scene.materials, frame, &packed)),
+            };
+            timings.add("adaptive", (select_time + started.elapsed()).as_secs_f64() * 1e3, Clock::Wall);
+            timings.samples = Some((selection.shaded, selection.samples));
+            shaded
+        } else {
+            self.shade_direct(*job, outputs, timings)?
+        };
+        if let Shaded::Passes(passes) = &mut shaded {
+            let started = std::time::Instant::now();
+            if let Some(indirect) = self.bounce(job.bounce, scene, frame, job.settings, &passes.visibility)? {
+                passes.add_indirect(indirect);
+                timings.add_wall("bounce", started);
+            }
         }
-    }
-
-    pub fn shade(
-        &self,
-        scene: &Scene,
-        frame: &Frame,
-        settings: &ShadingSettings,
-    ) -> Result<ShadedFrame, ExecutorError> {
-        Ok(self.shade_timed(scene, frame, settings, Specialisation::Full)?.0)
-    }
-
-    /// The frame's compositing passes and visibility terms (`logsh render`), bounce light
-    /// included.
-    pub fn shade_passes(
-        &self,
-        scene: &Scene,
-        frame: &Frame,
-        settings: &ShadingSettings,
-    ) -> Result<ShadedPasses, ExecutorError> {
-        Ok(self.shade_passes_timed(scene, frame, settings, Resolving::default(), Bounce::OfFrame)?.0)
-    }
-
-    /// [`shade_passes`](Self::shade_passes) with direct light only.
-    fn shade_direct_passes(
-        &self,
-        scene: &Scene,
-        frame: &Frame,
-        settings: &ShadingSettings,
-    ) -> Result<ShadedPasses, ExecutorError> {
-        self.run(
-            frame,
-            |gpu| gpu.shade_frame_passes(scene, frame, settings),
-            || crate::shade::shade_frame_passes(scene, frame, settings),
-        )
+        if let (Some(resolving), true) = (job.resolving, n > 1) {
+            let started = std::time::Instant::now();
+            let g = &frame.gbuffer;
+            let resolve = Resolve::new(n, g.width / n, g.height / n, resolving.filter);
+            shaded = match shaded {
+                Shaded::Beauty(beauty) => Shaded::Beauty(ShadedFrame {
+                    width: g.width / n,
+                    height: g.height / n,
+                    rgba: resolve.filter(&beauty.rgba),
+                }),
+                Shaded::Passes(passes) => Shaded::Passes(resolve.passes(&passes)),
+            };
+            timings.add_wall("resolve", started);
+        }
+        Ok(O::from_shaded(shaded))
     }
 
     /// The bounce light of `frame` ([`bounce`]), `None` where nothing bounces: from
@@ -233,158 +250,93 @@ impl Executor {
     ) -> Result<bounce::Surroundings, ExecutorError> {
         // The secondary points are packed side by side, not neighbours: each is shaded alone.
         let one_by_one = ShadingSettings { visibility_grid: 1, ..*settings };
-        let direct = self.shade_direct_passes(scene, plan.points(), &one_by_one)?;
+        let job = ShadeJob::new(scene, plan.points(), &one_by_one);
+        let direct = self.shade_direct(job, Outputs::Passes, &mut StageTimings::default())?;
+        let direct = direct.into_passes().expect("shaded into passes");
         Ok(plan.lit(scene, &direct.diffuse, &direct.visibility))
     }
 
-    /// [`shade_passes`](Self::shade_passes) at the camera's resolution: a supersampled
-    /// frame shaded where its samples differ ([`crate::shade::adaptive`], unless
-    /// `resolving.every_sample`), its bounce light ([`Self::bounce`]) gathered over every
-    /// sample, then resolved ([`crate::shade::resolve`]).
-    pub fn shade_passes_resolved(
+    /// Direct light at every pixel of `job.frame`, its samples as they are: the frame
+    /// planned once ([`FramePlan`]), then shaded on the GPU, or on the CPU by choice or as
+    /// the fall-back of `--device auto` for a frame the adapter cannot shade correctly.
+    fn shade_direct(
         &self,
-        scene: &Scene,
-        frame: &Frame,
-        settings: &ShadingSettings,
-        resolving: Resolving,
-        bounce: Bounce,
-    ) -> Result<ShadedPasses, ExecutorError> {
-        Ok(self.shade_passes_timed(scene, frame, settings, resolving, bounce)?.0)
-    }
-
-    /// [`shade_passes_resolved`](Self::shade_passes_resolved), timed: the stages "shade",
-    /// "adaptive" (choosing, packing and scattering the samples), "bounce" and "resolve",
-    /// on the wall clock.
-    fn shade_passes_timed(
-        &self,
-        scene: &Scene,
-        frame: &Frame,
-        settings: &ShadingSettings,
-        resolving: Resolving,
-        bounce: Bounce,
-    ) -> Result<(ShadedPasses, StageTimings), ExecutorError> {
-        let mut timings = StageTimings {
-            device: self.describe(),
-            on_gpu: matches!(self.device, Device::Gpu { .. }),
-            ..Default::default()
+        job: ShadeJob,
+        outputs: Outputs,
+        timings: &mut StageTimings,
+    ) -> Result<Shaded, ExecutorError> {
+        let plan = FramePlan::new(job.scene, job.frame, job.settings)?;
+        let mut own = plan.timings.clone();
+        let shaded = match &self.device {
+            Device::Cpu => crate::shade::cpu::shade_plan(&plan, outputs, &mut own),
+            Device::Gpu { gpu, fallback } => match gpu.shade_plan(&plan, outputs, job.specialisation, &mut own) {
+                Err(e @ GpuError::LoopBudget { .. }) if *fallback => {
+                    self.notify(format!("--device auto: shading frame {} on the CPU: {e}", job.frame.number));
+                    (timings.device, timings.on_gpu) = (cpu_description(), false);
+                    own = plan.timings.clone();
+                    crate::shade::cpu::shade_plan(&plan, outputs, &mut own)
+                }
+                other => other?,
+            },
         };
-        let n = frame.supersample.max(1);
-        check_grid_keeps_pixels(settings, n, resolving)?;
-        let started = std::time::Instant::now();
-        let mut passes = if n == 1 || resolving.every_sample {
-            let passes = self.shade_direct_passes(scene, frame, settings)?;
-            timings.add_wall("shade", started);
-            passes
-        } else {
-            let selection = adaptive::select(frame);
-            let select_time = started.elapsed();
-            let started = std::time::Instant::now();
-            let packed = self.shade_direct_passes(scene, &selection.packed, settings)?;
-            timings.add_wall("shade", started);
-            let started = std::time::Instant::now();
-            let passes = selection.scatter_passes(&scene.materials, frame, &packed);
-            timings.add("adaptive", (select_time + started.elapsed()).as_secs_f64() * 1e3, Clock::Wall);
-            timings.samples = Some((selection.shaded, selection.samples));
-            passes
-        };
-        let started = std::time::Instant::now();
-        if let Some(indirect) = self.bounce(bounce, scene, frame, settings, &passes.visibility)? {
-            passes.add_indirect(indirect);
-            timings.add_wall("bounce", started);
-        }
-        if n == 1 {
-            return Ok((passes, timings));
-        }
-        let g = &frame.gbuffer;
-        let started = std::time::Instant::now();
-        let passes = Resolve::new(n, g.width / n, g.height / n, resolving.filter).passes(&passes);
-        timings.add_wall("resolve", started);
-        Ok((passes, timings))
+        timings.add_all(&own);
+        Ok(shaded)
     }
+}
 
-    /// [`shade_timed`](Self::shade_timed) at the camera's resolution, as
-    /// [`shade_passes_resolved`](Self::shade_passes_resolved) shades and resolves.
-    pub fn shade_resolved_timed(
-        &self,
-        scene: &Scene,
-        frame: &Frame,
-        settings: &ShadingSettings,
-        resolving: Resolving,
-    ) -> Result<(ShadedFrame, StageTimings), ExecutorError> {
-        let n = frame.supersample;
-        if n <= 1 {
-            return self.shade_timed(scene, frame, settings, Specialisation::Full);
-        }
-        check_grid_keeps_pixels(settings, n, resolving)?;
-        if settings.bounce.bounces > 0 {
-            let (passes, timings) = self.shade_passes_timed(scene, frame, settings, resolving, Bounce::OfFrame)?;
-            return Ok((ShadedFrame { width: passes.width, height: passes.height, rgba: passes.beauty }, timings));
-        }
-        let (rgba, mut timings) = if resolving.every_sample {
-            let (shaded, timings) = self.shade_direct_timed(scene, frame, settings, Specialisation::Full)?;
-            (shaded.rgba, timings)
-        } else {
-            let started = std::time::Instant::now();
-            let selection = adaptive::select(frame);
-            let select_time = started.elapsed();
-            let (shaded, mut timings) =
-                self.shade_direct_timed(scene, &selection.packed, settings, Specialisation::Full)?;
-            let started = std::time::Instant::now();
-            let rgba = selection.scatter_rgba(&scene.materials, frame, &shaded.rgba);
-            timings.add("adaptive", (select_time + started.elapsed()).as_secs_f64() * 1e3, Clock::Wall);
-            timings.samples = Some((selection.shaded, selection.samples));
-            (rgba, timings)
-        };
-        let g = &frame.gbuffer;
-        let (width, height) = (g.width / n, g.height / n);
-        let started = std::time::Instant::now();
-        let rgba = Resolve::new(n, width, height, resolving.filter).filter(&rgba);
-        timings.add_wall("resolve", started);
-        Ok((ShadedFrame { width, height, rgba }, timings))
-    }
+/// A frame to shade and how: everything [`Executor::shade`] needs but the outputs.
+#[derive(Clone, Copy)]
+pub struct ShadeJob<'a> {
+    pub scene: &'a Scene,
+    pub frame: &'a Frame,
+    pub settings: &'a ShadingSettings,
+    /// How a supersampled frame is resolved to the camera's pixels; `None` shades and
+    /// returns every sample as a pixel (`bench`, `sweep`).
+    pub resolving: Option<Resolving>,
+    /// Where its bounce light comes from.
+    pub bounce: Bounce<'a>,
+    /// Below [`Specialisation::Full`] only on the GPU, to measure what specialisation
+    /// saves (`bench --specialise`).
+    pub specialisation: Specialisation,
+}
 
-    /// Shades and times each stage. Without bounce light the stages are the executor's
-    /// own (GPU timestamps where the adapter has them; `specialisation` only matters on
-    /// the GPU, see [`Gpu::shade_frame_timed`]); with it, the frame is shaded into its
-    /// passes, whose visibility the bounce reads, and timed on the wall clock as "shade"
-    /// and "bounce". The timings name the executor that ran.
-    pub fn shade_timed(
-        &self,
-        scene: &Scene,
-        frame: &Frame,
-        settings: &ShadingSettings,
-        specialisation: Specialisation,
-    ) -> Result<(ShadedFrame, StageTimings), ExecutorError> {
-        if settings.bounce.bounces == 0 {
-            return self.shade_direct_timed(scene, frame, settings, specialisation);
-        }
-        let (passes, timings) =
-            self.shade_passes_timed(scene, frame, settings, Resolving::default(), Bounce::OfFrame)?;
-        Ok((ShadedFrame { width: passes.width, height: passes.height, rgba: passes.beauty }, timings))
-    }
-
-    /// [`shade_timed`](Self::shade_timed) with direct light only.
-    fn shade_direct_timed(
-        &self,
-        scene: &Scene,
-        frame: &Frame,
-        settings: &ShadingSettings,
-        specialisation: Specialisation,
-    ) -> Result<(ShadedFrame, StageTimings), ExecutorError> {
-        self.run(
+impl<'a> ShadeJob<'a> {
+    /// `frame` of `scene` resolved with the default filter, bounce light from its own
+    /// pixels, the GPU program fully specialised.
+    pub fn new(scene: &'a Scene, frame: &'a Frame, settings: &'a ShadingSettings) -> Self {
+        Self {
+            scene,
             frame,
-            |gpu| {
-                let (shaded, mut timings) = gpu.shade_frame_timed(scene, frame, settings, specialisation)?;
-                timings.device = self.describe();
-                timings.on_gpu = true;
-                Ok((shaded, timings))
-            },
-            || {
-                let (shaded, mut timings) = crate::shade::shade_frame_timed(scene, frame, settings)?;
-                timings.device = cpu_description();
-                Ok((shaded, timings))
-            },
-        )
+            settings,
+            resolving: Some(Resolving::default()),
+            bounce: Bounce::OfFrame,
+            specialisation: Specialisation::Full,
+        }
+    }
+
+    fn with_frame(self, frame: &'a Frame) -> Self {
+        Self { frame, ..self }
+    }
+}
+
+/// What [`Executor::shade`] returns: [`ShadedFrame`] (the beauty) or [`ShadedPasses`].
+pub trait ShadedOutputs: Sized {
+    const OUTPUTS: Outputs;
+    /// `shaded` is in passes wherever `OUTPUTS` asks for them.
+    fn from_shaded(shaded: Shaded) -> Self;
+}
+
+impl ShadedOutputs for ShadedFrame {
+    const OUTPUTS: Outputs = Outputs::Beauty;
+    fn from_shaded(shaded: Shaded) -> Self {
+        shaded.into_beauty()
+    }
+}
+
+impl ShadedOutputs for ShadedPasses {
+    const OUTPUTS: Outputs = Outputs::Passes;
+    fn from_shaded(shaded: Shaded) -> Self {
+        shaded.into_passes().expect("shaded into passes, as OUTPUTS asks")
     }
 }
 

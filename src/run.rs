@@ -1,9 +1,11 @@
 //! What each command does, between parsed options and the library.
 
 use crate::cli::{BenchArgs, ExampleArgs, ExampleName, ReferenceArgs, ShadeArgs, SweepArgs};
-use crate::executor::Executor;
+use crate::executor::{Executor, ShadeJob};
 use crate::reference::{render_reference, ReferenceLight, ReferenceOptions};
 use crate::scene::{output, Scene};
+use crate::shade::ShadedFrame;
+use crate::timing::StageTimings;
 use anyhow::{anyhow, Context, Result};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use std::io::IsTerminal;
@@ -21,9 +23,11 @@ pub fn shade(args: &ShadeArgs) -> Result<()> {
     let executor = Executor::select(args.shading.device, &settings)?;
     print_notices(&executor);
     let started = Instant::now();
-    let shaded = executor.shade_resolved_timed(&scene, &frame, &settings, args.shading.resolving());
+    let job = ShadeJob { resolving: Some(args.shading.resolving()), ..ShadeJob::new(&scene, &frame, &settings) };
+    let mut timings = StageTimings::default();
+    let shaded = executor.shade::<ShadedFrame>(&job, &mut timings);
     print_notices(&executor);
-    let (shaded, timings) = shaded?;
+    let shaded = shaded?;
     let elapsed = started.elapsed();
     let stem = format!("beauty.{frame_number:04}");
     let (width, height) = (shaded.width, shaded.height);

@@ -9,12 +9,13 @@
 //! The reference a sweep renders is direct light, so every configuration is shaded
 //! without bounce light (`--bounces 0`): the sweep measures the direct light's method.
 
-use crate::executor::{Executor, ExecutorError};
+use crate::executor::{Executor, ExecutorError, ShadeJob};
 use crate::plot::{pareto_front, Chart, Scale, Series};
 use crate::scene::{Frame, Light, Scene};
 use crate::sh::quadrature::gauss_legendre_on;
 use crate::sh::ExpMethod;
-use crate::shade::{Quality, ShadingSettings};
+use crate::shade::{Quality, ShadedFrame, ShadingSettings};
+use crate::timing::StageTimings;
 use serde::Serialize;
 use std::time::Instant;
 
@@ -162,7 +163,8 @@ pub fn run(
         let mut image = None;
         for _ in 0..repeats.max(1) {
             let started = Instant::now();
-            let shaded = executor.shade(scene, frame, &settings)?;
+            let job = ShadeJob { resolving: None, ..ShadeJob::new(scene, frame, &settings) };
+            let shaded: ShadedFrame = executor.shade(&job, &mut StageTimings::default())?;
             best = best.min(started.elapsed().as_secs_f64() * 1e3);
             image = Some(shaded);
         }

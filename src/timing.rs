@@ -43,6 +43,13 @@ impl StageTimings {
         }
     }
 
+    /// Adds each stage of `other` to its namesake here, or after the others.
+    pub fn add_all(&mut self, other: &StageTimings) {
+        for stage in &other.stages {
+            self.add(stage.name, stage.milliseconds, stage.clock);
+        }
+    }
+
     /// Adds the wall time since `since` to stage `name`.
     pub fn add_wall(&mut self, name: &'static str, since: Instant) {
         self.add(name, since.elapsed().as_secs_f64() * 1e3, Clock::Wall);

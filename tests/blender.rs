@@ -857,7 +857,7 @@ fn textured_materials_shade_as_blender_evaluates_them() {
     assert!(scene.colour_passes(), "the export says colour_passes");
     let frame = scene.frame(1).unwrap();
     let colours = frame.gbuffer.colours.as_ref().expect("the G-buffer holds the colour passes");
-    let shaded = logsh::shade::shade_frame(&scene, &frame, &ShadingSettings::default()).unwrap();
+    let shaded = support::cpu_beauty(&scene, &frame, &ShadingSettings::default()).unwrap();
     let (mut light, mut dark) = (Vec::new(), Vec::new());
     for (i, d) in colours.diffuse.iter().enumerate() {
         if frame.gbuffer.material[i] != 0 {
@@ -976,7 +976,7 @@ fn water_reflects_with_fresnel() {
     let scene = Scene::load(&out).unwrap();
     let frame = scene.frame(1).unwrap();
     let (g, camera) = (&frame.gbuffer, frame.camera.as_ref().unwrap());
-    let shaded = logsh::shade::shade_frame(&scene, &frame, &ShadingSettings::default()).unwrap();
+    let shaded = support::cpu_beauty(&scene, &frame, &ShadingSettings::default()).unwrap();
     let (mut worst, mut seen) = (0.0f64, Vec::new());
     for i in (0..g.material.len()).filter(|&i| g.material[i] != 0) {
         let p = g.position[i].map(f64::from);

@@ -15,7 +15,7 @@ use logsh::executor::Executor;
 use logsh::scene::{Frame, GBuffer, HeightMap, Material, Scene, SceneError, Sphere, SunLight};
 use logsh::sh::ExpMethod;
 use logsh::shade::bounce::BounceSettings;
-use logsh::shade::{shade_frame, Quality, ShadedFrame, ShadedPasses, ShadingSettings};
+use logsh::shade::{Quality, ShadedFrame, ShadedPasses, ShadingSettings};
 use logsh::synth::{self, GBufferLayout, SphereOverPlane};
 use std::path::Path;
 use std::sync::Arc;
@@ -228,7 +228,7 @@ impl Worst {
 /// Shades and checks: every channel finite and >= 0, alpha 1 on surfaces and 0 on the
 /// background. Returns the image and its largest surface colour channel.
 fn shade_checked(scene: &Scene, frame: &Frame, settings: &ShadingSettings, ctx: &str) -> (ShadedFrame, f64) {
-    let shaded = shade_frame(scene, frame, settings).unwrap_or_else(|e| panic!("{ctx}: {e}"));
+    let shaded = support::cpu_beauty(scene, frame, settings).unwrap_or_else(|e| panic!("{ctx}: {e}"));
     assert_eq!(shaded.rgba.len(), frame.gbuffer.material.len(), "{ctx}");
     let mut max = 0.0f64;
     for (i, (px, &m)) in shaded.rgba.iter().zip(&frame.gbuffer.material).enumerate() {
@@ -794,7 +794,8 @@ fn pit(dir: &Path, albedo: f32) -> (Scene, Frame) {
 fn bounced(scene: &Scene, frame: &Frame, bounces: usize, ctx: &str) -> ShadedPasses {
     let settings =
         ShadingSettings { bounce: BounceSettings { bounces, ..BounceSettings::DEFAULT }, ..ShadingSettings::default() };
-    let passes = Executor::cpu().shade_passes(scene, frame, &settings).unwrap_or_else(|e| panic!("{ctx}: {e}"));
+    let passes =
+        support::rendered_passes(&Executor::cpu(), scene, frame, &settings).unwrap_or_else(|e| panic!("{ctx}: {e}"));
     for (name, pass) in [
         ("diffuse", &passes.diffuse),
         ("indirect", &passes.indirect),

@@ -13,7 +13,7 @@ use crate::support;
 use logsh::gpu::{Gpu, GpuError, Specialisation};
 use logsh::scene::{Frame, GBuffer, Scene};
 use logsh::sh::ExpMethod;
-use logsh::shade::{shade_frame, GlossyMethod, ShadedFrame, ShadingSettings};
+use logsh::shade::{GlossyMethod, ShadedFrame, ShadingSettings};
 use logsh::sweep::unoccluded_value;
 use logsh::synth::{self, ExampleOptions, SphereOverPlane};
 use rayon::prelude::*;
@@ -70,14 +70,14 @@ fn difference(a: &ShadedFrame, b: &ShadedFrame, unit: f64) -> Difference {
 /// lavapipe and it refused the settings as beyond its loop budget (the refusal is what
 /// keeps its images from being silently wrong); the caller decides whether that is fine.
 fn check_parity(gpu: &Gpu, scene: &Scene, frame: &Frame, settings: &ShadingSettings, what: &str) -> Option<Difference> {
-    let on_gpu = match gpu.shade_frame(scene, frame, settings) {
+    let on_gpu = match support::gpu_beauty(gpu, scene, frame, settings) {
         Err(e @ GpuError::LoopBudget { .. }) if gpu.is_lavapipe() => {
             eprintln!("{what}: refused by lavapipe ({e})");
             return None;
         }
         other => other.unwrap_or_else(|e| panic!("{what}: gpu: {e}")),
     };
-    let cpu = shade_frame(scene, frame, settings).unwrap_or_else(|e| panic!("{what}: cpu: {e}"));
+    let cpu = support::cpu_beauty(scene, frame, settings).unwrap_or_else(|e| panic!("{what}: cpu: {e}"));
     let unit = unoccluded_value(&frame.light).max(1e-12);
     let d = difference(&on_gpu, &cpu, unit);
     eprintln!("{what}: worst {:.2e}, mean {:.2e}", d.worst, d.mean);
@@ -272,9 +272,9 @@ fn generic_program_gives_the_specialised_image() {
     for scene in [&scene, &spheres] {
         let frame = scene.frame(scene.default_frame()).unwrap();
         let settings = ShadingSettings::default();
-        let (specialised, _) = gpu.shade_frame_timed(scene, &frame, &settings, Specialisation::Full).unwrap();
+        let (specialised, _) = support::gpu_beauty_timed(gpu, scene, &frame, &settings, Specialisation::Full).unwrap();
         for less in [Specialisation::Order, Specialisation::None] {
-            let (generic, _) = gpu.shade_frame_timed(scene, &frame, &settings, less).unwrap();
+            let (generic, _) = support::gpu_beauty_timed(gpu, scene, &frame, &settings, less).unwrap();
             let d = difference(&generic, &specialised, unoccluded_value(&frame.light));
             assert!(d.worst <= 1e-4, "{}: {less:?} differs by {}", scene.dir.display(), d.worst);
         }
@@ -303,8 +303,8 @@ fn tiles_give_the_untiled_image() {
     let scene = small_dunes(dir.path());
     let frame = scene.frame(scene.default_frame()).unwrap();
     let settings = ShadingSettings::default();
-    let whole = gpu().unwrap().shade_frame(&scene, &frame, &settings).unwrap();
-    let pieces = tiled.shade_frame(&scene, &frame, &settings).unwrap();
+    let whole = support::gpu_beauty(gpu().unwrap(), &scene, &frame, &settings).unwrap();
+    let pieces = support::gpu_beauty(&tiled, &scene, &frame, &settings).unwrap();
     assert_eq!(tiled.tile_points(64 * 36), 1000);
     assert_eq!(whole.rgba, pieces.rgba, "three tiles of 1000 points and one frame-sized tile differ");
 }
@@ -321,15 +321,18 @@ fn frames_from_many_threads_take_turns() {
     let scenes = [Scene::load(&samples.join("spheres")).unwrap(), Scene::load(&samples.join("cones")).unwrap()];
     let frames: Vec<Frame> = scenes.iter().map(|s| s.frame(s.default_frame()).unwrap()).collect();
     let settings = ShadingSettings::default();
-    let shade = |i: usize| (i % 2, shared.shade_frame(&scenes[i % 2], &frames[i % 2], &settings).unwrap());
+    let shade = |i: usize| (i % 2, support::gpu_beauty(&shared, &scenes[i % 2], &frames[i % 2], &settings).unwrap());
     let from_threads: Vec<(usize, ShadedFrame)> = std::thread::scope(|threads| {
         let shading: Vec<_> = (0..8).map(|i| threads.spawn(move || shade(i))).collect();
         shading.into_iter().map(|t| t.join().unwrap()).collect()
     });
     let pool = rayon::ThreadPoolBuilder::new().num_threads(4).build().unwrap();
     let from_jobs: Vec<(usize, ShadedFrame)> = pool.install(|| (0..8usize).into_par_iter().map(shade).collect());
-    let alone: Vec<ShadedFrame> =
-        scenes.iter().zip(&frames).map(|(s, f)| gpu().unwrap().shade_frame(s, f, &settings).unwrap()).collect();
+    let alone: Vec<ShadedFrame> = scenes
+        .iter()
+        .zip(&frames)
+        .map(|(s, f)| support::gpu_beauty(gpu().unwrap(), s, f, &settings).unwrap())
+        .collect();
     for (k, shaded) in from_threads.iter().chain(&from_jobs) {
         assert_eq!(shaded.rgba, alone[*k].rgba, "scene {k}: a frame shaded beside seven others differs");
     }
@@ -344,7 +347,7 @@ fn frame_of_8192_squared_is_shaded_in_tiles() {
     let scene = Scene::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("gbuffers/spheres")).unwrap();
     let small = scene.frame(scene.default_frame()).unwrap();
     let settings = ShadingSettings::for_order(3);
-    let expected = shade_frame(&scene, &small, &settings).unwrap();
+    let expected = support::cpu_beauty(&scene, &small, &settings).unwrap();
     const SIDE: usize = 8192;
     let (w, h) = (small.gbuffer.width, small.gbuffer.height);
     let (x0, y0) = ((SIDE - w) / 2, (SIDE - h) / 2);
@@ -375,7 +378,7 @@ fn frame_of_8192_squared_is_shaded_in_tiles() {
     }
     let tiles = (SIDE * SIDE).div_ceil(gpu.tile_points(SIDE * SIDE));
     eprintln!("8192 x 8192 in {tiles} tile(s) of {} points", gpu.tile_points(SIDE * SIDE));
-    let shaded = gpu.shade_frame(&scene, &big, &settings).expect("8192 x 8192 frame");
+    let shaded = support::gpu_beauty(gpu, &scene, &big, &settings).expect("8192 x 8192 frame");
     assert_eq!((shaded.width, shaded.height), (SIDE, SIDE));
     let unit = unoccluded_value(&small.light);
     let mut worst = 0.0f64;
@@ -402,7 +405,7 @@ fn settings_beyond_lavapipes_loop_budget_are_refused_there() {
     let scene = Scene::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("gbuffers/spheres")).unwrap();
     let frame = scene.frame(scene.default_frame()).unwrap();
     let settings = ShadingSettings { exp: ExpMethod::Exact, ..ShadingSettings::for_order(8) };
-    match gpu.shade_frame(&scene, &frame, &settings) {
+    match support::gpu_beauty(gpu, &scene, &frame, &settings) {
         Err(GpuError::LoopBudget { needed, limit, .. }) => {
             assert!(gpu.is_lavapipe() && needed > limit);
         }
@@ -425,8 +428,8 @@ fn compositing_passes_match() {
         if scene.colour_passes() {
             check_parity(gpu, scene, &frame, &settings, "textured dunes, beauty");
         }
-        let cpu = logsh::shade::shade_frame_passes(scene, &frame, &settings).unwrap();
-        let on_gpu = gpu.shade_frame_passes(scene, &frame, &settings).unwrap();
+        let cpu = support::cpu_passes(scene, &frame, &settings).unwrap();
+        let on_gpu = support::gpu_passes(gpu, scene, &frame, &settings).unwrap();
         let unit = unoccluded_value(&frame.light).max(1e-12) as f32;
         let rgb = |v: &[[f32; 3]]| v.iter().flat_map(|c| c.iter().map(|x| x / unit)).collect::<Vec<f32>>();
         let rgba = |v: &[[f32; 4]]| v.iter().flat_map(|c| c.iter().map(|x| x / unit)).collect::<Vec<f32>>();
@@ -510,13 +513,13 @@ fn ground_plane_matches() {
     let ground = lowest.map(|(p, _)| f64::from(p[2])).fold(f64::INFINITY, f64::min);
     frame.ground = Some(ground);
     let settings = ShadingSettings::default();
-    let without = logsh::shade::shade_frame(&scene, &Frame { ground: None, ..frame.clone() }, &settings).unwrap();
-    let with = logsh::shade::shade_frame(&scene, &frame, &settings).unwrap();
+    let without = support::cpu_beauty(&scene, &Frame { ground: None, ..frame.clone() }, &settings).unwrap();
+    let with = support::cpu_beauty(&scene, &frame, &settings).unwrap();
     let changed = with.rgba.iter().zip(&without.rgba).filter(|(a, b)| (a[0] - b[0]).abs() > 1e-3).count();
     assert!(changed > 100, "the ground changes the spheres' pixels ({changed} changed)");
     check_parity(gpu, &scene, &frame, &settings, "spheres over a ground plane").expect("fits lavapipe's budget");
-    let cpu = logsh::shade::shade_frame_passes(&scene, &frame, &settings).unwrap();
-    let on_gpu = gpu.shade_frame_passes(&scene, &frame, &settings).unwrap();
+    let cpu = support::cpu_passes(&scene, &frame, &settings).unwrap();
+    let on_gpu = support::gpu_passes(gpu, &scene, &frame, &settings).unwrap();
     assert_close!(on_gpu.visibility, cpu.visibility, TOLERANCE, "ground plane: visibility");
     assert_close!(on_gpu.visibility_blockers, cpu.visibility_blockers, TOLERANCE, "ground plane: visibility_blockers");
 }
@@ -562,7 +565,7 @@ fn point_lamps_match() {
         frame.points.push(low_lamp);
         // The lamps must light the frame for the comparison to test them.
         let mean = |f: &logsh::scene::Frame| {
-            let shaded = shade_frame(scene, f, &ShadingSettings::default()).unwrap();
+            let shaded = support::cpu_beauty(scene, f, &ShadingSettings::default()).unwrap();
             shaded.rgba.iter().map(|p| f64::from(p[0] + p[1] + p[2])).sum::<f64>() / shaded.rgba.len() as f64
         };
         let unlit = logsh::scene::Frame { points: Vec::new(), ..frame.clone() };
@@ -685,8 +688,9 @@ fn bounce_light_matches() {
         ));
     }
     for (name, scene, frame, unit) in &cases {
-        let cpu = Executor::cpu().shade_passes(scene, frame, &settings).unwrap_or_else(|e| panic!("{name}: {e}"));
-        let gpu = on_gpu.shade_passes(scene, frame, &settings).unwrap_or_else(|e| panic!("{name}: {e}"));
+        let cpu = support::rendered_passes(&Executor::cpu(), scene, frame, &settings)
+            .unwrap_or_else(|e| panic!("{name}: {e}"));
+        let gpu = support::rendered_passes(&on_gpu, scene, frame, &settings).unwrap_or_else(|e| panic!("{name}: {e}"));
         assert!(cpu.indirect.iter().any(|v| v[1] > 0.0), "{name}: no bounce light");
         for (pass, a, b) in [
             ("indirect_heightfield", &cpu.indirect_heightfield, &gpu.indirect_heightfield),
@@ -738,11 +742,11 @@ fn visibility_grid_matches() {
     ];
     for (name, scene, frame) in &cases {
         let unit = unoccluded_value(&frame.light).max(1e-12);
-        let per_pixel = gpu.shade_frame(scene, frame, &ShadingSettings::default()).unwrap();
+        let per_pixel = support::gpu_beauty(gpu, scene, frame, &ShadingSettings::default()).unwrap();
         for grid in [2, 4] {
             let settings = ShadingSettings { visibility_grid: grid, ..ShadingSettings::default() };
-            let gridded = gpu.shade_frame(scene, frame, &settings).unwrap();
-            let cpu = shade_frame(scene, frame, &settings).unwrap();
+            let gridded = support::gpu_beauty(gpu, scene, frame, &settings).unwrap();
+            let cpu = support::cpu_beauty(scene, frame, &settings).unwrap();
             let d = difference(&gridded, &cpu, unit);
             eprintln!("{name}, visibility grid {grid}: worst {:.2e}, mean {:.2e}", d.worst, d.mean);
             assert!(d.worst <= TOLERANCE, "{name}, grid {grid}: pixel {} differs by {}", d.worst_pixel, d.worst);
@@ -754,8 +758,8 @@ fn visibility_grid_matches() {
 
     let (_, scene, frame) = &cases[0];
     let settings = ShadingSettings { visibility_grid: 2, ..ShadingSettings::default() };
-    let cpu = logsh::shade::shade_frame_passes(scene, frame, &settings).unwrap();
-    let on_gpu = gpu.shade_frame_passes(scene, frame, &settings).unwrap();
+    let cpu = support::cpu_passes(scene, frame, &settings).unwrap();
+    let on_gpu = support::gpu_passes(gpu, scene, frame, &settings).unwrap();
     let unit = unoccluded_value(&frame.light).max(1e-12) as f32;
     let rgba = |v: &[[f32; 4]]| v.iter().flat_map(|c| c.iter().map(|x| x / unit)).collect::<Vec<f32>>();
     assert_close!(rgba(&on_gpu.beauty), rgba(&cpu.beauty), TOLERANCE, "grid 2: beauty");
@@ -763,11 +767,12 @@ fn visibility_grid_matches() {
     assert_close!(on_gpu.visibility_heightfield, cpu.visibility_heightfield, TOLERANCE, "grid 2: heightfield");
     assert_close!(on_gpu.visibility_blockers, cpu.visibility_blockers, TOLERANCE, "grid 2: blockers");
 
-    let whole = gpu.shade_frame(scene, frame, &settings).unwrap();
+    let whole = support::gpu_beauty(gpu, scene, frame, &settings).unwrap();
     let tiled = Gpu::new().unwrap().with_max_tile_points(500);
-    let pieces = tiled.shade_frame(scene, frame, &settings).unwrap();
+    let pieces = support::gpu_beauty(&tiled, scene, frame, &settings).unwrap();
     assert_eq!(whole.rgba, pieces.rgba, "grid 2: five tiles of 500 points and one frame-sized tile differ");
 
-    let refused = own_device().shade_frame(scene, frame, &settings).err().map(|e| e.to_string()).unwrap_or_default();
+    let refused =
+        support::gpu_beauty(&own_device(), scene, frame, &settings).err().map(|e| e.to_string()).unwrap_or_default();
     assert!(refused.contains("--visibility-grid 2") && refused.contains("storage buffers"), "{refused}");
 }

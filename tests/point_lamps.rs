@@ -6,7 +6,7 @@ use crate::support;
 
 use logsh::scene::{HeightMap, Light, PointLight, Scene, Sphere};
 use logsh::shade::sun::cap_overlap;
-use logsh::shade::{shade_frame, ShadingSettings};
+use logsh::shade::ShadingSettings;
 use logsh::synth::{sphere_over_plane, SphereOverPlane, PLANE_MATERIAL};
 use std::f64::consts::PI;
 use std::sync::Arc;
@@ -130,7 +130,7 @@ fn only_what_is_nearer_than_the_lamp_blocks_it() {
         let lamp =
             PointLight { position: [0.0, 0.0, height], radius: 0.1, power: 100.0, color: [1.0; 3], soft_falloff: true };
         frame.points = vec![lamp];
-        let shaded = shade_frame(&scene, &frame, &ShadingSettings::default()).unwrap();
+        let shaded = support::cpu_beauty(&scene, &frame, &ShadingSettings::default()).unwrap();
         let (mut worst, mut darkest) = (0.0f64, f64::INFINITY);
         for (i, &m) in frame.gbuffer.material.iter().enumerate() {
             let p = frame.gbuffer.position[i].map(f64::from);
@@ -172,7 +172,7 @@ fn extreme_point_lamps_stay_finite() {
         ([0.0, 0.0, 2.0], 1e4, 1e6, false),
     ] {
         frame.points = vec![PointLight { position, radius, power, color: [1.0; 3], soft_falloff }];
-        let shaded = shade_frame(&scene, &frame, &ShadingSettings::default()).unwrap();
+        let shaded = support::cpu_beauty(&scene, &frame, &ShadingSettings::default()).unwrap();
         let what = format!("lamp at {position:?}, radius {radius}, power {power}");
         assert_finite(&shaded, &frame, position[2] < -1.0, &what);
     }

@@ -4,6 +4,7 @@
 //!
 //! `cargo test --test suite reference:: -- --nocapture` prints the measured figures.
 
+use crate::support;
 use logsh::heightfield::HeightField;
 use logsh::logsh::Lobe;
 use logsh::reference::{
@@ -430,7 +431,7 @@ fn ground_plane_hides_the_lower_hemisphere() {
 /// the lobe in log-SH, which order 4 blurs into a dull blob.
 #[test]
 fn prefiltered_glossy_and_its_occlusion_match_the_reference() {
-    use logsh::shade::{shade_frame, GlossyMethod, ShadingSettings};
+    use logsh::shade::{GlossyMethod, ShadingSettings};
     let dir = tempfile::tempdir().unwrap();
     let spec = SphereOverPlane {
         spheres: vec![Sphere::new([0.0, 1.0, 1.2], 1.0)],
@@ -457,7 +458,7 @@ fn prefiltered_glossy_and_its_occlusion_match_the_reference() {
     };
     let error = |glossy: GlossyMethod| {
         let settings = ShadingSettings { glossy, ..ShadingSettings::default() };
-        let shaded = shade_frame(&scene, &frame, &settings).unwrap();
+        let shaded = support::cpu_beauty(&scene, &frame, &settings).unwrap();
         let (mut sum, mut n) = (0.0, 0usize);
         for (i, &m) in frame.gbuffer.material.iter().enumerate() {
             if m == PLANE_MATERIAL {
@@ -497,7 +498,7 @@ fn a_sphere_over_a_bright_plane_bounces_as_the_reference_does() {
     println!("reference with one bounce: {:.1} s", started.elapsed().as_secs_f64());
     let bounce = BounceSettings { bounces: 1, stride: 1, ..BounceSettings::DEFAULT };
     let settings = ShadingSettings { bounce, ..Default::default() };
-    let passes = Executor::cpu().shade_passes(&scene, &frame, &settings).unwrap();
+    let passes = support::rendered_passes(&Executor::cpu(), &scene, &frame, &settings).unwrap();
     let g = &frame.gbuffer;
     let (mut truth, mut ours, mut abs, mut count) = (0.0, 0.0, 0.0, 0usize);
     let mut worst = (0.0f64, 0usize);

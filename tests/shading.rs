@@ -1,9 +1,10 @@
 //! Whole pixels against closed-form answers on analytic scenes in format v1, shaded
 //! through the same reader and kernel as `logsh shade`.
 
+use crate::support;
 use logsh::reference::{render_reference, ReferenceOptions};
 use logsh::scene::{Scene, Sphere};
-use logsh::shade::{shade_frame, ShadedFrame, ShadingSettings};
+use logsh::shade::{ShadedFrame, ShadingSettings};
 use logsh::synth::{
     analytic_placements, example_scene, sphere_over_plane, ExampleOptions, GBufferLayout, SphereOverPlane,
 };
@@ -61,7 +62,7 @@ fn sphere_over_plane_meets_the_error_bounds_at_every_order() {
         let settings = ShadingSettings::for_order(order);
         let (mut sum, mut count, mut worst) = (0.0, 0, 0.0f64);
         for (scene, frame, expected) in &scenes {
-            let shaded = shade_frame(scene, frame, &settings).unwrap();
+            let shaded = support::cpu_beauty(scene, frame, &settings).unwrap();
             let (mean, max, n) = errors(&shaded, expected, 1.0);
             assert!(n > 500, "too few plane pixels with a closed form: {n}");
             sum += mean * n as f64;
@@ -98,7 +99,7 @@ fn unoccluded_plane_comes_out_as_its_albedo() {
         let scene = Scene::load(&path).unwrap();
         let frame = scene.frame(1).unwrap();
         for order in 3..=8 {
-            let shaded = shade_frame(&scene, &frame, &ShadingSettings::for_order(order)).unwrap();
+            let shaded = support::cpu_beauty(&scene, &frame, &ShadingSettings::for_order(order)).unwrap();
             let plane: Vec<&[f32; 4]> =
                 shaded.rgba.iter().zip(&frame.gbuffer.material).filter(|(_, &m)| m == 1).map(|(p, _)| p).collect();
             assert!(!plane.is_empty());
@@ -131,9 +132,9 @@ fn f32_and_f64_kernels_agree() {
     let (scene, frame, _) = analytic_scene(dir.path(), &spec);
     for order in [3, 4, 8] {
         let mut settings = ShadingSettings::for_order(order);
-        let single = shade_frame(&scene, &frame, &settings).unwrap();
+        let single = support::cpu_beauty(&scene, &frame, &settings).unwrap();
         settings.precision = logsh::shade::Precision::F64;
-        let double = shade_frame(&scene, &frame, &settings).unwrap();
+        let double = support::cpu_beauty(&scene, &frame, &settings).unwrap();
         let a: Vec<f32> = single.rgba.iter().flatten().copied().collect();
         let b: Vec<f32> = double.rgba.iter().flatten().copied().collect();
         assert_close!(a, b, PRECISION_TOLERANCE, "f32 against f64 at order {order}");
@@ -159,7 +160,7 @@ fn receivers_inside_and_touching_blockers_stay_finite() {
                 let mut settings = ShadingSettings::for_order(order);
                 settings.epsilon = epsilon;
                 settings.ratio_attenuation = ratio;
-                let shaded = shade_frame(&scene, &frame, &settings).unwrap();
+                let shaded = support::cpu_beauty(&scene, &frame, &settings).unwrap();
                 for px in &shaded.rgba {
                     assert!(
                         px.iter().all(|c| c.is_finite() && *c >= 0.0 && *c < 10.0),
@@ -178,7 +179,7 @@ fn sample_scene_with_height_field_water_and_phong_shades_finite() {
     let scene = Scene::load(dir.path()).unwrap();
     for number in scene.frame_numbers() {
         let frame = scene.frame(number).unwrap();
-        let shaded = shade_frame(&scene, &frame, &ShadingSettings::default()).unwrap();
+        let shaded = support::cpu_beauty(&scene, &frame, &ShadingSettings::default()).unwrap();
         let mut surface = 0;
         for (px, &m) in shaded.rgba.iter().zip(&frame.gbuffer.material) {
             assert!(px.iter().all(|c| c.is_finite() && *c >= 0.0), "frame {number}: {px:?}");
@@ -220,7 +221,7 @@ fn colour_passes_carry_a_texture_into_the_shade() {
     let textured = dunes_scene(dir.path(), "textured", 48, 27, 0.2);
     assert!(textured.colour_passes() && plain.colour_passes());
     let settings = ShadingSettings::default();
-    let shade = |scene: &Scene| shade_frame(scene, &scene.frame(1).unwrap(), &settings).unwrap().rgba;
+    let shade = |scene: &Scene| support::cpu_beauty(scene, &scene.frame(1).unwrap(), &settings).unwrap().rgba;
     let factors = ratios(&shade(&textured), &shade(&plain));
     let near = |f: f64, to: f64| (f - to).abs() <= 1e-4 * to.max(0.04);
     let bad: Vec<&f64> = factors.iter().filter(|&&f| !near(f, 1.0) && !near(f, 0.2) && !near(f, 0.04)).collect();
@@ -257,12 +258,12 @@ fn visibility_grid_follows_per_pixel_visibility() {
     example_scene("dunes", dir.path(), ExampleOptions { width: 96, height: 54, ..Default::default() }).unwrap();
     let scene = Scene::load(dir.path()).unwrap();
     let frame = scene.frame(1).unwrap();
-    let per_pixel = shade_frame(&scene, &frame, &ShadingSettings::default()).unwrap();
+    let per_pixel = support::cpu_beauty(&scene, &frame, &ShadingSettings::default()).unwrap();
     let open = logsh::compare::unoccluded_value(&frame).expect("a map");
     let unit = (open[0] + open[1] + open[2]) / 3.0;
     for (grid, bound) in [(2, 0.004), (4, 0.01)] {
         let settings = ShadingSettings { visibility_grid: grid, ..ShadingSettings::default() };
-        let gridded = shade_frame(&scene, &frame, &settings).unwrap();
+        let gridded = support::cpu_beauty(&scene, &frame, &settings).unwrap();
         let (mut sum, mut count) = (0.0, 0usize);
         for ((a, b), &m) in gridded.rgba.iter().zip(&per_pixel.rgba).zip(&frame.gbuffer.material) {
             assert!(a.iter().all(|v| v.is_finite()), "grid {grid}: a pixel is not finite");
@@ -283,10 +284,10 @@ fn visibility_grid_follows_per_pixel_visibility() {
         ..Default::default()
     };
     let (scene, frame, expected) = analytic_scene(dir.path().join("spheres").as_path(), &spec);
-    let per_pixel = errors(&shade_frame(&scene, &frame, &ShadingSettings::default()).unwrap(), &expected, 1.0);
+    let per_pixel = errors(&support::cpu_beauty(&scene, &frame, &ShadingSettings::default()).unwrap(), &expected, 1.0);
     for grid in [2, 4] {
         let settings = ShadingSettings { visibility_grid: grid, ..ShadingSettings::default() };
-        let (mean, max, count) = errors(&shade_frame(&scene, &frame, &settings).unwrap(), &expected, 1.0);
+        let (mean, max, count) = errors(&support::cpu_beauty(&scene, &frame, &settings).unwrap(), &expected, 1.0);
         println!("sphere over plane, grid {grid}: mean {mean:.4} max {max:.4} over {count} pixels (every pixel: {:.4} {:.4})", per_pixel.0, per_pixel.1);
         // The mean stays; the largest error grows where the contact shadow under the
         // sphere changes fastest, a block's visibility standing for its neighbours'

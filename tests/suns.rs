@@ -9,7 +9,7 @@ use crate::support;
 use logsh::reference::{render_reference, ReferenceOptions};
 use logsh::scene::{Light, Scene, Sphere, SunLight};
 use logsh::shade::sun::cap_overlap;
-use logsh::shade::{shade_frame, ShadingSettings};
+use logsh::shade::ShadingSettings;
 use logsh::synth::{sphere_over_plane, SphereOverPlane, PLANE_MATERIAL};
 use std::f64::consts::PI;
 use std::sync::Arc;
@@ -74,7 +74,7 @@ fn extreme_suns_stay_finite() {
         let direction = direction.map(|c| c / length);
         frame.suns =
             vec![SunLight { direction, half_angle: (0.5 * angle_degrees).to_radians(), strength, color: [1.0; 3] }];
-        let shaded = shade_frame(&scene, &frame, &ShadingSettings::default()).unwrap();
+        let shaded = support::cpu_beauty(&scene, &frame, &ShadingSettings::default()).unwrap();
         assert_finite(&shaded, &frame, direction[2] < -0.1, &format!("sun {direction:?} {angle_degrees} deg"));
     }
 }
@@ -145,7 +145,7 @@ fn a_map_sun_is_shaded_as_a_sharp_light() {
     let truth = render_reference(&scene, &frame, &options, &|_| {}).unwrap();
     let error = |sharp_lights: bool| {
         let settings = ShadingSettings { sharp_lights, ..Default::default() };
-        let shaded = shade_frame(&scene, &frame, &settings).unwrap();
+        let shaded = support::cpu_beauty(&scene, &frame, &settings).unwrap();
         let (mut sum, mut n) = (0.0, 0usize);
         for (i, &m) in frame.gbuffer.material.iter().enumerate() {
             if m != 0 {

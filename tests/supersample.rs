@@ -180,7 +180,7 @@ fn adaptive_shading_matches_every_sample_from_fewer() {
     let settings = logsh::shade::ShadingSettings::default();
     let shade = |every_sample| {
         let resolving = logsh::shade::Resolving { every_sample, ..Default::default() };
-        executor.shade_resolved_timed(&scene, &frame, &settings, resolving).unwrap()
+        support::resolved_beauty(&executor, &scene, &frame, &settings, resolving).unwrap()
     };
     let ((adaptive, timings), (every, _)) = (shade(false), shade(true));
     let (shaded, all) = timings.samples.expect("adaptive shading counts its samples");

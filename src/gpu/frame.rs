@@ -11,12 +11,12 @@ use super::layout::{
 use super::program::{Features, MarchShape, ShadeProgram, Specialisation, VisibilityBlocks, LAVAPIPE_LOOP_LIMIT};
 use super::pyramid::HeightFieldBuffers;
 use super::{Gpu, GpuError};
-use crate::scene::{Frame, Scene};
+
 use crate::shade::compositing::{assemble, Pixel};
 use crate::shade::kernel::reflect_view;
 use crate::shade::visibility_grid::{is_direct_surface, BlockPoints};
-use crate::shade::ShadingSettings;
-use crate::shade::{pixel_work, FramePlan, PixelPasses, PixelWork, PlannedKernel, ShadedFrame, ShadedPasses, Tint};
+
+use crate::shade::{pixel_work, FramePlan, Outputs, PixelPasses, PixelWork, PlannedKernel, Shaded, ShadedFrame, Tint};
 use crate::timing::{Clock, StageTimings};
 use rayon::prelude::*;
 use std::sync::Arc;
@@ -36,8 +36,8 @@ enum TileWork {
 type ConsumeTile<'c> = dyn FnMut(usize, &[TileWork], &[GpuShaded]) + 'c;
 
 /// A frame's plan with the program generated from it and its compiled pipelines.
-struct PreparedFrame<'a> {
-    plan: FramePlan<'a>,
+struct PreparedFrame<'p, 'a> {
+    plan: &'p FramePlan<'a>,
     program: ShadeProgram,
     pipelines: Arc<ShadePipelines>,
 }
@@ -62,90 +62,72 @@ struct BoundFrame {
 }
 
 impl Gpu {
-    /// Shades one frame (the GPU counterpart of [`crate::shade::shade_frame`]).
-    pub fn shade_frame(
+    /// Shades every pixel of `plan` into `outputs` (the GPU counterpart of
+    /// [`crate::shade::cpu::shade_plan`]), adding its stages to `timings`;
+    /// `specialisation` below [`Specialisation::Full`] only measures what specialisation
+    /// saves.
+    pub fn shade_plan(
         &self,
-        scene: &Scene,
-        frame: &Frame,
-        settings: &ShadingSettings,
-    ) -> Result<ShadedFrame, GpuError> {
-        Ok(self.shade_frame_timed(scene, frame, settings, Specialisation::Full)?.0)
-    }
-
-    /// Shades one frame and times each stage; `specialisation` below
-    /// [`Specialisation::Full`] only measures what specialisation saves.
-    pub fn shade_frame_timed(
-        &self,
-        scene: &Scene,
-        frame: &Frame,
-        settings: &ShadingSettings,
+        plan: &FramePlan,
+        outputs: Outputs,
         specialisation: Specialisation,
-    ) -> Result<(ShadedFrame, StageTimings), GpuError> {
-        let g = &frame.gbuffer;
-        let mut rgba = vec![[0.0f32; 4]; g.width * g.height];
-        let timings = self.shade_tiles(scene, frame, settings, specialisation, false, &mut |start, work, shaded| {
-            rgba[start..start + work.len()].par_iter_mut().zip(work.par_iter().zip(shaded)).for_each(
-                |(out, (w, s))| {
-                    *out = match *w {
-                        TileWork::Fixed(colour) => colour,
-                        TileWork::Shaded(tint) => {
-                            let rgb = |v: [f32; 4]| [v[0], v[1], v[2]];
-                            tint.beauty(rgb(s.diffuse), rgb(s.specular))
-                        }
-                    };
-                },
-            );
-        })?;
-        Ok((ShadedFrame { width: g.width, height: g.height, rgba }, timings))
-    }
-
-    /// Shades one frame into compositing passes and visibility terms (the GPU
-    /// counterpart of [`crate::shade::shade_frame_passes`]).
-    pub fn shade_frame_passes(
-        &self,
-        scene: &Scene,
-        frame: &Frame,
-        settings: &ShadingSettings,
-    ) -> Result<ShadedPasses, GpuError> {
-        let g = &frame.gbuffer;
-        let mut pixels = vec![Pixel::fixed([0.0; 4]); g.width * g.height];
-        self.shade_tiles(scene, frame, settings, Specialisation::Full, true, &mut |start, work, shaded| {
-            for ((w, s), out) in work.iter().zip(shaded).zip(&mut pixels[start..]) {
-                *out = match *w {
-                    TileWork::Fixed(colour) => Pixel::fixed(colour),
-                    TileWork::Shaded(tint) => {
-                        let rgb = |v: [f32; 4]| [v[0], v[1], v[2]];
-                        let seen = PixelPasses {
-                            diffuse: rgb(s.diffuse),
-                            specular: rgb(s.specular),
-                            visibility: s.visibility[0],
-                            visibility_heightfield: s.visibility[1],
-                            visibility_blockers: s.visibility[2],
-                        };
-                        Pixel::shaded(seen, tint)
-                    }
-                };
+        timings: &mut StageTimings,
+    ) -> Result<Shaded, GpuError> {
+        let g = &plan.frame.gbuffer;
+        let rgb = |v: [f32; 4]| [v[0], v[1], v[2]];
+        Ok(match outputs {
+            Outputs::Beauty => {
+                let mut rgba = vec![[0.0f32; 4]; g.width * g.height];
+                self.shade_tiles(plan, specialisation, false, timings, &mut |start, work, shaded| {
+                    rgba[start..start + work.len()].par_iter_mut().zip(work.par_iter().zip(shaded)).for_each(
+                        |(out, (w, s))| {
+                            *out = match *w {
+                                TileWork::Fixed(colour) => colour,
+                                TileWork::Shaded(tint) => tint.beauty(rgb(s.diffuse), rgb(s.specular)),
+                            };
+                        },
+                    );
+                })?;
+                Shaded::Beauty(ShadedFrame { width: g.width, height: g.height, rgba })
             }
-        })?;
-        Ok(assemble(frame, &pixels))
+            Outputs::Passes => {
+                let mut pixels = vec![Pixel::fixed([0.0; 4]); g.width * g.height];
+                self.shade_tiles(plan, specialisation, true, timings, &mut |start, work, shaded| {
+                    for ((w, s), out) in work.iter().zip(shaded).zip(&mut pixels[start..]) {
+                        *out = match *w {
+                            TileWork::Fixed(colour) => Pixel::fixed(colour),
+                            TileWork::Shaded(tint) => {
+                                let seen = PixelPasses {
+                                    diffuse: rgb(s.diffuse),
+                                    specular: rgb(s.specular),
+                                    visibility: s.visibility[0],
+                                    visibility_heightfield: s.visibility[1],
+                                    visibility_blockers: s.visibility[2],
+                                };
+                                Pixel::shaded(seen, tint)
+                            }
+                        };
+                    }
+                })?;
+                Shaded::Passes(assemble(plan.frame, &pixels))
+            }
+        })
     }
 
     /// The frame tile by tile: `consume(first pixel, what each pixel of the tile is, its
     /// shaded points)`.
     fn shade_tiles(
         &self,
-        scene: &Scene,
-        frame: &Frame,
-        settings: &ShadingSettings,
+        plan: &FramePlan,
         specialisation: Specialisation,
         passes: bool,
+        timings: &mut StageTimings,
         consume: &mut ConsumeTile,
-    ) -> Result<StageTimings, GpuError> {
+    ) -> Result<(), GpuError> {
         let _turn = self.one_frame_at_a_time.lock();
-        let prepared = self.prepare(scene, frame, settings, specialisation, passes)?;
-        let mut timings = prepared.plan.timings.clone();
-        let bound = self.bind(&prepared, &mut timings)?;
-        let pixels = frame.gbuffer.width * frame.gbuffer.height;
+        let prepared = self.prepare(plan, specialisation, passes, timings)?;
+        let bound = self.bind(&prepared, timings)?;
+        let pixels = plan.frame.gbuffer.width * plan.frame.gbuffer.height;
         let mut points = vec![GpuPoint::default(); bound.tile];
         let mut work = vec![TileWork::Fixed([0.0; 4]); bound.tile];
         for start in (0..pixels).step_by(bound.tile) {
@@ -153,24 +135,21 @@ impl Gpu {
             let started = Instant::now();
             pack_tile(&prepared, start, &mut points[..count], &mut work[..count]);
             timings.add_wall("frame walk", started);
-            self.run_tile(&bound, start, &points[..count], &mut timings, |shaded| {
-                consume(start, &work[..count], shaded)
-            })?;
+            self.run_tile(&bound, start, &points[..count], timings, |shaded| consume(start, &work[..count], shaded))?;
         }
-        Ok(timings)
+        Ok(())
     }
 
-    /// The frame's plan, its program (refused where lavapipe's loop budget would cut it
+    /// The plan's program (refused where lavapipe's loop budget would cut it
     /// short) and the program's pipeline, timing "tables" and "compile".
-    fn prepare<'a>(
+    fn prepare<'p, 'a>(
         &self,
-        scene: &'a Scene,
-        frame: &'a Frame,
-        settings: &ShadingSettings,
+        plan: &'p FramePlan<'a>,
         specialisation: Specialisation,
         passes: bool,
-    ) -> Result<PreparedFrame<'a>, GpuError> {
-        let mut plan = FramePlan::new(scene, frame, settings)?;
+        timings: &mut StageTimings,
+    ) -> Result<PreparedFrame<'p, 'a>, GpuError> {
+        let (scene, frame, settings) = (plan.scene, plan.frame, &plan.settings);
         let started = Instant::now();
         let PlannedKernel::F32(kernel) = plan.kernel.as_ref() else {
             return Err(GpuError::double_precision());
@@ -182,16 +161,16 @@ impl Gpu {
         let grid = if occluded { settings.visibility_grid } else { 1 };
         let features = Features { contents: plan.contents, specialisation, passes, grid };
         let program = ShadeProgram::new(kernel, features, march);
-        plan.timings.add_wall("tables", started);
+        timings.add_wall("tables", started);
         if self.is_lavapipe() {
-            self.check_loop_budget(&program, &plan, march)?;
+            self.check_loop_budget(&program, plan, march)?;
         }
         if grid > 1 {
             self.check_grid_bindings(grid)?;
         }
         let started = Instant::now();
         let pipelines = self.shade_pipelines(&program.source, grid > 1)?;
-        plan.timings.add_wall("compile", started);
+        timings.add_wall("compile", started);
         Ok(PreparedFrame { plan, program, pipelines })
     }
 

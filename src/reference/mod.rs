@@ -5,7 +5,7 @@
 //! # What a pixel is
 //!
 //! The materials of docs/design.md, "Scene format v1", with the same frame walk as
-//! [`crate::shade::shade_frame`]: `diffuse` and `heightfield` are `albedo * integral L V
+//! [`crate::shade::cpu::shade_plan`]: `diffuse` and `heightfield` are `albedo * integral L V
 //! max(n.w, 0)/pi`; `phong` adds `specular * integral L V (r+1)/(2 pi) max(R.w, 0)^r`
 //! (no cosine); `water` is `tint *` the shading of the reflection G-buffer's point with
 //! its own material, seen from the water point (a background reflection is the light's

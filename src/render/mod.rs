@@ -34,10 +34,11 @@ pub mod bands;
 pub mod frames;
 pub mod progress;
 
-use crate::executor::{Bounce, Executor};
+use crate::executor::{Bounce, Executor, ShadeJob};
 use crate::scene::output::{write_exr_layers, OutputChannel, SampleType};
 use crate::scene::{output, Scene, SceneError};
 use crate::shade::{ShadedPasses, ShadingSettings};
+use crate::timing::StageTimings;
 use anyhow::Context;
 use progress::Progress;
 use std::path::{Path, PathBuf};
@@ -344,7 +345,8 @@ fn shade_frame(
         }
         FramePasses { passes, transfer: Some(transfer) }
     } else {
-        let passes = executor.shade_passes_resolved(scene, data, settings, options.resolving, bounce)?;
+        let job = ShadeJob { resolving: Some(options.resolving), bounce, ..ShadeJob::new(scene, data, settings) };
+        let passes = executor.shade(&job, &mut StageTimings::default())?;
         FramePasses { passes, transfer: None }
     })
 }

@@ -2,45 +2,28 @@
 //! (`logsh shade`, `bench`) or compositing passes (`logsh render`). It is the oracle the
 //! GPU pass is compared with, and the fallback where no GPU can shade a frame.
 
-use super::compositing::{assemble, Pixel, ShadedPasses};
-use super::frame::{pixel_work, PixelWork, ShadeError, ShadedFrame, Tint};
+use super::compositing::{assemble, Pixel};
+use super::frame::{pixel_work, PixelWork, ShadedFrame, Tint};
 use super::kernel::{Caps, KnownAlongSun, Occluders, ShadingKernel, SurfacePoint};
 use super::plan::{FramePlan, PlannedKernel};
-use super::settings::ShadingSettings;
+use super::shaded::{Outputs, Shaded};
 use super::visibility_grid::{is_direct_surface, GridVisibility, VisibilityGrid};
-use crate::scene::{Frame, Scene};
 use crate::sh::Real;
 use crate::timing::StageTimings;
 use rayon::prelude::*;
 use std::time::Instant;
 
-/// Shades one frame of `scene` with `settings`.
-pub fn shade_frame(scene: &Scene, frame: &Frame, settings: &ShadingSettings) -> Result<ShadedFrame, ShadeError> {
-    Ok(shade_frame_timed(scene, frame, settings)?.0)
-}
-
-/// [`shade_frame`], timing its stages: the tables, the height-field pyramid, the pixels.
-pub fn shade_frame_timed(
-    scene: &Scene,
-    frame: &Frame,
-    settings: &ShadingSettings,
-) -> Result<(ShadedFrame, StageTimings), ShadeError> {
-    let plan = FramePlan::new(scene, frame, settings)?;
-    let (rgba, timings) = shade_plan::<[f32; 4]>(&plan);
-    let g = &frame.gbuffer;
-    Ok((ShadedFrame { width: g.width, height: g.height, rgba }, timings))
-}
-
-/// Shades one frame of `scene` into compositing passes; the checks and errors are
-/// [`shade_frame`]'s.
-pub fn shade_frame_passes(
-    scene: &Scene,
-    frame: &Frame,
-    settings: &ShadingSettings,
-) -> Result<ShadedPasses, ShadeError> {
-    let plan = FramePlan::new(scene, frame, settings)?;
-    let (pixels, _) = shade_plan::<Pixel>(&plan);
-    Ok(assemble(frame, &pixels))
+/// Shades every pixel of `plan` into `outputs`, adding the stages "pyramid", "visibility
+/// grid" and "shade" to `timings`.
+pub fn shade_plan(plan: &FramePlan, outputs: Outputs, timings: &mut StageTimings) -> Shaded {
+    let g = &plan.frame.gbuffer;
+    match outputs {
+        Outputs::Beauty => {
+            let rgba = shade_plan_pixels::<[f32; 4]>(plan, timings);
+            Shaded::Beauty(ShadedFrame { width: g.width, height: g.height, rgba })
+        }
+        Outputs::Passes => Shaded::Passes(assemble(plan.frame, &shade_plan_pixels::<Pixel>(plan, timings))),
+    }
 }
 
 /// What the CPU executor writes per pixel.
@@ -95,10 +78,8 @@ impl PixelResult for Pixel {
     }
 }
 
-/// Filters the pyramid and shades every pixel of the plan, timing "pyramid" and "shade"
-/// after the plan's own "tables".
-fn shade_plan<P: PixelResult>(plan: &FramePlan) -> (Vec<P>, StageTimings) {
-    let mut timings = plan.timings.clone();
+/// Filters the pyramid and shades every pixel of the plan, timing "pyramid" and "shade".
+fn shade_plan_pixels<P: PixelResult>(plan: &FramePlan, timings: &mut StageTimings) -> Vec<P> {
     let started = Instant::now();
     let pyramid = plan.terrain.as_ref().map(|terrain| terrain.horizon_pyramid(&plan.settings));
     if pyramid.is_some() {
@@ -106,17 +87,16 @@ fn shade_plan<P: PixelResult>(plan: &FramePlan) -> (Vec<P>, StageTimings) {
     }
     let blockers = (!plan.blockers.is_empty()).then_some(&plan.blockers);
     let occluders = Occluders { blockers, horizons: pyramid.as_ref() };
-    let pixels = match plan.kernel.as_ref() {
-        PlannedKernel::F32(kernel) => shade_pixels::<P, f32>(kernel, occluders, plan, &mut timings),
-        PlannedKernel::F64(kernel) => shade_pixels::<P, f64>(kernel, occluders, plan, &mut timings),
-    };
-    (pixels, timings)
+    match plan.kernel.as_ref() {
+        PlannedKernel::F32(kernel) => shade_pixels::<P, f32>(kernel, occluders, plan, timings),
+        PlannedKernel::F64(kernel) => shade_pixels::<P, f64>(kernel, occluders, plan, timings),
+    }
 }
 
 /// Shades the frame row by row; the sphere caps of a row's points are summed first, in
 /// packets ([`ShadingKernel::sum_caps`]).
 ///
-/// With a visibility grid ([`ShadingSettings::visibility_grid`] above 1, and something to
+/// With a visibility grid ([`ShadingSettings::visibility_grid`](super::ShadingSettings::visibility_grid) above 1, and something to
 /// occlude), the horizons and caps of one pixel per block are computed first (the stage
 /// "visibility grid"), and each pixel interpolates them ([`VisibilityGrid`]).
 fn shade_pixels<P: PixelResult, T: Real>(

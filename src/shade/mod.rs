@@ -20,14 +20,15 @@ pub mod plan;
 pub mod point;
 pub mod resolve;
 pub mod settings;
+pub mod shaded;
 pub mod sharp_lights;
 pub mod sun;
 pub mod visibility_grid;
 
 pub use compositing::ShadedPasses;
-pub use cpu::{shade_frame, shade_frame_passes, shade_frame_timed};
 pub use frame::{pixel_source, pixel_work, work_of, PixelSource, PixelWork, ShadeError, ShadedFrame, Tint};
 pub use kernel::{CapSums, Caps, Exponentiator, KnownAlongSun, Occluders, PixelPasses, ShadingKernel, SurfacePoint};
 pub use plan::{FrameContents, FramePlan, PlannedKernel, Terrain};
 pub use resolve::{PixelFilter, Resolve, Resolving};
 pub use settings::{default_epsilon, GlossyMethod, LightWindow, Precision, Quality, SettingsError, ShadingSettings};
+pub use shaded::{Outputs, Shaded};

@@ -16,7 +16,7 @@ use crate::shade::{
 use clap::ValueEnum;
 use rayon::prelude::*;
 
-/// The passes of `frame` (as [`crate::shade::shade_frame_passes`] gives them) and its
+/// The passes of `frame` (as [`crate::shade::cpu::shade_plan`] shades them) and its
 /// transfer layers.
 pub fn shade_with_transfer(
     scene: &Scene,

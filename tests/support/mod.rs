@@ -2,7 +2,10 @@
 //! actual difference.
 #![allow(dead_code)]
 
+pub mod executors;
 pub mod sharp;
+
+pub use executors::*;
 
 /// `to`, made a copy of the files of the scene directory `from` (its folders left out).
 pub fn copy_scene(from: &std::path::Path, to: &std::path::Path) {

@@ -5,7 +5,7 @@
 
 use logsh::reference::{render_reference, Integration, ReferenceLight, ReferenceOptions};
 use logsh::scene::{Frame, Scene, SceneError};
-use logsh::shade::{shade_frame, ShadedFrame, ShadingSettings};
+use logsh::shade::{ShadedFrame, ShadingSettings};
 use logsh::synth::PLANE_MATERIAL;
 use std::path::Path;
 
@@ -24,7 +24,7 @@ pub struct PlaneComparison {
 impl PlaneComparison {
     /// `closed_form(p)` is the plane's value at `p` and the open plane's there.
     pub fn measure(scene: &Scene, frame: &Frame, closed_form: impl Fn([f64; 3]) -> (f64, f64)) -> Self {
-        let shaded = shade_frame(scene, frame, &ShadingSettings::default()).unwrap();
+        let shaded = super::cpu_beauty(scene, frame, &ShadingSettings::default()).unwrap();
         let options = ReferenceOptions {
             light: ReferenceLight::EnvironmentMap,
             integration: Integration::Auto,
