@@ -306,19 +306,18 @@ fn lit(visibility: ptr<function, array<f32, COUNT_CAP>>, lobe: u32, axis: vec3<f
 }
 
 // A Phong material's glossy lobe, at `material.sharp_tables` (program.rs,
-// material_slots): its shape (LOBE_GGX, LOBE_PHONG, or LOBE_SH for the lobe in log-SH)
-// and width (alpha or the exponent), its core's 1 - cos and patch radius, and the cone
-// test's share of the occlusion; then, for a prefiltered lobe, the cone's weights, the
-// albedo table and the open lobe's ZH.
+// material_slots): its head (GpuLobeHead: LOBE_GGX, LOBE_PHONG, or LOBE_SH for the lobe
+// in log-SH, and its width, core and cone share); then, for a prefiltered lobe, the
+// cone's weights, the albedo table and the open lobe's ZH.
 fn lobe_kind(material: GpuMaterial) -> u32 {
-    return table_u32(material.sharp_tables);
+    return load_GpuLobeHead(material.sharp_tables).kind;
 }
 
 // The glossy lobe's value at cos theta = z from its axis, widened by a patch of angular
 // radius `patch_radius` (glossy.rs, SharpLobe::widened and SharpLobe::value; the log-SH
 // lobe is the same Phong lobe).
 fn widened_lobe_value(material: GpuMaterial, patch_radius: f32, z: vec4<f32>) -> vec4<f32> {
-    let width = tables[material.sharp_tables + 1u];
+    let width = load_GpuLobeHead(material.sharp_tables).width;
     let pi = 3.141592653589793;
     let blur = 0.25 * patch_radius * patch_radius;
     if lobe_kind(material) == LOBE_GGX {
@@ -344,10 +343,11 @@ fn albedo_lookup(offset: u32, mu: f32) -> f32 {
 // prefiltered_glossy): A(n . v) P(R) O, with n . v = n . R, O the cone test of the lobe's
 // core, the log-SH ratio (from `occlusion`), or a blend.
 fn prefiltered_glossy(occlusion: ptr<function, array<f32, COUNT_CAP>>, material: GpuMaterial, p: vec3<f32>, n: vec3<f32>, object: u32, r: vec3<f32>) -> vec3<f32> {
-    let core = tables[material.sharp_tables + 2u];
-    let core_patch = tables[material.sharp_tables + 3u];
-    let share = tables[material.sharp_tables + 4u];
-    let weights = material.sharp_tables + LOBE_HEAD;
+    let head = load_GpuLobeHead(material.sharp_tables);
+    let core = head.core_one_minus_cos;
+    let core_patch = head.core_patch;
+    let share = head.cone_share;
+    let weights = material.sharp_tables + GpuLobeHead_FLOATS;
     let albedo = weights + DISK_DIRECTIONS;
     let open_lobe = albedo + ALBEDO_ENTRIES;
     var by_cone = 0.0;
@@ -454,20 +454,18 @@ fn map_texel(map: u32, width: u32, column: u32, row: u32) -> vec3<f32> {
 fn sunlit(p: vec3<f32>, n: vec3<f32>, object: u32, r: vec3<f32>, material: GpuMaterial, diffuse: ptr<function, vec3<f32>>, specular: ptr<function, vec3<f32>>) {
     var albedo = 1.0;
     if material.kind == MATERIAL_PHONG && lobe_kind(material) != LOBE_SH {
-        albedo = albedo_lookup(material.sharp_tables + LOBE_HEAD + DISK_DIRECTIONS, dot(n, r));
+        albedo = albedo_lookup(material.sharp_tables + GpuLobeHead_FLOATS + DISK_DIRECTIONS, dot(n, r));
     }
     for (var s = 0u; s < SUN_COUNT; s++) {
-        let base = T_SUNS + 8u * s;
-        let axis = vec3<f32>(tables[base], tables[base + 1u], tables[base + 2u]);
-        let integral = vec3<f32>(tables[base + 4u], tables[base + 5u], tables[base + 6u]);
-        add_disk_light(p, n, object, r, material, albedo, axis, tables[base + 3u], tables[base + 7u], 3.0e38, integral, diffuse, specular);
+        let sun = load_GpuSun(T_SUNS + GpuSun_FLOATS * s);
+        add_disk_light(p, n, object, r, material, albedo, sun.axis.xyz, sun.axis.w, sun.integral.w, 3.0e38, sun.integral.xyz, diffuse, specular);
     }
     for (var s = 0u; s < POINT_COUNT; s++) {
         // The lamp's disk seen from p (src/scene/light.rs, PointLight::seen_from).
-        let base = T_POINTS + 8u * s;
-        let d = vec3<f32>(tables[base], tables[base + 1u], tables[base + 2u]) - p;
-        let radius = tables[base + 3u];
-        let intensity = vec3<f32>(tables[base + 4u], tables[base + 5u], tables[base + 6u]);
+        let lamp = load_GpuPointLamp(T_POINTS + GpuPointLamp_FLOATS * s);
+        let d = lamp.position.xyz - p;
+        let radius = lamp.position.w;
+        let intensity = lamp.intensity.xyz;
         let distance = length(d);
         var axis = n;
         if distance > 0.0 {
@@ -477,7 +475,7 @@ fn sunlit(p: vec3<f32>, n: vec3<f32>, object: u32, r: vec3<f32>, material: GpuMa
         let d2 = max(distance * distance, POINT_NEAREST * POINT_NEAREST);
         var sin2 = min(r2 / d2, 1.0);
         var spread = max(d2, r2);
-        if tables[base + 7u] > 0.5 {
+        if lamp.intensity.w > 0.5 {
             sin2 = r2 / (d2 + r2);
             spread = d2 + r2;
         }
@@ -552,7 +550,7 @@ fn shade(@builtin(global_invocation_id) id: vec3<u32>) {
                     // The log-SH occlusion's visibility: the caps and the unfolded horizons.
                     var occlusion = caps;
 //#if HEIGHTFIELD
-                    if enabled(FEATURE_HEIGHTFIELD) && tables[material.sharp_tables + 4u] < 1.0 {
+                    if enabled(FEATURE_HEIGHTFIELD) && load_GpuLobeHead(material.sharp_tables).cone_share < 1.0 {
                         add_horizons(a.xyz, n, false, from_grid, &horizons, &occlusion);
                     }
 //#endif

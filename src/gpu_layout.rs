@@ -29,10 +29,49 @@ pub trait GpuStruct: bytemuck::Pod {
     const NAME: &'static str;
     /// `(field name, WGSL type)` in declaration order.
     fn fields() -> Vec<(&'static str, &'static str)>;
+    /// Each field's byte offset in the Rust struct, in declaration order.
+    fn offsets() -> Vec<usize>;
     /// The WGSL declaration.
     fn wgsl() -> String {
         let fields: String = Self::fields().iter().map(|(name, ty)| format!("    {name}: {ty},\n")).collect();
         format!("struct {} {{\n{fields}}}\n", Self::NAME)
+    }
+}
+
+/// A record kept in the shading pass's `tables` (an `array<f32>`, [`crate::gpu`]'s
+/// program tables) rather than in a buffer of its own: the host pushes it as its
+/// bytes ([`TableRecord::floats`]), the shader reads it with `load_NAME(offset)`,
+/// generated from the same field list and the Rust offsets.
+pub trait TableRecord: GpuStruct {
+    /// The record as the `f32`s of the tables, a `u32` field by its bits.
+    fn floats(&self) -> Vec<f32> {
+        bytemuck::cast_slice(std::slice::from_ref(self)).to_vec()
+    }
+
+    /// `fn load_NAME(base: u32) -> NAME`, reading the record at `tables[base]`, and
+    /// `const NAME_FLOATS`, its length in the tables.
+    fn wgsl_loader() -> String {
+        let at = |offset: usize, k: usize| format!("tables[base + {}u]", offset / 4 + k);
+        let values: Vec<String> = Self::fields()
+            .iter()
+            .zip(Self::offsets())
+            .map(|(&(_, ty), offset)| match ty {
+                "f32" => at(offset, 0),
+                "u32" => format!("bitcast<u32>({})", at(offset, 0)),
+                "vec4<f32>" => format!("vec4<f32>({})", (0..4).map(|k| at(offset, k)).collect::<Vec<_>>().join(", ")),
+                "vec4<u32>" => format!(
+                    "bitcast<vec4<u32>>(vec4<f32>({}))",
+                    (0..4).map(|k| at(offset, k)).collect::<Vec<_>>().join(", ")
+                ),
+                other => unreachable!("no WgslType spells {other}"),
+            })
+            .collect();
+        let name = Self::NAME;
+        let floats = std::mem::size_of::<Self>() / 4;
+        format!(
+            "const {name}_FLOATS: u32 = {floats}u;\nfn load_{name}(base: u32) -> {name} {{\n    return {name}({});\n}}\n",
+            values.join(", ")
+        )
     }
 }
 
@@ -49,6 +88,9 @@ macro_rules! gpu_struct {
             const NAME: &'static str = stringify!($name);
             fn fields() -> Vec<(&'static str, &'static str)> {
                 vec![$((stringify!($field), <$ty as WgslType>::WGSL)),*]
+            }
+            fn offsets() -> Vec<usize> {
+                vec![$(std::mem::offset_of!($name, $field)),*]
             }
         }
     };
@@ -209,6 +251,86 @@ gpu_struct! {
     }
 }
 
+gpu_struct! {
+    /// A sun of the shading pass's tables (src/shade/sun.rs, [`TableRecord`]).
+    GpuSun {
+        /// Direction (xyz) and 1 - cos of the disk's half-angle (w).
+        axis: [f32; 4],
+        /// The disk integral, radiance times solid angle (rgb), and the patch radius of
+        /// its directions (w).
+        integral: [f32; 4],
+    }
+}
+
+gpu_struct! {
+    /// A point lamp of the shading pass's tables (src/scene/light.rs, PointLight;
+    /// [`TableRecord`]).
+    GpuPointLamp {
+        /// Position (xyz) and radius (w).
+        position: [f32; 4],
+        /// Power times colour over 4 pi (rgb), and 1 for Soft Falloff (w).
+        intensity: [f32; 4],
+    }
+}
+
+gpu_struct! {
+    /// The head of a glossy lobe's tables (src/shade/glossy.rs, [`TableRecord`]), before
+    /// its cone weights, albedo table and open lobe's ZH where it is prefiltered.
+    GpuLobeHead {
+        /// `LOBE_GGX`, `LOBE_PHONG` or `LOBE_SH`.
+        kind: u32,
+        /// GGX alpha or the Phong exponent.
+        width: f32,
+        /// 1 - cos of the lobe core's angular radius.
+        core_one_minus_cos: f32,
+        /// The patch radius of the core's directions.
+        core_patch: f32,
+        /// The cone test's share of the occlusion (the log-SH ratio has the rest).
+        cone_share: f32,
+    }
+}
+
+impl TableRecord for GpuSun {}
+impl TableRecord for GpuPointLamp {}
+impl TableRecord for GpuLobeHead {}
+
+/// What the WGSL declarations and the layout test read of one shared struct.
+pub struct Declared {
+    pub name: &'static str,
+    pub wgsl: String,
+    /// Byte offsets of the fields in the Rust struct.
+    pub offsets: Vec<usize>,
+    pub size: usize,
+}
+
+fn declared<T: GpuStruct>() -> Declared {
+    Declared { name: T::NAME, wgsl: T::wgsl(), offsets: T::offsets(), size: std::mem::size_of::<T>() }
+}
+
+/// Every struct the host and the shaders share: the one list the declarations and the
+/// layout test read.
+pub fn shared_structs() -> Vec<Declared> {
+    vec![
+        declared::<ShadeParams>(),
+        declared::<GpuPoint>(),
+        declared::<GpuShaded>(),
+        declared::<GpuBlockerNode>(),
+        declared::<GpuMaterial>(),
+        declared::<GpuLevel>(),
+        declared::<GpuStep>(),
+        declared::<GpuDecimation>(),
+        declared::<GpuTap>(),
+        declared::<GpuSun>(),
+        declared::<GpuPointLamp>(),
+        declared::<GpuLobeHead>(),
+    ]
+}
+
+/// The loaders of the records of the shading pass's tables ([`TableRecord`]).
+pub fn wgsl_table_loaders() -> String {
+    [GpuSun::wgsl_loader(), GpuPointLamp::wgsl_loader(), GpuLobeHead::wgsl_loader()].concat()
+}
+
 /// Invocations per workgroup of every compute pass (`@workgroup_size(WORKGROUP_SIZE)`).
 pub const WORKGROUP_SIZE: u32 = 64;
 
@@ -231,20 +353,7 @@ pub const SLOT_UNKNOWN: u32 = u32::MAX - 1;
 
 /// WGSL declarations of every shared struct and constant, prepended to each shader.
 pub fn wgsl_declarations() -> String {
-    let mut out = String::new();
-    for declaration in [
-        ShadeParams::wgsl(),
-        GpuPoint::wgsl(),
-        GpuShaded::wgsl(),
-        GpuBlockerNode::wgsl(),
-        GpuMaterial::wgsl(),
-        GpuLevel::wgsl(),
-        GpuStep::wgsl(),
-        GpuDecimation::wgsl(),
-        GpuTap::wgsl(),
-    ] {
-        out += &declaration;
-    }
+    let mut out: String = shared_structs().into_iter().map(|declared| declared.wgsl).collect();
     out += &format!("const WORKGROUP_SIZE: u32 = {WORKGROUP_SIZE}u;\n");
     out += &format!(
         "const FEATURE_HEIGHTFIELD: u32 = {FEATURE_HEIGHTFIELD}u;\nconst FEATURE_BLOCKERS: u32 = {FEATURE_BLOCKERS}u;\n\
@@ -275,57 +384,24 @@ mod tests {
         (members.iter().map(|m| m.offset).collect(), *span)
     }
 
-    fn check<T: GpuStruct>(rust_offsets: &[usize]) {
-        let (offsets, span) = naga_layout(T::NAME);
-        assert_eq!(span as usize, std::mem::size_of::<T>(), "{}: WGSL size vs Rust size", T::NAME);
-        let offsets: Vec<usize> = offsets.into_iter().map(|o| o as usize).collect();
-        assert_eq!(offsets, rust_offsets, "{}: WGSL offsets vs Rust offsets", T::NAME);
-    }
-
-    macro_rules! offsets {
-        ($t:ty, $($f:ident),*) => { [$(std::mem::offset_of!($t, $f)),*] };
+    #[test]
+    fn shared_structs_have_the_same_layout_on_both_sides() {
+        for declared in shared_structs() {
+            let (offsets, span) = naga_layout(declared.name);
+            assert_eq!(span as usize, declared.size, "{}: WGSL size vs Rust size", declared.name);
+            let offsets: Vec<usize> = offsets.into_iter().map(|o| o as usize).collect();
+            assert_eq!(offsets, declared.offsets, "{}: WGSL offsets vs Rust offsets", declared.name);
+        }
     }
 
     #[test]
-    fn shared_structs_have_the_same_layout_on_both_sides() {
-        check::<ShadeParams>(&offsets!(
-            ShadeParams,
-            point_count,
-            node_count,
-            log_epsilon,
-            hyb_threshold,
-            heightfield_rect,
-            feature_bits,
-            order,
-            coefficient_count,
-            quad_rows,
-            cluster_ratio,
-            quad_azimuths,
-            heightfield_peak,
-            tile_start,
-            image_width,
-            grid_columns,
-            grid_rows,
-            pad
-        ));
-        check::<GpuPoint>(&offsets!(GpuPoint, position_slot, normal, reflected));
-        check::<GpuShaded>(&offsets!(GpuShaded, diffuse, specular, visibility));
-        check::<GpuBlockerNode>(&offsets!(GpuBlockerNode, bounds, equivalent, skip, leaf, object, pad));
-        check::<GpuMaterial>(&offsets!(GpuMaterial, albedo, specular, kind, phong_lobe, sharp_map, sharp_tables));
-        check::<GpuLevel>(&offsets!(GpuLevel, offset, columns, rows, pad));
-        check::<GpuStep>(&offsets!(GpuStep, distance, inv_distance, level, pad));
-        check::<GpuDecimation>(&offsets!(
-            GpuDecimation,
-            in_columns,
-            in_rows,
-            out_columns,
-            out_rows,
-            ranges_x,
-            ranges_y,
-            scratch_offset,
-            level_offset
-        ));
-        check::<GpuTap>(&offsets!(GpuTap, index, weight));
+    fn table_record_loaders_are_valid_wgsl() {
+        let tables = "@group(0) @binding(1) var<storage, read> tables: array<f32>;\n";
+        let source = wgsl_declarations() + tables + &wgsl_table_loaders();
+        let module = naga::front::wgsl::parse_str(&source).unwrap_or_else(|e| panic!("{}", e.emit_to_string(&source)));
+        naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::empty())
+            .validate(&module)
+            .expect("the loaders validate");
     }
 
     #[test]

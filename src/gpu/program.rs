@@ -10,7 +10,10 @@
 //! and there is no per-pixel cost for choosing them at run time. Pipelines are cached by
 //! source text: a sequence compiles once.
 
-use super::layout::{wgsl_declarations, GpuMaterial, MATERIAL_DIFFUSE, MATERIAL_PHONG, NO_MAP};
+use super::layout::{
+    wgsl_declarations, wgsl_table_loaders, GpuLobeHead, GpuMaterial, GpuPointLamp, GpuSun, TableRecord,
+    MATERIAL_DIFFUSE, MATERIAL_PHONG, NO_MAP,
+};
 use crate::heightfield::{HorizonSettings, LevelReconstruction, PyramidPlan, ScaleMax};
 use crate::logsh::cap_scale;
 use crate::scene::Material;
@@ -261,8 +264,8 @@ impl ProgramTables {
         t.push("T_TANGENT", kernel.tangent.iter().copied());
         t.push("T_DIFFUSE", kernel.diffuse.zonal.iter().copied().chain([kernel.diffuse.log_peak as f32]));
         let (materials, slots) = material_slots(kernel, &mut t);
-        // The disk pattern (x, then y) and the suns (src/shade/sun.rs): direction,
-        // 1 - cos of the half-angle, disk integral, patch radius.
+        // The disk pattern (x, then y), the suns (src/shade/sun.rs) and the point lamps
+        // (src/scene/light.rs, PointLight).
         let pattern = disk_pattern();
         t.push("T_DISK", pattern.iter().map(|p| p[0] as f32).chain(pattern.iter().map(|p| p[1] as f32)));
         t.push(
@@ -270,18 +273,24 @@ impl ProgramTables {
             kernel.suns.iter().flat_map(|sun| {
                 let (d, i) = (sun.light.direction, sun.disk_integral);
                 let one_minus_cos = 1.0 - sun.light.half_angle.cos();
-                [d[0], d[1], d[2], one_minus_cos, i[0], i[1], i[2], sun.disk.patch].map(|v| v as f32)
+                GpuSun {
+                    axis: [d[0], d[1], d[2], one_minus_cos].map(|v| v as f32),
+                    integral: [i[0], i[1], i[2], sun.disk.patch].map(|v| v as f32),
+                }
+                .floats()
             }),
         );
-        // The point lamps (src/scene/light.rs, PointLight): position, radius, power times
-        // colour over 4 pi, and 1 for Soft Falloff.
         t.push(
             "T_POINTS",
             kernel.points.iter().flat_map(|lamp| {
                 let [x, y, z] = lamp.position;
                 let i = lamp.color.map(|c| f64::from(lamp.power) * f64::from(c) / (4.0 * std::f64::consts::PI));
                 let soft = if lamp.soft_falloff { 1.0 } else { 0.0 };
-                [x, y, z, lamp.radius, i[0], i[1], i[2], soft].map(|v| v as f32)
+                GpuPointLamp {
+                    position: [x, y, z, lamp.radius].map(|v| v as f32),
+                    intensity: [i[0], i[1], i[2], soft].map(|v| v as f32),
+                }
+                .floats()
             }),
         );
 
@@ -338,16 +347,17 @@ fn material_slots(kernel: &ShadingKernel<f32>, t: &mut TableBuilder) -> (Vec<Gpu
                     SharpLobe::Phong { exponent } => (LOBE_PHONG, exponent),
                 };
                 let core = sharp.lobe.core_radius();
-                let head = [
-                    f32::from_bits(kind),
-                    width as f32,
-                    (1.0 - core.cos()) as f32,
-                    patch_radius(core) as f32,
-                    sharp.cone_share as f32,
-                ];
+                let head = GpuLobeHead {
+                    kind,
+                    width: width as f32,
+                    core_one_minus_cos: (1.0 - core.cos()) as f32,
+                    core_patch: patch_radius(core) as f32,
+                    cone_share: sharp.cone_share as f32,
+                };
                 let weights = sharp.cone_weights.map(|w| w as f32);
                 let tables = t.push_unnamed(
-                    head.into_iter()
+                    head.floats()
+                        .into_iter()
                         .chain(weights)
                         .chain(sharp.albedo.iter().copied())
                         .chain(sharp.open.iter().copied()),
@@ -355,7 +365,8 @@ fn material_slots(kernel: &ShadingKernel<f32>, t: &mut TableBuilder) -> (Vec<Gpu
                 (map, tables as u32)
             }
             (Material::Phong { exponent, .. }, None) => {
-                (NO_MAP, t.push_unnamed([f32::from_bits(LOBE_SH), *exponent, 0.0, 0.0, 0.0]) as u32)
+                let head = GpuLobeHead { kind: LOBE_SH, width: *exponent, ..Default::default() };
+                (NO_MAP, t.push_unnamed(head.floats()) as u32)
             }
             _ => (NO_MAP, 0),
         };
@@ -379,8 +390,6 @@ fn material_slots(kernel: &ShadingKernel<f32>, t: &mut TableBuilder) -> (Vec<Gpu
 const LOBE_GGX: u32 = 0;
 const LOBE_PHONG: u32 = 1;
 const LOBE_SH: u32 = 2;
-/// Values before a lobe's cone weights: shape, width, core 1 - cos, patch, cone share.
-const LOBE_HEAD: usize = 5;
 
 /// The light and the tables of the kernel's exponentiation; returns the shape of the
 /// quadrature grid, which the program sums in separable form ([`SeparableQuadrature`]).
@@ -530,7 +539,6 @@ fn prelude(
         ("LOBE_GGX", U32(LOBE_GGX as usize)),
         ("LOBE_PHONG", U32(LOBE_PHONG as usize)),
         ("LOBE_SH", U32(LOBE_SH as usize)),
-        ("LOBE_HEAD", U32(LOBE_HEAD)),
         ("GRID_SIZE", U32(features.grid.max(1))),
         ("GRID_HEADER", U32(VisibilityBlocks::HEADER)),
         ("GRID_HORIZONS", U32(blocks.horizons)),
@@ -553,7 +561,8 @@ fn compose_source(
 ) -> String {
     let exp = kernel.exp.method;
     let blocks = VisibilityBlocks::of(kernel, features, march);
-    let mut source = wgsl_declarations() + &prelude(kernel, features, march, tables.quadrature, blocks);
+    let mut source =
+        wgsl_declarations() + &wgsl_table_loaders() + &prelude(kernel, features, march, tables.quadrature, blocks);
     for (name, offset) in &tables.builder.offsets {
         source += &Constant::U32(*offset).declare(name);
     }
