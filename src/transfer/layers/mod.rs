@@ -1,9 +1,9 @@
 //! The transfer layers of a frame in memory, their EXR channels and header, and reading
 //! them back (the table in the [module doc](super)).
 
+mod read;
+
 use super::lobe_code;
-use crate::scene::exr_read::{read_with_headers, ChannelFile};
-use crate::scene::exr_zip::Target;
 use crate::scene::output::{OutputChannel, SampleType};
 use crate::scene::{LightSource, SceneError};
 use crate::sh::{coefficient_count, MAX_ORDER, MIN_ORDER};
@@ -11,7 +11,6 @@ use crate::shade::bounce::IndirectParts;
 use crate::shade::glossy::SharpLobe;
 use crate::shade::kernel::{GlossyTransfer, PointTransfer};
 use crate::shade::Tint;
-use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -194,9 +193,6 @@ impl TransferHeader {
         Ok(())
     }
 }
-
-/// A layer's channels in the file, each with its place among a pixel's values.
-type ChannelNames = Vec<(String, usize)>;
 
 /// Whether an EXR whose headers are `meta` records transfer layers.
 pub fn holds_transfer(meta: &exr::meta::MetaData) -> bool {
@@ -588,288 +584,6 @@ impl TransferFrame {
     pub fn read(file: &Path) -> Result<TransferFrame, SceneError> {
         Self::read_reusing(file, None)
     }
-
-    /// [`read`](Self::read) into the memory of `spare`, a frame read before (of any
-    /// size), where there is one; its `P` and `N` where no passes share them any longer.
-    /// A frame's layers are 151 MB at 960x540 (`cones`: three transfer layers at order
-    /// 4), and freshly allocated each of their 37,000 pages faults as it is first written.
-    pub fn read_reusing(file: &Path, spare: Option<TransferFrame>) -> Result<TransferFrame, SceneError> {
-        const WHAT: &str = "a frame with transfer layers";
-        let (bytes, meta) = read_with_headers(file, WHAT)?;
-        let header = header_of(file, &meta)?;
-        let channels = ChannelFile::new(file, WHAT, bytes, &meta, "sh_diffuse_0.R")?;
-        let (width, height) = channels.size();
-        let n = width * height;
-        let count = coefficient_count(header.sh.order);
-        let sh_names = |name: &str| -> Vec<(String, usize)> {
-            (0..count).map(|k| (format!("{name}_{}.{}", k - k % 4, ["R", "G", "B", "A"][k % 4]), k)).collect()
-        };
-        let has_sh = |name: &str| channels.has(&format!("{name}_0.R"));
-        let (has_heightfield, has_blockers) = (has_sh("sh_heightfield"), has_sh("sh_blockers"));
-        if has_heightfield != has_blockers {
-            return Err(SceneError::invalid(file, "has one of sh_heightfield and sh_blockers without the other"));
-        }
-        if has_heightfield != (header.heightfield && header.blockers) {
-            return Err(SceneError::invalid(
-                file,
-                "holds sh_heightfield and sh_blockers where its header does not name both a height field and \
-                 blockers, or lacks them where it does",
-            ));
-        }
-        let has_sun_lamps = channels.has("sun_lamps_diffuse.R");
-        if has_sun_lamps == header.sun_lamps.is_empty() {
-            return Err(SceneError::invalid(
-                file,
-                "holds sun_lamps_diffuse and sun_lamps_specular where its header lists no Sun lamp, or lacks them \
-                 where it does",
-            ));
-        }
-        // The sectors the header records (a missing channel is then named below), or in
-        // a file that holds the layer without recording them, its channels if they are as
-        // many as such a file kept.
-        let horizon_sectors = match (channels.has(&horizon_channel(0)), header.horizon_sectors, &header.settings) {
-            (false, None, _) => 0,
-            // Sun lamps, or suns a render with sharp lights takes out of a map, over a field.
-            (_, recorded, Some(settings))
-                if header.heightfield && (!header.sun_lamps.is_empty() || settings.sharp_lights) =>
-            {
-                let azimuths = settings.horizon.directions;
-                let held = || (0..=azimuths).take_while(|&k| channels.has(&horizon_channel(k))).count();
-                match recorded {
-                    Some(sectors) if (1..=azimuths).contains(&sectors) => sectors,
-                    Some(sectors) => {
-                        return Err(SceneError::invalid(
-                            file,
-                            format!("keeps its horizons in {sectors} sectors, not 1 to its {azimuths} azimuths"),
-                        ))
-                    }
-                    None => match held() {
-                        held if UNRECORDED_SECTORS.iter().any(|&kept| held == kept.min(azimuths)) => held,
-                        held => {
-                            return Err(SceneError::invalid(
-                                file,
-                                format!(
-                                    "holds {held} horizon channels from horizon.0 without recording its sectors, \
-                                     where such a file kept {} of its {azimuths} azimuths",
-                                    UNRECORDED_SECTORS.map(|kept| kept.min(azimuths).to_string()).join(" or ")
-                                ),
-                            ))
-                        }
-                    },
-                }
-            }
-            _ => {
-                return Err(SceneError::invalid(
-                    file,
-                    "holds horizon channels, or records their sectors, where its header lists no Sun lamp and no \
-                     sharp lights over a height field, or no settings",
-                ))
-            }
-        };
-        // Every value is written by `fill` below, so a spare's old values are left in place.
-        let mut spare = spare.unwrap_or_else(|| TransferFrame::new(0, 0, header.clone(), false, false, 0));
-        let sh_layer = |layer: &mut Option<Vec<f32>>, present: bool| {
-            present.then(|| sized(layer.take().unwrap_or_default(), n * count))
-        };
-        let mut diffuse = sized(std::mem::take(&mut spare.diffuse), n * count);
-        let mut unoccluded = sized(std::mem::take(&mut spare.unoccluded), n * count);
-        let mut heightfield = sh_layer(&mut spare.heightfield, has_heightfield);
-        let mut blockers = sh_layer(&mut spare.blockers, has_blockers);
-        let mut specular = sh_layer(&mut spare.specular, has_sh("sh_specular"));
-        let mut albedo = sized(spare.albedo, n);
-        let mut specular_colour = sized(spare.specular_colour, n);
-        let mut lamps_diffuse = sized(spare.lamps_diffuse, n);
-        let mut lamps_specular = sized(spare.lamps_specular, n);
-        let colour_layer = |layer: Option<Vec<[f32; 3]>>| has_sun_lamps.then(|| sized(layer.unwrap_or_default(), n));
-        let mut sun_lamps_diffuse = colour_layer(spare.sun_lamps_diffuse);
-        let mut sun_lamps_specular = colour_layer(spare.sun_lamps_specular);
-        let mut glossy_direction = sized(spare.glossy_direction, n);
-        let mut position = unshared(spare.position, n);
-        let mut normal = unshared(spare.normal, n);
-        let mut glossy_lobe = sized(spare.glossy_lobe, n);
-        let mut glossy_weight = sized(spare.glossy_weight, n);
-        let mut alpha = sized(spare.alpha, n);
-        let mut horizons =
-            (horizon_sectors > 0).then(|| sized(spare.horizons.unwrap_or_default(), n * horizon_sectors));
-        let bounce_names = ["indirect_heightfield.", "indirect_blockers."];
-        let mut bounce = channels.has("indirect_heightfield.R").then(|| {
-            let [heightfield, blockers] = spare.bounce.map(|b| [b.heightfield, b.blockers]).unwrap_or_default();
-            [sized(heightfield, n), sized(blockers, n)]
-        });
-        let (position_values, normal_values) = (
-            std::sync::Arc::get_mut(&mut position).expect("unshared"),
-            std::sync::Arc::get_mut(&mut normal).expect("unshared"),
-        );
-        let named = |layer: &str, names: &[&str]| -> Vec<(String, usize)> {
-            names.iter().enumerate().map(|(k, c)| (format!("{layer}{c}"), k)).collect()
-        };
-        let (rgb, xyz) = (["R", "G", "B"], ["X", "Y", "Z"]);
-        let mut targets = vec![
-            Target { values: &mut diffuse, stride: count, channels: sh_names("sh_diffuse") },
-            Target { values: &mut unoccluded, stride: count, channels: sh_names("sh_unoccluded") },
-            Target { values: albedo.as_flattened_mut(), stride: 3, channels: named("albedo.", &rgb) },
-            Target { values: specular_colour.as_flattened_mut(), stride: 3, channels: named("specular_colour.", &rgb) },
-            Target { values: lamps_diffuse.as_flattened_mut(), stride: 3, channels: named("lamps_diffuse.", &rgb) },
-            Target { values: lamps_specular.as_flattened_mut(), stride: 3, channels: named("lamps_specular.", &rgb) },
-            Target {
-                values: glossy_direction.as_flattened_mut(),
-                stride: 3,
-                channels: named("glossy_direction.", &xyz),
-            },
-            Target { values: position_values.as_flattened_mut(), stride: 3, channels: named("P.", &xyz) },
-            Target { values: normal_values.as_flattened_mut(), stride: 3, channels: named("N.", &xyz) },
-            Target { values: &mut glossy_lobe, stride: 1, channels: named("glossy_lobe.", &["V"]) },
-            Target {
-                values: glossy_weight.as_flattened_mut(),
-                stride: 2,
-                channels: named("glossy_weight.", &["X", "Y"]),
-            },
-            Target { values: &mut alpha, stride: 1, channels: named("", &["A"]) },
-        ];
-        for (layer, name) in
-            [(&mut heightfield, "sh_heightfield"), (&mut blockers, "sh_blockers"), (&mut specular, "sh_specular")]
-        {
-            if let Some(values) = layer {
-                targets.push(Target { values, stride: count, channels: sh_names(name) });
-            }
-        }
-        for (layer, name) in
-            [(&mut sun_lamps_diffuse, "sun_lamps_diffuse."), (&mut sun_lamps_specular, "sun_lamps_specular.")]
-        {
-            if let Some(values) = layer {
-                targets.push(Target { values: values.as_flattened_mut(), stride: 3, channels: named(name, &rgb) });
-            }
-        }
-        if let Some(values) = &mut horizons {
-            let names = horizon_channels(horizon_sectors).into_iter().enumerate().map(|(k, name)| (name, k));
-            targets.push(Target { values, stride: horizon_sectors, channels: names.collect() });
-        }
-        for (values, name) in bounce.iter_mut().flatten().zip(bounce_names) {
-            targets.push(Target { values: values.as_flattened_mut(), stride: 3, channels: named(name, &rgb) });
-        }
-        channels.fill(file, WHAT, &mut targets)?;
-        drop(targets);
-        let lobes = header.lobes.len();
-        let last = lobe_code::PREFILTERED + lobes as f32 - 1.0;
-        if let Some(i) = glossy_lobe
-            .par_iter()
-            .position_first(|&c| !(c == c.round() && (0.0..=last.max(lobe_code::SH)).contains(&c)))
-        {
-            return Err(SceneError::invalid(
-                file,
-                format!(
-                    "glossy_lobe.V is {} at pixel ({}, {}), not a lobe of the header",
-                    glossy_lobe[i],
-                    i % width,
-                    i / width
-                ),
-            ));
-        }
-        if specular.is_none() && glossy_lobe.par_iter().any(|&c| c >= lobe_code::SH) {
-            return Err(SceneError::invalid(file, "its pixels read sh_specular, which it does not hold"));
-        }
-        // A horizon bounds a turned lamp's shadow: one below 0 or not a number would
-        // bound it wrongly (infinite bounds nothing, and is kept where none was marched).
-        // Checked a chunk at a time, as the finite values below, then found.
-        let below_zero = horizons.as_ref().filter(|values| !every_value(values, |x| x >= 0.0));
-        if let Some(i) = below_zero.and_then(|values| values.iter().position(|v| !(*v >= 0.0))) {
-            let (pixel, k) = (i / horizon_sectors, i % horizon_sectors);
-            return Err(SceneError::invalid(
-                file,
-                format!(
-                    "channel {} is {} at pixel ({}, {}), where a horizon tangent is at least 0",
-                    horizon_channels(horizon_sectors)[k],
-                    horizons.as_ref().map_or(0.0, |values| values[i]),
-                    pixel % width,
-                    pixel / width
-                ),
-            ));
-        }
-        let finite = |v: &[f32]| every_value(v, f32::is_finite);
-        let all_finite = finite(&diffuse)
-            && finite(&unoccluded)
-            && [&heightfield, &blockers, &specular].iter().all(|l| l.as_ref().is_none_or(|v| finite(v)))
-            && [&albedo, &specular_colour, &lamps_diffuse, &lamps_specular, &glossy_direction]
-                .iter()
-                .all(|l| finite(l.as_flattened()))
-            && [&sun_lamps_diffuse, &sun_lamps_specular]
-                .iter()
-                .all(|l| l.as_ref().is_none_or(|v| finite(v.as_flattened())))
-            && finite(glossy_weight.as_flattened())
-            && finite(&alpha)
-            && bounce.iter().flatten().all(|l| finite(l.as_flattened()));
-        if !all_finite {
-            // Named by the file's channel, with its first pixel that is not finite (rare:
-            // a damaged file).
-            let mut layers: Vec<(&[f32], ChannelNames)> =
-                vec![(&diffuse, sh_names("sh_diffuse")), (&unoccluded, sh_names("sh_unoccluded"))];
-            for (name, layer) in
-                [("sh_heightfield", &heightfield), ("sh_blockers", &blockers), ("sh_specular", &specular)]
-            {
-                layers.extend(layer.as_deref().map(|v| (v, sh_names(name))));
-            }
-            for (name, layer) in [
-                ("albedo.", &albedo),
-                ("specular_colour.", &specular_colour),
-                ("lamps_diffuse.", &lamps_diffuse),
-                ("lamps_specular.", &lamps_specular),
-            ] {
-                layers.push((layer.as_flattened(), named(name, &rgb)));
-            }
-            layers.push((glossy_direction.as_flattened(), named("glossy_direction.", &xyz)));
-            for (name, layer) in
-                [("sun_lamps_diffuse.", &sun_lamps_diffuse), ("sun_lamps_specular.", &sun_lamps_specular)]
-            {
-                layers.extend(layer.as_deref().map(|v| (v.as_flattened(), named(name, &rgb))));
-            }
-            layers.push((glossy_weight.as_flattened(), named("glossy_weight.", &["X", "Y"])));
-            layers.push((&alpha, named("", &["A"])));
-            for (values, name) in bounce.iter().flatten().zip(bounce_names) {
-                layers.push((values.as_flattened(), named(name, &rgb)));
-            }
-            let what = layers
-                .iter()
-                .find_map(|(values, channels)| {
-                    let (stride, at) = (channels.len(), values.iter().position(|v| !v.is_finite())?);
-                    let channel = channels.iter().find(|(_, offset)| *offset == at % stride)?;
-                    let pixel = at / stride;
-                    Some(format!("channel {} at pixel ({}, {})", channel.0, pixel % width, pixel / width))
-                })
-                .unwrap_or_else(|| "a transfer layer".into());
-            return Err(SceneError::NonFinite { file: file.to_path_buf(), what });
-        }
-        Ok(TransferFrame {
-            width,
-            height,
-            header,
-            diffuse,
-            unoccluded,
-            heightfield,
-            blockers,
-            specular,
-            albedo,
-            specular_colour,
-            lamps_diffuse,
-            lamps_specular,
-            sun_lamps_diffuse,
-            sun_lamps_specular,
-            glossy_lobe,
-            glossy_direction,
-            glossy_weight,
-            alpha,
-            horizons,
-            bounce: bounce.map(|[heightfield, blockers]| IndirectParts { heightfield, blockers }),
-            position,
-            normal,
-        })
-    }
-}
-
-/// Whether `test` holds for every one of `values`: each chunk checked whole, which runs
-/// in vector lanes (one value at a time, the finite check was a tenth of a sequence's
-/// relight).
-fn every_value(values: &[f32], test: impl Fn(f32) -> bool + Sync) -> bool {
-    values.par_chunks(1 << 14).all(|chunk| chunk.iter().fold(true, |all, &x| all & test(x)))
 }
 
 /// The channel of sector `k`'s horizon tangents, `horizon.k`.
@@ -896,25 +610,6 @@ fn half_at_least(tangent: f32) -> f32 {
     // Past the nearest half, a positive finite one: the next half up (infinite past the
     // largest).
     f32::from(half::f16::from_bits(rounded.to_bits() + 1))
-}
-
-/// `v` at length `n`, its values left as they are, or `n` zeros where it holds fewer
-/// (from the allocator's zeroed pages, which the decoder then writes once).
-fn sized<T: Copy + Default>(mut v: Vec<T>, n: usize) -> Vec<T> {
-    if v.capacity() < n {
-        return vec![T::default(); n];
-    }
-    v.truncate(n);
-    v.resize(n, T::default());
-    v
-}
-
-/// `shared` where nothing else holds it and it has `n` values, else `n` new ones.
-fn unshared(mut shared: std::sync::Arc<[[f32; 3]]>, n: usize) -> std::sync::Arc<[[f32; 3]]> {
-    if shared.len() != n || std::sync::Arc::get_mut(&mut shared).is_none() {
-        shared = std::iter::repeat_n([0.0f32; 3], n).collect();
-    }
-    shared
 }
 
 #[cfg(test)]
