@@ -268,7 +268,7 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
 /// `logsh render`.
 pub fn render(args: &crate::cli::RenderArgs) -> Result<()> {
     use crate::render::progress::{reporter, Command};
-    use crate::render::{check_outputs, render_sequence, FrameStatus, SequenceOptions};
+    use crate::render::{check_outputs, render_sequence, SequenceOptions};
     let settings = args.shading.settings()?;
     if args.threads == Some(0) {
         return Err(anyhow!("--threads 0: give at least 1, or leave it out for one thread per core"));
@@ -279,53 +279,9 @@ pub fn render(args: &crate::cli::RenderArgs) -> Result<()> {
     let mut scene = Scene::load(&args.scene)?;
     scene.turn_light(args.shading.light_rotation)?;
     if args.transfer {
-        // The transfer header records the scene's folder, map and LUT as JSON text, which
-        // holds no path that is not Unicode: refused before any frame is shaded.
-        let dir = std::path::absolute(&scene.dir).unwrap_or_else(|_| scene.dir.clone());
-        let recorded = serde_json::to_string(&(
-            &dir,
-            scene.light_source(scene.default_frame())?,
-            scene.view.absolute_spec(&scene.dir),
-        ));
-        if let Err(e) = recorded {
-            return Err(anyhow!(
-                "{}: --transfer records the scene's folder and files in each frame's header, and one of their paths \
-                 is not Unicode ({e}): rename it",
-                dir.display()
-            ));
-        }
+        check_recordable_paths(&scene)?;
     }
-    let frames: Vec<i64> = match &args.frames {
-        Some(spec) => spec.frames.clone(),
-        None => {
-            let range = scene.frame_numbers();
-            let count = i128::from(*range.end()) - i128::from(*range.start()) + 1;
-            if count > crate::render::frames::MAX_FRAMES as i128 {
-                return Err(anyhow!(
-                    "{}: the scene's frames {}-{} are {count} frames, more than {} in one run; choose some with --frames",
-                    scene.scene_file().display(),
-                    range.start(),
-                    range.end(),
-                    crate::render::frames::MAX_FRAMES
-                ));
-            }
-            range.collect()
-        }
-    };
-    if let Some(range) = scene.frames {
-        let outside: Vec<String> =
-            frames.iter().filter(|f| !(range.start..=range.end).contains(*f)).take(5).map(|f| f.to_string()).collect();
-        if !outside.is_empty() {
-            return Err(anyhow!(
-                "--frames {}: frame(s) {} outside the scene's frames {}-{} ({})",
-                args.frames.as_ref().map(|s| s.text.as_str()).unwrap_or_default(),
-                outside.join(", "),
-                range.start,
-                range.end,
-                scene.scene_file().display()
-            ));
-        }
-    }
+    let frames = frames_to_render(args, &scene)?;
     if args.out.exists() && !args.out.is_dir() {
         return Err(anyhow!("--out {}: exists and is not a directory", args.out.display()));
     }
@@ -374,6 +330,67 @@ pub fn render(args: &crate::cli::RenderArgs) -> Result<()> {
         eprintln!("render: shading on {}", executor.describe());
         render_sequence(&executor, &scene, &options, progress.as_mut())
     });
+    report_rendered(&outcomes, started, &args.out)
+}
+
+/// The transfer header records the scene's folder, map and LUT as JSON text, which holds
+/// no path that is not Unicode: refused before any frame is shaded.
+fn check_recordable_paths(scene: &Scene) -> Result<()> {
+    let dir = std::path::absolute(&scene.dir).unwrap_or_else(|_| scene.dir.clone());
+    let recorded = serde_json::to_string(&(
+        &dir,
+        scene.light_source(scene.default_frame())?,
+        scene.view.absolute_spec(&scene.dir),
+    ));
+    match recorded {
+        Ok(_) => Ok(()),
+        Err(e) => Err(anyhow!(
+            "{}: --transfer records the scene's folder and files in each frame's header, and one of their paths is \
+             not Unicode ({e}): rename it",
+            dir.display()
+        )),
+    }
+}
+
+/// The frames `--frames` asks for, all within the scene's, or the scene's own.
+fn frames_to_render(args: &crate::cli::RenderArgs, scene: &Scene) -> Result<Vec<i64>> {
+    let frames: Vec<i64> = match &args.frames {
+        Some(spec) => spec.frames.clone(),
+        None => {
+            let range = scene.frame_numbers();
+            let count = i128::from(*range.end()) - i128::from(*range.start()) + 1;
+            if count > crate::render::frames::MAX_FRAMES as i128 {
+                return Err(anyhow!(
+                    "{}: the scene's frames {}-{} are {count} frames, more than {} in one run; choose some with --frames",
+                    scene.scene_file().display(),
+                    range.start(),
+                    range.end(),
+                    crate::render::frames::MAX_FRAMES
+                ));
+            }
+            range.collect()
+        }
+    };
+    if let Some(range) = scene.frames {
+        let outside: Vec<String> =
+            frames.iter().filter(|f| !(range.start..=range.end).contains(*f)).take(5).map(|f| f.to_string()).collect();
+        if !outside.is_empty() {
+            return Err(anyhow!(
+                "--frames {}: frame(s) {} outside the scene's frames {}-{} ({})",
+                args.frames.as_ref().map(|s| s.text.as_str()).unwrap_or_default(),
+                outside.join(", "),
+                range.start,
+                range.end,
+                scene.scene_file().display()
+            ));
+        }
+    }
+    Ok(frames)
+}
+
+/// Says how many frames were rendered, skipped and failed, and fails naming each failure.
+fn report_rendered(outcomes: &[crate::render::FrameOutcome], started: Instant, out: &Path) -> Result<()> {
+    use crate::render::FrameStatus;
     let failed: Vec<_> = outcomes.iter().filter(|o| o.failed()).collect();
     let skipped = outcomes.iter().filter(|o| matches!(o.status, FrameStatus::Skipped { .. })).count();
     let rendered = outcomes.len() - failed.len() - skipped;
@@ -381,7 +398,7 @@ pub fn render(args: &crate::cli::RenderArgs) -> Result<()> {
         "{rendered} frame(s) rendered, {skipped} skipped, {} failed in {:.1} s: {}",
         failed.len(),
         started.elapsed().as_secs_f64(),
-        args.out.display()
+        out.display()
     );
     if failed.is_empty() {
         return Ok(());

@@ -216,80 +216,9 @@ impl<T: Real> ShadingKernel<T> {
         let epsilon = settings.epsilon;
         let mut tangent = vec![T::zero(); order];
         cap_log_zh(order, T::of(epsilon.ln()), T::of(FRAC_PI_2), &mut tangent);
-        let any_phong = materials.values().any(|m| matches!(m, Material::Phong { .. }));
-        let lobe_exp = any_phong.then(|| crate::sh::ExactExp::new(order));
         let exp = Exponentiator::new(order, settings.exp, settings.hyb_threshold);
-        // The prefiltered glossy term's map levels, where a Phong material needs them and
-        // the light has a map; otherwise every lobe stays in log-SH.
-        let levels = (any_phong && settings.glossy != GlossyMethod::Sh)
-            .then(|| glossy_map(residual))
-            .flatten()
-            .map(|(map, strength)| MapLevels::new(&map, strength, ground.is_some()));
-        let mut prefiltered: Vec<(SharpLobe, Arc<Prefiltered>)> = Vec::new();
-        let materials = materials
-            .iter()
-            .map(|(&index, material)| {
-                let (phong, sharp) = match material {
-                    Material::Phong { exponent, .. } => {
-                        let exponent = f64::from(*exponent);
-                        let lobe = Lobe::Phong { exponent: exponent.min(SH_MAX_EXPONENT) };
-                        let eps = settings.phong_epsilon.unwrap_or_else(|| {
-                            optimal_lobe_epsilon(
-                                order,
-                                lobe,
-                                lobe_exp.as_ref().expect("built when a phong material exists"),
-                            )
-                        });
-                        let table = LobeTable::new(order, lobe, eps);
-                        let sharp = levels.as_ref().map(|levels| {
-                            let sharp_lobe = match settings.glossy {
-                                GlossyMethod::Phong => SharpLobe::Phong { exponent },
-                                _ => SharpLobe::Ggx { alpha: ggx_alpha(exponent) },
-                            };
-                            let map = match prefiltered.iter().find(|(l, _)| *l == sharp_lobe) {
-                                Some((_, map)) => map.clone(),
-                                None => {
-                                    let map = Arc::new(levels.prefilter(sharp_lobe));
-                                    prefiltered.push((sharp_lobe, map.clone()));
-                                    map
-                                }
-                            };
-                            SharpGlossy {
-                                lobe: sharp_lobe,
-                                prefiltered: map,
-                                albedo: if colour_passes {
-                                    vec![1.0; ALBEDO_ENTRIES]
-                                } else {
-                                    albedo_table(sharp_lobe)
-                                },
-                                open: open_lobe(order, &exp, &table),
-                                cone_share: cone_share(sharp_lobe, order),
-                                cone_weights: cone_weights(sharp_lobe),
-                                core: DiskShape::new(sharp_lobe.core_radius()),
-                            }
-                        });
-                        (Some(table), sharp)
-                    }
-                    _ => (None, None),
-                };
-                (index, MaterialLobes { material: material.clone(), phong, sharp })
-            })
-            .collect();
-        let (cap_depths, band_depths) = if settings.fitted_depths {
-            let key = DepthKey {
-                order,
-                epsilon_bits: epsilon.to_bits(),
-                tangent_occlusion: settings.tangent_occlusion,
-                exp: settings.exp,
-                hyb_threshold_bits: settings.hyb_threshold.to_bits(),
-                directions: if has_heightfield { settings.horizon.directions } else { 0 },
-            };
-            let fitted = fitted_depths(key, &exp);
-            let of = |table: &[f64]| table.iter().map(|&d| T::of(d)).collect();
-            (of(&fitted.caps), of(&fitted.bands))
-        } else {
-            (vec![T::of(epsilon.ln()); DEPTH_INTERVALS + 1], vec![T::of(epsilon.ln()); DEPTH_INTERVALS + 1])
-        };
+        let materials = Self::material_lobes(settings, materials, colour_passes, residual, ground, &exp);
+        let (cap_depths, band_depths) = Self::depth_tables(settings, has_heightfield, &exp);
         let wedge = has_heightfield.then(|| WedgeOperator::new(order, settings.horizon.directions));
         let channel = |c: usize| light.iter().map(|rgb| T::of(rgb[c])).collect::<Vec<T>>();
         // The f32 path dots with the light inside the quadrature (`crate::sh::folded`).
@@ -328,6 +257,99 @@ impl<T: Real> ShadingKernel<T> {
             suns: suns.iter().map(SunDisk::new).collect(),
             points: points.to_vec(),
             ground,
+        }
+    }
+
+    /// Each material's lobes: a Phong material's log-SH lobe and, where the light has a
+    /// map and `--glossy` is not `sh`, its prefiltered glossy term (materials of the same
+    /// lobe share one prefiltered map).
+    fn material_lobes(
+        settings: &ShadingSettings,
+        materials: &BTreeMap<u32, Material>,
+        colour_passes: bool,
+        residual: &Light,
+        ground: Option<f64>,
+        exp: &Exponentiator,
+    ) -> BTreeMap<u32, MaterialLobes<T>> {
+        let order = settings.order;
+        let any_phong = materials.values().any(|m| matches!(m, Material::Phong { .. }));
+        let lobe_exp = any_phong.then(|| crate::sh::ExactExp::new(order));
+        // The prefiltered glossy term's map levels, where a Phong material needs them and
+        // the light has a map; otherwise every lobe stays in log-SH.
+        let levels = (any_phong && settings.glossy != GlossyMethod::Sh)
+            .then(|| glossy_map(residual))
+            .flatten()
+            .map(|(map, strength)| MapLevels::new(&map, strength, ground.is_some()));
+        let mut prefiltered: Vec<(SharpLobe, Arc<Prefiltered>)> = Vec::new();
+        materials
+            .iter()
+            .map(|(&index, material)| {
+                let (phong, sharp) = match material {
+                    Material::Phong { exponent, .. } => {
+                        let exponent = f64::from(*exponent);
+                        let lobe = Lobe::Phong { exponent: exponent.min(SH_MAX_EXPONENT) };
+                        let eps = settings.phong_epsilon.unwrap_or_else(|| {
+                            optimal_lobe_epsilon(
+                                order,
+                                lobe,
+                                lobe_exp.as_ref().expect("built when a phong material exists"),
+                            )
+                        });
+                        let table = LobeTable::new(order, lobe, eps);
+                        let sharp = levels.as_ref().map(|levels| {
+                            let sharp_lobe = match settings.glossy {
+                                GlossyMethod::Phong => SharpLobe::Phong { exponent },
+                                _ => SharpLobe::Ggx { alpha: ggx_alpha(exponent) },
+                            };
+                            let map = match prefiltered.iter().find(|(l, _)| *l == sharp_lobe) {
+                                Some((_, map)) => map.clone(),
+                                None => {
+                                    let map = Arc::new(levels.prefilter(sharp_lobe));
+                                    prefiltered.push((sharp_lobe, map.clone()));
+                                    map
+                                }
+                            };
+                            SharpGlossy {
+                                lobe: sharp_lobe,
+                                prefiltered: map,
+                                albedo: if colour_passes {
+                                    vec![1.0; ALBEDO_ENTRIES]
+                                } else {
+                                    albedo_table(sharp_lobe)
+                                },
+                                open: open_lobe(order, exp, &table),
+                                cone_share: cone_share(sharp_lobe, order),
+                                cone_weights: cone_weights(sharp_lobe),
+                                core: DiskShape::new(sharp_lobe.core_radius()),
+                            }
+                        });
+                        (Some(table), sharp)
+                    }
+                    _ => (None, None),
+                };
+                (index, MaterialLobes { material: material.clone(), phong, sharp })
+            })
+            .collect()
+    }
+
+    /// The log depths of caps and horizon bands per width: fitted where
+    /// `--fitted-depths` asks ([`super::fitted_depth`]), else `log(eps)` throughout.
+    fn depth_tables(settings: &ShadingSettings, has_heightfield: bool, exp: &Exponentiator) -> (Vec<T>, Vec<T>) {
+        let (order, epsilon) = (settings.order, settings.epsilon);
+        if settings.fitted_depths {
+            let key = DepthKey {
+                order,
+                epsilon_bits: epsilon.to_bits(),
+                tangent_occlusion: settings.tangent_occlusion,
+                exp: settings.exp,
+                hyb_threshold_bits: settings.hyb_threshold.to_bits(),
+                directions: if has_heightfield { settings.horizon.directions } else { 0 },
+            };
+            let fitted = fitted_depths(key, exp);
+            let of = |table: &[f64]| table.iter().map(|&d| T::of(d)).collect();
+            (of(&fitted.caps), of(&fitted.bands))
+        } else {
+            (vec![T::of(epsilon.ln()); DEPTH_INTERVALS + 1], vec![T::of(epsilon.ln()); DEPTH_INTERVALS + 1])
         }
     }
 

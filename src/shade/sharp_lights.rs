@@ -92,13 +92,8 @@ pub fn extract_suns(map: &EnvironmentMap, strength: f32) -> Decomposition {
     let (width, height) = (map.width, map.height);
     let lum = |t: [f32; 3]| (0..3).map(|k| LUMINANCE[k] * f64::from(t[k])).sum::<f64>();
     let mut luminance: Vec<f64> = map.texels.iter().map(|&t| lum(t)).collect();
-    let solid_angle: Vec<f64> = (0..height).map(|r| map.texel_solid_angle(r)).collect();
-    let (rows, columns) = direction_factors(width, height);
-    let direction = |i: usize| {
-        let ([sin_theta, cos_theta], [cos_phi, sin_phi]) = (rows[i / width], columns[i % width]);
-        [sin_theta * cos_phi, sin_theta * sin_phi, cos_theta]
-    };
-    let total: f64 = luminance.iter().enumerate().map(|(i, &l)| l * solid_angle[i / width]).sum();
+    let sky = SkyTexels::of(width, height, map);
+    let total: f64 = luminance.iter().enumerate().map(|(i, &l)| l * sky.solid_angle[i / width]).sum();
     let median = {
         let mut order = luminance.clone();
         let middle = order.len() / 2;
@@ -108,78 +103,163 @@ pub fn extract_suns(map: &EnvironmentMap, strength: f32) -> Decomposition {
     if !(total > 0.0 && strength > 0.0) {
         return out;
     }
-    let residual = &mut out.residual;
     let mut tried = vec![false; width * height];
-    // A region's texels and the ring around it, cleared after each region.
-    let (mut inside, mut ring) = (vec![false; width * height], vec![false; width * height]);
-    let (mut region, mut ring_texels) = (Vec::new(), Vec::new());
+    let mut region = Region::new(width * height);
     for _ in 0..MAX_REGIONS_TRIED {
         if out.suns.len() == MAX_EXTRACTED_SUNS {
             break;
         }
-        // The brightest texel not yet tried, the last of equals (as `Iterator::max_by`).
-        let mut peak = None;
-        for (i, &l) in luminance.iter().enumerate() {
-            if !tried[i] && peak.is_none_or(|p: usize| l.total_cmp(&luminance[p]).is_ge()) {
-                peak = Some(i);
-            }
-        }
-        let Some(peak) = peak else {
+        let Some(peak) = brightest_untried(&luminance, &tried) else {
             break;
         };
         let peak_lum = luminance[peak];
         if !(peak_lum >= SUN_CONTRAST * median && peak_lum > 0.0) {
             break;
         }
-        // The region: flood fill from the peak.
-        let floor = REGION_FLOOR * peak_lum;
-        for &i in &region {
-            inside[i] = false;
+        region.grow(peak, REGION_FLOOR * peak_lum, &luminance, width, height);
+        for &i in &region.texels {
+            tried[i] = true;
         }
-        region.clear();
-        region.push(peak);
-        inside[peak] = true;
+        let background = region.background(&out.residual, width, height);
+        let Some(found) = sky.sun_of(&region.texels, &out.residual, background, peak, total) else {
+            continue;
+        };
+        for &i in &region.texels {
+            out.residual.texels[i] = background.map(|b| b as f32);
+            luminance[i] = lum(out.residual.texels[i]);
+        }
+        let scaled = found.power.map(|p| p * f64::from(strength));
+        let peak_power = scaled.iter().copied().fold(0.0f64, f64::max);
+        out.suns.push(SunLight {
+            direction: found.axis,
+            half_angle: found.half_angle,
+            strength: peak_power as f32,
+            color: scaled.map(|p| (p / peak_power) as f32),
+        });
+        out.shares.push(found.share);
+    }
+    out
+}
+
+/// The brightest texel not yet tried, the last of equals (as `Iterator::max_by`).
+fn brightest_untried(luminance: &[f64], tried: &[bool]) -> Option<usize> {
+    let mut peak = None;
+    for (i, &l) in luminance.iter().enumerate() {
+        if !tried[i] && peak.is_none_or(|p: usize| l.total_cmp(&luminance[p]).is_ge()) {
+            peak = Some(i);
+        }
+    }
+    peak
+}
+
+/// A bright region of the map and the ring of texels around it, with masks of both that
+/// are cleared where they were set when the next region is grown.
+struct Region {
+    texels: Vec<usize>,
+    inside: Vec<bool>,
+    ring: Vec<bool>,
+    ring_texels: Vec<usize>,
+}
+
+impl Region {
+    fn new(texels: usize) -> Self {
+        Self { texels: Vec::new(), inside: vec![false; texels], ring: vec![false; texels], ring_texels: Vec::new() }
+    }
+
+    /// The region flood-filled from `peak` over the texels of luminance at least `floor`.
+    fn grow(&mut self, peak: usize, floor: f64, luminance: &[f64], width: usize, height: usize) {
+        for &i in &self.texels {
+            self.inside[i] = false;
+        }
+        self.texels.clear();
+        self.texels.push(peak);
+        self.inside[peak] = true;
         let mut next = 0;
-        while next < region.len() {
-            let i = region[next];
+        while next < self.texels.len() {
+            let i = self.texels[next];
             next += 1;
             for j in neighbours(i, width, height) {
-                if !inside[j] && luminance[j] >= floor {
-                    inside[j] = true;
-                    region.push(j);
+                if !self.inside[j] && luminance[j] >= floor {
+                    self.inside[j] = true;
+                    self.texels.push(j);
                 }
             }
         }
-        for &i in &region {
-            tried[i] = true;
+    }
+
+    /// The sky behind the region: the mean radiance of `residual` over the texels around
+    /// it.
+    fn background(&mut self, residual: &EnvironmentMap, width: usize, height: usize) -> [f64; 3] {
+        for &j in &self.ring_texels {
+            self.ring[j] = false;
         }
-        // The background: the mean radiance of the texels around the region.
-        for &j in &ring_texels {
-            ring[j] = false;
-        }
-        ring_texels.clear();
+        self.ring_texels.clear();
         let mut background = [0.0f64; 3];
-        for &i in &region {
+        for &i in &self.texels {
             for j in neighbours(i, width, height) {
-                if !inside[j] && !ring[j] {
-                    ring[j] = true;
-                    ring_texels.push(j);
+                if !self.inside[j] && !self.ring[j] {
+                    self.ring[j] = true;
+                    self.ring_texels.push(j);
                     for k in 0..3 {
                         background[k] += f64::from(residual.texels[j][k]);
                     }
                 }
             }
         }
-        let ring_count = ring_texels.len();
-        let background = background.map(|b| if ring_count > 0 { b / ring_count as f64 } else { 0.0 });
-        // Power above the background, its centre and spread.
+        let ring_count = self.ring_texels.len();
+        background.map(|b| if ring_count > 0 { b / ring_count as f64 } else { 0.0 })
+    }
+}
+
+/// A sun found in a region: its power per channel above the sky behind it, its axis and
+/// half-angle, and its share of the map's luminous power.
+struct FoundSun {
+    power: [f64; 3],
+    axis: [f64; 3],
+    half_angle: f64,
+    share: f64,
+}
+
+/// What the search reads of each texel of a map: its solid angle and direction.
+struct SkyTexels {
+    width: usize,
+    solid_angle: Vec<f64>,
+    rows: Vec<[f64; 2]>,
+    columns: Vec<[f64; 2]>,
+}
+
+impl SkyTexels {
+    fn of(width: usize, height: usize, map: &EnvironmentMap) -> Self {
+        let solid_angle: Vec<f64> = (0..height).map(|r| map.texel_solid_angle(r)).collect();
+        let (rows, columns) = direction_factors(width, height);
+        Self { width, solid_angle, rows, columns }
+    }
+
+    fn direction(&self, i: usize) -> [f64; 3] {
+        let ([sin_theta, cos_theta], [cos_phi, sin_phi]) = (self.rows[i / self.width], self.columns[i % self.width]);
+        [sin_theta * cos_phi, sin_theta * sin_phi, cos_theta]
+    }
+
+    /// The sun `region` (grown from `peak`) holds above `background` in `residual`:
+    /// `None` where it carries less than [`MIN_SUN_SHARE`] of `total` or reaches beyond
+    /// [`MAX_SUN_RADIUS`] of its centre. Its half-angle is that of a uniform disk with the
+    /// region's second moment about the centre, at least a texel's.
+    fn sun_of(
+        &self,
+        region: &[usize],
+        residual: &EnvironmentMap,
+        background: [f64; 3],
+        peak: usize,
+        total: f64,
+    ) -> Option<FoundSun> {
+        let width = self.width;
         let mut power = [0.0f64; 3];
         let (mut centre, mut weight_sum) = ([0.0f64; 3], 0.0);
-        for &i in &region {
+        for &i in region {
             let t = residual.texels[i];
-            let above = [0, 1, 2].map(|k| (f64::from(t[k]) - background[k]).max(0.0) * solid_angle[i / width]);
+            let above = [0, 1, 2].map(|k| (f64::from(t[k]) - background[k]).max(0.0) * self.solid_angle[i / width]);
             let weight = (0..3).map(|k| LUMINANCE[k] * above[k]).sum::<f64>();
-            let d = direction(i);
+            let d = self.direction(i);
             for k in 0..3 {
                 power[k] += above[k];
                 centre[k] += weight * d[k];
@@ -189,45 +269,31 @@ pub fn extract_suns(map: &EnvironmentMap, strength: f32) -> Decomposition {
         let share = weight_sum / total;
         let length = (centre[0] * centre[0] + centre[1] * centre[1] + centre[2] * centre[2]).sqrt();
         if !(share >= MIN_SUN_SHARE && length > 0.0) {
-            continue;
+            return None;
         }
         let axis = centre.map(|c| c / length);
         let angle_to = |i: usize| {
-            let d = direction(i);
+            let d = self.direction(i);
             (d[0] * axis[0] + d[1] * axis[1] + d[2] * axis[2]).clamp(-1.0, 1.0).acos()
         };
         if region.iter().any(|&i| angle_to(i) > MAX_SUN_RADIUS) {
-            continue;
+            return None;
         }
         let second_moment = region
             .iter()
             .map(|&i| {
                 let t = residual.texels[i];
                 let above = (0..3)
-                    .map(|k| LUMINANCE[k] * (f64::from(t[k]) - background[k]).max(0.0) * solid_angle[i / width])
+                    .map(|k| LUMINANCE[k] * (f64::from(t[k]) - background[k]).max(0.0) * self.solid_angle[i / width])
                     .sum::<f64>();
                 above * angle_to(i).powi(2)
             })
             .sum::<f64>()
             / weight_sum;
-        let row = peak / width;
-        let texel_radius = (solid_angle[row] / std::f64::consts::PI).sqrt();
+        let texel_radius = (self.solid_angle[peak / width] / std::f64::consts::PI).sqrt();
         let half_angle = (2.0 * second_moment).sqrt().max(texel_radius).min(std::f64::consts::FRAC_PI_2);
-        for &i in &region {
-            residual.texels[i] = background.map(|b| b as f32);
-            luminance[i] = lum(residual.texels[i]);
-        }
-        let scaled = power.map(|p| p * f64::from(strength));
-        let peak_power = scaled.iter().copied().fold(0.0f64, f64::max);
-        out.suns.push(SunLight {
-            direction: axis,
-            half_angle,
-            strength: peak_power as f32,
-            color: scaled.map(|p| (p / peak_power) as f32),
-        });
-        out.shares.push(share);
+        Some(FoundSun { power, axis, half_angle, share })
     }
-    out
 }
 
 /// Per row, `[sin(theta), cos(theta)]`, and per column, `[cos(phi), sin(phi)]`, of the

@@ -473,89 +473,13 @@ impl SurroundingsPlan {
             let counts = materials.get(&object).filter(|_| object != 0);
             counts.and_then(|c| c.iter().max_by_key(|&(_, n)| n).map(|(&m, _)| m)).unwrap_or(fallback_material)
         };
-        let mut largest: Vec<&crate::scene::Sphere> = frame.blockers.iter().filter(|s| s.radius > 0.0).collect();
-        largest.sort_by(|a, b| b.radius.total_cmp(&a.radius));
-        largest.truncate(MAX_SPHERE_LIGHTS);
-        let mut spheres: Vec<SphereLight> = largest
-            .into_iter()
-            .map(|sphere| SphereLight {
-                centre: sphere.center,
-                radius: sphere.radius,
-                object: sphere.object,
-                albedo: albedos.of_object(sphere.object),
-                material: material_of(sphere.object),
-                radiance: [None; SPHERE_DIRECTIONS],
-                overlap: 1.0,
-            })
-            .collect();
+        let mut spheres = largest_spheres(frame, |object| (albedos.of_object(object), material_of(object)));
         set_overlaps(&mut spheres);
         if terrain.is_none() && spheres.is_empty() {
             return Ok(None);
         }
 
-        let mut position = Vec::new();
-        let mut normal = Vec::new();
-        let mut material = Vec::new();
-        let mut object = Vec::new();
-        let mut albedo = Vec::new();
-        if let Some(grid) = &terrain {
-            for i in 0..grid.side * grid.side {
-                let p = grid.texel_position(i);
-                position.push(p.map(|v| v as f32));
-                normal.push(grid.normal_at(p[0], p[1]).map(|v| v as f32));
-                material.push(grid.material);
-                object.push(0);
-                albedo.push(grid.albedo[i]);
-            }
-        }
-        for sphere in &spheres {
-            for k in 0..SPHERE_DIRECTIONS {
-                let m = sphere_direction(k);
-                let lift = sphere.radius * (1.0 + 1e-3);
-                let p: [f64; 3] = std::array::from_fn(|a| sphere.centre[a] + lift * m[a]);
-                position.push(p.map(|v| v as f32));
-                normal.push(m.map(|v| v as f32));
-                material.push(sphere.material);
-                object.push(sphere.object);
-                albedo.push(sphere.albedo);
-            }
-        }
-        let count = position.len();
-        let width = (count as f64).sqrt().ceil() as usize;
-        let height = count.div_ceil(width);
-        let padded = width * height;
-        position.resize(padded, [0.0; 3]);
-        normal.resize(padded, [0.0, 0.0, 1.0]);
-        material.resize(padded, 0);
-        object.resize(padded, 0);
-        albedo.resize(padded, [0.0; 3]);
-        let colours = scene.colour_passes().then(|| SurfaceColours { diffuse: albedo, glossy: vec![[0.0; 3]; padded] });
-        let gbuffer = GBuffer {
-            file: frame.gbuffer.file.with_extension("surroundings"),
-            width,
-            height,
-            position,
-            normal,
-            uv: None,
-            material,
-            object: Some(object),
-            colours,
-            first_row: 0,
-        };
-        let points = Frame {
-            number: frame.number,
-            gbuffer,
-            reflection: None,
-            camera: frame.camera.clone(),
-            blockers: frame.blockers.clone(),
-            height_map: frame.height_map.clone(),
-            light: frame.light.clone(),
-            light_file_crc: frame.light_file_crc,
-            suns: frame.suns.clone(),
-            points: frame.points.clone(),
-            ground: frame.ground,
-            supersample: 1,
-        };
+        let points = secondary_points(scene, frame, terrain.as_ref(), &spheres);
         Ok(Some(Self { points, terrain, spheres, bounces: settings.bounces }))
     }
 
@@ -613,6 +537,98 @@ impl SurroundingsPlan {
             surroundings.set_radiance(&radiance);
         }
         surroundings
+    }
+}
+
+/// The largest blockers (at most [`MAX_SPHERE_LIGHTS`]) as lights, each with the albedo
+/// and material `surface` gives its object.
+fn largest_spheres(frame: &Frame, surface: impl Fn(u32) -> ([f32; 3], u32)) -> Vec<SphereLight> {
+    let mut largest: Vec<&crate::scene::Sphere> = frame.blockers.iter().filter(|s| s.radius > 0.0).collect();
+    largest.sort_by(|a, b| b.radius.total_cmp(&a.radius));
+    largest.truncate(MAX_SPHERE_LIGHTS);
+    largest
+        .into_iter()
+        .map(|sphere| {
+            let (albedo, material) = surface(sphere.object);
+            SphereLight {
+                centre: sphere.center,
+                radius: sphere.radius,
+                object: sphere.object,
+                albedo,
+                material,
+                radiance: [None; SPHERE_DIRECTIONS],
+                overlap: 1.0,
+            }
+        })
+        .collect()
+}
+
+/// The secondary points of `frame`'s surroundings as a frame of their own, packed side
+/// by side in a G-buffer: the terrain grid's texels, then each sphere's directions, just
+/// above its surface.
+fn secondary_points(scene: &Scene, frame: &Frame, terrain: Option<&TerrainGrid>, spheres: &[SphereLight]) -> Frame {
+    let mut position = Vec::new();
+    let mut normal = Vec::new();
+    let mut material = Vec::new();
+    let mut object = Vec::new();
+    let mut albedo = Vec::new();
+    if let Some(grid) = terrain {
+        for i in 0..grid.side * grid.side {
+            let p = grid.texel_position(i);
+            position.push(p.map(|v| v as f32));
+            normal.push(grid.normal_at(p[0], p[1]).map(|v| v as f32));
+            material.push(grid.material);
+            object.push(0);
+            albedo.push(grid.albedo[i]);
+        }
+    }
+    for sphere in spheres {
+        for k in 0..SPHERE_DIRECTIONS {
+            let m = sphere_direction(k);
+            let lift = sphere.radius * (1.0 + 1e-3);
+            let p: [f64; 3] = std::array::from_fn(|a| sphere.centre[a] + lift * m[a]);
+            position.push(p.map(|v| v as f32));
+            normal.push(m.map(|v| v as f32));
+            material.push(sphere.material);
+            object.push(sphere.object);
+            albedo.push(sphere.albedo);
+        }
+    }
+    let count = position.len();
+    let width = (count as f64).sqrt().ceil() as usize;
+    let height = count.div_ceil(width);
+    let padded = width * height;
+    position.resize(padded, [0.0; 3]);
+    normal.resize(padded, [0.0, 0.0, 1.0]);
+    material.resize(padded, 0);
+    object.resize(padded, 0);
+    albedo.resize(padded, [0.0; 3]);
+    let colours = scene.colour_passes().then(|| SurfaceColours { diffuse: albedo, glossy: vec![[0.0; 3]; padded] });
+    let gbuffer = GBuffer {
+        file: frame.gbuffer.file.with_extension("surroundings"),
+        width,
+        height,
+        position,
+        normal,
+        uv: None,
+        material,
+        object: Some(object),
+        colours,
+        first_row: 0,
+    };
+    Frame {
+        number: frame.number,
+        gbuffer,
+        reflection: None,
+        camera: frame.camera.clone(),
+        blockers: frame.blockers.clone(),
+        height_map: frame.height_map.clone(),
+        light: frame.light.clone(),
+        light_file_crc: frame.light_file_crc,
+        suns: frame.suns.clone(),
+        points: frame.points.clone(),
+        ground: frame.ground,
+        supersample: 1,
     }
 }
 
