@@ -4,6 +4,7 @@
 
 #![allow(clippy::wildcard_imports)]
 
+use super::filter::tent_weights;
 use super::*;
 
 /// Most pyramid levels a query supports (the per-query cache of receiver heights is
