@@ -216,8 +216,7 @@ fn tiny_scene_exports_reads_and_shades() {
     // logsh shades both frames.
     for number in ["1", "2"] {
         let out = dir.path().join("out");
-        let output = Command::cargo_bin("logsh")
-            .unwrap()
+        let output = crate::support::cli::logsh()
             .args(["shade"])
             .arg(&scene_dir)
             .args(["--frame", number, "--out"])
@@ -308,8 +307,7 @@ fn sun_lamp_exports_as_a_sun_light() {
     assert_eq!(sun.strength, 3.5);
     assert!((sun.color[1] - 0.9).abs() < 1e-6 && (sun.color[2] - 0.8).abs() < 1e-6);
     let shaded = dir.path().join("shaded");
-    let output = Command::cargo_bin("logsh")
-        .unwrap()
+    let output = crate::support::cli::logsh()
         .args(["shade", "--device", "cpu", "--out"])
         .arg(&shaded)
         .arg(&out)
@@ -351,8 +349,7 @@ fn point_lamps_export_and_shade_as_cycles_renders_them() {
     assert!((key.color[1] - 0.9).abs() < 1e-6);
 
     let shaded = dir.path().join("shaded");
-    let output = Command::cargo_bin("logsh")
-        .unwrap()
+    let output = crate::support::cli::logsh()
         .args(["shade", "--device", "cpu", "--out"])
         .arg(&shaded)
         .arg(&out)
@@ -493,8 +490,7 @@ fn sky_texture_bakes_and_its_sun_is_a_sun_light() {
         );
         assert!((sun.half_angle.to_degrees() * 2.0 - 0.545).abs() < 0.01, "Blender's Sun Size");
         strengths.push(sun.strength);
-        let output = Command::cargo_bin("logsh")
-            .unwrap()
+        let output = crate::support::cli::logsh()
             .args(["shade", "--device", "cpu", "--out"])
             .arg(dir.path().join(format!("shaded {rotation}")))
             .arg(&out)
@@ -562,8 +558,7 @@ fn dunes_height_map_and_sky_match_blender() {
     // One texel of a 256-wide map is 1.4 degrees: the sun lands within two.
     assert!(cos > (3.0f64.to_radians()).cos(), "brightest texel at {d:?}, sun at {sun:?}");
     let out = dir.path().join("out");
-    let output =
-        Command::cargo_bin("logsh").unwrap().arg("shade").arg(&scene_dir).arg("--out").arg(&out).output().unwrap();
+    let output = crate::support::cli::logsh().arg("shade").arg(&scene_dir).arg("--out").arg(&out).output().unwrap();
     assert_ok(&output, "logsh shade");
 }
 
@@ -606,7 +601,7 @@ fn the_compositor_recipe_relights_the_diffuse_pass() {
     let dir = tempfile::tempdir().unwrap();
     let frames = dir.path().join("frames");
     let logsh = |args: &[&str]| {
-        let output = Command::cargo_bin("logsh").unwrap().args(args).output().unwrap();
+        let output = crate::support::cli::logsh().args(args).output().unwrap();
         assert_ok(&output, &format!("logsh {args:?}"));
     };
     let cones = Path::new(REPO).join("gbuffers/cones");
@@ -746,8 +741,7 @@ fn previews_follow_the_scenes_view_transform() {
         assert_eq!(json["view"]["transform"], transform);
         assert_eq!(json["view"]["lut"].is_object(), transform != "Standard", "{}", json["view"]);
         let shaded = dir.path().join(format!("{transform}-shaded"));
-        let output = Command::cargo_bin("logsh")
-            .unwrap()
+        let output = crate::support::cli::logsh()
             .args(["shade", "--device", "cpu", "--out"])
             .arg(&shaded)
             .arg(&scene)
@@ -810,8 +804,7 @@ fn supersampled_export_resolves_to_the_camera() {
             assert_eq!((r.width, r.height), (32 * k, 18 * k), "the reflection G-buffer is supersampled too");
         }
         let shaded = dir.path().join(format!("shaded{n}"));
-        let output = Command::cargo_bin("logsh")
-            .unwrap()
+        let output = crate::support::cli::logsh()
             .args(["shade", "--device", "cpu", "--out"])
             .arg(&shaded)
             .arg(&scene_dir)
@@ -1053,8 +1046,7 @@ fn moving_terrain_lamps_and_world_export_per_frame() {
     assert!((constant(&one)[2] - 0.5).abs() < 1e-5 && (constant(&two)[2] - 0.25).abs() < 1e-5);
 
     let rendered = dir.path().join("rendered");
-    let output = Command::cargo_bin("logsh")
-        .unwrap()
+    let output = crate::support::cli::logsh()
         .args(["render", "--device", "cpu", "--frames", "1-2", "--out"])
         .arg(&rendered)
         .arg(&out)

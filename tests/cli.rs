@@ -1,14 +1,7 @@
 //! The command line as a black box: exit codes, outputs, and the wording of errors.
-use assert_cmd::Command;
 use std::path::Path;
 
-fn logsh() -> Command {
-    Command::cargo_bin("logsh").unwrap()
-}
-
-fn stderr_of(output: &std::process::Output) -> String {
-    String::from_utf8_lossy(&output.stderr).into_owned()
-}
+use crate::support::cli::{assert_fails_with, logsh, stderr_of, FAILED, REFUSED_WHILE_PARSING};
 
 /// A small sphere-over-plane scene written by `logsh example`.
 fn example_scene(dir: &Path) -> std::path::PathBuf {
@@ -50,32 +43,31 @@ fn every_exponentiation_and_order_runs() {
     }
 }
 
-fn assert_fails_with(cmd: &mut Command, needles: &[&str]) {
-    let output = cmd.output().unwrap();
-    let stderr = stderr_of(&output);
-    // 2 for what clap rejects while parsing, 1 for everything found later.
-    assert!(matches!(output.status.code(), Some(1 | 2)), "exit code {:?}: {stderr}", output.status.code());
-    assert!(!stderr.contains("panicked"), "{stderr}");
-    for needle in needles {
-        assert!(stderr.contains(needle), "expected {needle:?} in: {stderr}");
-    }
-}
-
 #[test]
 fn bad_flags_are_named() {
     let dir = tempfile::tempdir().unwrap();
     let scene = example_scene(dir.path());
     let out = dir.path().join("out");
-    assert_fails_with(logsh().arg("shade").arg(&scene).args(["--order", "9"]).arg("--out").arg(&out), &["--order 9"]);
     assert_fails_with(
-        logsh().arg("shade").arg(&scene).args(["--epsilon", "0"]).arg("--out").arg(&out),
+        &logsh().arg("shade").arg(&scene).args(["--order", "9"]).arg("--out").arg(&out).output().unwrap(),
+        FAILED,
+        &["--order 9"],
+    );
+    assert_fails_with(
+        &logsh().arg("shade").arg(&scene).args(["--epsilon", "0"]).arg("--out").arg(&out).output().unwrap(),
+        FAILED,
         &["--epsilon 0"],
     );
     assert_fails_with(
-        logsh().arg("shade").arg(&scene).args(["--directions", "2"]).arg("--out").arg(&out),
+        &logsh().arg("shade").arg(&scene).args(["--directions", "2"]).arg("--out").arg(&out).output().unwrap(),
+        FAILED,
         &["--directions 2"],
     );
-    assert_fails_with(logsh().arg("shade").arg(&scene).args(["--exp", "fast"]), &["--exp"]);
+    assert_fails_with(
+        &logsh().arg("shade").arg(&scene).args(["--exp", "fast"]).output().unwrap(),
+        REFUSED_WHILE_PARSING,
+        &["--exp"],
+    );
     assert!(!out.exists(), "nothing is written when the flags are wrong");
 }
 
@@ -83,17 +75,17 @@ fn bad_flags_are_named() {
 fn bad_scenes_are_named() {
     let dir = tempfile::tempdir().unwrap();
     let missing = dir.path().join("nowhere");
-    assert_fails_with(logsh().arg("shade").arg(&missing), &["error:", "nowhere"]);
+    assert_fails_with(&logsh().arg("shade").arg(&missing).output().unwrap(), FAILED, &["error:", "nowhere"]);
 
     let scene = example_scene(dir.path());
     let json = scene.join("scene.json");
     let original = std::fs::read_to_string(&json).unwrap();
 
     std::fs::write(&json, original.replacen("\"version\": 1", "\"version\": 1,\n  \"colour\": 3", 1)).unwrap();
-    assert_fails_with(logsh().arg("shade").arg(&scene), &["scene.json", "colour"]);
+    assert_fails_with(&logsh().arg("shade").arg(&scene).output().unwrap(), FAILED, &["scene.json", "colour"]);
 
     std::fs::write(&json, "{\n  \"version\": 1,\n  \"gbuffer\": \n}").unwrap();
-    assert_fails_with(logsh().arg("shade").arg(&scene), &["scene.json:4:1"]);
+    assert_fails_with(&logsh().arg("shade").arg(&scene).output().unwrap(), FAILED, &["scene.json:4:1"]);
 
     std::fs::write(&json, &original).unwrap();
     std::fs::write(
@@ -101,10 +93,10 @@ fn bad_scenes_are_named() {
         r#"{"frame": 1, "spheres": [{"center": [0, 0, 2], "radius": -1}]}"#,
     )
     .unwrap();
-    assert_fails_with(logsh().arg("shade").arg(&scene), &["blockers.0001.json", "radius"]);
+    assert_fails_with(&logsh().arg("shade").arg(&scene).output().unwrap(), FAILED, &["blockers.0001.json", "radius"]);
 
     std::fs::remove_file(scene.join("gbuffer.0001.exr")).unwrap();
-    assert_fails_with(logsh().arg("shade").arg(&scene), &["gbuffer.0001.exr"]);
+    assert_fails_with(&logsh().arg("shade").arg(&scene).output().unwrap(), FAILED, &["gbuffer.0001.exr"]);
 }
 
 #[test]
@@ -118,10 +110,18 @@ fn inputs_are_never_written_over() {
     let text = std::fs::read_to_string(&json).unwrap().replace("gbuffer.####.exr", "beauty.####.exr");
     std::fs::write(&json, text).unwrap();
     let before = std::fs::read(scene.join("beauty.0001.exr")).unwrap();
-    assert_fails_with(logsh().arg("shade").arg(&scene).arg("--out").arg(&scene), &["beauty.0001.exr"]);
+    assert_fails_with(
+        &logsh().arg("shade").arg(&scene).arg("--out").arg(&scene).output().unwrap(),
+        FAILED,
+        &["beauty.0001.exr"],
+    );
     assert_eq!(std::fs::read(scene.join("beauty.0001.exr")).unwrap(), before);
     // And `logsh example` does not overwrite a scene.
-    assert_fails_with(logsh().args(["example", "spheres", "--out"]).arg(&scene), &["already holds a scene"]);
+    assert_fails_with(
+        &logsh().args(["example", "spheres", "--out"]).arg(&scene).output().unwrap(),
+        FAILED,
+        &["already holds a scene"],
+    );
 }
 
 #[test]
@@ -229,11 +229,15 @@ fn visibility_grid_is_checked_and_renders() {
     for bad in ["0", "5"] {
         let mut cmd = logsh();
         cmd.arg("shade").arg(&scene).args(["--visibility-grid", bad]).arg("--out").arg(&out);
-        assert_fails_with(&mut cmd, &[&format!("--visibility-grid {bad} is outside 1..=4")]);
+        assert_fails_with(&cmd.output().unwrap(), FAILED, &[&format!("--visibility-grid {bad} is outside 1..=4")]);
     }
     let mut transfer = logsh();
     transfer.args(["render", "--device", "cpu", "--transfer", "--visibility-grid", "2", "--progress", "none"]);
-    assert_fails_with(transfer.arg(&scene).arg("--out").arg(&out), &["--visibility-grid 2", "--transfer"]);
+    assert_fails_with(
+        &transfer.arg(&scene).arg("--out").arg(&out).output().unwrap(),
+        FAILED,
+        &["--visibility-grid 2", "--transfer"],
+    );
     assert!(!out.exists(), "nothing is written when the flags are refused");
 
     let auto = logsh()

@@ -473,8 +473,7 @@ fn shade_on_the_gpu_matches_the_cpu_through_the_command_line() {
         let mut images = Vec::new();
         for device in ["gpu", "cpu"] {
             let out = dir.path().join(format!("{}-{device}", scene.file_name().unwrap().to_string_lossy()));
-            let output = assert_cmd::Command::cargo_bin("logsh")
-                .unwrap()
+            let output = crate::support::cli::logsh()
                 .args(["shade", "--device", device])
                 .arg(&scene)
                 .arg("--out")

@@ -4,7 +4,6 @@
 
 use crate::support;
 
-use assert_cmd::Command;
 use logsh::compare::unoccluded_value;
 use logsh::scene::output::write_exr_channels;
 use logsh::scene::{LightSource, Scene};
@@ -14,15 +13,7 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use support::exr_channels as channels;
 
-fn logsh() -> Command {
-    Command::cargo_bin("logsh").unwrap()
-}
-
-/// Runs `logsh` with `args`, asserting success.
-fn run(args: &[&str]) {
-    let output = logsh().args(args).output().unwrap();
-    assert!(output.status.success(), "logsh {args:?}: {}", String::from_utf8_lossy(&output.stderr));
-}
+use crate::support::cli::{logsh, run};
 
 /// Writes `channels` (as f32) with `header` as the `logshTransfer` attribute: a 96x54 frame
 /// with its transfer layers cut or its header edited.

@@ -2,21 +2,14 @@
 //! multi-layer EXRs whose passes add up to the beauty, resuming after a killed run, and
 //! every bad input ending in a non-zero exit with the file named and no panic.
 
-use assert_cmd::Command;
 use exr::prelude::{read_all_flat_layers_from_file, FlatSamples};
 use logsh::scene::Camera;
 use logsh::synth::{self, ExampleOptions};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
-use std::process::{Output, Stdio};
+use std::process::Stdio;
 
-fn logsh() -> Command {
-    Command::cargo_bin("logsh").unwrap()
-}
-
-fn stderr_of(output: &Output) -> String {
-    String::from_utf8_lossy(&output.stderr).into_owned()
-}
+use crate::support::cli::{assert_fails_with, logsh, stderr_of, FAILED, REFUSED_WHILE_PARSING};
 
 /// The dune sample (height field, blockers, water, a Phong sphere, a sky map) with a
 /// third frame whose camera has moved: per-frame cameras and blockers both change.
@@ -53,15 +46,6 @@ fn channels(path: &Path) -> (usize, usize, Channels) {
         })
         .collect();
     (layer.size.0, layer.size.1, map)
-}
-
-fn assert_fails_with(output: &Output, code: i32, needles: &[&str]) {
-    let stderr = stderr_of(output);
-    assert_eq!(output.status.code(), Some(code), "{stderr}");
-    assert!(!stderr.contains("panicked"), "{stderr}");
-    for needle in needles {
-        assert!(stderr.contains(needle), "expected {needle:?} in: {stderr}");
-    }
 }
 
 const PASS_CHANNELS: &[&str] = &[
@@ -560,7 +544,7 @@ fn one_bad_frame_fails_alone_and_is_named() {
     let output = logsh().arg("render").arg(&scene).args(["--progress", "lines", "--out"]).arg(&out).output().unwrap();
     assert_fails_with(
         &output,
-        1,
+        FAILED,
         &[
             "2 of 3 frame(s) failed",
             "frame 2: ",
@@ -586,23 +570,23 @@ fn bad_scenes_end_with_the_file_named() {
     let original = std::fs::read_to_string(&json).unwrap();
 
     std::fs::write(&json, original.replacen("\"version\": 1", "\"version\": 1,\n  \"colour\": 3", 1)).unwrap();
-    assert_fails_with(&render(), 1, &["scene.json", "unknown field `colour`"]);
+    assert_fails_with(&render(), FAILED, &["scene.json", "unknown field `colour`"]);
 
     std::fs::write(&json, "{\n  \"version\": 1,\n  \"gbuffer\": [\n}").unwrap();
-    assert_fails_with(&render(), 1, &["scene.json:4:1"]);
+    assert_fails_with(&render(), FAILED, &["scene.json:4:1"]);
 
     std::fs::write(&json, original.replace("gbuffer.####.exr", "../elsewhere/gbuffer.####.exr")).unwrap();
-    assert_fails_with(&render(), 1, &["scene.json", "\"gbuffer\"", "climbs out of the scene directory"]);
+    assert_fails_with(&render(), FAILED, &["scene.json", "\"gbuffer\"", "climbs out of the scene directory"]);
 
     std::fs::write(&json, original.replace("\"sky.exr\"", "\"/etc/sky.exr\"")).unwrap();
-    assert_fails_with(&render(), 1, &["scene.json", "\"light.environment\"", "absolute and outside"]);
+    assert_fails_with(&render(), FAILED, &["scene.json", "\"light.environment\"", "absolute and outside"]);
 
     std::fs::write(&json, &original).unwrap();
     std::fs::remove_file(scene.join("gbuffer.0001.exr")).unwrap();
-    assert_fails_with(&render(), 1, &["1 of 3 frame(s) failed", "gbuffer.0001.exr", "file not found"]);
+    assert_fails_with(&render(), FAILED, &["1 of 3 frame(s) failed", "gbuffer.0001.exr", "file not found"]);
 
     std::fs::write(scene.join("camera.0002.json"), "{\"frame\": 2,").unwrap();
-    assert_fails_with(&render(), 1, &["2 of 3 frame(s) failed", "camera.0002.json:1:"]);
+    assert_fails_with(&render(), FAILED, &["2 of 3 frame(s) failed", "camera.0002.json:1:"]);
     assert!(out.join("render.0003.exr").is_file());
 }
 
@@ -615,16 +599,20 @@ fn flags_and_outputs_are_checked_before_rendering() {
         logsh().arg("render").arg(&scene).args(args).arg("--out").arg(out).output().unwrap()
     };
 
-    assert_fails_with(&render(&["--frames", "1-3x0"], &out), 2, &["--frames", "step must be at least 1"]);
-    assert_fails_with(&render(&["--frames", "1,,3"], &out), 2, &["--frames", "empty item"]);
+    assert_fails_with(
+        &render(&["--frames", "1-3x0"], &out),
+        REFUSED_WHILE_PARSING,
+        &["--frames", "step must be at least 1"],
+    );
+    assert_fails_with(&render(&["--frames", "1,,3"], &out), REFUSED_WHILE_PARSING, &["--frames", "empty item"]);
     assert_fails_with(
         &render(&["--frames", "2-9"], &out),
-        1,
+        FAILED,
         &["frame(s) 4, 5, 6, 7, 8 outside the scene's frames 1-3"],
     );
-    assert_fails_with(&render(&["--order", "12"], &out), 1, &["--order 12"]);
-    assert_fails_with(&render(&["--threads", "0"], &out), 1, &["--threads 0"]);
-    assert_fails_with(&render(&["--name", "../x"], &out), 1, &["--name"]);
+    assert_fails_with(&render(&["--order", "12"], &out), FAILED, &["--order 12"]);
+    assert_fails_with(&render(&["--threads", "0"], &out), FAILED, &["--threads 0"]);
+    assert_fails_with(&render(&["--name", "../x"], &out), FAILED, &["--name"]);
     assert!(!out.exists(), "nothing is created when the command is refused");
 
     // A scene claiming every frame there is needs --frames.
@@ -633,18 +621,18 @@ fn flags_and_outputs_are_checked_before_rendering() {
     let mut v: serde_json::Value = serde_json::from_str(&original).unwrap();
     v["frames"] = serde_json::json!({"start": i64::MIN, "end": i64::MAX});
     std::fs::write(&json, v.to_string()).unwrap();
-    assert_fails_with(&render(&[], &out), 1, &["scene.json", "choose some with --frames"]);
+    assert_fails_with(&render(&[], &out), FAILED, &["scene.json", "choose some with --frames"]);
     std::fs::write(&json, &original).unwrap();
 
     // Outputs named like an input are refused before any frame is shaded.
     let before = std::fs::read(scene.join("gbuffer.0002.exr")).unwrap();
     assert_fails_with(
         &render(&["--name", "gbuffer"], &scene),
-        1,
+        FAILED,
         &["gbuffer.0001.exr", "refusing to write over an input"],
     );
     assert_eq!(std::fs::read(scene.join("gbuffer.0002.exr")).unwrap(), before);
-    assert_fails_with(&render(&[], &scene.join("scene.json")), 1, &["scene.json", "not a directory"]);
+    assert_fails_with(&render(&[], &scene.join("scene.json")), FAILED, &["scene.json", "not a directory"]);
 
     // Frame specs the way farms write them.
     let output = render(&["--frames", "3,1..2x1", "--progress", "json"], &out);
@@ -665,12 +653,12 @@ fn info_refuses_what_is_not_an_exr() {
     std::fs::write(&garbage, b"v/1\x01\x02\x00\x00 not an exr at all").unwrap();
     assert_fails_with(
         &logsh().arg("info").arg(&garbage).output().unwrap(),
-        1,
+        FAILED,
         &["garbage.exr", "not a readable image"],
     );
     assert_fails_with(
         &logsh().arg("info").arg(dir.path().join("none.exr")).output().unwrap(),
-        1,
+        FAILED,
         &["none.exr", "file not found"],
     );
 }
@@ -696,7 +684,7 @@ fn huge_headers_are_refused_before_allocation() {
     std::fs::write(&file, &bytes).unwrap();
     let out = dir.path().join("out");
     let output = logsh().arg("render").arg(&scene).args(["--frames", "1", "--out"]).arg(&out).output().unwrap();
-    assert_fails_with(&output, 1, &["gbuffer.0001.exr", "100000 x 100000 pixels is too large"]);
+    assert_fails_with(&output, FAILED, &["gbuffer.0001.exr", "100000 x 100000 pixels is too large"]);
     let output = logsh().arg("info").arg(&file).output().unwrap();
     assert!(!stderr_of(&output).contains("panicked"), "{}", stderr_of(&output));
 }
@@ -785,6 +773,6 @@ fn a_bad_pixel_in_a_band_is_named_in_the_frame() {
         .output()
         .unwrap();
     let pixel = format!("pixel ({}, {})", bad % g.width, bad / g.width);
-    assert_fails_with(&output, 1, &["gbuffer.0001.exr", &pixel]);
+    assert_fails_with(&output, FAILED, &["gbuffer.0001.exr", &pixel]);
     assert!(!out.join("render.0001.exr").exists() && !out.join("render.0001.png").exists());
 }

@@ -5,15 +5,11 @@
 
 use crate::support;
 
-use assert_cmd::Command;
 use logsh::synth::{self, ExampleOptions, SynthScene};
 use std::path::{Path, PathBuf};
 use support::exr_channels as channels;
 
-fn logsh(args: &[&str]) {
-    let output = Command::cargo_bin("logsh").unwrap().args(args).output().unwrap();
-    assert!(output.status.success(), "logsh {args:?}: {}", String::from_utf8_lossy(&output.stderr));
-}
+use crate::support::cli::run as logsh;
 
 /// The synthetic dunes (terrain, water, blockers, a sky above the horizon) at 48x27.
 fn dunes() -> SynthScene {
@@ -133,8 +129,7 @@ fn bad_supersampling_is_refused() {
         let mut json: serde_json::Value = serde_json::from_str(&original).unwrap();
         json_edit(&mut json);
         std::fs::write(&file, serde_json::to_string(&json).unwrap()).unwrap();
-        let output = Command::cargo_bin("logsh")
-            .unwrap()
+        let output = crate::support::cli::logsh()
             .args(["shade", path(&scene_dir), "--out", path(&dir.path().join("out")), "--device", "cpu"])
             .output()
             .unwrap();
@@ -149,8 +144,7 @@ fn bad_supersampling_is_refused() {
     refuse(&|j| j["supersample"] = serde_json::json!(0), &["scene.json", "supersample"]);
     // The G-buffer is twice the camera's size, not three times.
     refuse(&|j| j["supersample"] = serde_json::json!(3), &["camera.0001.json", "gbuffer.0001.exr"]);
-    let output = Command::cargo_bin("logsh")
-        .unwrap()
+    let output = crate::support::cli::logsh()
         .args(["render", path(&scene_dir), "--out", path(&dir.path().join("t")), "--transfer", "--progress", "none"])
         .output()
         .unwrap();
@@ -161,7 +155,7 @@ fn bad_supersampling_is_refused() {
     // A visibility grid needs the samples side by side: refused with the adaptive
     // selection, shaded with --every-sample.
     let grid = ["shade", path(&scene_dir), "--device", "cpu", "--visibility-grid", "2", "--out"];
-    let output = Command::cargo_bin("logsh").unwrap().args(grid).arg(dir.path().join("grid")).output().unwrap();
+    let output = crate::support::cli::logsh().args(grid).arg(dir.path().join("grid")).output().unwrap();
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert_eq!(output.status.code(), Some(1), "{stderr}");
     assert!(stderr.contains("--visibility-grid 2") && stderr.contains("--every-sample"), "{stderr}");

@@ -2,6 +2,7 @@
 //! actual difference.
 #![allow(dead_code)]
 
+pub mod cli;
 pub mod executors;
 pub mod sharp;
 
