@@ -7,7 +7,7 @@
 //!
 //! | path | body |
 //! |---|---|
-//! | `/` | the page (`page.html`: canvas, sliders, the relight in JavaScript) |
+//! | `/` | the page (`page.html`: the frame fitted to the window, a panel of controls below it, the relight in JavaScript) |
 //! | `/frames.json` | the frames of the directory: file names, those found at start sorted, then those written since appended (`Viewer::listed`) |
 //! | `/frame/<i>/meta.json` | size (of a preview at most 1920x1080: `PREVIEW_SIZE`), order, the light's SH vector, the lobes, the layout of the next two; the passes `rendered.bin` has, why there is no Cycles render where there is none, the suns' and Sun lamps' directions |
 //! | `/frame/<i>/pixels.bin` | the transfer layers, little-endian f32, one array after another |
@@ -16,20 +16,48 @@
 //! | `/frame/<i>/rendered.bin?pass=NAME` | the frame's pass `NAME` as rendered (`beauty`, `diffuse`, `specular`, `environment`, `indirect`: RGB; `visibility`: one value), f32 at the preview's pixels, read from its file ([`as_rendered`]) |
 //! | `/frame/<i>/pixel.json?x=X&y=Y` | pixel (`X`, `Y`) of the frame (its own pixels, not the preview's) as its file holds it: every channel but the transfer layers, by full name; and the material index and type of each of its G-buffer samples, or why they cannot be read |
 //! | `/frame/<i>/sharp_lights.bin?rotation=DEG` | the light turned `DEG` about Z, shaded again as `logsh relight` shades it ([`SunLampTurn`]), RGB f32: where the frame has Sun lamps, the `lamps_diffuse` then `lamps_specular` layers with them turned; then, where the page's light has suns taken out of its map (`sharp_suns`), their diffuse then specular light, turned |
-//! | `/bench/start`, `/bench/end?runs=N&what=W` | the page's `?bench=N` mode: the server prints the time between the two |
+//! | `/bench/start`, `/bench/end?runs=N&what=W&page_ms=T` | the page's `?bench=N` mode: the server prints the time between the two, and the page's own where its clock moved |
 //!
-//! The page takes its sliders' first values from its address: `?frame=I` (the index in
-//! `frames.json`, from 0), `rotation=DEG` (any angle, wrapped into -180 to 180),
-//! `strength=S`, `exposure=EV`, `wipe=F` (0 to 1), `pass=NAME`; `bench=N` and `proxy=N`
-//! time it (below), and `dragging=1` shows the frame as while the rotation is held.
+//! The page keeps its state in its address (`history.replaceState`; its "link to this
+//! view" is that address), so that a view can be shared, and takes its first state from
+//! it:
+//!
+//! | parameter | state |
+//! |---|---|
+//! | `frame=I` | the frame, its index in `frames.json` from 0 |
+//! | `pass=NAME` | `beauty`, `diffuse`, `specular`, `environment`, `indirect`, `visibility` |
+//! | `view=V` | `relit`; `wipe-rendered`, `diff-rendered` against the pass as rendered; `wipe-cycles`, `diff-cycles` against the Cycles render (the beauty). A view with nothing to compare against is the relit frame; `wipe=F` alone is `wipe-cycles` |
+//! | `diff=abs` or `signed` | the difference's kind: absolute per channel, or the mean over R, G, B on a diverging map (blue below, red above, black at zero) |
+//! | `wipe=F` | where the wipe is, 0 to 1 of the frame's width |
+//! | `rotation=DEG`, `strength=S`, `exposure=EV` | the light's turn about Z (any angle, wrapped into -180 to 180), its strength, the exposure added to the scene's |
+//! | `zoom=Z` | device pixels per frame pixel (absent: fitted to the window) |
+//! | `center=X,Y` | with `zoom`, the frame's point at the middle of the window, in frame pixels |
+//! | `inspect=X,Y` | the pixel pinned in the inspector, in frame pixels |
+//! | `keys=K,...` | keys pressed once the frame is shown (`KeyboardEvent.key` names, `Shift+` before one held): a view scripted |
+//! | `bench=N`, `proxy=N`, `dragging=1` | timing (below): N relights of each kind; a drag's step fixed at N; the frame as while the rotation is held |
+//!
+//! The page fits the frame to the window's device pixels (its canvas sized by
+//! `devicePixelRatio` and again when the window changes), shows frame pixels as squares
+//! when magnified (drawn without smoothing), zooms with the wheel and the keys, pans by
+//! dragging, and inspects the pixel under the cursor or pinned: its coordinates, its passes
+//! relit by the page, and its channels and material from `pixel.json`, to 5 significant
+//! digits. Against a reference it shows the mean and 95th percentile of the per-pixel
+//! absolute error (the mean over R, G, B, linear) over the preview's pixels. A small
+//! equirectangular view of the light's map turns with the rotation and turns it when
+//! dragged, the suns and Sun lamps marked. Every control is in the Tab order and has keys
+//! (`aria-keyshortcuts`; `?` shows them). Controls with nothing to act on (no Cycles
+//! render, one frame, no bounce light) are hidden, and the page says why.
 //!
 //! The page turns the light about Z by rotating its SH vector (exact, [`crate::sh::rotate_z`])
 //! and reading the maps along `Rz(-turn) R`; strength scales the environment (its
 //! suns shaded sharp included), exposure
 //! adds to the scene's, and the image is shown through the scene's view transform as the
 //! PNG previews are. It lights a frame once per turn and recombines it for the other
-//! sliders; while one is dragged, at one pixel in 2 x 2 or 4 x 4 (`?proxy=N` fixes the
-//! step), in full once it is let go. It is the relight of [`crate::transfer::relight`]
+//! sliders, and only draws it again for zoom and pan; while a slider is dragged, at one
+//! pixel in 2 x 2 or 4 x 4 (`?proxy=N` fixes the step), in full once it is let go. Its
+//! status line says what a relight took by the page's clock (`performance.now()`), and
+//! nothing of a time where nothing was relit or the clock did not move (a headless
+//! browser's virtual time). It is the relight of [`crate::transfer::relight`]
 //! but for the maps, read from grids at most [`crate::transfer::SAMPLED_MAP_WIDTH`] wide,
 //! and the open lobes' light, from a 64 x 32 grid: a preview, for which `logsh relight`
 //! gives the frame.
