@@ -183,6 +183,28 @@ fn the_server_answers_the_page_and_a_frames_data() {
     let (_, cycles) = server.request("GET", "/frame/0/cycles.bin");
     assert_eq!(cycles.len(), 4 * 3 * 240 * 135);
     assert_eq!(meta["sharp_suns"], serde_json::json!([]), "nor a sun for the server to shade");
+    // The passes as rendered, and one pixel as the file holds it.
+    let passes = serde_json::json!(["beauty", "diffuse", "specular", "environment", "indirect", "visibility"]);
+    assert_eq!(meta["rendered"], passes);
+    assert_eq!(server.request("GET", "/frame/0/rendered.bin?pass=beauty").1.len(), 4 * 3 * 240 * 135);
+    assert_eq!(server.request("GET", "/frame/0/rendered.bin?pass=visibility").1.len(), 4 * 240 * 135);
+    let (status, body) = server.request("GET", "/frame/0/rendered.bin?pass=sh_diffuse");
+    assert_eq!(status, 404);
+    assert!(
+        String::from_utf8_lossy(&body).contains("the passes are beauty, diffuse"),
+        "{}",
+        String::from_utf8_lossy(&body)
+    );
+    let (status, pixel) = server.request("GET", "/frame/0/pixel.json?x=120&y=80");
+    assert_eq!(status, 200, "{}", String::from_utf8_lossy(&pixel));
+    let pixel: serde_json::Value = serde_json::from_slice(&pixel).unwrap();
+    let names: Vec<&str> = pixel["channels"].as_array().unwrap().iter().map(|c| c[0].as_str().unwrap()).collect();
+    assert!(names.contains(&"R") && names.contains(&"visibility.Y") && names.contains(&"P.X"), "{names:?}");
+    assert!(!names.iter().any(|n| n.starts_with("sh_")), "no transfer layer: {names:?}");
+    assert_eq!(pixel["material"]["samples"][0]["type"], "diffuse", "{pixel}");
+    assert_eq!(server.request("GET", "/frame/0/pixel.json?x=120").0, 400, "no y");
+    let (status, body) = server.request("GET", "/frame/0/pixel.json?x=240&y=0");
+    assert_eq!((status, String::from_utf8_lossy(&body).as_ref()), (404, "no pixel (240, 0): the frame is 240x135"));
     let (status, body) = server.request("GET", "/frame/0/sharp_lights.bin?rotation=75");
     assert_eq!(
         (status, String::from_utf8_lossy(&body).as_ref()),
@@ -831,6 +853,8 @@ fn the_inspector_shows_the_files_values() {
     let materials_json = &scene["materials"];
     let server = Server::start(&frames);
     let mut materials = std::collections::BTreeSet::new();
+    // The largest difference of a value shown from the file's, relative to the value.
+    let mut worst = 0.0f64;
     for (x, y) in [(120, 80), (30, 100), (160, 60), (100, 45), (0, 0), (239, 134), (200, 10), (50, 120)] {
         let dom = page(&browser, &format!("{}?inspect={x},{y}&rotation=75", server.address));
         assert_eq!(
@@ -846,6 +870,9 @@ fn the_inspector_shows_the_files_values() {
             }
             let seen = inspected(&dom, &format!("file:{name}")).unwrap_or_else(|| panic!("({x}, {y}): no {name}"));
             let value = f64::from(*value);
+            if value != 0.0 {
+                worst = worst.max((seen - value).abs() / value.abs());
+            }
             assert!(
                 (seen - value).abs() <= FIVE_DIGITS * value.abs(),
                 "({x}, {y}) {name}: the inspector shows {seen}, the file holds {value}"
@@ -877,6 +904,7 @@ fn the_inspector_shows_the_files_values() {
             );
         }
     }
+    println!("the inspector's values differ from the file's by {worst:.2e} of them at most");
     assert!(materials.len() >= 3, "background and two materials at least: {materials:?}");
     server.stop();
 }
