@@ -1,8 +1,11 @@
 //! `logsh view` as a black box: the server answers on 127.0.0.1 with the page and a
 //! frame's data, and in a real headless browser (Chromium) the page loads and relights the
-//! frame as `logsh relight` does.
+//! frame as `logsh relight` does, fits it to the window and zooms it, inspects a pixel's
+//! values as its file holds them, compares it with the frame as rendered and with Cycles,
+//! hides the controls with nothing to act on, and takes the keyboard. The screenshots
+//! find the frame by the colour of the window around it.
 //!
-//! Without a browser the browser test says on stderr that it did not run, and passes,
+//! Without a browser each browser test says on stderr that it did not run, and passes,
 //! unless `LOGSH_REQUIRE_BROWSER=1` (which `.ci/run` sets once it has installed Debian's
 //! `chromium`).
 
@@ -384,8 +387,8 @@ const AROUND_THE_FRAME: [u8; 3] = [0x11, 0x11, 0x13];
 
 /// Where a screenshot of the page shows the frame, `[left, top, width, height]`: the rows
 /// from the first that holds a pixel not of the colour around the frame to the next that
-/// holds none, and the columns of such pixels in them. The frame must leave a row of the
-/// window below it (the panel lies under the window).
+/// holds none, and the columns of such pixels in them. The frame must leave a row of that
+/// colour below it, above the panel of controls.
 fn frame_in(shot: &image::RgbaImage) -> [u32; 4] {
     let around = |x: u32, y: u32| shot.get_pixel(x, y).0[..3] == AROUND_THE_FRAME;
     let holds_frame = |y: u32| (0..shot.width()).any(|x| !around(x, y));
