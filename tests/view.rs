@@ -1121,9 +1121,21 @@ fn every_control_takes_the_keyboard() {
     let dom = page(&browser, &format!("{}?keys=],],],s,v,i", server.address));
     let link = attribute_of(&dom, "share", "href").unwrap();
     println!("link: {link}");
-    for kept in ["rotation=15", "strength=0.9", "view=wipe-rendered", "inspect=120,"] {
+    for kept in ["rotation=15", "strength=0.9", "view=wipe-rendered"] {
         assert!(link.contains(kept), "the link keeps {kept}: {link}");
     }
+    // i pins the pixel at the middle of the window: (120, 67.5), rounded either way.
+    let pinned: Vec<i64> = link
+        .split("inspect=")
+        .nth(1)
+        .expect(&link)
+        .split('&')
+        .next()
+        .unwrap()
+        .split(',')
+        .map(|v| v.parse().unwrap())
+        .collect();
+    assert!((pinned[0] - 120).abs() <= 1 && (pinned[1] - 67).abs() <= 1, "the link keeps the pinned pixel: {link}");
     assert!(text_of(&dom, "status").contains("as rendered right of the wipe"), "v: the next view");
     assert!(!is_hidden(&dom, "inspector"), "i pins the inspector");
     // A sequence: the arrows step through it, End goes to its last frame.
