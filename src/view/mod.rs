@@ -7,27 +7,57 @@
 //!
 //! | path | body |
 //! |---|---|
-//! | `/` | the page (`page.html`: canvas, sliders, the relight in JavaScript) |
+//! | `/` | the page (`page.html`: the frame fitted to the window, a panel of controls below it, the relight in JavaScript) |
 //! | `/frames.json` | the frames of the directory: file names, those found at start sorted, then those written since appended (`Viewer::listed`) |
-//! | `/frame/<i>/meta.json` | size (of a preview at most 1920x1080: `PREVIEW_SIZE`), order, the light's SH vector, the lobes, the layout of the next two |
+//! | `/frame/<i>/meta.json` | size (of a preview at most 1920x1080: `PREVIEW_SIZE`), order, the light's SH vector, the lobes, the layout of the next two; the passes `rendered.bin` has, why there is no Cycles render where there is none, the suns' and Sun lamps' directions |
 //! | `/frame/<i>/pixels.bin` | the transfer layers, little-endian f32, one array after another |
 //! | `/frame/<i>/maps.bin` | the maps the glossy lookups read ([`RelightLight::sampled_maps`]), then the scene's view transform LUT ([`crate::scene::view`]) |
 //! | `/frame/<i>/cycles.bin` | the Cycles render of the frame as RGB f32, where one is found |
+//! | `/frame/<i>/rendered.bin?pass=NAME` | the frame's pass `NAME` as rendered (`beauty`, `diffuse`, `specular`, `environment`, `indirect`: RGB; `visibility`: one value), f32 at the preview's pixels, read from its file ([`as_rendered`]) |
+//! | `/frame/<i>/pixel.json?x=X&y=Y` | pixel (`X`, `Y`) of the frame (its own pixels, not the preview's) as its file holds it: every channel but the transfer layers, by full name; and the material index and type of each of its G-buffer samples, or why they cannot be read |
 //! | `/frame/<i>/sharp_lights.bin?rotation=DEG` | the light turned `DEG` about Z, shaded again as `logsh relight` shades it ([`SunLampTurn`]), RGB f32: where the frame has Sun lamps, the `lamps_diffuse` then `lamps_specular` layers with them turned; then, where the page's light has suns taken out of its map (`sharp_suns`), their diffuse then specular light, turned |
-//! | `/bench/start`, `/bench/end?runs=N&what=W` | the page's `?bench=N` mode: the server prints the time between the two |
+//! | `/bench/start`, `/bench/end?runs=N&what=W&page_ms=T` | the page's `?bench=N` mode: the server prints the time between the two, and the page's own where its clock moved |
 //!
-//! The page takes its sliders' first values from its address: `?frame=I` (the index in
-//! `frames.json`, from 0), `rotation=DEG` (any angle, wrapped into -180 to 180),
-//! `strength=S`, `exposure=EV`, `wipe=F` (0 to 1), `pass=NAME`; `bench=N` and `proxy=N`
-//! time it (below), and `dragging=1` shows the frame as while the rotation is held.
+//! The page keeps its state in its address (`history.replaceState`; its "link to this
+//! view" is that address), so that a view can be shared, and takes its first state from
+//! it:
+//!
+//! | parameter | state |
+//! |---|---|
+//! | `frame=I` | the frame, its index in `frames.json` from 0 |
+//! | `pass=NAME` | `beauty`, `diffuse`, `specular`, `environment`, `indirect`, `visibility` |
+//! | `view=V` | `relit`; `wipe-rendered`, `diff-rendered` against the pass as rendered; `wipe-cycles`, `diff-cycles` against the Cycles render (the beauty). A view with nothing to compare against is the relit frame; `wipe=F` alone is `wipe-cycles` |
+//! | `diff=abs` or `signed` | the difference's kind: absolute per channel, or the mean over R, G, B on a diverging map (blue below, red above, black at zero) |
+//! | `wipe=F` | where the wipe is, 0 to 1 of the frame's width |
+//! | `rotation=DEG`, `strength=S`, `exposure=EV` | the light's turn about Z (any angle, wrapped into -180 to 180), its strength, the exposure added to the scene's |
+//! | `zoom=Z` | device pixels per frame pixel (absent: fitted to the window) |
+//! | `center=X,Y` | with `zoom`, the frame's point at the middle of the window, in frame pixels |
+//! | `inspect=X,Y` | the pixel pinned in the inspector, in frame pixels |
+//! | `keys=K,...` | keys pressed once the frame is shown (`KeyboardEvent.key` names, `Shift+` before one held): a view scripted |
+//! | `bench=N`, `proxy=N`, `dragging=1` | timing (below): N relights of each kind; a drag's step fixed at N; the frame as while the rotation is held |
+//!
+//! The page fits the frame to the window's device pixels (its canvas sized by
+//! `devicePixelRatio` and again when the window changes), shows frame pixels as squares
+//! when magnified (drawn without smoothing), zooms with the wheel and the keys, pans by
+//! dragging, and inspects the pixel under the cursor or pinned: its coordinates, its passes
+//! relit by the page, and its channels and material from `pixel.json`, to 5 significant
+//! digits. Against a reference it shows the mean and 95th percentile of the per-pixel
+//! absolute error (the mean over R, G, B, linear) over the preview's pixels. A small
+//! equirectangular view of the light's map turns with the rotation and turns it when
+//! dragged, the suns and Sun lamps marked. Every control is in the Tab order and has keys
+//! (`aria-keyshortcuts`; `?` shows them). Controls with nothing to act on (no Cycles
+//! render, one frame, no bounce light) are hidden, and the page says why.
 //!
 //! The page turns the light about Z by rotating its SH vector (exact, [`crate::sh::rotate_z`])
 //! and reading the maps along `Rz(-turn) R`; strength scales the environment (its
 //! suns shaded sharp included), exposure
 //! adds to the scene's, and the image is shown through the scene's view transform as the
 //! PNG previews are. It lights a frame once per turn and recombines it for the other
-//! sliders; while one is dragged, at one pixel in 2 x 2 or 4 x 4 (`?proxy=N` fixes the
-//! step), in full once it is let go. It is the relight of [`crate::transfer::relight`]
+//! sliders, and only draws it again for zoom and pan; while a slider is dragged, at one
+//! pixel in 2 x 2 or 4 x 4 (`?proxy=N` fixes the step), in full once it is let go. Its
+//! status line says what a relight took by the page's clock (`performance.now()`), and
+//! nothing of a time where nothing was relit or the clock did not move (a headless
+//! browser's virtual time). It is the relight of [`crate::transfer::relight`]
 //! but for the maps, read from grids at most [`crate::transfer::SAMPLED_MAP_WIDTH`] wide,
 //! and the open lobes' light, from a 64 x 32 grid: a preview, for which `logsh relight`
 //! gives the frame.
@@ -53,6 +83,7 @@ use std::borrow::Cow;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 
+mod as_rendered;
 mod server;
 
 use server::Response;
@@ -78,6 +109,10 @@ pub struct Viewer {
 
 /// The responses of one frame.
 struct FrameBodies {
+    /// The frame's header, which names the scene its G-buffer is read from.
+    header: crate::transfer::TransferHeader,
+    /// The frame's width and height (its preview's may be smaller: [`PREVIEW_SIZE`]).
+    size: [usize; 2],
     meta: String,
     pixels: Vec<u8>,
     maps: Vec<u8>,
@@ -249,14 +284,29 @@ impl Viewer {
             ("/bench/start", _) => *started = Some(std::time::Instant::now()),
             ("/bench/end", Some(start)) => {
                 let ms = 1e3 * start.elapsed().as_secs_f64();
-                let value = |key: &str| query.split('&').find_map(|pair| pair.strip_prefix(key)?.strip_prefix('='));
-                let runs: f64 = value("runs").and_then(|n| n.parse().ok()).unwrap_or(1.0);
-                let what = match value("what") {
+                let runs: f64 = query_value(query, "runs").and_then(|n| n.parse().ok()).unwrap_or(1.0);
+                // The page's own clock, which stands still under a headless browser's
+                // virtual time: said only where it moved.
+                let page_ms = query_value(query, "page_ms").and_then(|n| n.parse::<f64>().ok()).filter(|&ms| ms > 0.0);
+                if query_value(query, "what") == Some("shown") {
+                    // One drag per frame of the browser's: the first to the last is
+                    // `runs - 1` frames.
+                    let rate = |ms: f64| 1e3 * (runs - 1.0) / ms;
+                    let page = page_ms.map_or(String::new(), |p| format!(", {:.1} by the page's clock", rate(p)));
+                    eprintln!(
+                        "view: {runs} rotation drags shown one per browser frame: {:.1} frames per second by the \
+                         server's clock{page}",
+                        rate(ms)
+                    );
+                    return Response::ok("text/plain", Vec::new());
+                }
+                let what = match query_value(query, "what") {
                     Some("dragged") => "relights while the rotation is dragged",
                     Some("strength") => "strength changes (no relight)",
                     _ => "relights",
                 };
-                eprintln!("view: {runs} {what} in the browser took {ms:.0} ms, {:.1} ms each", ms / runs);
+                let page = page_ms.map_or(String::new(), |p| format!(" ({:.1} ms each by the page's clock)", p / runs));
+                eprintln!("view: {runs} {what} in the browser took {ms:.0} ms, {:.1} ms each{page}", ms / runs);
             }
             _ => return Response::error(404, "no benchmark started"),
         }
@@ -305,8 +355,10 @@ impl Viewer {
                         Some(rgb) => Response::ok("application/octet-stream", rgb.clone()),
                         None => Response::error(404, "no Cycles render of this frame"),
                     },
+                    "rendered.bin" => rendered_pass(&file, &bodies, query_value(query, "pass").unwrap_or("beauty")),
+                    "pixel.json" => inspected_pixel(&file, &bodies, query),
                     "sharp_lights.bin" => {
-                        let rotation = query.split('&').find_map(|pair| pair.strip_prefix("rotation="));
+                        let rotation = query_value(query, "rotation");
                         match (&bodies.sharp, rotation.and_then(|r| r.parse::<f64>().ok())) {
                             (None, _) => Response::error(404, "this frame has no Sun lamp and its map no sun"),
                             (_, None) => Response::error(400, "sharp_lights.bin takes ?rotation=DEG"),
@@ -405,6 +457,62 @@ impl Viewer {
         }
         Ok(bodies)
     }
+}
+
+/// The value of `key` in a request's query (`a=1&b=2`), as sent.
+fn query_value<'a>(query: &'a str, key: &str) -> Option<&'a str> {
+    query.split('&').find_map(|pair| pair.strip_prefix(key)?.strip_prefix('='))
+}
+
+/// `rendered.bin?pass=NAME`: the frame's pass `NAME` as rendered ([`as_rendered::PASSES`]),
+/// read from its file at the preview's pixels, one or three f32 per pixel.
+fn rendered_pass(file: &Path, bodies: &FrameBodies, pass: &str) -> Response {
+    let Some(channels) = as_rendered::pass_channels(pass) else {
+        let names: Vec<&str> = as_rendered::PASSES.iter().map(|(name, _)| *name).collect();
+        return Response::error(404, &format!("no pass {pass}: the passes are {}", names.join(", ")));
+    };
+    let (shown, ..) = preview_pixels(bodies.size[0], bodies.size[1], PREVIEW_SIZE);
+    match as_rendered::pass_at(file, channels, &shown) {
+        Ok(values) => {
+            let mut body = Vec::new();
+            put_f32s(&mut body, &values);
+            Response::ok("application/octet-stream", body)
+        }
+        Err(e) => Response::error(404, &format!("no {pass} as rendered: {e}")),
+    }
+}
+
+/// `pixel.json?x=X&y=Y`: the frame's pixel (`X`, `Y`), counted in the frame's own pixels
+/// (not the preview's), as its file holds it: every channel but the transfer layers, by
+/// full name in the file's order, and the material of its G-buffer samples (or why they
+/// cannot be read).
+fn inspected_pixel(file: &Path, bodies: &FrameBodies, query: &str) -> Response {
+    let coordinate = |key| query_value(query, key).and_then(|v| v.parse::<usize>().ok());
+    let (Some(x), Some(y)) = (coordinate("x"), coordinate("y")) else {
+        return Response::error(400, "pixel.json takes ?x=X&y=Y, whole pixels from the top-left corner");
+    };
+    let [width, height] = bodies.size;
+    let channels = match as_rendered::channels_at(file, x, y) {
+        Ok(Some(channels)) => channels,
+        Ok(None) => {
+            return Response::error(404, &format!("no pixel ({x}, {y}): the frame is {width}x{height}"));
+        }
+        Err(e) => return Response::error(500, &e.to_string()),
+    };
+    let material = match as_rendered::materials_at(&bodies.header, x, y) {
+        Ok(samples) => serde_json::json!({
+            "samples": samples.iter().map(|(index, kind)| serde_json::json!({"index": index, "type": kind}))
+                .collect::<Vec<_>>(),
+        }),
+        Err(e) => serde_json::json!({"unread": e.to_string()}),
+    };
+    let body = serde_json::json!({
+        "x": x,
+        "y": y,
+        "channels": channels.iter().map(|(name, value)| serde_json::json!([name, value])).collect::<Vec<_>>(),
+        "material": material,
+    });
+    Response::ok("application/json", body.to_string().into_bytes())
 }
 
 /// A file's size and time of last writing.
@@ -588,14 +696,21 @@ fn frame_bodies(
         put_f32s(&mut maps, lut.values.as_flattened());
         serde_json::json!({"size": lut.size, "log2_range": lut.log2_range, "offset": offset})
     });
-    let (cycles, no_cycles) = cycles_render(file, frame);
+    let (cycles, unusable_cycles) = cycles_render(file, frame);
+    // Why the page has no Cycles render to compare against, where it has none.
+    let no_cycles = cycles.is_none().then(|| {
+        unusable_cycles.clone().unwrap_or_else(|| {
+            let name = format!("cycles.{:04}.exr", frame.header.frame);
+            format!("no Cycles render: no {name} beside the frame or in the scene directory it was rendered from")
+        })
+    });
     let cycles: Option<Vec<u8>> = cycles.as_ref().map(|rgb| {
         let mut bytes = Vec::new();
         put_f32s(&mut bytes, &at_shown(rgb.as_flattened(), 3));
         bytes
     });
     // What the page says beside its status: why it shows what it shows.
-    let notes: Vec<String> = [view_standard, no_cycles].into_iter().flatten().collect();
+    let notes: Vec<String> = [view_standard, unusable_cycles].into_iter().flatten().collect();
     for note in &notes {
         eprintln!("view: {}: {note}", file.display());
     }
@@ -610,6 +725,9 @@ fn frame_bodies(
         "pixels": layout,
         "maps": map_layout,
         "cycles": cycles.is_some(),
+        "no_cycles": no_cycles,
+        // The passes as rendered that the page can compare its own with (`rendered.bin`).
+        "rendered": as_rendered::passes_in(file),
         "view": {"exposure": view.exposure, "transparent": view.transparent, "lut": lut},
         // The suns taken out of the map, shaded by the server (`suns_*` layers,
         // `sharp_lights.bin`).
@@ -626,11 +744,22 @@ fn frame_bodies(
         // The scene's Sun lamps, which the page asks the server for turned
         // (`sharp_lights.bin`).
         "sun_lamps": frame.header.sun_lamps.len(),
+        // Their directions as rendered, azimuth and elevation in degrees.
+        "sun_lamp_directions": frame.header.sun_lamps,
         "sun_lamps_kept": sharp.lamps_kept,
         "notes": notes,
     });
     let cycles_files = cycles_candidates(file, frame).into_iter().map(|path| (path.clone(), written(&path))).collect();
-    FrameBodies { meta: meta.to_string(), pixels, maps, cycles, cycles_files, sharp: None }
+    FrameBodies {
+        header: frame.header.clone(),
+        size: [frame.width, frame.height],
+        meta: meta.to_string(),
+        pixels,
+        maps,
+        cycles,
+        cycles_files,
+        sharp: None,
+    }
 }
 
 #[cfg(test)]
