@@ -39,7 +39,7 @@ pub enum Command {
     Info(InfoArgs),
     /// Recompute the beauty and every pass of frames rendered with --transfer under a turned, scaled or swapped environment, without shading again.
     Relight(RelightArgs),
-    /// Serve a local web page (127.0.0.1 only) that shows the frames of a directory rendered with --transfer and relights them in the browser: environment rotation, strength, exposure, and a wipe against the Cycles render; the Sun lamps and the suns of an HDRI are shaded sharp from the scene, as logsh relight shades them.
+    /// Serve a local web page (127.0.0.1 only) that shows the frames of a directory rendered with --transfer, fitted to the window with zoom and pan, and relights them in the browser: environment rotation (also by dragging the light's map), strength, exposure; a pixel inspector reading the EXR's values; a wipe or difference (absolute or signed, with mean and p95 error) against the Cycles render or the frame as rendered; the Sun lamps and the suns of an HDRI are shaded sharp from the scene, as logsh relight shades them. Every control has keys (`?` lists them), and the page's state is kept in its address.
     View(ViewArgs),
 }
 
