@@ -989,6 +989,12 @@ fn the_difference_from_the_frame_itself_is_zero() {
     server.stop();
 }
 
+/// Frame 2 of the cones rendered with transfer layers into `frames`, beside frame 1.
+fn render_second_frame(scene: &Path, frames: &Path) {
+    let (scene, frames) = (scene.to_str().unwrap(), frames.to_str().unwrap());
+    run(&["render", scene, "--frames", "2", "--transfer", "--progress", "none", "--out", frames]);
+}
+
 /// The controls with nothing to act on are hidden, and the page says why: without a
 /// Cycles render, the views against it (and an address asking for one shows the frame
 /// relit); with one frame, the frame slider; outside a wipe, the wipe; outside a
@@ -1031,17 +1037,7 @@ fn controls_without_a_target_are_hidden() {
 
     // A Cycles render and a second frame.
     std::fs::rename(scene.join("cycles.moved"), scene.join("cycles.0001.exr")).unwrap();
-    run(&[
-        "render",
-        scene.to_str().unwrap(),
-        "--frames",
-        "2",
-        "--transfer",
-        "--progress",
-        "none",
-        "--out",
-        frames.to_str().unwrap(),
-    ]);
+    render_second_frame(&scene, &frames);
     let server = Server::start(&frames);
     let dom = page(&browser, &format!("{}?view=wipe-cycles", server.address));
     assert!(!option(&dom, "wipe-cycles") && !option(&dom, "diff-cycles"), "a Cycles render to wipe against");
@@ -1066,17 +1062,7 @@ fn every_control_takes_the_keyboard() {
     let dir = tempfile::tempdir().unwrap();
     let frames = rendered_cones(dir.path(), serde_json::json!([]), false);
     let scene = dir.path().join("cones");
-    run(&[
-        "render",
-        scene.to_str().unwrap(),
-        "--frames",
-        "2",
-        "--transfer",
-        "--progress",
-        "none",
-        "--out",
-        frames.to_str().unwrap(),
-    ]);
+    render_second_frame(&scene, &frames);
     let server = Server::start(&frames);
     let dom = page(&browser, &server.address);
     // The keys the help's table names, each cell's words.
