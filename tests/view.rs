@@ -382,7 +382,7 @@ fn screenshot_and_page(
     (image::open(file).unwrap().to_rgba8(), String::from_utf8_lossy(&output.stdout).into_owned())
 }
 
-/// The colour of the window around the frame (`#viewport` in src/view/page.html).
+/// The colour of the window around the frame (`#viewport` in src/view/page/head.html).
 const AROUND_THE_FRAME: [u8; 3] = [0x11, 0x11, 0x13];
 
 /// Where a screenshot of the page shows the frame, `[left, top, width, height]`: the rows

@@ -7,7 +7,7 @@
 //!
 //! | path | body |
 //! |---|---|
-//! | `/` | the page (`page.html`: the frame fitted to the window, a panel of controls below it, the relight in JavaScript) |
+//! | `/` | the page (`page/`: its markup and four scripts, one page: the frame fitted to the window, a panel of controls below it, the relight in JavaScript) |
 //! | `/frames.json` | the frames of the directory: file names, those found at start sorted, then those written since appended (`Viewer::listed`) |
 //! | `/frame/<i>/meta.json` | size (of a preview at most 1920x1080: `PREVIEW_SIZE`), order, the light's SH vector, the lobes, the layout of the next two; the passes `rendered.bin` has, why there is no Cycles render where there is none, the suns' and Sun lamps' directions |
 //! | `/frame/<i>/pixels.bin` | the transfer layers, little-endian f32, one array after another |
@@ -89,7 +89,19 @@ mod server;
 use server::Response;
 
 /// The page, with its script inline.
-const PAGE: &str = include_str!("page.html");
+const PAGE: &str = concat!(
+    // The markup and its style.
+    include_str!("page/head.html"),
+    // The relight: SH rotation, map lookups, the view transform, the passes composed.
+    include_str!("page/light.js"),
+    // The window (fit, zoom, pan), the pixel inspector and the light's map.
+    include_str!("page/window.js"),
+    // The sharp lights, the frame shown, the address and the sequence.
+    include_str!("page/frame.js"),
+    // Keys, the pointer, the state from the address, and the start.
+    include_str!("page/controls.js"),
+    include_str!("page/tail.html"),
+);
 
 /// What `logsh view` serves.
 pub struct Viewer {
