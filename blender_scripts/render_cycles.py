@@ -81,7 +81,7 @@ from logsh_exporter.exporter import DATA_FILTER, DATA_FILTER_WIDTH, Changes, mat
 
 
 def roughness_of(exponent):
-    """Inverse of `exporter.phong_exponent`."""
+    """Inverse of `materials.phong_exponent` (the exporter's)."""
     alpha = (1.0 / (2.0 * (exponent + 0.5))) ** 0.5
     return alpha ** 0.5
 

@@ -9,7 +9,7 @@ import bpy
 import numpy as np
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "blender_scripts"))
-from logsh_exporter import blockers, exporter  # noqa: E402
+from logsh_exporter import blockers, geometry  # noqa: E402
 
 bpy.ops.wm.read_factory_settings(use_empty=True)
 add = {
@@ -23,8 +23,8 @@ for name, make in add.items():
     make()
     obj = bpy.context.active_object
     depsgraph = bpy.context.evaluated_depsgraph_get()
-    triangles = exporter.world_triangles(obj.evaluated_get(depsgraph), obj.matrix_world)
-    points, inside, depth, point_volume = exporter.volume_sample(triangles)
+    triangles = geometry.world_triangles(obj.evaluated_get(depsgraph), obj.matrix_world)
+    points, inside, depth, point_volume = geometry.volume_sample(triangles)
     fit = blockers.VolumeFit(name, points, inside, depth, point_volume, moments=blockers.mesh_moments(triangles))
     result[name] = {"count": len(fit.radii), "error": fit.error,
                     "centres": fit.centres.tolist(), "radii": fit.radii.tolist(),

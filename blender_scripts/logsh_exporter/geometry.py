@@ -1,0 +1,399 @@
+"""The geometry of an export: the objects' triangles, the ground plane, the blocker
+spheres fitted per object (`blockers.py`), the height map sampled from the terrain, the
+camera per frame and the reflection G-buffer of water."""
+
+import bpy
+import mathutils
+import numpy as np
+from mathutils.bvhtree import BVHTree
+
+from . import blockers as blocker_fit
+from .exr import write_exr
+from .common import ExportError, FLAT_THICKNESS, GEOMETRY_TYPES, new_file
+
+
+# ---- geometry --------------------------------------------------------------------------
+
+def world_triangles(obj_eval, matrix):
+    """(T, 3, 3) world-space triangles of an evaluated object, or None without geometry."""
+    mesh = obj_eval.to_mesh()
+    try:
+        if mesh is None or len(mesh.polygons) == 0:
+            return None
+        mesh.calc_loop_triangles()
+        co = np.empty(len(mesh.vertices) * 3)
+        mesh.vertices.foreach_get("co", co)
+        tris = np.empty(len(mesh.loop_triangles) * 3, dtype=np.int64)
+        mesh.loop_triangles.foreach_get("vertices", tris)
+    finally:
+        obj_eval.to_mesh_clear()
+    m = np.array(matrix)
+    world = co.reshape(-1, 3) @ m[:3, :3].T + m[:3, 3]
+    return world[tris.reshape(-1, 3)]
+
+
+def triangle_tree(triangles):
+    """Blender's BVH over (T, 3, 3) triangles, for nearest-point and ray queries."""
+    vertices = triangles.reshape(-1, 3)
+    return BVHTree.FromPolygons([tuple(v) for v in vertices], [(3 * i, 3 * i + 1, 3 * i + 2) for i in range(len(triangles))])
+
+
+def is_flat(triangles):
+    points = triangles.reshape(-1, 3)
+    centred = points - points.mean(axis=0)
+    extents = np.sort(np.ptp(centred @ np.linalg.svd(centred, full_matrices=False)[2].T, axis=0))
+    return extents[-1] <= 0 or extents[0] < FLAT_THICKNESS * extents[-1]
+
+
+def find_ground(objects, terrain, log):
+    """The height of the scene's floor, when there is no height field: the lowest flat,
+    horizontal mesh whose extent covers every other object's in x and y (an object may set
+    the custom property `logsh_ground` to false to be left out). logsh then treats it as
+    an infinite plane hiding the lower hemisphere from everything above it, as Cycles'
+    floor hides it; without this a constant or bright-bottomed World would light the
+    undersides of objects from below the floor."""
+    if terrain is not None:
+        return None
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    bounds = {}
+    for obj in objects:
+        if obj.type not in GEOMETRY_TYPES or obj.is_instancer:
+            continue
+        evaluated = obj.evaluated_get(depsgraph)
+        triangles = world_triangles(evaluated, evaluated.matrix_world)
+        if triangles is not None:
+            points = triangles.reshape(-1, 3)
+            bounds[obj.name] = (points.min(axis=0), points.max(axis=0), obj)
+    best = None
+    for name, (lo, hi, obj) in bounds.items():
+        if not obj.get("logsh_ground", True):
+            continue
+        size = max(hi[0] - lo[0], hi[1] - lo[1])
+        if size <= 0 or hi[2] - lo[2] > 1e-4 * size:
+            continue
+        others = [b for other, b in bounds.items() if other != name]
+        if not others:
+            continue
+        z = 0.5 * (lo[2] + hi[2])
+        covers = all(o_lo[0] >= lo[0] and o_lo[1] >= lo[1] and o_hi[0] <= hi[0] and o_hi[1] <= hi[1]
+                     for o_lo, o_hi, _ in others)
+        above = all(o_lo[2] >= z - 1e-3 * size for o_lo, _, _ in others)
+        if covers and above and (best is None or z < best[0]):
+            best = (z, name)
+    if best is not None:
+        log(f"ground: \"{best[1]}\" at z = {best[0]:.4g} hides the lower hemisphere from the objects above it "
+            "(set its logsh_ground property to false to leave it out)")
+        return best[0]
+    return None
+
+
+def object_indices(objects, changes):
+    """Gives every renderable object its own pass index 1..N (undone after the export), so
+    that the G-buffer's Object Index pass and the blocker spheres name the same object: a
+    receiver takes no shadow from its own spheres that hold it (docs/design.md)."""
+    index_of = {}
+    for i, obj in enumerate(sorted(objects, key=lambda o: o.name), start=1):
+        changes.set(obj, "pass_index", i)
+        index_of[obj.name] = i
+    return index_of
+
+
+def volume_sample(triangles, count=16000, seed=0):
+    """Uniform points over the mesh's grown bounding box, whether each lies inside the mesh
+    (the side of the nearest surface point's face it lies on) and its distance to the
+    surface; and the volume each point stands for."""
+    points, box_volume = blocker_fit.sample_box(triangles, count, seed)
+    tree = triangle_tree(triangles)
+    inside = np.zeros(count, dtype=bool)
+    depth = np.zeros(count)
+    for i, p in enumerate(points):
+        location, normal, _, distance = tree.find_nearest(mathutils.Vector(p))
+        if location is not None:
+            inside[i] = (mathutils.Vector(p) - location).dot(normal) < 0.0
+            depth[i] = distance
+    return points, inside, depth, box_volume / count
+
+
+def export_blockers(scene, depsgraph, objects, terrain, index_of, table, object_index, options, fits, frame, log):
+    """Spheres of every blocker object at this frame; prints each fit's error."""
+    allowed = {o.name for o in objects}
+    spheres, reports = [], []
+    for instance in depsgraph.object_instances:
+        original = instance.object.original
+        if original.name not in allowed or original == terrain or original.type not in GEOMETRY_TYPES:
+            continue
+        count = original.get("logsh_spheres")
+        if count is not None and int(count) <= 0:
+            continue
+        instancer = instance.parent.original.name if instance.is_instance and instance.parent else ""
+        key = (original.name, instancer, tuple(instance.persistent_id) if instance.is_instance else ())
+        matrix = np.array(instance.matrix_world)
+        triangles = world_triangles(instance.object, instance.matrix_world)
+        if triangles is None:
+            continue
+        fit = fits.get(key)
+        if fit == "skip":
+            continue
+        inverse = np.linalg.inv(matrix)
+        local = triangles.reshape(-1, 3) @ inverse[:3, :3].T + inverse[:3, 3]
+        if fit is None or not fit.follows(local):
+            if count is None and fit is None:
+                materials = {s.material.name for s in original.material_slots if s.material}
+                if materials and all(table[index_of[m]]["type"] == "water" for m in materials):
+                    fits[key] = "skip"
+                    log(f"note: \"{original.name}\" is water only; not a blocker")
+                    continue
+                if is_flat(triangles):
+                    fits[key] = "skip"
+                    log(f"note: \"{original.name}\" is flat; not a blocker (set its logsh_spheres property to force it)")
+                    continue
+            name = original.name + (f" (instanced by {instancer}, {instance.persistent_id[0]})" if instance.is_instance else "")
+            points, inside, depth, point_volume = volume_sample(triangles)
+            try:
+                volume = blocker_fit.VolumeFit(name, points, inside, depth, point_volume,
+                                               count=int(count) if count is not None else None,
+                                               error_target=options.fit_error, max_count=options.spheres,
+                                               moments=blocker_fit.mesh_moments(triangles))
+            except ValueError as e:
+                raise ExportError(str(e)) from None
+            fit = blocker_fit.ObjectSpheres(name, volume, matrix, local)
+            fits[key] = fit
+            reports.append((name, fit.count, fit.error))
+        centres, radii = fit.spheres(matrix)
+        object_id = object_index.get(original.name, 0)
+        spheres += [{"center": [float(v) for v in c], "radius": float(r), "object": object_id}
+                    for c, r in zip(centres, radii)]
+    report_fit_errors(reports, frame, log)
+    return spheres
+
+
+def report_fit_errors(reports, frame, log):
+    """Each new fit's sphere count and its error: the volume of the symmetric difference
+    between the spheres' union and the mesh, relative to the mesh's volume."""
+    if not reports:
+        return
+    if len(reports) <= 12:
+        for name, count, error in reports:
+            log(f"frame {frame}: {name}: {count} sphere(s), volume error {100 * error:.1f}%")
+    else:
+        errors = np.array([e for _, _, e in reports])
+        worst = reports[int(np.argmax(errors))][0]
+        log(f"frame {frame}: {len(reports)} objects fitted with {sum(c for _, c, _ in reports)} spheres; volume error "
+            f"{100 * errors.mean():.1f}% on average, {100 * errors.max():.1f}% at worst ({worst})")
+
+
+def export_heightmap(terrain, depsgraph, out, options, log, name="heightmap.exr"):
+    """Samples the terrain's top surface on a corner-registered grid over its XY bounds,
+    into the file `name`."""
+    triangles = world_triangles(terrain.evaluated_get(depsgraph), terrain.evaluated_get(depsgraph).matrix_world)
+    if triangles is None:
+        raise ExportError(f"height field \"{terrain.name}\" has no faces")
+    vertices = triangles.reshape(-1, 3)
+    lo, hi = vertices.min(axis=0), vertices.max(axis=0)
+    if not (hi[0] > lo[0] and hi[1] > lo[1]):
+        raise ExportError(f"height field \"{terrain.name}\" has no extent in x or y")
+    long_side = max(hi[0] - lo[0], hi[1] - lo[1])
+    columns = max(2, int(round(options.heightmap_size * (hi[0] - lo[0]) / long_side)))
+    rows = max(2, int(round(options.heightmap_size * (hi[1] - lo[1]) / long_side)))
+    tree = triangle_tree(triangles)
+    top = hi[2] + 1.0 + 0.01 * long_side
+    heights = np.full((rows, columns), np.nan, dtype=np.float32)
+    down = mathutils.Vector((0.0, 0.0, -1.0))
+    for j in range(rows):
+        y = lo[1] + (hi[1] - lo[1]) * j / (rows - 1)
+        for i in range(columns):
+            x = lo[0] + (hi[0] - lo[0]) * i / (columns - 1)
+            hit = tree.ray_cast(mathutils.Vector((x, y, top)), down)[0]
+            if hit is None:  # the outermost samples lie on the edges; nudge inwards
+                nx = min(max(x, lo[0] + 1e-5 * long_side), hi[0] - 1e-5 * long_side)
+                ny = min(max(y, lo[1] + 1e-5 * long_side), hi[1] - 1e-5 * long_side)
+                hit = tree.ray_cast(mathutils.Vector((nx, ny, top)), down)[0]
+            if hit is not None:
+                heights[j, i] = hit.z
+    holes = np.isnan(heights)
+    if holes.all():
+        raise ExportError(f"height field \"{terrain.name}\": no vertical ray hits it")
+    if holes.any():
+        log(f"note: height field \"{terrain.name}\": {int(holes.sum())} of {holes.size} samples fall in holes; set to its lowest point")
+        heights[holes] = np.nanmin(heights)
+    # Row 0 of the map lies at min y and is the file's first scan line.
+    write_exr(new_file(out, name), {"Y": heights})
+    log(f"height map {name}: {columns}x{rows} samples of \"{terrain.name}\" over x {lo[0]:.3g}..{hi[0]:.3g}, "
+        f"y {lo[1]:.3g}..{hi[1]:.3g}")
+    return {"heights": name, "min": [float(lo[0]), float(lo[1])], "max": [float(hi[0]), float(hi[1])]}
+
+
+def terrain_moves(scene, terrain, frames):
+    """Whether the terrain's evaluated surface differs between `frames`: anything that
+    moves it (an animated transform, modifiers such as Wave or Ocean, shape keys,
+    armatures, geometry nodes) shows in its world-space triangles. Compared to 1e-6 of its
+    extent, far below a height map's spacing."""
+    first = None
+    for frame in frames:
+        scene.frame_set(frame)
+        depsgraph = bpy.context.evaluated_depsgraph_get()
+        evaluated = terrain.evaluated_get(depsgraph)
+        triangles = world_triangles(evaluated, evaluated.matrix_world)
+        if triangles is None:
+            raise ExportError(f"height field \"{terrain.name}\" has no faces on frame {frame}")
+        if first is None:
+            first = triangles
+            scale = float(np.ptp(triangles.reshape(-1, 3), axis=0).max()) or 1.0
+        elif triangles.shape != first.shape or np.abs(triangles - first).max() > 1e-6 * scale:
+            return True
+    return False
+
+
+# ---- camera and reflection -------------------------------------------------------------
+
+def camera_json(scene, frame, width, height):
+    obj = scene.camera
+    data = obj.data
+    if data.type != "PERSP":
+        raise ExportError(f"camera \"{obj.name}\" is {data.type}; logsh reads perspective cameras only")
+    if data.shift_x != 0.0 or data.shift_y != 0.0:
+        raise ExportError(f"camera \"{obj.name}\" has a lens shift; logsh's camera has none")
+    # logsh reads Blender's default sensor fit (AUTO: the sensor width spans the longer
+    # image side); other fits are written as the AUTO width that gives the same view.
+    landscape = width >= height
+    if data.sensor_fit == "HORIZONTAL":
+        sensor = data.sensor_width if landscape else data.sensor_width * height / width
+    elif data.sensor_fit == "VERTICAL":
+        sensor = data.sensor_height * width / height if landscape else data.sensor_height
+    else:
+        sensor = data.sensor_width
+    m = obj.matrix_world
+    return {
+        "frame": frame,
+        "position": list(m.translation),
+        "matrix_world": [list(row) for row in m],
+        "lens_mm": data.lens,
+        "sensor_width_mm": sensor,
+        "resolution": [width, height],
+    }
+
+
+def pixel_rays(camera):
+    """Unit world directions through every pixel centre, rows from the top (as logsh's
+    `Camera::ray_direction`)."""
+    w, h = camera["resolution"]
+    half = 0.5 * camera["sensor_width_mm"] / camera["lens_mm"]
+    hw, hh = (half, half * h / w) if w >= h else (half * w / h, half)
+    x = (2.0 * (np.arange(w) + 0.5) / w - 1.0) * hw
+    y = (1.0 - 2.0 * (np.arange(h) + 0.5) / h) * hh
+    local = np.stack(np.broadcast_arrays(x[None, :], y[:, None], -np.ones((h, w))), axis=-1)
+    world = local @ np.array(camera["matrix_world"])[:3, :3].T
+    return world / np.linalg.norm(world, axis=-1, keepdims=True)
+
+
+class SurfaceLookup:
+    """Smooth (interpolated) normals and materials at ray hits, per evaluated object.
+
+    `Scene.ray_cast` returns the face normal; Cycles' Normal pass is the interpolated
+    shading normal, so the reflection G-buffer interpolates corner normals the same way.
+    """
+
+    def __init__(self, depsgraph):
+        self.depsgraph = depsgraph
+        self.cache = {}
+
+    def _mesh(self, obj):
+        entry = self.cache.get(obj.name)
+        if entry is None:
+            evaluated = obj.evaluated_get(self.depsgraph)
+            mesh = evaluated.to_mesh()
+            mesh.calc_loop_triangles()
+            n = len(mesh.loop_triangles)
+            verts = np.empty(n * 3, dtype=np.int64)
+            loops = np.empty(n * 3, dtype=np.int64)
+            polys = np.empty(n, dtype=np.int64)
+            mesh.loop_triangles.foreach_get("vertices", verts)
+            mesh.loop_triangles.foreach_get("loops", loops)
+            mesh.loop_triangles.foreach_get("polygon_index", polys)
+            co = np.empty(len(mesh.vertices) * 3)
+            mesh.vertices.foreach_get("co", co)
+            normals = np.empty(len(mesh.loops) * 3)
+            mesh.corner_normals.foreach_get("vector", normals)
+            material_index = np.empty(len(mesh.polygons), dtype=np.int64)
+            mesh.polygons.foreach_get("material_index", material_index)
+            slots = [s.material.name if s.material else None for s in evaluated.material_slots]
+            evaluated.to_mesh_clear()
+            order = np.argsort(polys, kind="stable")
+            entry = {
+                "tri_vertices": verts.reshape(-1, 3), "tri_loops": loops.reshape(-1, 3), "tri_poly": polys,
+                "co": co.reshape(-1, 3), "normals": normals.reshape(-1, 3), "material_index": material_index,
+                "slots": slots, "order": order, "sorted_poly": polys[order],
+            }
+            self.cache[obj.name] = entry
+        return entry
+
+    def at(self, obj, face, location, matrix, ray):
+        """(shading normal facing the ray, material name) of a hit."""
+        m = self._mesh(obj)
+        inverse = matrix.inverted()
+        local = np.array(inverse @ location)
+        lo, hi = np.searchsorted(m["sorted_poly"], [face, face + 1])
+        best, best_weights = None, None
+        for t in m["order"][lo:hi]:
+            a, b, c = m["co"][m["tri_vertices"][t]]
+            weights = _barycentric(local, a, b, c)
+            if best is None or weights.min() > best_weights.min():
+                best, best_weights = t, weights
+        if best is None:
+            normal = mathutils.Vector((0.0, 0.0, 1.0))
+        else:
+            n_local = best_weights @ m["normals"][m["tri_loops"][best]]
+            normal = (inverse.transposed().to_3x3() @ mathutils.Vector(n_local)).normalized()
+        if normal.dot(ray) > 0.0:  # Cycles turns the normal towards the viewer on back faces
+            normal = -normal
+        slot = m["material_index"][face] if face < len(m["material_index"]) else 0
+        name = m["slots"][slot] if slot < len(m["slots"]) else None
+        return normal, name
+
+
+def _barycentric(p, a, b, c):
+    v0, v1, v2 = b - a, c - a, p - a
+    d00, d01, d11 = v0 @ v0, v0 @ v1, v1 @ v1
+    d20, d21 = v2 @ v0, v2 @ v1
+    denominator = d00 * d11 - d01 * d01
+    if denominator == 0.0:
+        return np.array([1.0, 0.0, 0.0])
+    v = (d11 * d20 - d01 * d21) / denominator
+    w = (d00 * d21 - d01 * d20) / denominator
+    return np.array([1.0 - v - w, v, w])
+
+
+def write_reflection(scene, depsgraph, camera, index_of, water, path):
+    """The reflection G-buffer: what each water pixel's mirror ray hits."""
+    w, h = camera["resolution"]
+    rays = pixel_rays(camera)
+    origin = mathutils.Vector(camera["position"])
+    lookup = SurfaceLookup(depsgraph)
+    position = np.zeros((h, w, 3), dtype=np.float32)
+    normal = np.zeros((h, w, 3), dtype=np.float32)
+    index = np.zeros((h, w), dtype=np.float32)
+    objects = np.zeros((h, w), dtype=np.float32)
+    scale = max(1.0, origin.length)
+    for y in range(h):
+        for x in range(w):
+            d = mathutils.Vector(rays[y, x])
+            hit, location, _, face, obj, matrix = scene.ray_cast(depsgraph, origin, d)
+            if not hit:
+                continue
+            n, material = lookup.at(obj, face, location, matrix, d)
+            if index_of.get(material) not in water:
+                continue
+            mirror = d - 2.0 * d.dot(n) * n
+            start = location + n * (1e-5 * scale)
+            hit, location, _, face, obj, matrix = scene.ray_cast(depsgraph, start, mirror)
+            if not hit:
+                continue  # the sky: material 0
+            n, material = lookup.at(obj, face, location, matrix, mirror)
+            position[y, x], normal[y, x] = location, n
+            index[y, x] = index_of.get(material, 0)
+            objects[y, x] = obj.original.pass_index
+    channels = {"ViewLayer.IndexMA.X": index, "ViewLayer.IndexOB.X": objects}
+    for k, axis in enumerate("XYZ"):
+        channels[f"ViewLayer.Position.{axis}"] = position[..., k]
+        channels[f"ViewLayer.Normal.{axis}"] = normal[..., k]
+    write_exr(path, channels)
