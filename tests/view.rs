@@ -981,8 +981,10 @@ fn the_difference_from_the_frame_itself_is_zero() {
                 [p[0], p[1], p[2]]
             })
             .collect();
-        let (bluer, redder) =
-            (pixels.iter().filter(|p| p[2] > p[0] + 20).count(), pixels.iter().filter(|p| p[0] > p[2] + 20).count());
+        let (bluer, redder) = (
+            pixels.iter().filter(|p| p[2] > p[0].saturating_add(20)).count(),
+            pixels.iter().filter(|p| p[0] > p[2].saturating_add(20)).count(),
+        );
         println!("{query}: {bluer} pixels below, {redder} above");
         assert!(bluer > 500 && redder > 500, "{query}: both signs shown: {bluer} below, {redder} above");
     }
