@@ -155,10 +155,7 @@ impl Executor {
         timings.device = self.describe();
         timings.on_gpu = self.on_gpu();
         // The bounce gather reads the visibility pass.
-        let outputs = match O::OUTPUTS == Outputs::Passes || job.settings.bounce.bounces > 0 {
-            true => Outputs::Passes,
-            false => Outputs::Beauty,
-        };
+        let outputs = if job.settings.bounce.bounces > 0 { Outputs::Passes } else { O::OUTPUTS };
         let (scene, frame) = (job.scene, job.frame);
         let n = frame.supersample.max(1);
         let adaptive = match job.resolving {

@@ -147,11 +147,7 @@ fn relight_in_threads(
         });
         let writer = threads.spawn(move || -> Result<()> {
             for relit in write_rx {
-                let (index, outcome, passes) = write_relit(args, outputs, relit);
-                let written = match &outcome.status {
-                    FrameStatus::Failed { error } => Err(anyhow!("{error}")),
-                    _ => Ok(()),
-                };
+                let (index, outcome, passes, written) = write_relit(args, outputs, relit);
                 done_tx.send((index, outcome)).ok();
                 written?;
                 // The relight may have finished: then the passes are dropped here.
@@ -198,16 +194,20 @@ fn relight_in_threads(
     })
 }
 
-/// Writes one relit frame: its index, its outcome, and its passes for the next frame's
-/// relight to reuse.
-fn write_relit(args: &RelightArgs, outputs: &[[PathBuf; 3]], relit: Relit) -> (usize, FrameOutcome, ShadedPasses) {
+/// Writes one relit frame: its index, its outcome, its passes for the next frame's
+/// relight to reuse, and the write's failure where it failed.
+fn write_relit(
+    args: &RelightArgs,
+    outputs: &[[PathBuf; 3]],
+    relit: Relit,
+) -> (usize, FrameOutcome, ShadedPasses, Result<()>) {
     let Relit { index, frame, passes, view, description, seconds } = relit;
     let [exr, png, json] = &outputs[index];
     let t = Instant::now();
     let written = crate::render::write_passes(exr, &passes, args.colour_type)
         .and_then(|()| output::write_png_preview(png, passes.width, passes.height, &passes.beauty, &view))
         .and_then(|()| output::write_text(json, &description));
-    let status = match written {
+    let status = match &written {
         Ok(()) => FrameStatus::Done {
             seconds: seconds + t.elapsed().as_secs_f64(),
             outputs: vec![exr.clone(), png.clone(), json.clone()],
@@ -215,7 +215,7 @@ fn write_relit(args: &RelightArgs, outputs: &[[PathBuf; 3]], relit: Relit) -> (u
         Err(e) => FrameStatus::Failed { error: format!("{e:#}") },
     };
     let input = Some(args.frames[index].clone());
-    (index, FrameOutcome { frame: Some(frame), input, status }, passes)
+    (index, FrameOutcome { frame: Some(frame), input, status }, passes, written.map_err(Into::into))
 }
 
 /// Reports the relight's failure, then the frames it stops before, in order after the
