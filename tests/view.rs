@@ -363,23 +363,39 @@ fn screenshot_and_page(
     density: u32,
     file: &Path,
 ) -> (image::RgbaImage, String) {
-    let output = Command::new(browser)
-        .args([
-            "--headless",
-            "--no-sandbox",
-            "--disable-gpu",
+    let output = settled_page(
+        browser,
+        &[
             "--hide-scrollbars",
             &format!("--force-device-scale-factor={density}"),
             &format!("--window-size={width},{height}"),
-            "--virtual-time-budget=30000",
             &format!("--screenshot={}", file.display()),
-            "--dump-dom",
             url,
-        ])
-        .output()
-        .unwrap();
+        ],
+    );
     assert!(file.is_file(), "no screenshot: {}", String::from_utf8_lossy(&output.stderr));
     (image::open(file).unwrap().to_rgba8(), String::from_utf8_lossy(&output.stdout).into_owned())
+}
+
+/// The headless browser run with `args` (the page's URL last), its DOM dumped once its
+/// script and fetches have run. The browser's virtual time does not always wait for the
+/// server to shade the sharp lights again: while the page says a turn is on its way
+/// (`data-turning` on its status line), the page is loaded again, up to four times; the
+/// server keeps the frame it prepared, so later turns come sooner.
+fn settled_page(browser: &Path, args: &[&str]) -> std::process::Output {
+    let mut tries = 0;
+    loop {
+        let output = Command::new(browser)
+            .args(["--headless", "--no-sandbox", "--disable-gpu", "--virtual-time-budget=30000", "--dump-dom"])
+            .args(args)
+            .output()
+            .unwrap();
+        tries += 1;
+        if tries == 4 || !String::from_utf8_lossy(&output.stdout).contains("data-turning=") {
+            return output;
+        }
+        eprintln!("the page's sharp lights were still on their way; loading it again");
+    }
 }
 
 /// The colour of the window around the frame (`#viewport` in src/view/page/head.html).
@@ -475,10 +491,7 @@ fn assert_page_shows(
 /// The page's status line at `url` once its script and fetches have run (the browser's
 /// dump of the page's DOM).
 fn status_line(browser: &Path, url: &str) -> String {
-    let output = Command::new(browser)
-        .args(["--headless", "--no-sandbox", "--disable-gpu", "--virtual-time-budget=30000", "--dump-dom", url])
-        .output()
-        .unwrap();
+    let output = settled_page(browser, &[url]);
     let dom = String::from_utf8_lossy(&output.stdout);
     let start = dom.find("id=\"status\"").unwrap_or_else(|| {
         panic!("no status line in the page: {dom} (the browser said: {})", String::from_utf8_lossy(&output.stderr))

@@ -155,6 +155,8 @@ function showStatus(f, fresh, step, ms) {
   status.textContent = `${meta.file}: ${size}, order ${meta.order}${how}${view}` + sunsNote(f) + sunLampNote(f);
   if (fresh && ms > 0) status.dataset.relightMs = ms.toFixed(2); else delete status.dataset.relightMs;
   status.dataset.frame = meta.file;
+  // A turn of the sharp lights on its way: the status line will change when it comes.
+  if (f.turning !== null) status.dataset.turning = String(f.turning); else delete status.dataset.turning;
   const line = $("metrics");
   if (ref && metrics && metrics.frame === f) {
     line.hidden = false;
