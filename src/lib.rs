@@ -10,7 +10,8 @@
 //! driver of `logsh render`, [`bench`](mod@bench) `logsh bench`,
 //! [`reference`](mod@reference) the ground truth, [`compare`] the measure against Cycles,
 //! [`synth`] procedural scenes, [`info`]
-//! the EXR listing of `logsh info`, [`cli`] and [`run`] the command line.
+//! the EXR listing of `logsh info`, [`cli`] and [`run`] the command line; [`memo`] holds
+//! the tables a process builds once.
 pub mod bench;
 pub mod cli;
 pub mod compare;
@@ -20,6 +21,7 @@ pub mod gpu_layout;
 pub mod heightfield;
 pub mod info;
 pub mod logsh;
+pub mod memo;
 pub mod plot;
 pub mod reference;
 pub mod render;

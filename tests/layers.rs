@@ -12,6 +12,7 @@ const LAYERS: &[(&str, usize)] = &[
     ("x86", 0),
     ("timing", 0),
     ("gpu_layout", 0),
+    ("memo", 0),
     ("sh", 1),
     ("logsh", 1),
     ("heightfield", 1),

@@ -8,6 +8,7 @@
 //! going into the DC term, so `eps` means the same thing for every lobe and every
 //! normalisation.
 
+use crate::memo::Memo;
 use crate::sh::basis::{legendre, Real};
 use crate::sh::quadrature::gauss_legendre_on;
 use std::f64::consts::PI;
@@ -129,6 +130,17 @@ pub fn lobe_exp_error(order: usize, lobe: Lobe, epsilon: f64, exact: &crate::sh:
     let mut e = vec![0.0; order * order];
     exact.exp(&f, &mut e);
     (0..order).map(|l| (e[crate::sh::index(l, 0)] - truth[l]).powi(2)).sum::<f64>().sqrt()
+}
+
+/// [`optimal_lobe_epsilon`] on [`crate::sh::ExactExp::new`]'s grid, searched once per
+/// order and lobe in a process ([`crate::memo`]).
+pub fn shared_optimal_lobe_epsilon(order: usize, lobe: Lobe) -> f64 {
+    static FOUND: Memo<(usize, Option<u64>), f64> = Memo::new();
+    let shape = match lobe {
+        Lobe::Diffuse => None,
+        Lobe::Phong { exponent } => Some(exponent.to_bits()),
+    };
+    *FOUND.get_or_build((order, shape), || optimal_lobe_epsilon(order, lobe, &crate::sh::ExactExp::shared(order, true)))
 }
 
 /// Range searched by [`optimal_lobe_epsilon`].

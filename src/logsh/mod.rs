@@ -9,7 +9,9 @@ pub mod training;
 pub mod wedge;
 
 pub use cap::{cap_log_zh, cap_scale, own_sphere_holds, view_blocker, BlockerView, OWN_SPHERE_REACH};
-pub use lobe::{lobe_exp_error, lobe_log_zh, lobe_log_zh_as, lobe_zh, optimal_lobe_epsilon, Lobe};
+pub use lobe::{
+    lobe_exp_error, lobe_log_zh, lobe_log_zh_as, lobe_zh, optimal_lobe_epsilon, shared_optimal_lobe_epsilon, Lobe,
+};
 pub use slice::{nlp_slice, nlp_slice_of_sine};
 pub use training::training_log_vectors;
 pub use wedge::{WedgeOperator, WedgeTurn};

@@ -20,7 +20,9 @@
 use super::basis::{coefficient_count, eval_basis, Real, MAX_COEFFICIENTS};
 use super::product::TriplingTensor;
 use super::quadrature::SphereQuadrature;
+use crate::memo::Memo;
 use std::f64::consts::PI;
+use std::sync::Arc;
 
 /// `y_0`, the constant value of the DC basis function.
 pub const Y0: f64 = 0.28209479177387814; // 1 / (2 sqrt(pi))
@@ -86,6 +88,13 @@ impl ExactExp {
     /// Gauss nodes in `cos theta` of [`ExactExp::fast`].
     pub fn fast_nodes(order: usize) -> usize {
         2 * order + 2
+    }
+
+    /// [`ExactExp::new`] or [`ExactExp::fast`] (`fine`), built once per order and process
+    /// ([`crate::memo`]).
+    pub fn shared(order: usize, fine: bool) -> Arc<Self> {
+        static GRIDS: Memo<(usize, bool), ExactExp> = Memo::new();
+        GRIDS.get_or_build((order, fine), || if fine { Self::new(order) } else { Self::fast(order) })
     }
 
     pub fn with_grid(order: usize, nz: usize) -> Self {

@@ -2,6 +2,8 @@
 
 use super::basis::{coefficient_count, eval_basis, Real};
 use super::quadrature::SphereQuadrature;
+use crate::memo::Memo;
+use std::sync::Arc;
 
 /// Non-zero entries of `Gamma_ijk = integral of y_i y_j y_k` for `i, j, k < order^2`,
 /// computed by the crate itself with a quadrature that is exact for the degree-`3(n-1)`
@@ -18,6 +20,12 @@ pub struct TriplingTensor {
 const TENSOR_ZERO: f64 = 1e-12;
 
 impl TriplingTensor {
+    /// [`TriplingTensor::new`], built once per order and process ([`crate::memo`]).
+    pub fn shared(order: usize) -> Arc<Self> {
+        static TENSORS: Memo<usize, TriplingTensor> = Memo::new();
+        TENSORS.get_or_build(order, || Self::new(order))
+    }
+
     pub fn new(order: usize) -> Self {
         let count = coefficient_count(order);
         let quadrature = SphereQuadrature::for_products(order);

@@ -7,10 +7,18 @@
 //! to three order-`n` basis functions need only `nz >= 3n / 2`.
 
 use super::basis::{eval_basis, Real};
+use crate::memo::Memo;
 
 /// Gauss-Legendre nodes and weights on [-1, 1], by Newton's iteration on `P_count`.
 /// Nodes and weights are accurate to about 1e-15 for any count up to several thousand.
+/// Each count's rule is worked out once per process ([`crate::memo`]).
 pub fn gauss_legendre(count: usize) -> (Vec<f64>, Vec<f64>) {
+    static RULES: Memo<usize, (Vec<f64>, Vec<f64>)> = Memo::new();
+    let rule = RULES.get_or_build(count, || newton_gauss_legendre(count));
+    (rule.0.clone(), rule.1.clone())
+}
+
+fn newton_gauss_legendre(count: usize) -> (Vec<f64>, Vec<f64>) {
     let mut nodes = vec![0.0; count];
     let mut weights = vec![0.0; count];
     let n = count as f64;

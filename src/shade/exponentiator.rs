@@ -2,8 +2,10 @@
 //! its method needs, and the hand-over of the SH-space methods to the quadrature beyond
 //! the magnitudes where they hold.
 
+use crate::memo::Memo;
 use crate::sh::exp::{exp_hyb_with, exp_series, ExactExp, OlTable};
 use crate::sh::{ExpMethod, Real, TriplingTensor, MAX_COEFFICIENTS};
+use std::sync::Arc;
 
 /// Largest non-DC magnitude `|f^|` given to the SH-space methods; a pixel beyond it is
 /// exponentiated by `quad` instead, which the lobe's peak bounds. Pixels at the default
@@ -19,19 +21,19 @@ pub fn sh_space_max_magnitude(method: ExpMethod) -> f64 {
     }
 }
 
-/// `exp*` with the tables its method needs, built once per frame setting.
+/// `exp*` with the tables its method needs, built once per order and method in a process.
 pub struct Exponentiator {
     pub(crate) method: ExpMethod,
     /// The fine grid for `exact`; the coarse one for `quad`, and for the other methods'
     /// fallback beyond [`sh_space_max_magnitude`].
-    pub(crate) exact: Option<ExactExp>,
-    pub(crate) tensor: Option<TriplingTensor>,
-    pub(crate) ol: Option<OlTable>,
+    pub(crate) exact: Option<Arc<ExactExp>>,
+    pub(crate) tensor: Option<Arc<TriplingTensor>>,
+    pub(crate) ol: Option<Arc<OlTable>>,
     pub(crate) hyb_threshold: f64,
 }
 
 /// Training vectors for the OL fit: 64 of them, a fixed seed (the table is the same on
-/// every run). The fit runs once per frame setting; 256 vectors made `ol` slower per
+/// every run). The fit runs once per order in a process; 256 vectors made `ol` slower per
 /// frame than `quad`.
 const OL_TRAINING_COUNT: usize = 64;
 const OL_TRAINING_SEED: u64 = 0x1065_5a11;
@@ -42,13 +44,13 @@ impl Exponentiator {
         let needs_ol = matches!(method, ExpMethod::Ol | ExpMethod::Hyb);
         Self {
             method,
-            exact: Some(match method {
-                ExpMethod::Exact => ExactExp::new(order),
-                _ => ExactExp::fast(order),
-            }),
-            tensor: needs_tensor.then(|| TriplingTensor::new(order)),
+            exact: Some(ExactExp::shared(order, method == ExpMethod::Exact)),
+            tensor: needs_tensor.then(|| TriplingTensor::shared(order)),
             ol: needs_ol.then(|| {
-                OlTable::fit(order, &crate::logsh::training_log_vectors(order, OL_TRAINING_COUNT, OL_TRAINING_SEED))
+                static FITS: Memo<usize, OlTable> = Memo::new();
+                FITS.get_or_build(order, || {
+                    OlTable::fit(order, &crate::logsh::training_log_vectors(order, OL_TRAINING_COUNT, OL_TRAINING_SEED))
+                })
             }),
             hyb_threshold,
         }

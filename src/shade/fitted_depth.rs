@@ -34,11 +34,11 @@
 use super::exponentiator::Exponentiator;
 use crate::logsh::minimise::scan_then_golden;
 use crate::logsh::{cap_log_zh, lobe_log_zh, nlp_slice, nlp_slice_of_sine, Lobe, WedgeOperator};
+use crate::memo::Memo;
 use crate::sh::{add_rotated_zonal, coefficient_count, ExpMethod, Real, MAX_COEFFICIENTS};
 use rayon::prelude::*;
-use std::collections::HashMap;
 use std::f64::consts::FRAC_PI_2;
-use std::sync::{Arc, Mutex, OnceLock};
+use std::sync::Arc;
 
 /// Intervals of each table over its angle (a cap's radius, a band's width) in
 /// `[0, pi/2]`: 1.4 degrees apart.
@@ -81,20 +81,16 @@ pub struct FittedDepths {
 /// Fits the tables of `key`, or returns the ones this process already fitted: once per
 /// setting, not once per frame.
 pub fn fitted_depths(key: DepthKey, exp: &Exponentiator) -> Arc<FittedDepths> {
-    static FITTED: OnceLock<Mutex<HashMap<DepthKey, Arc<FittedDepths>>>> = OnceLock::new();
-    let cache = FITTED.get_or_init(Default::default);
-    if let Some(tables) = cache.lock().unwrap_or_else(|e| e.into_inner()).get(&key) {
-        return tables.clone();
-    }
-    let epsilon = f64::from_bits(key.epsilon_bits);
-    let bands = if key.directions == 0 {
-        vec![epsilon.ln(); DEPTH_INTERVALS + 1]
-    } else {
-        fit_band_depths(key.order, epsilon, exp, &WedgeOperator::new(key.order, key.directions))
-    };
-    let tables = Arc::new(FittedDepths { caps: fit_cap_depths(key.order, epsilon, key.tangent_occlusion, exp), bands });
-    cache.lock().unwrap_or_else(|e| e.into_inner()).insert(key, tables.clone());
-    tables
+    static FITTED: Memo<DepthKey, FittedDepths> = Memo::new();
+    FITTED.get_or_build(key, || {
+        let epsilon = f64::from_bits(key.epsilon_bits);
+        let bands = if key.directions == 0 {
+            vec![epsilon.ln(); DEPTH_INTERVALS + 1]
+        } else {
+            fit_band_depths(key.order, epsilon, exp, &WedgeOperator::new(key.order, key.directions))
+        };
+        FittedDepths { caps: fit_cap_depths(key.order, epsilon, key.tangent_occlusion, exp), bands }
+    })
 }
 
 /// `DEPTH_INTERVALS + 1` log depths at `alpha = k pi / (2 DEPTH_INTERVALS)` for

@@ -37,6 +37,7 @@
 //! both lobes have the same peak, `(r + 1/2) / (2 pi)` against `(r + 1) / (2 pi)`.
 
 use super::sun::{disk_pattern, DISK_DIRECTIONS};
+use crate::memo::Memo;
 use crate::scene::light::{lookup_coordinates, BilinearTaps, EnvironmentMap};
 use crate::vector::dot;
 use std::f64::consts::{FRAC_PI_2, PI};
@@ -196,8 +197,17 @@ pub fn cone_share(lobe: SharpLobe, order: usize) -> f64 {
 pub const ALBEDO_ENTRIES: usize = 33;
 
 /// `A(mu)` at `mu = i / (ALBEDO_ENTRIES - 1)`, read linearly ([`albedo_lookup`]).
+/// Each lobe's table is worked out once per process ([`crate::memo`]).
 pub fn albedo_table(lobe: SharpLobe) -> Vec<f32> {
-    (0..ALBEDO_ENTRIES).map(|i| lobe.albedo(i as f64 / (ALBEDO_ENTRIES - 1) as f64) as f32).collect()
+    static TABLES: Memo<(bool, u64), Vec<f32>> = Memo::new();
+    let key = match lobe {
+        SharpLobe::Ggx { alpha } => (true, alpha.to_bits()),
+        SharpLobe::Phong { exponent } => (false, exponent.to_bits()),
+    };
+    let table = TABLES.get_or_build(key, || {
+        (0..ALBEDO_ENTRIES).map(|i| lobe.albedo(i as f64 / (ALBEDO_ENTRIES - 1) as f64) as f32).collect()
+    });
+    table.to_vec()
 }
 
 /// Linear interpolation of an [`albedo_table`] at `n . v = mu`.

@@ -17,7 +17,7 @@ use super::settings::{GlossyMethod, ShadingSettings, MAX_DIRECTIONS};
 use super::sun::{DiskDirections, DiskHorizon, DiskShape, Planes, SunDisk, DISK_DIRECTIONS};
 use crate::heightfield::{HorizonAgainst, HorizonPyramid};
 use crate::logsh::{
-    cap_log_zh, lobe_log_zh_as, optimal_lobe_epsilon, view_blocker, BlockerView, Lobe, WedgeOperator, WedgeTurn,
+    cap_log_zh, lobe_log_zh_as, shared_optimal_lobe_epsilon, view_blocker, BlockerView, Lobe, WedgeOperator, WedgeTurn,
 };
 use crate::scene::{EnvironmentMap, Light, Material, PointLight, SunLight};
 use crate::sh::{add_rotated_zonal, coefficient_count, ExpMethod, FoldedQuadrature, Real, MAX_COEFFICIENTS};
@@ -273,7 +273,6 @@ impl<T: Real> ShadingKernel<T> {
     ) -> BTreeMap<u32, MaterialLobes<T>> {
         let order = settings.order;
         let any_phong = materials.values().any(|m| matches!(m, Material::Phong { .. }));
-        let lobe_exp = any_phong.then(|| crate::sh::ExactExp::new(order));
         // The prefiltered glossy term's map levels, where a Phong material needs them and
         // the light has a map; otherwise every lobe stays in log-SH.
         let levels = (any_phong && settings.glossy != GlossyMethod::Sh)
@@ -288,13 +287,7 @@ impl<T: Real> ShadingKernel<T> {
                     Material::Phong { exponent, .. } => {
                         let exponent = f64::from(*exponent);
                         let lobe = Lobe::Phong { exponent: exponent.min(SH_MAX_EXPONENT) };
-                        let eps = settings.phong_epsilon.unwrap_or_else(|| {
-                            optimal_lobe_epsilon(
-                                order,
-                                lobe,
-                                lobe_exp.as_ref().expect("built when a phong material exists"),
-                            )
-                        });
+                        let eps = settings.phong_epsilon.unwrap_or_else(|| shared_optimal_lobe_epsilon(order, lobe));
                         let table = LobeTable::new(order, lobe, eps);
                         let sharp = levels.as_ref().map(|levels| {
                             let sharp_lobe = match settings.glossy {
