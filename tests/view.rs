@@ -730,13 +730,9 @@ fn attribute_of(dom: &str, id: &str, attribute: &str) -> Option<String> {
     Some(tag[at..at + tag[at..].find('"').unwrap()].replace("&amp;", "&"))
 }
 
-/// The page's DOM at `url` once its script and fetches have run.
+/// The page's DOM at `url` once its script and fetches have run ([`settled_page`]).
 fn page(browser: &Path, url: &str) -> String {
-    let output = Command::new(browser)
-        .args(["--headless", "--no-sandbox", "--disable-gpu", "--virtual-time-budget=30000", "--dump-dom", url])
-        .output()
-        .unwrap();
-    String::from_utf8_lossy(&output.stdout).into_owned()
+    String::from_utf8_lossy(&settled_page(browser, &[url]).stdout).into_owned()
 }
 
 /// In a 1280x900 window the page fits the frame to the window: it covers at least 60 % of
