@@ -569,6 +569,44 @@ fn the_page_turns_a_sun_lamp_with_the_map() {
     server.stop();
 }
 
+/// The map marks the scene's point lamps where they lie as seen from the middle of the
+/// frame's surface, and its caption counts them: lamps 100 km away along +x, -y and +z lie at azimuth 0, -90 and elevation 90 (within 0.01 degree of the closed form,
+/// whatever the middle, which the cones' frame holds within a few metres of the origin).
+/// Where the scene cannot be read, none is marked and the page says why.
+#[test]
+fn the_map_marks_point_lamps_where_they_lie() {
+    let dir = tempfile::tempdir().unwrap();
+    let lamp =
+        |position: [f64; 3]| serde_json::json!({"type": "point", "position": position, "radius": 0.1, "power": 10.0});
+    let lamps = serde_json::json!([lamp([1e5, 0.0, 0.0]), lamp([0.0, -1e5, 0.0]), lamp([0.0, 0.0, 1e5])]);
+    let frames = rendered_cones(dir.path(), lamps, false);
+    let server = Server::start(&frames);
+    let (_, meta) = server.request("GET", "/frame/0/meta.json");
+    let meta: serde_json::Value = serde_json::from_slice(&meta).unwrap();
+    let directions: Vec<[f64; 2]> = serde_json::from_value(meta["point_lamp_directions"].clone()).unwrap();
+    assert_eq!(directions.len(), 3, "{directions:?}");
+    let near = |found: f64, expected: f64| (found - expected).abs() < 0.01;
+    let [along_x, along_y, above] = [directions[0], directions[1], directions[2]];
+    assert!(near(along_x[0], 0.0) && near(along_x[1], 0.0), "{along_x:?}");
+    assert!(near(along_y[0], -90.0) && near(along_y[1], 0.0), "{along_y:?}");
+    assert!(near(above[1], 90.0), "{above:?}");
+    if let Some(browser) = required_browser("the_map_marks_point_lamps_where_they_lie") {
+        let dom = page(&browser, &format!("{}?rotation=60", server.address));
+        assert!(dom.contains("3 point lamps, fixed, seen from the frame's middle (square)"), "{dom}");
+    }
+    server.stop();
+
+    let scene = dir.path().join("cones");
+    std::fs::rename(scene.join("scene.json"), scene.join("scene.json.moved")).unwrap();
+    let server = Server::start(&frames);
+    let (_, meta) = server.request("GET", "/frame/0/meta.json");
+    let meta: serde_json::Value = serde_json::from_slice(&meta).unwrap();
+    assert_eq!(meta["point_lamp_directions"], serde_json::json!([]));
+    let notes = meta["notes"].to_string();
+    assert!(notes.contains("point lamps are not marked on the map") && notes.contains("scene.json"), "{notes}");
+    server.stop();
+}
+
 /// A frame whose map holds a sun, rendered with it taken out and shaded sharp (the
 /// default): the page shows it sharp as `logsh relight` does, turned with the map by the
 /// server (`sharp_lights.bin`) and scaled by the page's strength, and says so. Where the

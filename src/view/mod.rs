@@ -9,7 +9,7 @@
 //! |---|---|
 //! | `/` | the page (`page/`: its markup and four scripts, one page: the frame fitted to the window, a panel of controls below it, the relight in JavaScript) |
 //! | `/frames.json` | the frames of the directory: file names, those found at start sorted, then those written since appended (`Viewer::listed`) |
-//! | `/frame/<i>/meta.json` | size (of a preview at most 1920x1080: `PREVIEW_SIZE`), order, the light's SH vector, the lobes, the layout of the next two; the passes `rendered.bin` has, why there is no Cycles render where there is none, the suns' and Sun lamps' directions |
+//! | `/frame/<i>/meta.json` | size (of a preview at most 1920x1080: `PREVIEW_SIZE`), order, the light's SH vector, the lobes, the layout of the next two; the passes `rendered.bin` has, why there is no Cycles render where there is none, the suns' and Sun lamps' directions, and the point lamps' as seen from the middle of the frame |
 //! | `/frame/<i>/pixels.bin` | the transfer layers, little-endian f32, one array after another |
 //! | `/frame/<i>/maps.bin` | the maps the glossy lookups read ([`RelightLight::sampled_maps`]), then the scene's view transform LUT ([`crate::scene::view`]) |
 //! | `/frame/<i>/cycles.bin` | the Cycles render of the frame as RGB f32, where one is found |
@@ -84,6 +84,7 @@ use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 
 mod as_rendered;
+mod point_lamps;
 mod server;
 
 use server::Response;
@@ -721,8 +722,12 @@ fn frame_bodies(
         put_f32s(&mut bytes, &at_shown(rgb.as_flattened(), 3));
         bytes
     });
+    let (point_lamps, unread_lamps) = match point_lamps::point_lamp_directions(frame) {
+        Ok(directions) => (directions, None),
+        Err(e) => (Vec::new(), Some(format!("the scene's point lamps are not marked on the map: {e}"))),
+    };
     // What the page says beside its status: why it shows what it shows.
-    let notes: Vec<String> = [view_standard, unusable_cycles].into_iter().flatten().collect();
+    let notes: Vec<String> = [view_standard, unusable_cycles, unread_lamps].into_iter().flatten().collect();
     for note in &notes {
         eprintln!("view: {}: {note}", file.display());
     }
@@ -759,6 +764,9 @@ fn frame_bodies(
         // Their directions as rendered, azimuth and elevation in degrees.
         "sun_lamp_directions": frame.header.sun_lamps,
         "sun_lamps_kept": sharp.lamps_kept,
+        // The scene's point lamps, which stay where they are as the map turns: azimuth and
+        // elevation in degrees from the middle of the frame's surface.
+        "point_lamp_directions": point_lamps,
         "notes": notes,
     });
     let cycles_files = cycles_candidates(file, frame).into_iter().map(|path| (path.clone(), written(&path))).collect();

@@ -284,10 +284,18 @@ function drawEnvironment() {
     context.beginPath(); context.moveTo(x, y - r); context.lineTo(x + r, y); context.lineTo(x, y + r); context.lineTo(x - r, y); context.closePath();
     context.fillStyle = "#fff"; context.fill(); context.strokeStyle = "#000"; context.stroke();
   }
+  // The point lamps stay where they are as the map turns.
+  const points = meta.point_lamp_directions || [];
+  for (const [azimuth, elevation] of points) {
+    const [x, y] = place(azimuth - state.rotation, elevation), r = 4 * dpr;
+    context.fillStyle = "#9cf"; context.fillRect(x - r, y - r, 2 * r, 2 * r);
+    context.strokeStyle = "#000"; context.strokeRect(x - r, y - r, 2 * r, 2 * r);
+  }
   const marks = [
     meta.sharp_suns.length ? `${meta.sharp_suns.length} sun${meta.sharp_suns.length > 1 ? "s" : ""} shaded sharp (disc)` : "",
     meta.suns_in_sh.length ? `${meta.suns_in_sh.length} held in SH (ring)` : "",
     meta.sun_lamps ? `${meta.sun_lamps} Sun lamp${meta.sun_lamps > 1 ? "s" : ""} (diamond)` : "",
+    points.length ? `${points.length} point lamp${points.length > 1 ? "s" : ""}, fixed, seen from the frame's middle (square)` : "",
   ].filter(Boolean);
   $("light-caption").textContent = `the environment turned ${state.rotation}°` + (marks.length ? `: ${marks.join(", ")}` : "");
   canvas.setAttribute("aria-valuenow", String(state.rotation));
