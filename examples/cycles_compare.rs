@@ -17,13 +17,17 @@
 //!   render, bounce light included.
 //!
 //! Every run shades as `logsh render` does, bounce light included (the preset's
-//! `--bounces`); `default, --bounces 0` is the direct light alone.
+//! `--bounces`); the `--bounces 0` rows (`default`, `high`, `ultra`) are the direct light
+//! alone, to be read against the direct-light truths.
 //!
 //!     cargo run --release --example cycles_compare -- gbuffers/dunes gbuffers/wrecking_ball
 //!
 //! With `--reference TOLERANCE`, also the ground-truth renderer (`logsh reference`: exact
 //! visibility of the same proxies, the environment importance-sampled to `TOLERANCE`):
 //! the proxy floor, what the sphere proxies alone cost against the meshes.
+//!
+//! With `--settings "FLAGS"` (repeatable), also a row shaded with `logsh shade`'s shading
+//! flags, such as `--settings "--bounces 0 --level-step 8 --level-offset 8"`.
 //!
 //! With `--noise DIR`, the same measure between the stored render and a second one of the
 //! same scene with another seed, `DIR/<scene name>/cycles.NNNN.exr`
@@ -65,10 +69,19 @@ fn main() {
         args.drain(i..i + 2);
         tolerance
     });
+    // Rows of their own: `logsh shade`'s shading flags, one string each.
+    let mut flagged: Vec<(String, ShadingSettings)> = Vec::new();
+    while let Some(i) = args.iter().position(|a| a == "--settings") {
+        let flags = args.get(i + 1).expect("--settings needs the flags, quoted").clone();
+        args.drain(i..i + 2);
+        flagged.push((flags.clone(), settings_of(&flags).unwrap_or_else(|e| panic!("--settings {flags:?}: {e}"))));
+    }
     let quick = args.iter().position(|a| a == "--quick").map(|i| args.remove(i)).is_some();
     let dirs: Vec<PathBuf> = args.into_iter().map(PathBuf::from).collect();
     if dirs.is_empty() {
-        eprintln!("usage: cycles_compare [--quick] [--noise DIR] [--reference TOLERANCE] SCENE_DIR...");
+        eprintln!(
+            "usage: cycles_compare [--quick] [--noise DIR] [--reference TOLERANCE] [--settings FLAGS]... SCENE_DIR..."
+        );
         std::process::exit(2);
     }
     println!(
@@ -80,13 +93,17 @@ fn main() {
         ("default", default),
         ("default, --bounces 0", ShadingSettings { bounce: BounceSettings::none(), ..default }),
         ("high", Quality::High.settings()),
+        ("high, --bounces 0", ShadingSettings { bounce: BounceSettings::none(), ..Quality::High.settings() }),
         ("ultra", Quality::Ultra.settings()),
+        ("ultra, --bounces 0", ShadingSettings { bounce: BounceSettings::none(), ..Quality::Ultra.settings() }),
         ("default, depths at log(eps) (--fitted-depths off)", ShadingSettings { fitted_depths: false, ..default }),
         ("default, ratio attenuation", ShadingSettings { ratio_attenuation: true, ..default }),
         ("default, overlap floor off", ShadingSettings { overlap_floor: false, ..default }),
         ("default, no clusters", ShadingSettings { cluster_ratio: 0.0, ..default }),
     ];
     let runs = if quick { &all_runs[..2] } else { &all_runs[..] };
+    let flagged_rows: Vec<(&str, ShadingSettings)> =
+        flagged.iter().map(|(name, settings)| (name.as_str(), *settings)).collect();
     let executor = Executor::cpu();
     for dir in dirs {
         let scene = Scene::load(&dir).unwrap_or_else(|e| panic!("{e}"));
@@ -142,6 +159,7 @@ fn main() {
             .chain(if has_map_suns && !quick { &whole_map[..] } else { &[] })
             .chain(if has_phong { &other_glossy[..] } else { &[] })
             .chain(if is_map && !quick { &windowed[..] } else { &[] })
+            .chain(&flagged_rows)
             .collect();
         for (name, settings) in runs {
             let job = ShadeJob::new(&scene, &frame, settings);
@@ -228,4 +246,16 @@ fn main() {
             }
         }
     }
+}
+
+/// The settings `logsh shade`'s shading flags give (`--settings "--bounces 0 --level-step 8"`).
+fn settings_of(flags: &str) -> Result<ShadingSettings, String> {
+    #[derive(clap::Parser)]
+    struct Flags {
+        #[command(flatten)]
+        shading: logsh::cli::ShadingArgs,
+    }
+    let parsed = <Flags as clap::Parser>::try_parse_from(std::iter::once("--settings").chain(flags.split_whitespace()))
+        .map_err(|e| e.to_string())?;
+    parsed.shading.settings().map_err(|e| e.to_string())
 }
