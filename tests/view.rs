@@ -43,6 +43,13 @@ impl Server {
         Self::request_to(&self.address, method, path)
     }
 
+    /// The first frame's meta.json.
+    fn meta(&self) -> serde_json::Value {
+        let (status, body) = self.request("GET", "/frame/0/meta.json");
+        assert_eq!(status, 200, "{}", String::from_utf8_lossy(&body));
+        serde_json::from_slice(&body).unwrap()
+    }
+
     /// [`Self::request`] to the server at `address`, from any thread.
     fn request_to(address: &str, method: &str, path: &str) -> (u16, Vec<u8>) {
         let host = address.trim_start_matches("http://").trim_end_matches('/');
@@ -169,9 +176,7 @@ fn the_server_answers_the_page_and_a_frames_data() {
     assert!(String::from_utf8_lossy(&page).contains("<canvas"), "the page");
     let (_, names) = server.request("GET", "/frames.json");
     assert_eq!(serde_json::from_slice::<Vec<String>>(&names).unwrap(), ["render.0001.exr"]);
-    let (status, meta) = server.request("GET", "/frame/0/meta.json");
-    assert_eq!(status, 200, "{}", String::from_utf8_lossy(&meta));
-    let meta: serde_json::Value = serde_json::from_slice(&meta).unwrap();
+    let meta = server.meta();
     assert_eq!(
         (meta["width"].as_u64(), meta["height"].as_u64(), meta["order"].as_u64()),
         (Some(240), Some(135), Some(4))
@@ -243,9 +248,7 @@ fn the_server_answers_the_page_and_a_frames_data() {
     .unwrap();
     std::fs::rename(scene.join("cycles.0001.exr"), scene.join("cycles.moved")).unwrap();
     std::fs::rename(scene.join("view_lut.exr"), scene.join("view_lut.moved")).unwrap();
-    let (status, meta) = server.request("GET", "/frame/0/meta.json");
-    assert_eq!(status, 200, "{}", String::from_utf8_lossy(&meta));
-    let meta: serde_json::Value = serde_json::from_slice(&meta).unwrap();
+    let meta = server.meta();
     assert_eq!((meta["order"].as_u64(), &meta["cycles"]), (Some(3), &serde_json::json!(false)));
     let notes = meta["notes"].to_string();
     assert!(notes.contains("no wipe against Cycles") && notes.contains("is 8x8, the frame 240x135"), "{notes}");
@@ -301,9 +304,6 @@ fn a_refused_sun_lamp_turn_is_tried_again_and_first_turns_agree() {
     let frames = rendered_cones(dir.path(), sun, false);
     let description = dir.path().join("cones/scene.json");
     let original = std::fs::read_to_string(&description).unwrap();
-    let meta = |server: &Server| -> serde_json::Value {
-        serde_json::from_slice(&server.request("GET", "/frame/0/meta.json").1).unwrap()
-    };
 
     // Twelve first turns at once: one read of the frame, the same lamps for each.
     let server = Server::start(&frames);
@@ -320,10 +320,10 @@ fn a_refused_sun_lamp_turn_is_tried_again_and_first_turns_agree() {
     // The scene's description gone when the frame is first read: kept, and said why.
     std::fs::rename(&description, dir.path().join("moved.json")).unwrap();
     let server = Server::start(&frames);
-    assert!(meta(&server)["sun_lamps_kept"].as_str().unwrap().contains("cannot be read"));
+    assert!(server.meta()["sun_lamps_kept"].as_str().unwrap().contains("cannot be read"));
     assert_eq!(server.request("GET", "/frame/0/sharp_lights.bin?rotation=75").0, 409);
     std::fs::rename(dir.path().join("moved.json"), &description).unwrap();
-    assert_eq!(meta(&server)["sun_lamps_kept"], serde_json::Value::Null, "the scene put back");
+    assert_eq!(server.meta()["sun_lamps_kept"], serde_json::Value::Null, "the scene put back");
     assert!(server.request("GET", "/frame/0/sharp_lights.bin?rotation=75") == turned[0], "turned as before");
     server.stop();
 
@@ -521,8 +521,7 @@ fn the_page_turns_a_sun_lamp_with_the_map() {
     }
     let preview = |name: &str| image::open(dir.path().join(name).join("render.0001.png")).unwrap().to_rgba8();
     let server = Server::start(&frames);
-    let (_, meta) = server.request("GET", "/frame/0/meta.json");
-    let meta: serde_json::Value = serde_json::from_slice(&meta).unwrap();
+    let meta = server.meta();
     assert_eq!((&meta["sun_lamps"], &meta["sun_lamps_kept"]), (&serde_json::json!(1), &serde_json::Value::Null));
     let (status, lamps) = server.request("GET", "/frame/0/sharp_lights.bin?rotation=75");
     assert_eq!((status, lamps.len()), (200, 4 * 6 * 240 * 135), "both lamps layers, RGB f32");
@@ -554,8 +553,7 @@ fn the_page_turns_a_sun_lamp_with_the_map() {
     let scene = dir.path().join("cones");
     std::fs::rename(scene.join("scene.json"), scene.join("scene.json.moved")).unwrap();
     let server = Server::start(&frames);
-    let (_, meta) = server.request("GET", "/frame/0/meta.json");
-    let meta: serde_json::Value = serde_json::from_slice(&meta).unwrap();
+    let meta = server.meta();
     let why = meta["sun_lamps_kept"].as_str().expect("a reason").to_string();
     assert!(why.contains("cannot be read"), "{why}");
     assert_eq!(server.request("GET", "/frame/0/sharp_lights.bin?rotation=75").0, 409);
@@ -581,8 +579,7 @@ fn the_map_marks_point_lamps_where_they_lie() {
     let lamps = serde_json::json!([lamp([1e5, 0.0, 0.0]), lamp([0.0, -1e5, 0.0]), lamp([0.0, 0.0, 1e5])]);
     let frames = rendered_cones(dir.path(), lamps, false);
     let server = Server::start(&frames);
-    let (_, meta) = server.request("GET", "/frame/0/meta.json");
-    let meta: serde_json::Value = serde_json::from_slice(&meta).unwrap();
+    let meta = server.meta();
     let directions: Vec<[f64; 2]> = serde_json::from_value(meta["point_lamp_directions"].clone()).unwrap();
     assert_eq!(directions.len(), 3, "{directions:?}");
     let near = |found: f64, expected: f64| (found - expected).abs() < 0.01;
@@ -599,8 +596,7 @@ fn the_map_marks_point_lamps_where_they_lie() {
     let scene = dir.path().join("cones");
     std::fs::rename(scene.join("scene.json"), scene.join("scene.json.moved")).unwrap();
     let server = Server::start(&frames);
-    let (_, meta) = server.request("GET", "/frame/0/meta.json");
-    let meta: serde_json::Value = serde_json::from_slice(&meta).unwrap();
+    let meta = server.meta();
     assert_eq!(meta["point_lamp_directions"], serde_json::json!([]));
     let notes = meta["notes"].to_string();
     assert!(notes.contains("point lamps are not marked on the map") && notes.contains("scene.json"), "{notes}");
@@ -627,10 +623,7 @@ fn the_page_shades_a_map_sun_sharp() {
     }
     let preview = |name: &str| image::open(dir.path().join(name).join("render.0001.png")).unwrap().to_rgba8();
     let server = Server::start(&frames);
-    let meta = |server: &Server| -> serde_json::Value {
-        serde_json::from_slice(&server.request("GET", "/frame/0/meta.json").1).unwrap()
-    };
-    let shown = meta(&server);
+    let shown = server.meta();
     let suns = shown["sharp_suns"].as_array().expect("the map's suns");
     assert_eq!((suns.len(), &shown["suns_in_sh"]), (1, &serde_json::json!([])), "{shown}");
     let azimuth = suns[0]["azimuth"].as_f64().unwrap();
@@ -653,7 +646,7 @@ fn the_page_shades_a_map_sun_sharp() {
     let scene = dir.path().join("cones");
     std::fs::rename(scene.join("scene.json"), scene.join("scene.json.moved")).unwrap();
     let server = Server::start(&frames);
-    let held = meta(&server);
+    let held = server.meta();
     assert_eq!(
         (held["sharp_suns"].as_array().map(Vec::len), held["suns_in_sh"].as_array().map(Vec::len)),
         (Some(0), Some(1))
@@ -670,7 +663,7 @@ fn the_page_shades_a_map_sun_sharp() {
     assert!(to_soft < 1.5, "the page differs from logsh relight --sharp-lights off by {to_soft:.2} levels");
     // Put back: shaded sharp again.
     std::fs::rename(scene.join("scene.json.moved"), scene.join("scene.json")).unwrap();
-    assert_eq!(meta(&server)["sharp_suns"].as_array().map(Vec::len), Some(1), "the scene put back");
+    assert_eq!(server.meta()["sharp_suns"].as_array().map(Vec::len), Some(1), "the scene put back");
     server.stop();
 
     // Rendered with the sun held in SH: the page holds it so, as `logsh relight` does.
@@ -678,7 +671,7 @@ fn the_page_shades_a_map_sun_sharp() {
     let render = ["render", scene.to_str().unwrap(), "--frames", "1", "--transfer", "--sharp-lights", "off"];
     run(&[&render[..], &["--progress", "none", "--out", off.to_str().unwrap()]].concat());
     let server = Server::start(&off);
-    let held = meta(&server);
+    let held = server.meta();
     assert_eq!(
         (held["sharp_suns"].as_array().map(Vec::len), held["suns_in_sh"].as_array().map(Vec::len)),
         (Some(0), Some(1))
