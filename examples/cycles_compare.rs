@@ -42,7 +42,7 @@
 use logsh::compare::{frame_error, read_rgb, unoccluded_value};
 use logsh::executor::{Executor, ShadeJob};
 use logsh::reference::{render_reference, ReferenceOptions};
-use logsh::scene::{Light, Material, Scene};
+use logsh::scene::{Frame, Light, Material, Scene};
 use logsh::shade::bounce::BounceSettings;
 use logsh::shade::sharp_lights::extract_suns;
 use logsh::shade::{GlossyMethod, LightWindow, Quality, ShadedFrame, ShadingSettings};
@@ -57,7 +57,17 @@ const TRUTHS: [(&str, &str); 4] = [
     ("authored_bdefault", "as authored, Blender's light paths"),
 ];
 
-fn main() {
+/// The command line: the scene directories and what to add to each one's table.
+struct Options {
+    dirs: Vec<PathBuf>,
+    quick: bool,
+    noise: Option<PathBuf>,
+    reference_tolerance: Option<f64>,
+    /// Rows of their own: `logsh shade`'s shading flags, one string each, and their settings.
+    flagged: Vec<(String, ShadingSettings)>,
+}
+
+fn options() -> Options {
     let mut args: Vec<String> = std::env::args().skip(1).collect();
     let noise = args.iter().position(|a| a == "--noise").map(|i| {
         let dir = PathBuf::from(args.get(i + 1).expect("--noise needs a directory"));
@@ -69,12 +79,12 @@ fn main() {
         args.drain(i..i + 2);
         tolerance
     });
-    // Rows of their own: `logsh shade`'s shading flags, one string each.
-    let mut flagged: Vec<(String, ShadingSettings)> = Vec::new();
+    let mut flagged = Vec::new();
     while let Some(i) = args.iter().position(|a| a == "--settings") {
         let flags = args.get(i + 1).expect("--settings needs the flags, quoted").clone();
         args.drain(i..i + 2);
-        flagged.push((flags.clone(), settings_of(&flags).unwrap_or_else(|e| panic!("--settings {flags:?}: {e}"))));
+        let settings = settings_of(&flags).unwrap_or_else(|e| panic!("--settings {flags:?}: {e}"));
+        flagged.push((flags, settings));
     }
     let quick = args.iter().position(|a| a == "--quick").map(|i| args.remove(i)).is_some();
     let dirs: Vec<PathBuf> = args.into_iter().map(PathBuf::from).collect();
@@ -84,26 +94,15 @@ fn main() {
         );
         std::process::exit(2);
     }
+    Options { dirs, quick, noise, reference_tolerance, flagged }
+}
+
+fn main() {
+    let Options { dirs, quick, noise, reference_tolerance, flagged } = options();
     println!(
         "| scene | truth | settings | pixels | mean abs error | p95 | mean signed | mean abs (plain) | glossy pixels (exponent >= 50) |"
     );
     println!("| --- | --- | --- | --- | --- | --- | --- | --- | --- |");
-    let default = Quality::Default.settings();
-    let all_runs = [
-        ("default", default),
-        ("default, --bounces 0", ShadingSettings { bounce: BounceSettings::none(), ..default }),
-        ("high", Quality::High.settings()),
-        ("high, --bounces 0", ShadingSettings { bounce: BounceSettings::none(), ..Quality::High.settings() }),
-        ("ultra", Quality::Ultra.settings()),
-        ("ultra, --bounces 0", ShadingSettings { bounce: BounceSettings::none(), ..Quality::Ultra.settings() }),
-        ("default, depths at log(eps) (--fitted-depths off)", ShadingSettings { fitted_depths: false, ..default }),
-        ("default, ratio attenuation", ShadingSettings { ratio_attenuation: true, ..default }),
-        ("default, overlap floor off", ShadingSettings { overlap_floor: false, ..default }),
-        ("default, no clusters", ShadingSettings { cluster_ratio: 0.0, ..default }),
-    ];
-    let runs = if quick { &all_runs[..2] } else { &all_runs[..] };
-    let flagged_rows: Vec<(&str, ShadingSettings)> =
-        flagged.iter().map(|(name, settings)| (name.as_str(), *settings)).collect();
     let executor = Executor::cpu();
     for dir in dirs {
         let scene = Scene::load(&dir).unwrap_or_else(|e| panic!("{e}"));
@@ -133,35 +132,7 @@ fn main() {
         let scene_name =
             dir.file_name().map_or_else(|| dir.display().to_string(), |n| n.to_string_lossy().into_owned());
         let mut images: Vec<(String, Vec<[f32; 3]>)> = Vec::new();
-        // Where --sharp-lights takes suns out of the map, also without that.
-        let has_map_suns = match frame.light.as_ref() {
-            Light::Environment { map, strength } => !extract_suns(map, *strength).suns.is_empty(),
-            _ => false,
-        };
-        let whole_map = [
-            ("default, sharp lights off", ShadingSettings { sharp_lights: false, ..default }),
-            ("high, sharp lights off", ShadingSettings { sharp_lights: false, ..Quality::High.settings() }),
-        ];
-        // Under a map, also its SH projection windowed.
-        let is_map = matches!(frame.light.as_ref(), Light::Environment { .. });
-        let windowed = [
-            ("default, --light-window lanczos", ShadingSettings { light_window: LightWindow::Lanczos, ..default }),
-            ("default, --light-window hann", ShadingSettings { light_window: LightWindow::Hann, ..default }),
-        ];
-        // Where a material is glossy, also the other two ways of shading its lobe.
-        let has_phong = scene.materials.values().any(|m| matches!(m, Material::Phong { .. }));
-        let other_glossy = [
-            ("default, --glossy phong", ShadingSettings { glossy: GlossyMethod::Phong, ..default }),
-            ("default, --glossy sh", ShadingSettings { glossy: GlossyMethod::Sh, ..default }),
-        ];
-        let runs: Vec<&(&str, ShadingSettings)> = runs
-            .iter()
-            .chain(if has_map_suns && !quick { &whole_map[..] } else { &[] })
-            .chain(if has_phong { &other_glossy[..] } else { &[] })
-            .chain(if is_map && !quick { &windowed[..] } else { &[] })
-            .chain(&flagged_rows)
-            .collect();
-        for (name, settings) in runs {
+        for (name, settings) in &runs_of(&scene, &frame, quick, &flagged) {
             let job = ShadeJob::new(&scene, &frame, settings);
             let shaded: ShadedFrame =
                 executor.shade(&job, &mut StageTimings::default()).unwrap_or_else(|e| panic!("{e}"));
@@ -171,7 +142,7 @@ fn main() {
                 "{}: Cycles render and G-buffer differ in size",
                 dir.display()
             );
-            images.push((name.to_string(), shaded.rgba.iter().map(|p| [p[0], p[1], p[2]]).collect()));
+            images.push((name.clone(), shaded.rgba.iter().map(|p| [p[0], p[1], p[2]]).collect()));
         }
         if let Some(tolerance) = reference_tolerance {
             let options = ReferenceOptions { tolerance, ..Default::default() };
@@ -208,41 +179,12 @@ fn main() {
                 / surface.len().max(1) as f64;
             let (count, mean, p95, signed) = (error.pixels, error.mean, error.p95, error.signed);
             let errors = error.per_pixel;
-            let glossy: Vec<f64> = frame
-                .gbuffer
-                .material
-                .iter()
-                .filter(|&&m| m != 0)
-                .zip(&errors)
-                .filter(|(m, _)| matches!(scene.materials.get(m), Some(Material::Phong { exponent, .. }) if *exponent >= 50.0))
-                .map(|(_, e)| *e)
-                .collect();
-            let glossy = if glossy.is_empty() {
-                "-".to_string()
-            } else {
-                format!("{:.3} ({} px)", glossy.iter().sum::<f64>() / glossy.len() as f64, glossy.len())
-            };
+            let glossy = glossy_column(&scene, &frame.gbuffer.material, &errors);
             println!(
                 "| {scene_name} | {truth} | {name} | {count} | {mean:.3} | {p95:.3} | {signed:+.3} | {plain:.4} | {glossy} |"
             );
             if std::env::var_os("LOGSH_COMPARE_BY_MATERIAL").is_some() {
-                let mut by_material: std::collections::BTreeMap<u32, (f64, f64, usize)> = Default::default();
-                for (i, &m) in frame.gbuffer.material.iter().enumerate() {
-                    if m == 0 {
-                        continue;
-                    }
-                    let entry = by_material.entry(m).or_default();
-                    for k in 0..3 {
-                        let d = (image[i][k] as f64 - cycles[i][k] as f64) / unoccluded[k] / 3.0;
-                        entry.0 += d.abs();
-                        entry.1 += d;
-                    }
-                    entry.2 += 1;
-                }
-                for (m, (abs, signed, n)) in by_material {
-                    let n_f = n as f64;
-                    eprintln!("    material {m}: {n} pixels, mean abs {:.3}, signed {:+.3}", abs / n_f, signed / n_f);
-                }
+                print_by_material(&frame.gbuffer.material, image, cycles, unoccluded);
             }
         }
     }
@@ -258,4 +200,96 @@ fn settings_of(flags: &str) -> Result<ShadingSettings, String> {
     let parsed = <Flags as clap::Parser>::try_parse_from(std::iter::once("--settings").chain(flags.split_whitespace()))
         .map_err(|e| e.to_string())?;
     parsed.shading.settings().map_err(|e| e.to_string())
+}
+
+/// The last column: the mean error over the pixels of glossy materials (Phong exponent
+/// 50 or more) and their count, or "-".
+fn glossy_column(scene: &Scene, material: &[u32], errors: &[f64]) -> String {
+    let glossy: Vec<f64> = material
+        .iter()
+        .filter(|&&m| m != 0)
+        .zip(errors)
+        .filter(|(m, _)| matches!(scene.materials.get(m), Some(Material::Phong { exponent, .. }) if *exponent >= 50.0))
+        .map(|(_, e)| *e)
+        .collect();
+    if glossy.is_empty() {
+        "-".to_string()
+    } else {
+        format!("{:.3} ({} px)", glossy.iter().sum::<f64>() / glossy.len() as f64, glossy.len())
+    }
+}
+
+/// Each material's mean absolute and signed error, in units of the open floor
+/// (`LOGSH_COMPARE_BY_MATERIAL`), on stderr.
+fn print_by_material(material: &[u32], image: &[[f32; 3]], cycles: &[[f32; 3]], unoccluded: [f64; 3]) {
+    let mut by_material: std::collections::BTreeMap<u32, (f64, f64, usize)> = Default::default();
+    for (i, &m) in material.iter().enumerate() {
+        if m == 0 {
+            continue;
+        }
+        let entry = by_material.entry(m).or_default();
+        for k in 0..3 {
+            let d = (image[i][k] as f64 - cycles[i][k] as f64) / unoccluded[k] / 3.0;
+            entry.0 += d.abs();
+            entry.1 += d;
+        }
+        entry.2 += 1;
+    }
+    for (m, (abs, signed, n)) in by_material {
+        let n_f = n as f64;
+        eprintln!("    material {m}: {n} pixels, mean abs {:.3}, signed {:+.3}", abs / n_f, signed / n_f);
+    }
+}
+
+/// The settings each scene is shaded with, named as the table names them: the presets
+/// (only the first two with `--quick`), then by what the scene holds, then `--settings`.
+fn runs_of(
+    scene: &Scene,
+    frame: &Frame,
+    quick: bool,
+    flagged: &[(String, ShadingSettings)],
+) -> Vec<(String, ShadingSettings)> {
+    let default = Quality::Default.settings();
+    let direct = |settings: ShadingSettings| ShadingSettings { bounce: BounceSettings::none(), ..settings };
+    let presets = [
+        ("default", default),
+        ("default, --bounces 0", direct(default)),
+        ("high", Quality::High.settings()),
+        ("high, --bounces 0", direct(Quality::High.settings())),
+        ("ultra", Quality::Ultra.settings()),
+        ("ultra, --bounces 0", direct(Quality::Ultra.settings())),
+        ("default, depths at log(eps) (--fitted-depths off)", ShadingSettings { fitted_depths: false, ..default }),
+        ("default, ratio attenuation", ShadingSettings { ratio_attenuation: true, ..default }),
+        ("default, overlap floor off", ShadingSettings { overlap_floor: false, ..default }),
+        ("default, no clusters", ShadingSettings { cluster_ratio: 0.0, ..default }),
+    ];
+    // Where --sharp-lights takes suns out of the map, also without that.
+    let has_map_suns = match frame.light.as_ref() {
+        Light::Environment { map, strength } => !extract_suns(map, *strength).suns.is_empty(),
+        _ => false,
+    };
+    let whole_map = [
+        ("default, sharp lights off", ShadingSettings { sharp_lights: false, ..default }),
+        ("high, sharp lights off", ShadingSettings { sharp_lights: false, ..Quality::High.settings() }),
+    ];
+    // Under a map, also its SH projection windowed.
+    let is_map = matches!(frame.light.as_ref(), Light::Environment { .. });
+    let windowed = [
+        ("default, --light-window lanczos", ShadingSettings { light_window: LightWindow::Lanczos, ..default }),
+        ("default, --light-window hann", ShadingSettings { light_window: LightWindow::Hann, ..default }),
+    ];
+    // Where a material is glossy, also the other two ways of shading its lobe.
+    let has_phong = scene.materials.values().any(|m| matches!(m, Material::Phong { .. }));
+    let other_glossy = [
+        ("default, --glossy phong", ShadingSettings { glossy: GlossyMethod::Phong, ..default }),
+        ("default, --glossy sh", ShadingSettings { glossy: GlossyMethod::Sh, ..default }),
+    ];
+    (if quick { &presets[..2] } else { &presets[..] })
+        .iter()
+        .chain(if has_map_suns && !quick { &whole_map[..] } else { &[] })
+        .chain(if has_phong { &other_glossy[..] } else { &[] })
+        .chain(if is_map && !quick { &windowed[..] } else { &[] })
+        .map(|&(name, settings)| (name.to_string(), settings))
+        .chain(flagged.iter().cloned())
+        .collect()
 }
