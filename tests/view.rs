@@ -568,8 +568,9 @@ fn the_page_turns_a_sun_lamp_with_the_map() {
 }
 
 /// The map marks the scene's point lamps where they lie as seen from the middle of the
-/// frame's surface, and its caption counts them: lamps 100 km away along +x, -y and +z lie at azimuth 0, -90 and elevation 90 (within 0.01 degree of the closed form,
-/// whatever the middle, which the cones' frame holds within a few metres of the origin).
+/// frame's surface, and its caption counts them: lamps 100 km away along +x, -y and +z lie
+/// at azimuth 0, -90 and elevation 90 (within 0.01 degree of the closed form, whatever the
+/// middle, which the cones' frame holds within a few metres of the origin).
 /// Where the scene cannot be read, none is marked and the page says why.
 #[test]
 fn the_map_marks_point_lamps_where_they_lie() {

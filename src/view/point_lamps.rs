@@ -4,7 +4,7 @@
 
 use crate::scene::{Scene, SceneError};
 use crate::transfer::TransferFrame;
-use crate::vector::sub;
+use crate::vector::{dot, sub};
 
 /// The frame's point lamps (its own where scene.json's `per_frame` moves them) as azimuth
 /// and elevation in degrees, as a sun's ([`crate::scene::SunLight::azimuth_elevation`]),
@@ -34,8 +34,9 @@ pub fn point_lamp_directions(frame: &TransferFrame) -> Result<Vec<[f64; 2]>, Sce
     Ok(points
         .iter()
         .filter_map(|lamp| {
-            let [x, y, z] = sub(lamp.position, middle);
-            let length = (x * x + y * y + z * z).sqrt();
+            let towards = sub(lamp.position, middle);
+            let length = dot(towards, towards).sqrt();
+            let [x, y, z] = towards;
             (length > 0.0).then(|| [y.atan2(x).to_degrees(), (z / length).clamp(-1.0, 1.0).asin().to_degrees()])
         })
         .collect())
