@@ -172,10 +172,10 @@ pub struct ShadingArgs {
     /// Height field: number of azimuthal directions W [default: from --quality].
     #[arg(long)]
     pub directions: Option<usize>,
-    /// Height field: pyramid level step k, levels per halving of resolution [default: from --quality].
+    /// Height field: pyramid level step k, levels per halving of resolution, with Sun or point lamps too [default: from --quality, finer under Sun or point lamps].
     #[arg(long)]
     pub level_step: Option<f64>,
-    /// Height field: pyramid level offset o [default: from --quality].
+    /// Height field: pyramid level offset o, with Sun or point lamps too [default: from --quality, finer under Sun or point lamps].
     #[arg(long)]
     pub level_offset: Option<f64>,
     /// SH exponentiation method [default: from --quality].
@@ -266,6 +266,9 @@ impl ShadingArgs {
         }
         if let Some(o) = self.level_offset {
             settings.horizon.level_offset = o;
+        }
+        if self.level_step.is_some() || self.level_offset.is_some() {
+            settings.lamp_levels = None;
         }
         if let Some(bounces) = self.bounces {
             settings.bounce.bounces = bounces;

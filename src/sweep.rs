@@ -76,11 +76,13 @@ pub fn configurations() -> Vec<(String, String, ShadingSettings)> {
     for level_step in [2.0, 4.0, 8.0] {
         let mut s = base;
         s.horizon.level_step = level_step;
+        s.lamp_levels = None;
         out.push(("level_step".into(), level_step.to_string(), s));
     }
     for level_offset in [1.0, 2.0, 3.0, 4.0] {
         let mut s = base;
         s.horizon.level_offset = level_offset;
+        s.lamp_levels = None;
         out.push(("level_offset".into(), level_offset.to_string(), s));
     }
     out.push(("ratio_attenuation".into(), "on".into(), ShadingSettings { ratio_attenuation: true, ..base }));

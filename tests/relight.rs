@@ -413,7 +413,8 @@ fn a_sun_lamp_turns_with_the_map_or_stays_as_rendered() {
     assert_eq!(header.sun_lamps.len(), 1, "{:?}", header.sun_lamps);
     let [a, e] = header.sun_lamps[0];
     assert!((a - 50.0).abs() < 1e-6 && (e - 45.0).abs() < 1e-6, "turned 20 deg with the map: {a}, {e}");
-    let high = logsh::shade::Quality::High.settings();
+    // Under its lamps, with the lamps' levels of the march.
+    let high = logsh::shade::Quality::High.settings().for_frame(true);
     let recorded = header.settings.expect("the render's settings");
     assert_eq!((recorded.order, recorded.horizon), (high.order, high.horizon), "--quality high recorded");
 

@@ -6,11 +6,12 @@
 
 use crate::support;
 
+use logsh::heightfield::{brute_force_horizon, HorizonPyramid};
 use logsh::reference::{render_reference, ReferenceOptions};
 use logsh::scene::{Light, Scene, Sphere, SunLight};
 use logsh::shade::sun::cap_overlap;
-use logsh::shade::ShadingSettings;
-use logsh::synth::{sphere_over_plane, SphereOverPlane, PLANE_MATERIAL};
+use logsh::shade::{FramePlan, ShadingSettings};
+use logsh::synth::{sphere_over_plane, ExampleOptions, SphereOverPlane, PLANE_MATERIAL};
 use std::f64::consts::PI;
 use std::sync::Arc;
 use support::sharp::{assert_finite, load_with_lights, PlaneComparison};
@@ -272,4 +273,58 @@ fn water_mirrors_a_sun_lamp() {
     frame.suns = vec![SunLight { direction: [0.0, 0.0, -1.0], ..sun }];
     let PixelWork::Fixed(elsewhere) = pixel_work(&scene.materials, &frame, x, y) else { panic!("still the sky") };
     assert_eq!(elsewhere, sky);
+}
+
+/// Under Sun or point lamps the default preset marches a height field with the lamps'
+/// levels (k 6, o 6), elsewhere with the environment's (k 4, o 5), and settings without
+/// lamp levels keep theirs under lamps too. Along a low sun's azimuth, the lamps' march
+/// finds the dunes' horizons closer to the exact ones ([`brute_force_horizon`]): 0.0024
+/// rad from them on average, against 0.0030 (the dunes are smooth; the canyon's crests
+/// gain more, docs/method/sun-lamps-and-hdri-suns.md).
+#[test]
+fn lamps_over_a_height_field_are_marched_finer() {
+    let dir = tempfile::tempdir().unwrap();
+    let options = ExampleOptions { width: 64, height: 36, ..Default::default() };
+    logsh::synth::example_scene("dunes", dir.path(), options).unwrap();
+    let scene = Scene::load(dir.path()).unwrap();
+    let mut frame = scene.frame(scene.default_frame()).unwrap();
+    let levels = |frame: &logsh::scene::Frame, settings: &ShadingSettings| {
+        let plan = FramePlan::new(&scene, frame, settings).unwrap();
+        (plan.settings.horizon.level_step, plan.settings.horizon.level_offset)
+    };
+    let default = ShadingSettings::default();
+    assert_eq!(levels(&frame, &default), (4.0, 5.0), "under the sky alone");
+    let azimuth = 40f64.to_radians();
+    let elevation = 8f64.to_radians();
+    frame.suns.push(SunLight {
+        direction: [elevation.cos() * azimuth.cos(), elevation.cos() * azimuth.sin(), elevation.sin()],
+        half_angle: 1f64.to_radians(),
+        strength: 3.0,
+        color: [1.0; 3],
+    });
+    assert_eq!(levels(&frame, &default), (6.0, 6.0), "under a Sun lamp");
+    let without = ShadingSettings { lamp_levels: None, ..default };
+    assert_eq!(levels(&frame, &without), (4.0, 5.0), "without lamp levels");
+
+    let plan = FramePlan::new(&scene, &frame, &default).unwrap();
+    let field = &plan.terrain.as_ref().expect("the dunes' height field").field;
+    let error = |settings: &ShadingSettings| {
+        let pyramid = HorizonPyramid::new(field, settings.horizon).unwrap();
+        let ([x0, y0], [x1, y1]) = (field.min(), field.max());
+        let mut sum = 0.0;
+        let n = 24;
+        for i in 0..n {
+            for j in 0..n {
+                let (x, y) =
+                    (x0 + (x1 - x0) * (i as f64 + 0.5) / n as f64, y0 + (y1 - y0) * (j as f64 + 0.5) / n as f64);
+                let p = [x, y, field.height_at(x, y)];
+                let marched = pyramid.horizon_along(p, [azimuth.cos(), azimuth.sin()], f64::INFINITY);
+                sum += (marched - brute_force_horizon(field, p, azimuth)).abs();
+            }
+        }
+        sum / (n * n) as f64
+    };
+    let (environment, lamps) = (error(&without), error(&plan.settings));
+    eprintln!("mean |horizon error| along the sun: {environment:.5} rad at k 4, o 5, {lamps:.5} at k 6, o 6");
+    assert!(lamps < 0.9 * environment, "the lamps' march: {lamps} rad against {environment}");
 }

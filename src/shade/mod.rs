@@ -30,5 +30,7 @@ pub use frame::{pixel_source, pixel_work, work_of, PixelSource, PixelWork, Shade
 pub use kernel::{CapSums, Caps, Exponentiator, KnownAlongSun, Occluders, PixelPasses, ShadingKernel, SurfacePoint};
 pub use plan::{FrameContents, FramePlan, PlannedKernel, Terrain};
 pub use resolve::{PixelFilter, Resolve, Resolving};
-pub use settings::{default_epsilon, GlossyMethod, LightWindow, Precision, Quality, SettingsError, ShadingSettings};
+pub use settings::{
+    default_epsilon, GlossyMethod, LightWindow, MarchLevels, Precision, Quality, SettingsError, ShadingSettings,
+};
 pub use shaded::{Outputs, Shaded};
