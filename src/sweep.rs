@@ -172,6 +172,7 @@ pub fn run(
         }
         let image = image.expect("at least one run");
         let (rmse, mean_abs, p99_abs, max_abs) = error_stats(&image.rgba, reference, unit);
+        let marched = settings.for_frame(frame).horizon;
         rows.push(SweepRow {
             knob,
             value,
@@ -179,8 +180,8 @@ pub fn run(
             epsilon: settings.epsilon,
             exp: exp_name(settings.exp).into(),
             directions: settings.horizon.directions,
-            level_step: settings.horizon.level_step,
-            level_offset: settings.horizon.level_offset,
+            level_step: marched.level_step,
+            level_offset: marched.level_offset,
             ratio_attenuation: settings.ratio_attenuation,
             tangent_occlusion: settings.tangent_occlusion,
             milliseconds: best,

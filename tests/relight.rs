@@ -414,7 +414,9 @@ fn a_sun_lamp_turns_with_the_map_or_stays_as_rendered() {
     let [a, e] = header.sun_lamps[0];
     assert!((a - 50.0).abs() < 1e-6 && (e - 45.0).abs() < 1e-6, "turned 20 deg with the map: {a}, {e}");
     // Under its lamps, with the lamps' levels of the march.
-    let high = logsh::shade::Quality::High.settings().for_frame(true);
+    let mut high = logsh::shade::Quality::High.settings();
+    let levels = high.lamp_levels.expect("the lamps' levels of --quality high");
+    (high.horizon.level_step, high.horizon.level_offset) = (levels.level_step, levels.level_offset);
     let recorded = header.settings.expect("the render's settings");
     assert_eq!((recorded.order, recorded.horizon), (high.order, high.horizon), "--quality high recorded");
 

@@ -84,10 +84,8 @@ impl<'a> FramePlan<'a> {
         let started = Instant::now();
         settings.validate()?;
         check_frame(scene, frame)?;
-        let field = height_field(scene, frame)?;
-        let lamps = !frame.suns.is_empty() || !frame.points.is_empty();
-        let settings = &settings.for_frame(lamps && field.is_some());
-        let terrain = match field {
+        let settings = &settings.for_frame(frame);
+        let terrain = match height_field(scene, frame)? {
             Some(field) => {
                 let pyramid = PyramidPlan::new(&field, settings.horizon)
                     .map_err(|cause| ShadeError::height_field(scene, cause))?;

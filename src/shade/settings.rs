@@ -2,6 +2,7 @@
 //! march, with defaults chosen by measurement.
 
 use crate::heightfield::HorizonSettings;
+use crate::scene::Frame;
 use crate::sh::{ExpMethod, MAX_ORDER, MIN_ORDER};
 
 /// Most azimuthal directions W a kernel accepts (per-pixel buffers are on the stack).
@@ -293,13 +294,14 @@ impl ShadingSettings {
         Ok(())
     }
 
-    /// The settings a frame is shaded with: where Sun or point lamps light its height
-    /// field (`lamps_on_terrain`), the march takes [`Self::lamp_levels`]. A lamp's sharp
-    /// shadow falls where its direction crosses the horizon, so the horizon's error moves
-    /// the shadow's edge, where the environment's soft light averages it out.
-    pub fn for_frame(&self, lamps_on_terrain: bool) -> ShadingSettings {
+    /// The settings `frame` is shaded with: where Sun or point lamps light its height
+    /// field, the march takes [`Self::lamp_levels`]. A lamp's sharp shadow falls where its
+    /// direction crosses the horizon, so the horizon's error moves the shadow's edge, where
+    /// the environment's soft light averages it out.
+    pub fn for_frame(&self, frame: &Frame) -> ShadingSettings {
+        let lamps = !frame.suns.is_empty() || !frame.points.is_empty();
         let mut settings = *self;
-        if let Some(levels) = self.lamp_levels.filter(|_| lamps_on_terrain) {
+        if let Some(levels) = self.lamp_levels.filter(|_| lamps && frame.height_map.is_some()) {
             settings.horizon.level_step = levels.level_step;
             settings.horizon.level_offset = levels.level_offset;
         }
