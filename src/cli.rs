@@ -172,10 +172,10 @@ pub struct ShadingArgs {
     /// Height field: number of azimuthal directions W [default: from --quality].
     #[arg(long)]
     pub directions: Option<usize>,
-    /// Height field: pyramid level step k, levels per halving of resolution, with Sun or point lamps too [default: from --quality, finer under Sun or point lamps].
+    /// Height field: pyramid level step k, levels per halving of resolution, under sharp lights too [default: from --quality, finer under sharp lights: Sun or point lamps, suns taken out of the map].
     #[arg(long)]
     pub level_step: Option<f64>,
-    /// Height field: pyramid level offset o, with Sun or point lamps too [default: from --quality, finer under Sun or point lamps].
+    /// Height field: pyramid level offset o, under sharp lights too [default: from --quality, finer under sharp lights].
     #[arg(long)]
     pub level_offset: Option<f64>,
     /// SH exponentiation method [default: from --quality].

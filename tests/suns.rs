@@ -275,9 +275,9 @@ fn water_mirrors_a_sun_lamp() {
     assert_eq!(elsewhere, sky);
 }
 
-/// Under Sun or point lamps the default preset marches a height field with the lamps'
-/// levels (k 6, o 6), elsewhere with the environment's (k 4, o 5), and settings without
-/// lamp levels keep theirs under lamps too. Along a low sun's azimuth, the lamps' march
+/// Under sharp lights (a Sun lamp, a sun taken out of the map) the default preset marches
+/// a height field with the lamps' levels (k 6, o 6), elsewhere with the environment's
+/// (k 4, o 5), and settings without lamp levels keep theirs under lamps too. Along a low sun's azimuth, the lamps' march
 /// finds the dunes' horizons closer to the exact ones ([`brute_force_horizon`]): 0.0024
 /// rad from them on average, against 0.0030 (the dunes are smooth; the canyon's crests
 /// gain more, docs/method/sun-lamps-and-hdri-suns.md).
@@ -305,6 +305,17 @@ fn lamps_over_a_height_field_are_marched_finer() {
     assert_eq!(levels(&frame, &default), (6.0, 6.0), "under a Sun lamp");
     let without = ShadingSettings { lamp_levels: None, ..default };
     assert_eq!(levels(&frame, &without), (4.0, 5.0), "without lamp levels");
+    // A sun in the map, one texel 3000 times the sky's, which `--sharp-lights` takes out.
+    let mut map_sun = scene.frame(scene.default_frame()).unwrap();
+    let (width, height) = (256, 128);
+    let [u, v] = logsh::scene::light::direction_to_equirectangular(frame.suns[0].direction);
+    let sun_texel = ((1.0 - v) * height as f64) as usize * width + (u * width as f64) as usize;
+    let texels = (0..width * height).map(|i| if i == sun_texel { [3000.0; 3] } else { [0.6, 0.7, 0.9] }).collect();
+    let map = logsh::scene::EnvironmentMap { file: "sky.exr".into(), width, height, texels };
+    map_sun.light = Arc::new(Light::Environment { map, strength: 1.0 });
+    assert_eq!(levels(&map_sun, &default), (6.0, 6.0), "under a sun taken out of the map");
+    let kept = ShadingSettings { sharp_lights: false, ..default };
+    assert_eq!(levels(&map_sun, &kept), (4.0, 5.0), "with the map's sun kept in SH");
 
     let plan = FramePlan::new(&scene, &frame, &default).unwrap();
     let field = &plan.terrain.as_ref().expect("the dunes' height field").field;

@@ -56,8 +56,8 @@ pub enum GpuError {
     #[error(
         "{adapter} (lavapipe, Mesa's CPU Vulkan driver) ends each shader invocation after {limit} loop iterations, \
          and this frame needs up to {needed} per pixel ({what}): its image would be wrong. Shade with --device cpu, \
-         or lower --order, --directions, --level-step, --level-offset or the blocker count (under Sun or point lamps \
-         the presets march finer), or use a hardware GPU"
+         or lower --order, --directions, --level-step, --level-offset or the blocker count (under sharp lights the \
+         presets march finer), or use a hardware GPU"
     )]
     LoopBudget { adapter: String, needed: u64, limit: u64, what: String },
     #[error("GPU error on {adapter} during {during}: {message}")]

@@ -84,8 +84,12 @@ impl<'a> FramePlan<'a> {
         let started = Instant::now();
         settings.validate()?;
         check_frame(scene, frame)?;
-        let settings = &settings.for_frame(frame);
-        let terrain = match height_field(scene, frame)? {
+        let field = height_field(scene, frame)?;
+        // The kernel reads no level of the march: the lamps' levels are chosen after it.
+        let lighting = lighting(settings, scene, frame, field.is_some());
+        let sharp_lights = !lighting.suns.is_empty() || !frame.points.is_empty();
+        let settings = &settings.for_frame(sharp_lights && field.is_some());
+        let terrain = match field {
             Some(field) => {
                 let pyramid = PyramidPlan::new(&field, settings.horizon)
                     .map_err(|cause| ShadeError::height_field(scene, cause))?;
@@ -100,7 +104,6 @@ impl<'a> FramePlan<'a> {
             prefiltered: false,
             suns: false,
         };
-        let lighting = lighting(settings, scene, frame, contents.heightfield);
         let (kernel, suns, extracted_shares) =
             (lighting.kernel.clone(), lighting.suns.clone(), lighting.extracted_shares.clone());
         let contents = FrameContents {

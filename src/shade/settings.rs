@@ -2,7 +2,6 @@
 //! march, with defaults chosen by measurement.
 
 use crate::heightfield::HorizonSettings;
-use crate::scene::Frame;
 use crate::sh::{ExpMethod, MAX_ORDER, MIN_ORDER};
 
 /// Most azimuthal directions W a kernel accepts (per-pixel buffers are on the stack).
@@ -59,7 +58,7 @@ pub struct ShadingSettings {
     pub glossy: GlossyMethod,
     /// Height-field march: W, k, o.
     pub horizon: HorizonSettings,
-    /// The march's k and o where Sun or point lamps light a height field (`None`: those of
+    /// The march's k and o where sharp lights light a height field (`None`: those of
     /// [`Self::horizon`]); [`Self::for_frame`] puts them in. Absent from a transfer frame
     /// written before it existed, which was marched with `horizon`'s.
     #[serde(default)]
@@ -294,14 +293,14 @@ impl ShadingSettings {
         Ok(())
     }
 
-    /// The settings `frame` is shaded with: where Sun or point lamps light its height
-    /// field, the march takes [`Self::lamp_levels`]. A lamp's sharp shadow falls where its
-    /// direction crosses the horizon, so the horizon's error moves the shadow's edge, where
-    /// the environment's soft light averages it out.
-    pub fn for_frame(&self, frame: &Frame) -> ShadingSettings {
-        let lamps = !frame.suns.is_empty() || !frame.points.is_empty();
+    /// The settings a frame is shaded with: where sharp lights (Sun or point lamps, or
+    /// suns taken out of the map) light its height field (`sharp_lights_on_terrain`), the
+    /// march takes [`Self::lamp_levels`]. A sharp light's shadow falls where its direction
+    /// crosses the horizon, so the horizon's error moves the shadow's edge, where the
+    /// environment's soft light averages it out.
+    pub fn for_frame(&self, sharp_lights_on_terrain: bool) -> ShadingSettings {
         let mut settings = *self;
-        if let Some(levels) = self.lamp_levels.filter(|_| lamps && frame.height_map.is_some()) {
+        if let Some(levels) = self.lamp_levels.filter(|_| sharp_lights_on_terrain) {
             settings.horizon.level_step = levels.level_step;
             settings.horizon.level_offset = levels.level_offset;
         }
@@ -322,11 +321,11 @@ impl Default for ShadingSettings {
 pub enum Quality {
     /// Order 3, ol exponentiation (a table lookup), W 8, k 2, o 2: fastest.
     Draft,
-    /// Order 4, quad, W 16, k 4, o 5 (k 6, o 6 under Sun or point lamps).
+    /// Order 4, quad, W 16, k 4, o 5 (k 6, o 6 under sharp lights).
     Default,
-    /// Order 6, quad, W 24, k 4, o 5 (k 8, o 8 under Sun or point lamps).
+    /// Order 6, quad, W 24, k 4, o 5 (k 8, o 8 under sharp lights).
     High,
-    /// Order 8, quad, W 32, k 8, o 4 (k 12, o 8 under Sun or point lamps): most accurate.
+    /// Order 8, quad, W 32, k 8, o 4 (k 12, o 8 under sharp lights): most accurate.
     Ultra,
 }
 
@@ -355,13 +354,14 @@ impl Quality {
             Quality::High => (6, ExpMethod::Quad, 24, 4.0, 5.0),
             Quality::Ultra => (8, ExpMethod::Quad, 32, 8.0, 4.0),
         };
-        // Under Sun or point lamps, finer steps and levels: the canyon's low Sun lamp
+        // Under sharp lights, finer steps and levels: the canyon's low Sun lamp
         // (against Cycles' direct light, converted materials, 240x135) came out 0.0116
         // at k 4, o 5, 0.0103 at k 4, o 8, 0.0084 at k 8, o 5 and 0.0070 at k 6, o 6 (the
         // swell 0.0029 and 0.0021), at high 0.0098 and 0.0051 at k 8, o 8, and at ultra
         // 0.0130 and 0.0053 at k 12, o 8; the Sun-lamp terrain and the lantern were
-        // unchanged. Environment light alone gains nothing from them (the dunes' sky,
-        // 0.0234 and 0.0236 at k 6, o 6) and they add a fifth to the march.
+        // unchanged; the canyon under a sun in its map in place of the lamp, 0.0136 and
+        // 0.0096 at k 6, o 6. Environment light alone gains nothing from them (the dunes'
+        // sky, 0.0234 and 0.0236 at k 6, o 6), and they add a quarter to the march.
         let lamp_levels = match self {
             Quality::Draft => None,
             Quality::Default => Some((6.0, 6.0)),
