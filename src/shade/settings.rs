@@ -361,7 +361,8 @@ impl Quality {
         // 0.0130 and 0.0053 at k 12, o 8; the Sun-lamp terrain and the lantern were
         // unchanged; the canyon under a sun in its map in place of the lamp, 0.0136 and
         // 0.0096 at k 6, o 6. Environment light alone gains nothing from them (the dunes'
-        // sky, 0.0234 and 0.0236 at k 6, o 6), and they add a quarter to the march.
+        // sky, 0.0234 and 0.0236 at k 6, o 6), and they add a quarter to a third to the
+        // shading stage.
         let lamp_levels = match self {
             Quality::Draft => None,
             Quality::Default => Some((6.0, 6.0)),
