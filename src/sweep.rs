@@ -14,7 +14,7 @@ use crate::plot::{pareto_front, Chart, Scale, Series};
 use crate::scene::{Frame, Light, Scene};
 use crate::sh::quadrature::gauss_legendre_on;
 use crate::sh::ExpMethod;
-use crate::shade::{FramePlan, Quality, ShadedFrame, ShadingSettings};
+use crate::shade::{frame_settings, Quality, ShadedFrame, ShadingSettings};
 use crate::timing::StageTimings;
 use serde::Serialize;
 use std::time::Instant;
@@ -172,8 +172,7 @@ pub fn run(
         }
         let image = image.expect("at least one run");
         let (rmse, mean_abs, p99_abs, max_abs) = error_stats(&image.rgba, reference, unit);
-        // The march as the frame was shaded (with the lamps' levels under sharp lights).
-        let marched = FramePlan::new(scene, frame, &settings).map_or(settings.horizon, |plan| plan.settings.horizon);
+        let marched = frame_settings(&settings, scene, frame).horizon;
         rows.push(SweepRow {
             knob,
             value,

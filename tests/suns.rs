@@ -17,6 +17,12 @@ use std::sync::Arc;
 use support::sharp::{assert_finite, load_with_lights, PlaneComparison};
 
 const SUN_HALF_ANGLE_DEGREES: f64 = 3.0;
+
+/// The texel of a `width` x `height` equirectangular map that unit `direction` falls in.
+fn texel_towards(direction: [f64; 3], width: usize, height: usize) -> usize {
+    let [u, v] = logsh::scene::light::direction_to_equirectangular(direction);
+    ((1.0 - v) * height as f64) as usize * width + (u * width as f64) as usize
+}
 const SUN_STRENGTH: f32 = 3.0;
 
 /// The plane's albedo in [`SphereOverPlane`] is white.
@@ -126,8 +132,7 @@ fn a_map_sun_is_shaded_as_a_sharp_light() {
     let (width, height) = (256, 128);
     let sun = [0.45f64, 0.3, 0.84];
     let length = sun.iter().map(|c| c * c).sum::<f64>().sqrt();
-    let [u, v] = logsh::scene::light::direction_to_equirectangular(sun.map(|c| c / length));
-    let sun_texel = ((1.0 - v) * height as f64) as usize * width + (u * width as f64) as usize;
+    let sun_texel = texel_towards(sun.map(|c| c / length), width, height);
     let texels = (0..width * height)
         .map(|i| {
             if i == sun_texel {
@@ -277,10 +282,10 @@ fn water_mirrors_a_sun_lamp() {
 
 /// Under sharp lights (a Sun lamp, a sun taken out of the map) the default preset marches
 /// a height field with the lamps' levels (k 6, o 6), elsewhere with the environment's
-/// (k 4, o 5), and settings without lamp levels keep theirs under lamps too. Along a low sun's azimuth, the lamps' march
-/// finds the dunes' horizons closer to the exact ones ([`brute_force_horizon`]): 0.0024
-/// rad from them on average, against 0.0030 (the dunes are smooth; the canyon's crests
-/// gain more, docs/method/sun-lamps-and-hdri-suns.md).
+/// (k 4, o 5), and settings without lamp levels keep theirs under lamps too. Along a low
+/// sun's azimuth, the lamps' march finds the dunes' horizons closer to the exact ones
+/// ([`brute_force_horizon`]): 0.0024 rad from them on average, against 0.0030 (the dunes
+/// are smooth; the canyon's crests gain more, docs/method/sun-lamps-and-hdri-suns.md).
 #[test]
 fn lamps_over_a_height_field_are_marched_finer() {
     let dir = tempfile::tempdir().unwrap();
@@ -308,8 +313,7 @@ fn lamps_over_a_height_field_are_marched_finer() {
     // A sun in the map, one texel 3000 times the sky's, which `--sharp-lights` takes out.
     let mut map_sun = scene.frame(scene.default_frame()).unwrap();
     let (width, height) = (256, 128);
-    let [u, v] = logsh::scene::light::direction_to_equirectangular(frame.suns[0].direction);
-    let sun_texel = ((1.0 - v) * height as f64) as usize * width + (u * width as f64) as usize;
+    let sun_texel = texel_towards(frame.suns[0].direction, width, height);
     let texels = (0..width * height).map(|i| if i == sun_texel { [3000.0; 3] } else { [0.6, 0.7, 0.9] }).collect();
     let map = logsh::scene::EnvironmentMap { file: "sky.exr".into(), width, height, texels };
     map_sun.light = Arc::new(Light::Environment { map, strength: 1.0 });

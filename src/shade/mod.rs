@@ -28,7 +28,7 @@ pub mod visibility_grid;
 pub use compositing::ShadedPasses;
 pub use frame::{pixel_source, pixel_work, work_of, PixelSource, PixelWork, ShadeError, ShadedFrame, Tint};
 pub use kernel::{CapSums, Caps, Exponentiator, KnownAlongSun, Occluders, PixelPasses, ShadingKernel, SurfacePoint};
-pub use plan::{FrameContents, FramePlan, PlannedKernel, Terrain};
+pub use plan::{frame_settings, FrameContents, FramePlan, PlannedKernel, Terrain};
 pub use resolve::{PixelFilter, Resolve, Resolving};
 pub use settings::{
     default_epsilon, GlossyMethod, LightWindow, MarchLevels, Precision, Quality, SettingsError, ShadingSettings,

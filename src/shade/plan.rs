@@ -84,12 +84,8 @@ impl<'a> FramePlan<'a> {
         let started = Instant::now();
         settings.validate()?;
         check_frame(scene, frame)?;
-        let field = height_field(scene, frame)?;
-        // The kernel reads no level of the march: the lamps' levels are chosen after it.
-        let lighting = lighting(settings, scene, frame, field.is_some());
-        let sharp_lights = !lighting.suns.is_empty() || !frame.points.is_empty();
-        let settings = &settings.for_frame(sharp_lights && field.is_some());
-        let terrain = match field {
+        let (settings, lighting) = &marched_with(settings, scene, frame);
+        let terrain = match height_field(scene, frame)? {
             Some(field) => {
                 let pyramid = PyramidPlan::new(&field, settings.horizon)
                     .map_err(|cause| ShadeError::height_field(scene, cause))?;
@@ -130,6 +126,22 @@ impl<'a> FramePlan<'a> {
             timings,
         })
     }
+}
+
+/// `settings` as `frame` is shaded with them ([`ShadingSettings::for_frame`]): the march
+/// takes the lamps' levels where sharp lights (Sun or point lamps, suns taken out of the
+/// map) light its height field. What `logsh sweep` records of a frame's march.
+pub fn frame_settings(settings: &ShadingSettings, scene: &Scene, frame: &Frame) -> ShadingSettings {
+    marched_with(settings, scene, frame).0
+}
+
+/// [`frame_settings`] and the frame's lighting, which takes the map's suns out: the
+/// kernel reads no level of the march, so it is built before they are chosen.
+fn marched_with(settings: &ShadingSettings, scene: &Scene, frame: &Frame) -> (ShadingSettings, Arc<Lighting>) {
+    let terrain = frame.height_map.is_some();
+    let lighting = lighting(settings, scene, frame, terrain);
+    let sharp_lights = !lighting.suns.is_empty() || !frame.points.is_empty();
+    (settings.for_frame(sharp_lights && terrain), lighting)
 }
 
 /// What a frame's kernel is built from, at either precision.

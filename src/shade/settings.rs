@@ -261,13 +261,8 @@ impl ShadingSettings {
         if !(3..=MAX_DIRECTIONS).contains(&self.horizon.directions) {
             return Err(SettingsError::Directions(self.horizon.directions));
         }
-        if !(self.horizon.level_step > 0.0 && self.horizon.level_step.is_finite()) {
-            return Err(SettingsError::LevelStep(self.horizon.level_step));
-        }
-        if !(self.horizon.level_offset >= 0.0 && self.horizon.level_offset.is_finite()) {
-            return Err(SettingsError::LevelOffset(self.horizon.level_offset));
-        }
-        if let Some(levels) = self.lamp_levels {
+        let environment = MarchLevels { level_step: self.horizon.level_step, level_offset: self.horizon.level_offset };
+        for levels in std::iter::once(environment).chain(self.lamp_levels) {
             if !(levels.level_step > 0.0 && levels.level_step.is_finite()) {
                 return Err(SettingsError::LevelStep(levels.level_step));
             }
