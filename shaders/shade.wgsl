@@ -125,8 +125,10 @@ fn exp_dot_light(f: ptr<function, array<f32, COUNT_CAP>>, v: ptr<function, array
 // for an upward-facing receiver), the height field's wedges, the caps of the blocker
 // tree's spheres and clusters the receiver sees. Where `from_grid`, the horizon
 // elevations and the caps are the visibility grid's (`grid_at`) and nothing is marched
-// or walked. The caps' sum goes to `caps` too, which the visibility passes read.
-fn visibility(p: vec3<f32>, n: vec3<f32>, object: u32, from_grid: bool, horizons: ptr<function, array<f32, DIRECTIONS>>, caps: ptr<function, array<f32, COUNT_CAP>>) -> array<f32, COUNT_CAP> {
+// or walked; the height field's log vector is the grid's `field` where `field_weight` is
+// 1, blended with the point's own from the grid's horizons where it is between 0 and 1.
+// The caps' sum goes to `caps` too, which the visibility passes read.
+fn visibility(p: vec3<f32>, n: vec3<f32>, object: u32, from_grid: bool, horizons: ptr<function, array<f32, DIRECTIONS>>, caps: ptr<function, array<f32, COUNT_CAP>>, field: ptr<function, array<f32, COUNT_CAP>>, field_weight: f32) -> array<f32, COUNT_CAP> {
     var acc: array<f32, COUNT_CAP>;
     var fold_tangent = false;
 //#if HEIGHTFIELD
@@ -138,7 +140,19 @@ fn visibility(p: vec3<f32>, n: vec3<f32>, object: u32, from_grid: bool, horizons
     add_ground(p, &acc);
 //#if HEIGHTFIELD
     if enabled(FEATURE_HEIGHTFIELD) {
-        add_horizons(p, n, fold_tangent, from_grid, horizons, &acc);
+        if from_grid && field_weight >= 1.0 {
+            for (var i = 0u; i < COUNT; i++) {
+                acc[i] += (*field)[i];
+            }
+        } else if from_grid && field_weight > 0.0 {
+            var own: array<f32, COUNT_CAP>;
+            add_horizons(p, n, fold_tangent, from_grid, horizons, &own);
+            for (var i = 0u; i < COUNT; i++) {
+                acc[i] += field_weight * (*field)[i] + (1.0 - field_weight) * own[i];
+            }
+        } else {
+            add_horizons(p, n, fold_tangent, from_grid, horizons, &acc);
+        }
     }
 //#endif
 //#if BLOCKERS
@@ -168,8 +182,9 @@ fn add_horizons(p: vec3<f32>, n: vec3<f32>, fold_tangent: bool, from_grid: bool,
 
 //#if GRID
 // The visibility grid's pre-pass (src/shade/visibility_grid.rs, VisibilityGrid::new):
-// the tangents of the horizons' elevations and the caps' log vector at each block's
-// point, into its record.
+// the tangents of the horizons' elevations, the caps' log vector and the height field's
+// log vector (the block's tangent plane folded in) at each block's point, into its
+// record.
 @compute @workgroup_size(WORKGROUP_SIZE)
 fn grid_visibility(@builtin(global_invocation_id) id: vec3<u32>) {
     if id.x >= params.grid_columns * params.grid_rows {
@@ -183,6 +198,17 @@ fn grid_visibility(@builtin(global_invocation_id) id: vec3<u32>) {
 //#if HEIGHTFIELD
     if GRID_HORIZONS > 0u {
         store_horizon_tangents(p, record + GRID_HEADER);
+        let n = vec3<f32>(grid[record + 4u], grid[record + 5u], grid[record + 6u]);
+        var sigmas: array<f32, DIRECTIONS>;
+        for (var k = 0u; k < GRID_HORIZONS; k++) {
+            sigmas[k] = atan(grid[record + GRID_HEADER + k]);
+        }
+        let fold_tangent = TANGENT_OCCLUSION && n.z > 0.0 && enabled(FEATURE_HEIGHTFIELD);
+        var field: array<f32, COUNT_CAP>;
+        add_given_horizons(&sigmas, n, fold_tangent, params.log_epsilon, &field);
+        for (var i = 0u; i < GRID_FIELD; i++) {
+            grid[record + GRID_HEADER + GRID_HORIZONS + GRID_CAPS + i] = field[i];
+        }
     }
 //#endif
 //#if BLOCKERS
@@ -213,10 +239,12 @@ fn likeness(p: vec3<f32>, n: vec3<f32>, q: vec3<f32>, m: vec3<f32>) -> f32 {
 
 // The horizon elevations and caps of point `point` (at p, normal n, on `object`),
 // interpolated from the four blocks around its pixel, weighted bilinearly and by
-// likeness (visibility_grid.rs, VisibilityGrid::at; horizons averaged as tangents);
-// false where the grid does not serve the point or no block is like it, which is then
-// computed alone.
-fn grid_at(point: u32, p: vec3<f32>, n: vec3<f32>, object: u32, served: bool, horizons: ptr<function, array<f32, DIRECTIONS>>, caps: ptr<function, array<f32, COUNT_CAP>>) -> bool {
+// likeness (visibility_grid.rs, VisibilityGrid::at; horizons averaged as tangents), and
+// the height field's log vector into `field`, with how much the point takes it rather
+// than turn its own horizons (`field_weight`, VisibilityGrid::at), the horizons only
+// where it turns its own in part or `wants_horizons`; false where the grid does not serve
+// the point or no block is like it, which is then computed alone.
+fn grid_at(point: u32, p: vec3<f32>, n: vec3<f32>, object: u32, served: bool, wants_horizons: bool, horizons: ptr<function, array<f32, DIRECTIONS>>, caps: ptr<function, array<f32, COUNT_CAP>>, field: ptr<function, array<f32, COUNT_CAP>>, field_weight: ptr<function, f32>) -> bool {
     if !served {
         return false;
     }
@@ -232,6 +260,10 @@ fn grid_at(point: u32, p: vec3<f32>, n: vec3<f32>, object: u32, served: bool, ho
     var total = 0.0;
     var tangents: array<f32, DIRECTIONS>;
     var sum: array<f32, COUNT_CAP>;
+    var field_sum: array<f32, COUNT_CAP>;
+    // The least n . m of the blocks, -1 where one folds its tangent plane where the point
+    // does not (an upward normal folds).
+    var least_cosine = 1.0;
     for (var corner = 0u; corner < 4u; corner++) {
         let db = f32(corner / 2u);
         let dc = f32(corner % 2u);
@@ -258,15 +290,32 @@ fn grid_at(point: u32, p: vec3<f32>, n: vec3<f32>, object: u32, served: bool, ho
         for (var i = 0u; i < GRID_CAPS; i++) {
             sum[i] += weight * grid[record + GRID_HEADER + GRID_HORIZONS + i];
         }
+        for (var i = 0u; i < GRID_FIELD; i++) {
+            field_sum[i] += weight * grid[record + GRID_HEADER + GRID_HORIZONS + GRID_CAPS + i];
+        }
+        var cosine = -1.0;
+        if (m.z > 0.0) == (n.z > 0.0) {
+            cosine = dot(n, m);
+        }
+        least_cosine = min(least_cosine, cosine);
     }
     if total < GRID_MIN_WEIGHT {
         return false;
     }
-    for (var k = 0u; k < GRID_HORIZONS; k++) {
-        (*horizons)[k] = atan(tangents[k] / total);
+    if GRID_FIELD > 0u {
+        *field_weight = clamp((least_cosine - GRID_FIELD_FAR) / (GRID_FIELD_NEAR - GRID_FIELD_FAR), 0.0, 1.0);
+    }
+    // The horizons only where the point turns its own slices or reads them otherwise.
+    if *field_weight < 1.0 || wants_horizons {
+        for (var k = 0u; k < GRID_HORIZONS; k++) {
+            (*horizons)[k] = atan(tangents[k] / total);
+        }
     }
     for (var i = 0u; i < GRID_CAPS; i++) {
         (*caps)[i] = sum[i] / total;
+    }
+    for (var i = 0u; i < GRID_FIELD; i++) {
+        (*field)[i] = field_sum[i] / total;
     }
     return true;
 }
@@ -532,11 +581,15 @@ fn shade(@builtin(global_invocation_id) id: vec3<u32>) {
         let object = bitcast<u32>(record.normal.w);
         var caps: array<f32, COUNT_CAP>;
         var horizons: array<f32, DIRECTIONS>;
+        var field: array<f32, COUNT_CAP>;
         var from_grid = false;
+        var field_weight = 0.0;
 //#if GRID
-        from_grid = grid_at(point, a.xyz, n, object, record.reflected.w > 0.5, &horizons, &caps);
+        // A Phong lobe's specular occlusion reads the horizons.
+        let glossy = slot != SLOT_UNKNOWN && materials[slot].kind == MATERIAL_PHONG;
+        from_grid = grid_at(point, a.xyz, n, object, record.reflected.w > 0.5, glossy, &horizons, &caps, &field, &field_weight);
 //#endif
-        var v = visibility(a.xyz, n, object, from_grid, &horizons, &caps);
+        var v = visibility(a.xyz, n, object, from_grid, &horizons, &caps, &field, field_weight);
         if slot != SLOT_UNKNOWN {
             let material = materials[slot];
             let lit_diffuse = lit(&v, T_DIFFUSE, n);

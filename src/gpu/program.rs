@@ -130,13 +130,16 @@ impl MarchShape {
 /// The record of one block of the visibility grid in the pre-pass's buffer
 /// (`shaders/shade.wgsl`, `grid_visibility`): a header of [`Self::HEADER`] values (the
 /// block's point, the bits of its object, its normal, 1 where it has a surface pixel),
-/// then the tangents of its horizons' elevations and its caps' log vector.
+/// then the tangents of its horizons' elevations, its caps' log vector and the height
+/// field's log vector with the block's tangent plane folded in.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct VisibilityBlocks {
     /// Azimuths (0 without a height field or a grid).
     pub horizons: usize,
     /// Coefficients (0 without blockers or a grid).
     pub caps: usize,
+    /// Coefficients of the height field's log vector (0 without a height field or a grid).
+    pub field: usize,
 }
 
 impl VisibilityBlocks {
@@ -149,12 +152,13 @@ impl VisibilityBlocks {
         Self {
             horizons: march.map_or(0, |m| m.directions),
             caps: if features.contents.blockers { coefficient_count(kernel.order) } else { 0 },
+            field: if march.is_some() { coefficient_count(kernel.order) } else { 0 },
         }
     }
 
     /// Values per block.
     pub fn stride(&self) -> usize {
-        Self::HEADER + self.horizons + self.caps
+        Self::HEADER + self.horizons + self.caps + self.field
     }
 }
 
@@ -543,10 +547,13 @@ fn prelude(
         ("GRID_HEADER", U32(VisibilityBlocks::HEADER)),
         ("GRID_HORIZONS", U32(blocks.horizons)),
         ("GRID_CAPS", U32(blocks.caps)),
+        ("GRID_FIELD", U32(blocks.field)),
         ("GRID_STRIDE", U32(blocks.stride())),
         ("GRID_MIN_WEIGHT", F32(crate::shade::visibility_grid::MIN_WEIGHT)),
         ("GRID_NORMAL_POWER", F32(f64::from(crate::shade::visibility_grid::NORMAL_POWER))),
         ("GRID_PLANE_WIDTH", F32(crate::shade::visibility_grid::PLANE_WIDTH)),
+        ("GRID_FIELD_NEAR", F32(crate::shade::visibility_grid::FIELD_NORMAL_COSINES[0])),
+        ("GRID_FIELD_FAR", F32(crate::shade::visibility_grid::FIELD_NORMAL_COSINES[1])),
     ];
     constants.iter().map(|(name, value)| value.declare(name)).collect()
 }
@@ -651,7 +658,7 @@ impl ShadeProgram {
         // alone, so the march and the caps above stay in the bound (the pre-pass runs
         // fewer: one point's march and caps).
         let grid = if self.features.grid > 1 {
-            let values = (self.blocks.horizons + self.blocks.caps) as u64;
+            let values = (self.blocks.horizons + self.blocks.caps + self.blocks.field) as u64;
             4 * (1 + values) + values
         } else {
             0

@@ -8,6 +8,7 @@ use super::kernel::{Caps, KnownAlongSun, Occluders, ShadingKernel, SurfacePoint}
 use super::plan::{FramePlan, PlannedKernel};
 use super::shaded::{Outputs, Shaded};
 use super::visibility_grid::{is_direct_surface, GridVisibility, VisibilityGrid};
+use crate::scene::Material;
 use crate::sh::Real;
 use crate::timing::StageTimings;
 use rayon::prelude::*;
@@ -138,7 +139,9 @@ fn shade_pixels<P: PixelResult, T: Real>(
                         None => caps.of(shaded - 1),
                         Some(grid) => {
                             let direct = is_direct_surface(materials, frame, g.index(x, y));
-                            match direct && grid.at(x, y, &point, &mut interpolated) {
+                            // A Phong lobe's specular occlusion reads the horizons.
+                            let glossy = matches!(materials.get(&point.material), Some(Material::Phong { .. }));
+                            match direct && grid.at(x, y, &point, glossy, &mut interpolated) {
                                 true => interpolated.caps(),
                                 false => Caps::Walk,
                             }

@@ -126,6 +126,10 @@ pub enum Caps<'a> {
     Grid {
         caps: Option<&'a [f64]>,
         horizons: Option<&'a [f64]>,
+        /// The height field's log vector, the tangent plane folded in
+        /// ([`ShadingKernel::heightfield_log`]), and how much the pixel takes it rather
+        /// than turn its own horizons (0 to 1).
+        heightfield: Option<(&'a [f64], f64)>,
     },
 }
 
@@ -466,39 +470,44 @@ impl<T: Real> ShadingKernel<T> {
         }
         if let Some((pyramid, wedge, turn)) = marched {
             let directions = wedge.directions;
-            // The horizons and the tangent plane by the tangents of their elevations
-            // (`banded_slice_of_tangents`).
-            let mut horizons = [0.0f64; MAX_DIRECTIONS];
-            match caps {
-                Caps::Grid { horizons: Some(given), .. } => horizons[..directions].copy_from_slice(given),
-                _ => pyramid.horizon_tangents(p, &mut horizons[..directions]),
-            }
-            if let Some(found) = horizons_found {
-                pyramid.sector_maxima(&horizons[..directions], found);
-            }
-            // Eight azimuths at a time: their slices, then their part of the turn.
-            const RUN: usize = 8;
-            let mut slices = [T::zero(); RUN * crate::sh::MAX_ORDER];
-            if let Some(occlusion) = occlusion.as_deref_mut() {
-                for (run, sigmas) in horizons[..directions].chunks(RUN).enumerate() {
-                    self.banded_slices(&[0.0; RUN][..sigmas.len()], sigmas, &mut slices);
-                    turn.accumulate_from(run * RUN, &slices[..sigmas.len() * order], occlusion);
+            // The grid's interpolated log vector (not for a relight's transfer, which
+            // records the horizons): whole, or blended with the pixel's own slices.
+            let given = match (&caps, &horizons_found) {
+                (Caps::Grid { heightfield: Some(given), .. }, None) => Some(*given),
+                _ => None,
+            };
+            let whole = given.filter(|&(_, weight)| weight >= 1.0);
+            if let Some((field, _)) = whole {
+                for (a, &c) in acc.iter_mut().zip(field) {
+                    *a = *a + T::of(c);
                 }
             }
-            // The band from the horizontal (or the tangent plane, where higher) up to each
-            // horizon takes its fitted depth; below it stays at log(eps).
-            for (run, sigmas) in horizons[..directions].chunks_mut(RUN).enumerate() {
-                let mut bases = [0.0f64; RUN];
-                if fold_tangent {
-                    for (k, (base, sigma)) in bases.iter_mut().zip(sigmas.iter_mut()).enumerate() {
-                        let (sin, cos) = self.azimuths[run * RUN + k];
-                        let tangent_plane = -(n[0] * cos + n[1] * sin) / n[2];
-                        *sigma = sigma.max(tangent_plane);
-                        *base = base.max(tangent_plane);
+            if whole.is_none() || occlusion.is_some() {
+                // The horizons and the tangent plane by the tangents of their elevations
+                // (`banded_slice_of_tangents`).
+                let mut horizons = [0.0f64; MAX_DIRECTIONS];
+                match caps {
+                    Caps::Grid { horizons: Some(given), .. } => horizons[..directions].copy_from_slice(given),
+                    _ => pyramid.horizon_tangents(p, &mut horizons[..directions]),
+                }
+                if let Some(found) = horizons_found {
+                    pyramid.sector_maxima(&horizons[..directions], found);
+                }
+                if let Some(occlusion) = occlusion.as_deref_mut() {
+                    self.add_horizon_slices(turn, &horizons[..directions], None, occlusion);
+                }
+                let fold_normal = fold_tangent.then_some(n);
+                match (given, whole) {
+                    (_, Some(_)) => {}
+                    (None, None) => self.add_horizon_slices(turn, &horizons[..directions], fold_normal, acc),
+                    (Some((field, weight)), None) => {
+                        let mut own = [T::zero(); MAX_COEFFICIENTS];
+                        self.add_horizon_slices(turn, &horizons[..directions], fold_normal, &mut own[..acc.len()]);
+                        for ((a, &o), &f) in acc.iter_mut().zip(&own).zip(field) {
+                            *a = *a + T::of(weight * f + (1.0 - weight) * o.to_f64().unwrap_or(0.0));
+                        }
                     }
                 }
-                self.banded_slices(&bases[..sigmas.len()], sigmas, &mut slices);
-                turn.accumulate_from(run * RUN, &slices[..sigmas.len() * order], acc);
             }
         }
         let Some(tree) = occluders.blockers else {
@@ -531,6 +540,47 @@ impl<T: Real> ShadingKernel<T> {
                 *a = *a + c;
             }
         }
+    }
+
+    /// The height field's log vector from the tangents of its horizons' elevations along
+    /// the kernel's azimuths (`banded_slice_of_tangents`, turned by the wedge operator),
+    /// added to `acc`: each band from the horizontal, or from the tangent plane of
+    /// `fold_normal` where given and higher, up to its horizon takes its fitted depth;
+    /// below it stays at log(eps).
+    fn add_horizon_slices(&self, turn: &WedgeTurn<T>, tangents: &[f64], fold_normal: Option<[f64; 3]>, acc: &mut [T]) {
+        // Eight azimuths at a time: their slices, then their part of the turn.
+        const RUN: usize = 8;
+        let order = self.order;
+        let mut slices = [T::zero(); RUN * crate::sh::MAX_ORDER];
+        for (run, tangents) in tangents.chunks(RUN).enumerate() {
+            let mut bases = [0.0f64; RUN];
+            let mut sigmas = [0.0f64; RUN];
+            sigmas[..tangents.len()].copy_from_slice(tangents);
+            if let Some(n) = fold_normal {
+                for (k, (base, sigma)) in bases.iter_mut().zip(sigmas.iter_mut()).take(tangents.len()).enumerate() {
+                    let (sin, cos) = self.azimuths[run * RUN + k];
+                    let tangent_plane = -(n[0] * cos + n[1] * sin) / n[2];
+                    *sigma = sigma.max(tangent_plane);
+                    *base = base.max(tangent_plane);
+                }
+            }
+            self.banded_slices(&bases[..tangents.len()], &sigmas[..tangents.len()], &mut slices);
+            turn.accumulate_from(run * RUN, &slices[..tangents.len() * order], acc);
+        }
+    }
+
+    /// The height field's log vector at a point with normal `n` whose horizons' tangents
+    /// are `tangents`, its tangent plane folded in as [`Self::add_visibility`] folds it:
+    /// what the visibility grid interpolates ([`super::visibility_grid`]). Zero without a
+    /// height field.
+    pub(crate) fn heightfield_log(&self, tangents: &[f64], n: [f64; 3]) -> [T; MAX_COEFFICIENTS] {
+        let mut acc = [T::zero(); MAX_COEFFICIENTS];
+        if let Some(turn) = &self.wedge_turn {
+            let count = coefficient_count(self.order);
+            let fold = (self.tangent_occlusion && n[2] > 0.0).then_some(n);
+            self.add_horizon_slices(turn, tangents, fold, &mut acc[..count]);
+        }
+        acc
     }
 
     /// The log vectors of the sphere caps `tree` casts on `p` with normal `n` on object
