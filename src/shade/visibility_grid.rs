@@ -22,8 +22,9 @@
 //! field's log vector, its own tangent plane folded in ([`ShadingKernel::heightfield_log`]),
 //! and a pixel takes the vectors' weighted mean in place of turning its own slices,
 //! wherever its blocks' normals lie within about 6 degrees of its own (blended into its
-//! own slices out to 10 degrees, so that nothing jumps) and it needs no specular occlusion (a prefiltered glossy lobe reads the horizons
-//! unfolded): the slices and their turn were a sixth of a grid pixel's time on the
+//! own slices out to 10 degrees, so that nothing jumps; a prefiltered glossy lobe's
+//! specular occlusion still reads the horizons, unfolded): the slices and their turn
+//! were a sixth of a grid pixel's time on the
 //! dunes, and the tangent planes of normals within the likeness's 25 degrees fold almost
 //! the same bands (against Cycles, the dunes at 2 and 4 moved from 0.0231 and 0.0233 to
 //! 0.0233 and 0.0239). A pixel whose four blocks weigh
@@ -76,7 +77,7 @@ pub struct GridVisibility {
     field: [f64; MAX_COEFFICIENTS],
     directions: usize,
     count: usize,
-    /// Coefficients of `field` (0 without a height field).
+    /// Coefficients of `field`: 0 without a height field or where `field_weight` is 0.
     count_field: usize,
     /// How much the pixel takes `field` rather than turn its own horizons: 1 where its
     /// blocks' normals all lie within [`FIELD_NORMAL_COSINES`]' first of its own, 0
@@ -103,8 +104,7 @@ impl GridVisibility {
         Caps::Grid {
             caps: (self.count > 0).then(|| &self.caps[..self.count]),
             horizons: (self.directions > 0).then(|| &self.horizons[..self.directions]),
-            heightfield: (self.count_field > 0 && self.field_weight > 0.0)
-                .then(|| (&self.field[..self.count_field], self.field_weight)),
+            heightfield: (self.count_field > 0).then(|| (&self.field[..self.count_field], self.field_weight)),
         }
     }
 }
