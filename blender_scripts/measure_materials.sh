@@ -14,7 +14,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 OUT=${1:-target/materials}
-SCENES=${SCENES:-"textured primitives glossy sun_lamp cones"}
+SCENES=${SCENES:-"textured primitives glossy sun_lamp cones principled_tiles primitives_sun_lamp primitives_hdri_sun"}
 RESOLUTION=${RESOLUTION:-240x135}
 TRUTH_SAMPLES=${TRUTH_SAMPLES:-1024}
 EXPORT_OPTIONS=${EXPORT_OPTIONS:-}

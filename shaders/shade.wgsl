@@ -362,22 +362,39 @@ fn lobe_kind(material: GpuMaterial) -> u32 {
     return load_GpuLobeHead(material.sharp_tables).kind;
 }
 
-// The glossy lobe's value at cos theta = z from its axis, widened by a patch of angular
+// The Phong lobe's value at cos theta = z from its axis, widened by a patch of angular
 // radius `patch_radius` (glossy.rs, SharpLobe::widened and SharpLobe::value; the log-SH
-// lobe is the same Phong lobe).
-fn widened_lobe_value(material: GpuMaterial, patch_radius: f32, z: vec4<f32>) -> vec4<f32> {
+// lobe is the same Phong lobe; a GGX lobe reflects sharp lights through widened_ggx_lit).
+fn widened_phong_value(material: GpuMaterial, patch_radius: f32, z: vec4<f32>) -> vec4<f32> {
     let width = load_GpuLobeHead(material.sharp_tables).width;
     let pi = 3.141592653589793;
     let blur = 0.25 * patch_radius * patch_radius;
-    if lobe_kind(material) == LOBE_GGX {
-        let a2 = width * width + blur;
-        let mu2 = (1.0 + clamp(z, vec4<f32>(-1.0), vec4<f32>(1.0))) * 0.5;
-        let d = mu2 * (a2 - 1.0) + 1.0;
-        return a2 / (pi * d * d) * 0.25;
-    }
     let a2 = 0.5 / (width + 0.5) + blur;
     let exponent = clamp(0.5 / a2 - 0.5, 1.1754944e-38, width);
     return select(vec4<f32>(0.0), (exponent + 1.0) / (2.0 * pi) * pow(max(z, vec4<f32>(1e-30)), vec4<f32>(exponent)), z > vec4<f32>(0.0));
+}
+
+// GGX's BRDF times the cosine and Schlick's Fresnel term for n . v = n_v, n . w = n_w and
+// v . w = v_w, widened by a patch of angular radius `patch_radius` (glossy.rs, ggx_lit
+// and SharpLobe::widened).
+fn widened_ggx_lit(material: GpuMaterial, patch_radius: f32, n_v: f32, n_w: vec4<f32>, v_w: vec4<f32>) -> vec4<f32> {
+    let head = load_GpuLobeHead(material.sharp_tables);
+    let a2 = head.width * head.width + 0.25 * patch_radius * patch_radius;
+    let mu = clamp(n_v, 1e-4, 1.0);
+    let half_length_squared = 2.0 + 2.0 * v_w;
+    let half_length = sqrt(max(half_length_squared, vec4<f32>(1e-12)));
+    let n_h = min((mu + n_w) / half_length, vec4<f32>(1.0));
+    let f0 = head.lamp_fresnel;
+    let m = 1.0 - clamp(0.5 * half_length, vec4<f32>(0.0), vec4<f32>(1.0));
+    let m2 = m * m;
+    let fresnel = f0 + (1.0 - f0) * (m2 * m2 * m);
+    let d = n_h * n_h * (a2 - 1.0) + 1.0;
+    let distribution = a2 / (3.141592653589793 * d * d);
+    let lambda_v = 0.5 * (sqrt(1.0 + a2 * (1.0 - mu * mu) / max(mu * mu, 1e-12)) - 1.0);
+    let n_w2 = max(n_w * n_w, vec4<f32>(1e-12));
+    let lambda_w = 0.5 * (sqrt(1.0 + a2 * (1.0 - n_w2) / n_w2) - 1.0);
+    let value = fresnel * distribution / (1.0 + lambda_v + lambda_w) / (4.0 * mu);
+    return select(vec4<f32>(0.0), value, n_w > vec4<f32>(0.0) & half_length_squared > vec4<f32>(1e-12));
 }
 
 // The lobe's albedo at n . v = mu, linearly (glossy.rs, albedo_lookup).
@@ -398,7 +415,7 @@ fn prefiltered_glossy(occlusion: ptr<function, array<f32, COUNT_CAP>>, material:
     let share = head.cone_share;
     let weights = material.sharp_tables + GpuLobeHead_FLOATS;
     let albedo = weights + DISK_DIRECTIONS;
-    let open_lobe = albedo + ALBEDO_ENTRIES;
+    let open_lobe = albedo + 2u * ALBEDO_ENTRIES;
     var by_cone = 0.0;
     if share > 0.0 {
         var disk = disk_around(r, core);
@@ -498,12 +515,13 @@ fn map_texel(map: u32, width: u32, column: u32, row: u32) -> vec3<f32> {
 //#if SUNS
 // The sharp lights' diffuse and glossy radiance at p (kernel.rs, sunlit; sun.rs): each
 // sun's and point lamp's disk integral times the mean over its directions of visibility
-// times the cosine lobe, and times the glossy lobe about r (with the lobe's albedo for a
-// prefiltered one).
+// times the cosine lobe, and times the glossy lobe (GGX's BRDF, or the Phong lobe about
+// r), scaled by the lamps' scale table for a prefiltered one (glossy.rs,
+// lamp_scale_table).
 fn sunlit(p: vec3<f32>, n: vec3<f32>, object: u32, r: vec3<f32>, material: GpuMaterial, diffuse: ptr<function, vec3<f32>>, specular: ptr<function, vec3<f32>>) {
     var albedo = 1.0;
     if material.kind == MATERIAL_PHONG && lobe_kind(material) != LOBE_SH {
-        albedo = albedo_lookup(material.sharp_tables + GpuLobeHead_FLOATS + DISK_DIRECTIONS, dot(n, r));
+        albedo = albedo_lookup(material.sharp_tables + GpuLobeHead_FLOATS + DISK_DIRECTIONS + ALBEDO_ENTRIES, dot(n, r));
     }
     for (var s = 0u; s < SUN_COUNT; s++) {
         let sun = load_GpuSun(T_SUNS + GpuSun_FLOATS * s);
@@ -545,15 +563,37 @@ fn sunlit(p: vec3<f32>, n: vec3<f32>, object: u32, r: vec3<f32>, material: GpuMa
 // radiance times its solid angle, `reach` its distance (3e38 for a sun).
 fn add_disk_light(p: vec3<f32>, n: vec3<f32>, object: u32, r: vec3<f32>, material: GpuMaterial, albedo: f32, axis: vec3<f32>, one_minus_cos: f32, patch_radius: f32, reach: f32, integral: vec3<f32>, diffuse: ptr<function, vec3<f32>>, specular: ptr<function, vec3<f32>>) {
     let glossy = material.kind == MATERIAL_PHONG;
+    let ggx = glossy && lobe_kind(material) == LOBE_GGX;
+    let n_v = dot(n, r);
+    let v = 2.0 * n_v * n - r;
     var disk = disk_around(axis, one_minus_cos);
     let blocked = disk_blocked(&disk, p, n, object, axis, one_minus_cos, patch_radius, reach, true, true);
     var cosine = 0.0;
     var lobe = 0.0;
+    // GGX smooth over an open disk takes its value at the axis (glossy.rs,
+    // smooth_over_disk).
+    var open = true;
+    for (var q = 0u; q < DISK_QUADS; q++) {
+        open = open && all(blocked[q] == vec4<f32>(0.0));
+    }
+    let width = load_GpuLobeHead(material.sharp_tables).width;
+    let widened = width * width + 0.25 * patch_radius * patch_radius;
+    let least = SMOOTH_OVER_DISK * one_minus_cos;
+    let n_axis = dot(n, axis);
+    let seen_at = max(n_v, 0.0);
+    let at_axis = ggx && open && widened * seen_at * seen_at >= least && n_axis * n_axis >= least;
+    if at_axis {
+        let value = widened_ggx_lit(material, patch_radius, n_v, vec4<f32>(n_axis), vec4<f32>(dot(v, axis)));
+        lobe = value.x * f32(DISK_DIRECTIONS);
+    }
     for (var q = 0u; q < DISK_QUADS; q++) {
         let visible = 1.0 - blocked[q];
-        cosine += dot(visible, max(n.x * disk.x[q] + n.y * disk.y[q] + n.z * disk.z[q], vec4<f32>(0.0)));
-        if glossy {
-            lobe += dot(visible, widened_lobe_value(material, patch_radius, r.x * disk.x[q] + r.y * disk.y[q] + r.z * disk.z[q]));
+        let n_w = n.x * disk.x[q] + n.y * disk.y[q] + n.z * disk.z[q];
+        cosine += dot(visible, max(n_w, vec4<f32>(0.0)));
+        if ggx && !at_axis {
+            lobe += dot(visible, widened_ggx_lit(material, patch_radius, n_v, n_w, v.x * disk.x[q] + v.y * disk.y[q] + v.z * disk.z[q]));
+        } else if glossy && !ggx {
+            lobe += dot(visible, widened_phong_value(material, patch_radius, r.x * disk.x[q] + r.y * disk.y[q] + r.z * disk.z[q]));
         }
     }
     let mean = 1.0 / f32(DISK_DIRECTIONS);

@@ -275,7 +275,8 @@ gpu_struct! {
 
 gpu_struct! {
     /// The head of a glossy lobe's tables (src/shade/glossy.rs, [`TableRecord`]), before
-    /// its cone weights, albedo table and open lobe's ZH where it is prefiltered.
+    /// its cone weights, albedo table, sharp lights' scale table and open lobe's ZH where
+    /// it is prefiltered.
     GpuLobeHead {
         /// `LOBE_GGX`, `LOBE_PHONG` or `LOBE_SH`.
         kind: u32,
@@ -287,6 +288,8 @@ gpu_struct! {
         core_patch: f32,
         /// The cone test's share of the occlusion (the log-SH ratio has the rest).
         cone_share: f32,
+        /// The reflectance at normal incidence of the sharp lights' Fresnel term.
+        lamp_fresnel: f32,
     }
 }
 

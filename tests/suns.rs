@@ -63,6 +63,64 @@ fn sun_behind_a_sphere_matches_the_closed_form() {
         .assert_close("sun over sphere and plane");
 }
 
+/// A Sun lamp reflects off a rough glossy plane as GGX's BRDF does (`ggx_lit`: Cycles'
+/// Glossy BSDF, single scattering, no Fresnel), not as the split sum's lobe about the
+/// mirrored view: the plane's pixels within 0.1 % of `strength * D G2 / (4 n.v)` on
+/// average and 0.3 % at worst (measured: 8e-5 and 1.5e-4; the disk is 32 directions of a
+/// 0.5-degree sun), where the lobe about the mirrored view is over 20 % off on 1070 of
+/// its 2304 pixels.
+#[test]
+fn a_sun_lamp_reflects_off_a_rough_plane_as_ggx_does() {
+    use logsh::scene::Material;
+    use logsh::shade::glossy::{ggx_alpha, ggx_lit, SharpLobe};
+    let dir = tempfile::tempdir().unwrap();
+    let spec = SphereOverPlane { spheres: vec![], width: 64, height: 36, ..Default::default() };
+    sphere_over_plane(dir.path(), &spec).unwrap();
+    let mut scene = Scene::load(dir.path()).unwrap();
+    let exponent = 3.0f32;
+    scene.materials.insert(PLANE_MATERIAL, Material::Phong { albedo: [0.0; 3], specular: [1.0; 3], exponent });
+    let mut frame = scene.frame(1).unwrap();
+    let elevation = 40f64.to_radians();
+    let sun = SunLight {
+        direction: [elevation.cos() * 0.6, elevation.cos() * 0.8, elevation.sin()],
+        half_angle: 0.25f64.to_radians(),
+        strength: SUN_STRENGTH,
+        color: [1.0, 1.0, 1.0],
+    };
+    frame.light = Arc::new(Light::Constant([0.0; 3]));
+    frame.suns = vec![sun];
+    let shaded = support::cpu_beauty(&scene, &frame, &ShadingSettings::default()).unwrap();
+    let alpha = ggx_alpha(f64::from(exponent));
+    let (mut sum, mut worst, mut pixels, mut far_from_the_lobe) = (0.0, 0.0f64, 0usize, 0usize);
+    for (i, &m) in frame.gbuffer.material.iter().enumerate() {
+        if m != PLANE_MATERIAL {
+            continue;
+        }
+        let point = logsh::shade::frame::surface_at(&frame.gbuffer, i, None, &frame);
+        let to_eye = [0, 1, 2].map(|k| point.view_origin[k] - point.position[k]);
+        let length = to_eye.iter().map(|c| c * c).sum::<f64>().sqrt();
+        let v = to_eye.map(|c| c / length);
+        let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+        let n = point.normal;
+        let expected =
+            f64::from(SUN_STRENGTH) * ggx_lit(alpha, 1.0, dot(n, v), dot(n, sun.direction), dot(v, sun.direction));
+        let mirrored = [0, 1, 2].map(|k| 2.0 * dot(n, v) * n[k] - v[k]);
+        let lobe = f64::from(SUN_STRENGTH) * SharpLobe::Ggx { alpha }.value(dot(mirrored, sun.direction));
+        let error = (f64::from(shaded.rgba[i][0]) - expected).abs() / expected;
+        sum += error;
+        worst = worst.max(error);
+        pixels += 1;
+        far_from_the_lobe += usize::from((lobe - expected).abs() > 0.2 * expected);
+    }
+    let mean = sum / pixels as f64;
+    println!("GGX under a Sun lamp, {pixels} plane pixels: mean {mean:.1e}, worst {worst:.1e}; {far_from_the_lobe} where the lobe about R is 20 % off");
+    assert!(
+        far_from_the_lobe > pixels / 10,
+        "the view must tell the BRDF from the lobe about R: {far_from_the_lobe} of {pixels}"
+    );
+    assert!(mean <= 1e-3 && worst <= 3e-3, "mean {mean}, worst {worst}");
+}
+
 /// Extreme suns stay finite: radiance 1e6, 0.01 degrees wide, on the horizon and below.
 #[test]
 fn extreme_suns_stay_finite() {

@@ -328,8 +328,8 @@ fn material_slots(kernel: &ShadingKernel<f32>, t: &mut TableBuilder) -> (Vec<Gpu
             _ => continue,
         };
         // The glossy lobe (shaders/shade.wgsl, lobe_kind): its shape, width, core radius
-        // and cone share; for a prefiltered one also the cone's weights, the albedo table
-        // and the open lobe's ZH, and its map.
+        // and cone share; for a prefiltered one also the cone's weights, the albedo table,
+        // the sharp lights' scale table and the open lobe's ZH, and its map.
         let (sharp_map, sharp_tables) = match (&lobes.material, &lobes.sharp) {
             (_, Some(sharp)) => {
                 let key = Arc::as_ptr(&sharp.prefiltered);
@@ -357,6 +357,7 @@ fn material_slots(kernel: &ShadingKernel<f32>, t: &mut TableBuilder) -> (Vec<Gpu
                     core_one_minus_cos: (1.0 - core.cos()) as f32,
                     core_patch: patch_radius(core) as f32,
                     cone_share: sharp.cone_share as f32,
+                    lamp_fresnel: sharp.lamp_fresnel as f32,
                 };
                 let weights = sharp.cone_weights.map(|w| w as f32);
                 let tables = t.push_unnamed(
@@ -364,6 +365,7 @@ fn material_slots(kernel: &ShadingKernel<f32>, t: &mut TableBuilder) -> (Vec<Gpu
                         .into_iter()
                         .chain(weights)
                         .chain(sharp.albedo.iter().copied())
+                        .chain(sharp.lamp_scale.iter().copied())
                         .chain(sharp.open.iter().copied()),
                 );
                 (map, tables as u32)
@@ -541,6 +543,7 @@ fn prelude(
         ("POINT_HALF_ANGLE_MIN", F32(crate::scene::light::POINT_HALF_ANGLE_MIN)),
         ("POINT_NEAREST", F32(crate::scene::light::POINT_NEAREST)),
         ("LOBE_GGX", U32(LOBE_GGX as usize)),
+        ("SMOOTH_OVER_DISK", F32(crate::shade::glossy::SMOOTH_OVER_DISK)),
         ("LOBE_PHONG", U32(LOBE_PHONG as usize)),
         ("LOBE_SH", U32(LOBE_SH as usize)),
         ("GRID_SIZE", U32(features.grid.max(1))),

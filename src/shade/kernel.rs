@@ -10,7 +10,8 @@ use super::fitted_depth::{
 };
 use super::frame::{pixel_source, PixelSource, PixelWork};
 use super::glossy::{
-    albedo_lookup, albedo_table, cone_share, cone_weights, ggx_alpha, MapLevels, Prefiltered, SharpLobe, ALBEDO_ENTRIES,
+    albedo_lookup, albedo_table, cone_share, cone_weights, ggx_alpha, lamp_scale_table, smooth_over_disk, GgxLit,
+    MapLevels, Prefiltered, SharpLobe, ALBEDO_ENTRIES,
 };
 pub use super::point::{above_ground, reflect_view, SurfacePoint};
 use super::settings::{GlossyMethod, ShadingSettings, MAX_DIRECTIONS};
@@ -61,6 +62,12 @@ pub(crate) struct SharpGlossy<T> {
     pub(crate) prefiltered: Arc<Prefiltered>,
     /// The lobe's albedo over `n . v` ([`super::glossy::albedo_table`]).
     pub(crate) albedo: Vec<f32>,
+    /// What a sharp light's glossy term is scaled by over `n . v`
+    /// ([`super::glossy::lamp_scale_table`]).
+    pub(crate) lamp_scale: Vec<f32>,
+    /// The reflectance at normal incidence of the Fresnel term sharp lights reflect with
+    /// ([`super::glossy::ggx_lit`]): 1 (none) on converted materials.
+    pub(crate) lamp_fresnel: f64,
     /// `exp*(Phong lobe)` about +Z as ZH: the unoccluded denominator of the specular
     /// occlusion.
     pub(crate) open: Vec<T>,
@@ -197,6 +204,8 @@ impl<T: Real> ShadingKernel<T> {
     /// scene's light with its suns taken out), whose map the glossy term reflects;
     /// `has_heightfield` decides whether the wedge operator is built at all; `suns` and
     /// `points` are the sharp lights; `ground` the height of the scene's ground plane;
+    /// `lamp_fresnel`: each Phong material's reflectance at normal incidence for the sharp
+    /// lights' Fresnel term ([`super::glossy::lamp_fresnel`]);
     /// `colour_passes`: the G-buffer's Glossy Color weighs each glossy lobe
     /// ([`crate::scene::gbuffer`], "Colour passes"). That pass is Cycles' estimate of the
     /// specular layer's albedo under a white sky, Fresnel and the lobe's own energy
@@ -208,6 +217,7 @@ impl<T: Real> ShadingKernel<T> {
     pub fn new(
         settings: &ShadingSettings,
         materials: &BTreeMap<u32, Material>,
+        lamp_fresnel: &BTreeMap<u32, f64>,
         colour_passes: bool,
         light: &[[f64; 3]],
         residual: &Light,
@@ -221,7 +231,7 @@ impl<T: Real> ShadingKernel<T> {
         let mut tangent = vec![T::zero(); order];
         cap_log_zh(order, T::of(epsilon.ln()), T::of(FRAC_PI_2), &mut tangent);
         let exp = Exponentiator::new(order, settings.exp, settings.hyb_threshold);
-        let materials = Self::material_lobes(settings, materials, colour_passes, residual, ground, &exp);
+        let materials = Self::material_lobes(settings, materials, lamp_fresnel, colour_passes, residual, ground, &exp);
         let (cap_depths, band_depths) = Self::depth_tables(settings, has_heightfield, &exp);
         let wedge = has_heightfield.then(|| WedgeOperator::new(order, settings.horizon.directions));
         let channel = |c: usize| light.iter().map(|rgb| T::of(rgb[c])).collect::<Vec<T>>();
@@ -270,6 +280,7 @@ impl<T: Real> ShadingKernel<T> {
     fn material_lobes(
         settings: &ShadingSettings,
         materials: &BTreeMap<u32, Material>,
+        lamp_fresnel: &BTreeMap<u32, f64>,
         colour_passes: bool,
         residual: &Light,
         ground: Option<f64>,
@@ -306,14 +317,15 @@ impl<T: Real> ShadingKernel<T> {
                                     map
                                 }
                             };
+                            let albedo =
+                                if colour_passes { vec![1.0; ALBEDO_ENTRIES] } else { albedo_table(sharp_lobe) };
+                            let fresnel = lamp_fresnel.get(&index).copied().unwrap_or(1.0);
                             SharpGlossy {
                                 lobe: sharp_lobe,
                                 prefiltered: map,
-                                albedo: if colour_passes {
-                                    vec![1.0; ALBEDO_ENTRIES]
-                                } else {
-                                    albedo_table(sharp_lobe)
-                                },
+                                lamp_scale: lamp_scale_table(sharp_lobe, &albedo, fresnel),
+                                lamp_fresnel: fresnel,
+                                albedo,
                                 open: open_lobe(order, exp, &table),
                                 cone_share: cone_share(sharp_lobe, order),
                                 cone_weights: cone_weights(sharp_lobe),

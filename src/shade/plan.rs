@@ -149,6 +149,8 @@ struct KernelInputs<'a> {
     settings: &'a ShadingSettings,
     /// The materials as the kernel shades them ([`Scene::kernel_materials`]).
     materials: &'a BTreeMap<u32, Material>,
+    /// [`super::glossy::lamp_fresnel`].
+    lamp_fresnel: &'a BTreeMap<u32, f64>,
     colour_passes: bool,
     frame: &'a Frame,
     /// The SH projection of `residual`.
@@ -165,6 +167,7 @@ impl KernelInputs<'_> {
         ShadingKernel::new(
             self.settings,
             self.materials,
+            self.lamp_fresnel,
             self.colour_passes,
             self.light,
             self.residual,
@@ -196,6 +199,7 @@ struct LightingKey {
     settings: ShadingSettings,
     light: Arc<Light>,
     materials: BTreeMap<u32, Material>,
+    lamp_fresnel: BTreeMap<u32, f64>,
     colour_passes: bool,
     suns: Vec<SunLight>,
     points: Vec<PointLight>,
@@ -208,6 +212,7 @@ impl LightingKey {
         Arc::ptr_eq(&self.light, &other.light)
             && self.settings == other.settings
             && self.materials == other.materials
+            && self.lamp_fresnel == other.lamp_fresnel
             && self.colour_passes == other.colour_passes
             && self.suns == other.suns
             && self.points == other.points
@@ -226,6 +231,7 @@ fn lighting(settings: &ShadingSettings, scene: &Scene, frame: &Frame, heightfiel
         settings: *settings,
         light: frame.light.clone(),
         materials: scene.kernel_materials(),
+        lamp_fresnel: super::glossy::lamp_fresnel(scene),
         colour_passes: scene.colour_passes(),
         suns: frame.suns.clone(),
         points: frame.points.clone(),
@@ -253,6 +259,7 @@ fn lighting(settings: &ShadingSettings, scene: &Scene, frame: &Frame, heightfiel
     let inputs = KernelInputs {
         settings,
         materials: &key.materials,
+        lamp_fresnel: &key.lamp_fresnel,
         colour_passes: key.colour_passes,
         frame,
         light: &light,

@@ -579,6 +579,31 @@ impl SunDisk {
         }
     }
 
+    /// `integral over the disk of L V brdf(n . w, v . w) dw` for the disk as `seen`: a
+    /// lobe that depends on the direction through two axes, such as GGX's BRDF times the
+    /// cosine ([`super::glossy::ggx_lit`]). Where the lobe is `smooth` over the disk
+    /// ([`super::glossy::smooth_over_disk`]), an open disk takes its value at the axis.
+    pub fn reflected_between_seen(
+        &self,
+        seen: &DiskSeen,
+        brdf: impl Fn(f64, f64) -> f64,
+        smooth: bool,
+        n: [f64; 3],
+        v: [f64; 3],
+    ) -> [f64; 3] {
+        let by_axis = &self.disk.by_axis;
+        let term = |i: usize, n_w: f64| brdf(n_w, along_direction(by_axis, i, v));
+        match seen {
+            DiskSeen::Open if smooth => {
+                let at_axis = brdf(dot(self.disk.axis, n), dot(self.disk.axis, v));
+                self.disk_integral.map(|c| c * at_axis)
+            }
+            DiskSeen::Open => self.disk_mean(n, term),
+            DiskSeen::Partial(visibility) => self.disk_mean(n, |i, n_w| visibility[i] * term(i, n_w)),
+            DiskSeen::Hidden => [0.0; 3],
+        }
+    }
+
     /// [`Self::reflected_seen`] of the cosine lobe about the receiver's normal `n`. An
     /// open disk lies wholly above the tangent plane, where the lobe is linear in `n . w`:
     /// its mean over the directions is its value at their mean, one dot product where
@@ -803,6 +828,50 @@ mod tests {
             }
         }
         assert!(open > 3000 && partial > 100, "{open} open, {partial} partial");
+    }
+
+    /// A GGX lobe smooth over an open disk ([`smooth_over_disk`]) reflects it as its
+    /// value at the axis does, within 0.2 % of the 32 directions' mean (measured: 8.9e-4):
+    /// suns 0.25 to 10 degrees wide, lobes twice the least width, views and normals all
+    /// around.
+    #[test]
+    fn a_smooth_lobe_reflects_an_open_disk_at_its_axis() {
+        use crate::shade::glossy::{smooth_over_disk, GgxLit, SMOOTH_OVER_DISK};
+        let (mut worst, mut compared) = (0.0f64, 0);
+        for degrees in [0.25, 2.0, 10.0] {
+            let half_angle = f64::to_radians(degrees);
+            let alpha = 2.0 * (SMOOTH_OVER_DISK * (1.0 - half_angle.cos())).sqrt();
+            for axis in seven_axes() {
+                let sun =
+                    SunDisk::new(&SunLight { direction: axis, half_angle, strength: 2.0, color: [1.0, 0.5, 0.25] });
+                for k in 0..300 {
+                    let n = spiral_normal(k, 300, 1.0);
+                    if !matches!(sun.seen(None, DiskHorizon::None, None, [0.0; 3], n, 0), DiskSeen::Open) {
+                        continue;
+                    }
+                    for j in 0..12 {
+                        let v = spiral_normal(j * 25 + k % 25, 300, 1.0);
+                        if dot(v, n) <= 0.05
+                            || !smooth_over_disk(alpha, dot(v, n), 1.0 - half_angle.cos(), dot(n, axis))
+                        {
+                            continue;
+                        }
+                        let brdf = GgxLit::new(alpha, 0.04, dot(v, n));
+                        let at_axis = sun.reflected_between_seen(&DiskSeen::Open, |a, b| brdf.value(a, b), true, n, v);
+                        let mean = sun.reflected_between_seen(&DiskSeen::Open, |a, b| brdf.value(a, b), false, n, v);
+                        let peak =
+                            sun.disk_integral[0] * brdf.value(dot(n, v).max(0.0), 1.0).max(brdf.value(1.0, dot(n, v)));
+                        if mean[0] > 1e-3 * peak {
+                            worst = worst.max((at_axis[0] - mean[0]).abs() / mean[0]);
+                            compared += 1;
+                        }
+                    }
+                }
+            }
+        }
+        println!("smooth lobes at the axis: {compared} compared, worst {worst:.1e}");
+        assert!(compared > 1000, "{compared}");
+        assert!(worst <= 2e-3, "worst {worst}");
     }
 
     /// A disk's visibility over a height field, the march told the disk's band of

@@ -181,13 +181,19 @@ impl<T: Real> ShadingKernel<T> {
         };
         let as_f32 = |d: [f64; 3], g: [f64; 3]| (d.map(|c| c as f32), g.map(|c| c as f32));
         let n = point.normal;
-        // The glossy lobe as the environment's glossy term has it: the prefiltered one's
-        // shape and albedo, or Eq. 27's Phong lobe with `--glossy sh`; about the mirrored
-        // view, which a diffuse material does not read (a square root and three divisions
-        // a pixel, 3 % of a turn of the Sun-lamp scene's lamps).
+        // The glossy lobe: GGX's BRDF, scaled by the lamps' table
+        // ([`super::super::glossy::lamp_scale_table`]); with `--glossy phong` the Phong lobe
+        // about the mirrored view, scaled so too; with `--glossy sh` Eq. 27's Phong lobe. The
+        // mirrored view, which a diffuse material does not read (a square root and three
+        // divisions a pixel, 3 % of a turn of the Sun-lamp scene's lamps).
         let glossy_axis = phong.map(|_| reflect_view(point.view_origin, point.position, n));
         let sharp = phong.and_then(|_| self.materials.get(&point.material)?.sharp.as_ref());
-        let sharp_albedo = sharp.zip(glossy_axis).map(|(sharp, axis)| albedo_lookup(&sharp.albedo, dot(axis, n)));
+        // The view direction, mirrored back from the lobe's axis, for GGX's BRDF.
+        let view = glossy_axis.map(|axis| {
+            let twice = 2.0 * dot(axis, n);
+            [twice * n[0] - axis[0], twice * n[1] - axis[1], twice * n[2] - axis[2]]
+        });
+        let lamp_scale = sharp.zip(glossy_axis).map(|(sharp, axis)| albedo_lookup(&sharp.lamp_scale, dot(axis, n)));
         // Disk `k`'s diffuse and glossy radiance, `None` where it is wholly hidden (every
         // term is then 0, the lobes being finite: the same bits as adding them). The disks
         // are lent, not moved: a disk is 1.7 KB, and moving the suns through an iterator
@@ -208,11 +214,18 @@ impl<T: Real> ShadingKernel<T> {
             }
             let d = sun.diffuse_reflected(&seen, n);
             // The lobe widened by the disk's patch ([`SharpLobe::widened`]).
-            let g = phong.zip(glossy_axis).map(|((_, exponent), axis)| match (sharp, sharp_albedo) {
-                (Some(sharp), Some(a)) => {
-                    let lobe = sharp.lobe.widened(sun.disk.patch);
-                    sun.reflected_seen(&seen, |z| a * lobe.value(z), axis)
-                }
+            let g = phong.zip(glossy_axis).map(|((_, exponent), axis)| match (sharp, lamp_scale, view) {
+                (Some(sharp), Some(a), Some(v)) => match sharp.lobe.widened(sun.disk.patch) {
+                    // GGX's BRDF itself ([`GgxLit`]); the split sum's lobe about `R` is
+                    // for the environment's prefiltered map alone.
+                    SharpLobe::Ggx { alpha } => {
+                        let (n_v, n_axis) = (dot(v, n), dot(n, sun.disk.axis));
+                        let brdf = GgxLit::new(alpha, sharp.lamp_fresnel, n_v);
+                        let smooth = smooth_over_disk(alpha, n_v, 1.0 - sun.disk.half_angle.cos(), n_axis);
+                        sun.reflected_between_seen(&seen, |n_w, v_w| a * brdf.value(n_w, v_w), smooth, n, v)
+                    }
+                    lobe => sun.reflected_seen(&seen, |z| a * lobe.value(z), axis),
+                },
                 _ => {
                     let lobe = SharpLobe::Phong { exponent: f64::from(exponent) }.widened(sun.disk.patch);
                     sun.reflected_seen(&seen, |z| lobe.value(z), axis)
