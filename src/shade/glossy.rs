@@ -142,18 +142,26 @@ impl GgxLit {
 /// tile darker then (docs/method/materials.md).
 pub fn lamp_scale_table(lobe: SharpLobe, albedo: &[f32], f0: f64) -> Vec<f32> {
     match lobe {
-        SharpLobe::Ggx { .. } => {
-            static TABLES: Memo<(u64, u64), Vec<f32>> = Memo::new();
-            let SharpLobe::Ggx { alpha } = lobe else { unreachable!() };
-            let own = TABLES.get_or_build((alpha.to_bits(), f0.to_bits()), || {
-                (0..ALBEDO_ENTRIES)
-                    .map(|i| lobe.fresnel_albedo(i as f64 / (ALBEDO_ENTRIES - 1) as f64, f0) as f32)
-                    .collect()
-            });
-            albedo.iter().zip(own.iter()).map(|(&a, &own)| a / own.max(LAMP_ALBEDO_FLOOR * a)).collect()
+        SharpLobe::Ggx { alpha } => {
+            let own = fresnel_albedo_table(alpha, f0);
+            albedo.iter().zip(&own).map(|(&a, &own)| a / own.max(LAMP_ALBEDO_FLOOR * a)).collect()
         }
         SharpLobe::Phong { .. } => albedo.to_vec(),
     }
+}
+
+/// GGX's albedo with Schlick's term of reflectance `f0` ([`SharpLobe::fresnel_albedo`])
+/// over `n . v`, as [`albedo_table`] holds it at `f0 = 1`. It is linear in `f0`, so it is
+/// mixed from the tables at `f0 = 1` and `f0 = 0`, each integrated once per lobe and
+/// process.
+fn fresnel_albedo_table(alpha: f64, f0: f64) -> Vec<f32> {
+    static AT_ZERO: Memo<u64, Vec<f32>> = Memo::new();
+    let lobe = SharpLobe::Ggx { alpha };
+    let at_zero = AT_ZERO.get_or_build(alpha.to_bits(), || {
+        (0..ALBEDO_ENTRIES).map(|i| lobe.fresnel_albedo(i as f64 / (ALBEDO_ENTRIES - 1) as f64, 0.0) as f32).collect()
+    });
+    let mix = |one: f32, zero: f32| (f0 * f64::from(one) + (1.0 - f0) * f64::from(zero)) as f32;
+    albedo_table(lobe).iter().zip(at_zero.iter()).map(|(&one, &zero)| mix(one, zero)).collect()
 }
 
 /// The least reflectance [`lamp_fresnel`] gives: water's (IOR 1.33).
@@ -204,8 +212,8 @@ pub fn smooth_over_disk(alpha: f64, n_v: f64, one_minus_cos: f64, n_axis: f64) -
 /// layer (Cycles' albedo also holds its multiple scattering, which this reads as a
 /// higher `f0`: 0.9 of a rough dielectric's single-scattering albedo or less).
 pub fn fresnel_from_albedo(alpha: f64, albedo: f64, least: f64) -> f64 {
-    let lobe = SharpLobe::Ggx { alpha };
-    let (one, zero) = (lobe.fresnel_albedo(0.5, 1.0), lobe.fresnel_albedo(0.5, 0.0));
+    let at = |f0: f64| albedo_lookup(&fresnel_albedo_table(alpha, f0), 0.5);
+    let (one, zero) = (at(1.0), at(0.0));
     ((albedo - zero) / (one - zero).max(1e-9)).clamp(least, 1.0)
 }
 

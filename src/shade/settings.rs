@@ -69,9 +69,9 @@ pub struct ShadingSettings {
     /// existed, which was shaded without.
     #[serde(default = "BounceSettings::none")]
     pub bounce: BounceSettings,
-    /// Pixels per side of the blocks whose height-field horizons and log vector and sphere caps are
-    /// computed once, at one pixel of each, and interpolated between the blocks
-    /// ([`super::visibility_grid`]); 1 computes them at every pixel. Absent from a
+    /// Pixels per side of the blocks whose height-field horizons and log vector and whose
+    /// sphere caps are computed once, at one pixel of each, and interpolated between the
+    /// blocks ([`super::visibility_grid`]); 1 computes them at every pixel. Absent from a
     /// transfer frame written before it existed, which was shaded per pixel.
     #[serde(default = "one")]
     pub visibility_grid: usize,

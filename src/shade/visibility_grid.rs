@@ -24,12 +24,11 @@
 //! wherever its blocks' normals lie within about 6 degrees of its own (blended into its
 //! own slices out to 10 degrees, so that nothing jumps; a prefiltered glossy lobe's
 //! specular occlusion still reads the horizons, unfolded): the slices and their turn
-//! were a sixth of a grid pixel's time on the
-//! dunes, and the tangent planes of normals within the likeness's 25 degrees fold almost
-//! the same bands (against Cycles, the dunes at 2 and 4 moved from 0.0231 and 0.0233 to
-//! 0.0233 and 0.0239). A pixel whose four blocks weigh
-//! less than [`MIN_WEIGHT`] in all (an edge of its own, water's reflected points) is
-//! computed alone. The tangent plane, the ground plane, the BRDF lobe, the
+//! were a sixth of a grid pixel's time on the dunes, and the tangent planes of normals
+//! within the likeness's 25 degrees fold almost the same bands (against Cycles, the dunes
+//! at 2 and 4 moved from 0.0231 and 0.0233 to 0.0233 and 0.0239). A pixel whose four
+//! blocks weigh less than [`MIN_WEIGHT`] in all (an edge of its own, water's reflected
+//! points) is computed alone. The tangent plane, the ground plane, the BRDF lobe, the
 //! exponentiation and the suns' and lamps' disks stay per pixel.
 //!
 //! The GPU executor runs the same steps: the blocks' points ([`BlockPoints`]) are chosen
