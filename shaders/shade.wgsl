@@ -374,7 +374,27 @@ fn widened_phong_value(material: GpuMaterial, patch_radius: f32, z: vec4<f32>) -
     return select(vec4<f32>(0.0), (exponent + 1.0) / (2.0 * pi) * pow(max(z, vec4<f32>(1e-30)), vec4<f32>(exponent)), z > vec4<f32>(0.0));
 }
 
-// GGX's BRDF times the cosine and Schlick's Fresnel term for n . v = n_v, n . w = n_w and
+// The Fresnel term of reflectance f0 at v . h = c (glossy.rs, Fresnel): the dielectric's
+// Fresnel equations up to DIELECTRIC_F0, Schlick's approximation from METAL_F0, mixed
+// between.
+fn fresnel_at(f0: f32, c: vec4<f32>) -> vec4<f32> {
+    let m = 1.0 - c;
+    let m2 = m * m;
+    let schlick = f0 + (1.0 - f0) * (m2 * m2 * m);
+    let metal = clamp((f0 - DIELECTRIC_F0) / (METAL_F0 - DIELECTRIC_F0), 0.0, 1.0);
+    if metal >= 1.0 {
+        return schlick;
+    }
+    let root = min(sqrt(max(f0, 0.0)), sqrt(max(DIELECTRIC_F0, METAL_F0)));
+    let eta = (1.0 + root) / (1.0 - root);
+    let g = sqrt(eta * eta - 1.0 + c * c);
+    let a = (g - c) / max(g + c, vec4<f32>(1e-12));
+    let b = (c * (g + c) - 1.0) / (c * (g - c) + 1.0);
+    let dielectric = select(vec4<f32>(0.0), 0.5 * a * a * (1.0 + b * b), g + c > vec4<f32>(1e-12));
+    return dielectric + metal * (schlick - dielectric);
+}
+
+// GGX's BRDF times the cosine and the Fresnel term for n . v = n_v, n . w = n_w and
 // v . w = v_w, widened by a patch of angular radius `patch_radius` (glossy.rs, ggx_lit
 // and SharpLobe::widened).
 fn widened_ggx_lit(material: GpuMaterial, patch_radius: f32, n_v: f32, n_w: vec4<f32>, v_w: vec4<f32>) -> vec4<f32> {
@@ -384,10 +404,7 @@ fn widened_ggx_lit(material: GpuMaterial, patch_radius: f32, n_v: f32, n_w: vec4
     let half_length_squared = 2.0 + 2.0 * v_w;
     let half_length = sqrt(max(half_length_squared, vec4<f32>(1e-12)));
     let n_h = min((mu + n_w) / half_length, vec4<f32>(1.0));
-    let f0 = head.lamp_fresnel;
-    let m = 1.0 - clamp(0.5 * half_length, vec4<f32>(0.0), vec4<f32>(1.0));
-    let m2 = m * m;
-    let fresnel = f0 + (1.0 - f0) * (m2 * m2 * m);
+    let fresnel = fresnel_at(head.lamp_fresnel, clamp(0.5 * half_length, vec4<f32>(0.0), vec4<f32>(1.0)));
     let d = n_h * n_h * (a2 - 1.0) + 1.0;
     let distribution = a2 / (3.141592653589793 * d * d);
     let lambda_v = 0.5 * (sqrt(1.0 + a2 * (1.0 - mu * mu) / max(mu * mu, 1e-12)) - 1.0);
@@ -572,19 +589,22 @@ fn add_disk_light(p: vec3<f32>, n: vec3<f32>, object: u32, r: vec3<f32>, materia
     var lobe = 0.0;
     // GGX smooth over an open disk takes its value at the axis (glossy.rs,
     // smooth_over_disk).
-    var open = true;
-    for (var q = 0u; q < DISK_QUADS; q++) {
-        open = open && all(blocked[q] == vec4<f32>(0.0));
-    }
-    let width = load_GpuLobeHead(material.sharp_tables).width;
-    let widened = width * width + 0.25 * patch_radius * patch_radius;
-    let least = SMOOTH_OVER_DISK * one_minus_cos;
-    let n_axis = dot(n, axis);
-    let seen_at = max(n_v, 0.0);
-    let at_axis = ggx && open && widened * seen_at * seen_at >= least && n_axis * n_axis >= least;
-    if at_axis {
-        let value = widened_ggx_lit(material, patch_radius, n_v, vec4<f32>(n_axis), vec4<f32>(dot(v, axis)));
-        lobe = value.x * f32(DISK_DIRECTIONS);
+    var at_axis = false;
+    if ggx {
+        var open = true;
+        for (var q = 0u; q < DISK_QUADS; q++) {
+            open = open && all(blocked[q] == vec4<f32>(0.0));
+        }
+        let width = load_GpuLobeHead(material.sharp_tables).width;
+        let widened = width * width + 0.25 * patch_radius * patch_radius;
+        let least = SMOOTH_OVER_DISK * one_minus_cos;
+        let n_axis = dot(n, axis);
+        let seen_at = max(n_v, 0.0);
+        at_axis = open && widened * seen_at * seen_at >= least && n_axis * n_axis >= least;
+        if at_axis {
+            let value = widened_ggx_lit(material, patch_radius, n_v, vec4<f32>(n_axis), vec4<f32>(dot(v, axis)));
+            lobe = value.x * f32(DISK_DIRECTIONS);
+        }
     }
     for (var q = 0u; q < DISK_QUADS; q++) {
         let visible = 1.0 - blocked[q];

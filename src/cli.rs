@@ -81,6 +81,9 @@ pub struct ReferenceArgs {
     /// Rays per receiver and bounce (cosine-weighted, stratified); the bounce's noise falls as one over their square root.
     #[arg(long, default_value_t = 64)]
     pub bounce_samples: usize,
+    /// Glossy lobes, as `logsh shade --glossy` names them: ggx integrates GGX's BRDF with Fresnel (what the default preset reflects its suns and lamps through, and approximates for the environment by the split sum); phong and sh, the Phong lobe of Eq. 27 about the mirrored view.
+    #[arg(long, value_enum, default_value_t = GlossyMethod::Ggx)]
+    pub glossy: GlossyMethod,
 }
 
 #[derive(Args, Debug)]

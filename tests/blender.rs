@@ -824,7 +824,8 @@ fn supersampled_export_resolves_to_the_camera() {
 /// A checker texture on a Principled BSDF arrives as Blender evaluates it: the export
 /// carries Cycles' Diffuse Color and Glossy Color passes (scene.json `colour_passes`),
 /// the ground's Diffuse Color takes the checker's two colours, and logsh's shade of the
-/// light cells is brighter than of the dark ones by about their ratio (0.8 / 0.1). With
+/// light cells is brighter than of the dark ones by about their ratio (0.8 / 0.1); the
+/// table gives the material's reflectance at normal incidence (`fresnel`). With
 /// `--no-colour-passes` the ground is one colour again.
 #[test]
 fn textured_materials_shade_as_blender_evaluates_them() {
@@ -848,6 +849,10 @@ fn textured_materials_shade_as_blender_evaluates_them() {
     assert_ok(&export_frame_1(&python, &blend, &out, "48x27"), "exporting a textured ground");
     let scene = Scene::load(&out).unwrap();
     assert!(scene.colour_passes(), "the export says colour_passes");
+    // What the passes cannot carry: the reflectance at normal incidence of the
+    // Principled BSDF's IOR 1.5 at Specular IOR Level 0.5, which its texture leaves alone.
+    let fresnel: Vec<f64> = scene.fresnel.values().copied().collect();
+    assert!(fresnel.len() == 1 && (fresnel[0] - 0.04).abs() < 1e-6, "fresnel {fresnel:?}");
     let frame = scene.frame(1).unwrap();
     let colours = frame.gbuffer.colours.as_ref().expect("the G-buffer holds the colour passes");
     let shaded = support::cpu_beauty(&scene, &frame, &ShadingSettings::default()).unwrap();
@@ -881,6 +886,7 @@ fn textured_materials_shade_as_blender_evaluates_them() {
     assert!(warned.contains("material \"checker\": its Base Color is driven by nodes"), "{warned}");
     let scene = Scene::load(&plain).unwrap();
     assert!(!scene.colour_passes() && scene.frame(1).unwrap().gbuffer.colours.is_none());
+    assert!(scene.fresnel.is_empty(), "the converted material has no Fresnel term: {:?}", scene.fresnel);
 }
 
 /// What logsh cannot shade stops the export, naming the material and the node: emission,

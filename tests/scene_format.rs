@@ -203,6 +203,20 @@ fn scene_level_validation() {
             &["needs key \"exponent\""],
         ),
         (
+            Box::new(|v| {
+                v["materials"]["3"] = serde_json::json!(
+                    {"type": "phong", "albedo": [0, 0, 0], "specular": [1, 1, 1], "exponent": 8, "fresnel": 1.5}
+                )
+            }),
+            &["material 3", "fresnel 1.5 is not a reflectance from 0 to 1"],
+        ),
+        (
+            Box::new(|v| {
+                v["materials"]["3"] = serde_json::json!({"type": "diffuse", "albedo": [1, 1, 1], "fresnel": 0.04})
+            }),
+            &["material 3", "\"fresnel\" does not belong to type diffuse"],
+        ),
+        (
             Box::new(|v| v["materials"]["3"] = serde_json::json!({"type": "diffuse", "albedo": [1, -1, 1]})),
             &["negative"],
         ),

@@ -83,7 +83,10 @@ per pixel by the Glossy Color pass, which is black where Specular IOR Level is 0
 table's colours are each material's mean Diffuse and Glossy Color over its pixels in the
 first frame (`fit_to_passes`), which logsh uses only for the points seen in water's
 reflection (the exporter ray casts the reflection G-buffer, which has no colour passes of
-its own); a material out of view keeps the colours below. Without them (`colour_passes`
+its own); a material out of view keeps the colours below. What the passes cannot carry,
+the reflectance at normal incidence that a lamp's highlight follows through the Fresnel
+term, is the entry's `fresnel` (the converted specular below, averaged over R, G and B; 1
+for a Glossy BSDF; left out where a node drives it). Without them (`colour_passes`
 False, `--no-colour-passes`, the materials of `render_cycles.py`'s direct-light truth),
 the conversion is the whole of the material (logsh has no Fresnel term and a Phong lobe
 about the mirror direction, `docs/design.md`):

@@ -372,13 +372,33 @@ def convert_material(material, on_terrain, colour_passes, refuse, warn):
     diffuse_weight = (1.0 - metallic) * (1.0 - transmission)
     albedo = [c * diffuse_weight for c in colour]
     specular = [c * metallic + (1.0 - metallic) * f0 * t for c, t in zip(colour, tint)]
+    entry = {"type": "phong", "albedo": albedo, "specular": specular, "exponent": phong_exponent(roughness)}
     if colour_passes and node is not None:
         # A black colour tells logsh to leave the lobe out: only where no node can make
         # the pass non-zero.
         driven = lambda *sockets: any(_linked(node, s) for s in sockets)  # noqa: E731
         if max(albedo) <= 0.0 and driven("Base Color", "Color", "Metallic", "Transmission Weight"):
-            albedo = [1e-3] * 3
+            entry["albedo"] = [1e-3] * 3
         if max(specular) <= 0.0 and driven("Base Color", "Color", "Metallic", "Specular IOR Level", "Specular Tint",
                                            "IOR"):
-            specular = [1e-3] * 3
-    return {"type": "phong", "albedo": albedo, "specular": specular, "exponent": phong_exponent(roughness)}
+            entry["specular"] = [1e-3] * 3
+        fresnel = fresnel_at_normal_incidence(node, specular, metallic)
+        if fresnel is not None:
+            entry["fresnel"] = fresnel
+    return entry
+
+
+def fresnel_at_normal_incidence(node, specular, metallic):
+    """The reflectance at normal incidence of `node`'s specular layer, which the Glossy
+    Color pass cannot tell logsh (module doc): a Glossy BSDF has no Fresnel term (1); a
+    Principled BSDF's is its converted `specular` (the IOR's, times 2 x Specular IOR Level
+    and Specular Tint, mixed with the base colour by Metallic), averaged over R, G and B.
+    None where a node drives it, and logsh works it out from the pass."""
+    if node.type in ("BSDF_GLOSSY", "BSDF_ANISOTROPIC"):
+        return 1.0
+    if node.type != "BSDF_PRINCIPLED":
+        return None
+    if any(_linked(node, s) for s in ("Metallic", "IOR", "Specular IOR Level", "Specular Tint")) or \
+            (metallic > 0.0 and _linked(node, "Base Color")):
+        return None
+    return float(min(max(sum(specular) / 3.0, 0.0), 1.0))

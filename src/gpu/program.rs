@@ -544,6 +544,8 @@ fn prelude(
         ("POINT_NEAREST", F32(crate::scene::light::POINT_NEAREST)),
         ("LOBE_GGX", U32(LOBE_GGX as usize)),
         ("SMOOTH_OVER_DISK", F32(crate::shade::glossy::SMOOTH_OVER_DISK)),
+        ("DIELECTRIC_F0", F32(crate::shade::glossy::DIELECTRIC_F0)),
+        ("METAL_F0", F32(crate::shade::glossy::METAL_F0)),
         ("LOBE_PHONG", U32(LOBE_PHONG as usize)),
         ("LOBE_SH", U32(LOBE_SH as usize)),
         ("GRID_SIZE", U32(features.grid.max(1))),

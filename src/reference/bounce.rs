@@ -81,7 +81,7 @@ impl Context<'_> {
 
     /// The direct light a white diffuse surface at `p` reflects (`E / pi`).
     fn white_direct(&self, p: [f64; 3], n: [f64; 3], object: u32, seed: u64) -> [f64; 3] {
-        let terms = [LobeTerm { lobe: Lobe::Diffuse, axis: n, scale: [1.0; 3] }];
+        let terms = [LobeTerm { lobe: Lobe::Diffuse, axis: n, scale: [1.0; 3], ggx: None }];
         self.lit(p, n, object, &terms, 4.0 * self.options.tolerance, seed).rgb
     }
 

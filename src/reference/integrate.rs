@@ -6,6 +6,7 @@ use crate::heightfield::{brute_force_horizon, HeightField};
 use crate::logsh::{own_sphere_holds, Lobe};
 use crate::scene::{Light, Sphere};
 use crate::sh::quadrature::gauss_legendre;
+use crate::shade::glossy::GgxLit;
 use crate::vector::{dot, frame_around};
 use std::f64::consts::{FRAC_PI_2, PI, TAU};
 use std::sync::OnceLock;
@@ -166,14 +167,41 @@ pub struct ReferenceOccluders<'a> {
     pub ground: Option<f64>,
 }
 
-/// One BRDF term of the integrand: `scale * lobe(axis . w)`.
+/// One BRDF term of the integrand: `scale * lobe(axis . w)`, or `scale *` GGX's BRDF
+/// where `ggx` is given.
 #[derive(Clone, Copy, Debug)]
 pub struct LobeTerm {
+    /// The lobe, and the shape the integration follows (the sharpest lobe's axis is the
+    /// meridians' pole, and sampling draws from it) where `ggx` is given.
     pub lobe: Lobe,
     /// Unit axis (the normal for the diffuse lobe, the mirrored view for Phong).
     pub axis: [f64; 3],
     /// RGB factor (albedo, specular, times a water tint).
     pub scale: [f64; 3],
+    /// GGX's BRDF in place of `lobe`'s value.
+    pub ggx: Option<GgxTerm>,
+}
+
+/// GGX's BRDF with the Fresnel term ([`GgxLit`]: `F D G2 / (4 n . v)`, per unit
+/// radiance along `w`), seen along `view` by a receiver of `normal`: the default preset's
+/// glossy lobe, which its sharp lights reflect through and its environment term
+/// approximates by the split sum.
+#[derive(Clone, Copy, Debug)]
+pub struct GgxTerm {
+    pub brdf: GgxLit,
+    /// Unit normal and unit direction to the eye.
+    pub normal: [f64; 3],
+    pub view: [f64; 3],
+}
+
+impl LobeTerm {
+    /// The term's BRDF along unit `w`, before `scale`.
+    pub fn value(&self, w: [f64; 3]) -> f64 {
+        match &self.ggx {
+            Some(ggx) => ggx.brdf.value(dot(ggx.normal, w), dot(ggx.view, w)),
+            None => self.lobe.value(dot(self.axis, w)),
+        }
+    }
 }
 
 /// The integral at one point and how far it got.
@@ -322,7 +350,7 @@ fn subtract(a: &Intervals, b: &Intervals) -> Intervals {
 pub(super) fn lobe_sum(terms: &[LobeTerm], w: [f64; 3]) -> [f64; 3] {
     let mut brdf = [0.0; 3];
     for t in terms {
-        let v = t.lobe.value(dot(t.axis, w));
+        let v = t.value(w);
         if v > 0.0 {
             for k in 0..3 {
                 brdf[k] += t.scale[k] * v;

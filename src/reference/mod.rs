@@ -6,8 +6,21 @@
 //!
 //! The materials of docs/design.md, "Scene format v1", with the same frame walk as
 //! [`crate::shade::cpu::shade_plan`]: `diffuse` and `heightfield` are `albedo * integral L V
-//! max(n.w, 0)/pi`; `phong` adds `specular * integral L V (r+1)/(2 pi) max(R.w, 0)^r`
-//! (no cosine); `water` is `tint *` the shading of the reflection G-buffer's point with
+//! max(n.w, 0)/pi`; `phong` adds `specular * integral L V f(w)`, where `f` is the glossy
+//! lobe of the kernel's `--glossy` ([`ReferenceOptions::glossy`]):
+//!
+//! - `ggx` (the default): GGX's BRDF of width `alpha = sqrt(1 / (2 r + 1))` with the
+//!   Fresnel term ([`crate::shade::glossy::Fresnel`]), `F D G2 / (4 n.v)` per unit
+//!   radiance ([`crate::shade::glossy::ggx_lit`]), scaled at each `n.v` by the kernel's lamp table
+//!   ([`crate::shade::glossy::lamp_scale_table`]) so that it integrates to the albedo the
+//!   kernel's environment term is scaled by (GGX's own albedo, or 1 under the Glossy
+//!   Color pass). This is what the kernel reflects sharp lights through; its environment
+//!   term is the split-sum approximation of the same integral, and the reference tells
+//!   that approximation's error apart;
+//! - `phong` and `sh`: Eq. 27's `(r+1)/(2 pi) max(R.w, 0)^r` (no cosine), cut by the
+//!   tangent plane.
+//!
+//! `water` is `tint *` the shading of the reflection G-buffer's point with
 //! its own material, seen from the water point (a background reflection is the light's
 //! radiance along the mirrored view); background pixels are the light's radiance along
 //! the camera ray (0 without a camera) with alpha 0. A material index missing from the
@@ -123,15 +136,20 @@ mod integrate;
 mod sampled;
 
 pub use integrate::{
-    integrate_point, LightModel, LobeTerm, PointEstimate, ReferenceOccluders, MAX_REFERENCE_SH_ORDER, SURFACE_BAND,
+    integrate_point, GgxTerm, LightModel, LobeTerm, PointEstimate, ReferenceOccluders, MAX_REFERENCE_SH_ORDER,
+    SURFACE_BAND,
 };
 pub use sampled::{sample_lamps, sample_point, sample_suns, TexelSampler, BASE_POINTS, REPLICATES};
 
 use crate::logsh::Lobe;
-use crate::scene::{Frame, Material, Scene};
+use crate::scene::{Frame, Light, Material, Scene};
 use crate::shade::frame::{mirrored_suns, pixel_source, PixelSource, Tint};
+use crate::shade::glossy::{
+    albedo_lookup, environment_albedo_table, ggx_alpha, lamp_fresnel, lamp_scale_table, GgxLit, SharpLobe,
+};
 use crate::shade::kernel::reflect_view;
 use crate::shade::kernel::SurfacePoint;
+use crate::shade::GlossyMethod;
 use rayon::prelude::*;
 use std::collections::BTreeMap;
 use std::sync::Mutex;
@@ -187,6 +205,8 @@ pub struct ReferenceOptions {
     pub bounces: usize,
     /// Rays per receiver and bounce.
     pub bounce_samples: usize,
+    /// The glossy lobe of Phong materials, as the kernel's `--glossy` names it.
+    pub glossy: GlossyMethod,
 }
 
 impl Default for ReferenceOptions {
@@ -198,6 +218,7 @@ impl Default for ReferenceOptions {
             max_level: 6,
             bounces: 0,
             bounce_samples: 64,
+            glossy: GlossyMethod::Ggx,
         }
     }
 }
@@ -286,6 +307,7 @@ pub fn render_reference(
     let ctx = Context {
         albedos: albedos.as_ref(),
         materials: scene.kernel_materials(),
+        ggx: GgxMaterial::of_scene(scene, &frame.light, options.glossy),
         integration,
         environment: environment.as_ref(),
         scene,
@@ -335,6 +357,52 @@ pub fn render_reference(
     })
 }
 
+/// A Phong material's glossy lobe as the kernel's `--glossy ggx` reflects its sharp
+/// lights: GGX's BRDF of the material's width with the Fresnel term of reflectance
+/// `fresnel`, times `scale` at `n . v` ([`lamp_scale_table`]).
+struct GgxMaterial {
+    alpha: f64,
+    fresnel: f64,
+    scale: Vec<f32>,
+}
+
+impl GgxMaterial {
+    /// Every Phong material's, where the kernel shades `light`'s glossy term as GGX (a
+    /// light given as SH coefficients has no map and is always shaded in log-SH).
+    fn of_scene(scene: &Scene, light: &Light, glossy: GlossyMethod) -> BTreeMap<u32, GgxMaterial> {
+        if glossy != GlossyMethod::Ggx || matches!(light, Light::Sh(_)) {
+            return BTreeMap::new();
+        }
+        let fresnel = lamp_fresnel(scene);
+        let ggx = |(&index, material): (&u32, &Material)| {
+            let Material::Phong { exponent, .. } = material else { return None };
+            let alpha = ggx_alpha(f64::from(*exponent));
+            let lobe = SharpLobe::Ggx { alpha };
+            let fresnel = fresnel.get(&index).copied().unwrap_or(1.0);
+            let scale = lamp_scale_table(lobe, &environment_albedo_table(lobe, scene.colour_passes()), fresnel);
+            Some((index, GgxMaterial { alpha, fresnel, scale }))
+        };
+        scene.materials.iter().filter_map(ggx).collect()
+    }
+
+    /// `phong`'s term (its axis, the mirrored view, and colour) reflected through GGX's
+    /// BRDF, seen along unit `view` by a receiver of unit normal `n`.
+    fn term(&self, phong: LobeTerm, n: [f64; 3], view: [f64; 3]) -> LobeTerm {
+        let n_v = crate::vector::dot(n, view);
+        let scale = albedo_lookup(&self.scale, n_v);
+        LobeTerm {
+            scale: phong.scale.map(|c| c * scale),
+            ggx: Some(GgxTerm { brdf: GgxLit::new(self.alpha, self.fresnel, n_v), normal: n, view }),
+            ..phong
+        }
+    }
+}
+
+/// The unit direction from `p` to the eye, or `n` where they coincide.
+fn view_direction(eye: [f64; 3], p: [f64; 3], n: [f64; 3]) -> [f64; 3] {
+    integrate::unit([eye[0] - p[0], eye[1] - p[1], eye[2] - p[2]]).unwrap_or(n)
+}
+
 /// What every pixel's integration reads.
 struct Context<'a> {
     scene: &'a Scene,
@@ -343,6 +411,8 @@ struct Context<'a> {
     /// The lobes and their colours as the kernel shades them, the pixels' tints on top
     /// ([`Scene::kernel_materials`]).
     materials: BTreeMap<u32, Material>,
+    /// The Phong materials whose glossy lobe is GGX's BRDF ([`GgxMaterial`]).
+    ggx: BTreeMap<u32, GgxMaterial>,
     frame: &'a Frame,
     occluders: ReferenceOccluders<'a>,
     light: &'a LightModel<'a>,
@@ -368,16 +438,17 @@ impl Context<'_> {
         let scaled = |c: [f32; 3], t: [f32; 3]| [0, 1, 2].map(|k| f64::from(c[k]) * f64::from(t[k]));
         let terms = match self.materials.get(&point.material) {
             Some(Material::Diffuse { albedo }) | Some(Material::Heightfield { albedo }) => {
-                vec![LobeTerm { lobe: Lobe::Diffuse, axis: n, scale: scaled(*albedo, tint.diffuse) }]
+                vec![LobeTerm { lobe: Lobe::Diffuse, axis: n, scale: scaled(*albedo, tint.diffuse), ggx: None }]
             }
-            Some(Material::Phong { albedo, specular, exponent }) => vec![
-                LobeTerm { lobe: Lobe::Diffuse, axis: n, scale: scaled(*albedo, tint.diffuse) },
-                LobeTerm {
-                    lobe: Lobe::Phong { exponent: f64::from(*exponent) },
-                    axis: reflect_view(view, p, n),
-                    scale: scaled(*specular, tint.specular),
-                },
-            ],
+            Some(Material::Phong { albedo, specular, exponent }) => {
+                let (axis, scale) = (reflect_view(view, p, n), scaled(*specular, tint.specular));
+                let phong = LobeTerm { lobe: Lobe::Phong { exponent: f64::from(*exponent) }, axis, scale, ggx: None };
+                let glossy = match self.ggx.get(&point.material) {
+                    Some(ggx) => ggx.term(phong, n, view_direction(view, p, n)),
+                    None => phong,
+                };
+                vec![LobeTerm { lobe: Lobe::Diffuse, axis: n, scale: scaled(*albedo, tint.diffuse), ggx: None }, glossy]
+            }
             Some(Material::Water { .. }) | None => Vec::new(),
         };
         let estimate = self.lit(p, n, point.object, &terms, self.options.tolerance, seed);

@@ -143,6 +143,7 @@ pub fn reference(args: &ReferenceArgs) -> Result<()> {
             max_level: args.max_level,
             bounces: args.bounces,
             bounce_samples: args.bounce_samples,
+            glossy: args.glossy,
         };
         let bar = progress_bar(height, &format!("reference ({light:?})"));
         let started = Instant::now();

@@ -69,6 +69,7 @@ pub(super) struct MaterialFile {
     pub(super) tint: Option<[f64; 3]>,
     pub(super) specular: Option<[f64; 3]>,
     pub(super) exponent: Option<f64>,
+    pub(super) fresnel: Option<f64>,
 }
 
 #[derive(Deserialize)]
@@ -129,7 +130,13 @@ pub(super) fn colour(file: &Path, what: &str, c: [f64; 3]) -> Result<[f32; 3], S
     Ok([c[0] as f32, c[1] as f32, c[2] as f32])
 }
 
-pub(super) fn parse_material(file: &Path, key: &str, m: &MaterialFile) -> Result<(u32, Material), SceneError> {
+/// A material entry: its index, the material, and a `phong` material's reflectance at
+/// normal incidence where the entry gives it (`fresnel`).
+pub(super) fn parse_material(
+    file: &Path,
+    key: &str,
+    m: &MaterialFile,
+) -> Result<(u32, Material, Option<f64>), SceneError> {
     let index: u32 = key.trim().parse().map_err(|_| {
         SceneError::invalid(file, format!("material key \"{key}\" is not a material index (a whole number >= 1)"))
     })?;
@@ -162,6 +169,21 @@ pub(super) fn parse_material(file: &Path, key: &str, m: &MaterialFile) -> Result
             return Err(SceneError::invalid(file, format!("{name}: type {} needs key \"{k}\"", m.kind)));
         }
     }
+    let fresnel = match m.fresnel {
+        Some(_) if m.kind != "phong" => {
+            return Err(SceneError::invalid(
+                file,
+                format!("{name}: key \"fresnel\" does not belong to type {}", m.kind),
+            ))
+        }
+        Some(f) if !f.is_finite() => {
+            return Err(SceneError::NonFinite { file: file.to_path_buf(), what: format!("{name} fresnel") })
+        }
+        Some(f) if !(0.0..=1.0).contains(&f) => {
+            return Err(SceneError::invalid(file, format!("{name}: fresnel {f} is not a reflectance from 0 to 1")))
+        }
+        f => f,
+    };
     let get = |k: &str, v: Option<[f64; 3]>| colour(file, &format!("{name} {k}"), v.expect("checked above"));
     let material = match m.kind.as_str() {
         "heightfield" => Material::Heightfield { albedo: get("albedo", m.albedo)? },
@@ -182,7 +204,7 @@ pub(super) fn parse_material(file: &Path, key: &str, m: &MaterialFile) -> Result
             }
         }
     };
-    Ok((index, material))
+    Ok((index, material, fresnel))
 }
 
 /// One entry of `lights`.

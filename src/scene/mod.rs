@@ -261,6 +261,9 @@ pub struct Scene {
     pub ground: Option<f64>,
     /// Material table by index (all `>= 1`).
     pub materials: BTreeMap<u32, Material>,
+    /// The reflectance at normal incidence of the `phong` materials whose entry gives it
+    /// (`fresnel`): what their Fresnel term starts from ([`crate::shade::glossy::Fresnel`]).
+    pub fresnel: BTreeMap<u32, f64>,
     pub light_spec: LightSpec,
     /// Suns beside `light` (from `lights`).
     pub suns: Vec<SunLight>,
@@ -332,11 +335,14 @@ impl Scene {
                 return Err(SceneError::invalid(&file, format!("frames: start {} is after end {}", f.start, f.end)));
             }
         }
-        let mut materials = BTreeMap::new();
+        let (mut materials, mut fresnel) = (BTreeMap::new(), BTreeMap::new());
         for (key, m) in &raw.materials {
-            let (index, material) = parse_material(&file, key, m)?;
+            let (index, material, reflectance) = parse_material(&file, key, m)?;
             if materials.insert(index, material).is_some() {
                 return Err(SceneError::invalid(&file, format!("material {index} is defined twice")));
+            }
+            if let Some(reflectance) = reflectance {
+                fresnel.insert(index, reflectance);
             }
         }
         let heightfield = match raw.heightfield {
@@ -412,6 +418,7 @@ impl Scene {
             heightfield,
             ground,
             materials,
+            fresnel,
             light_spec,
             suns,
             points,

@@ -82,7 +82,59 @@ fn schlick(f0: f64, cosine: f64) -> f64 {
     f0 + (1.0 - f0) * (1.0 - cosine.clamp(0.0, 1.0)).powi(5)
 }
 
-/// GGX's BRDF times the cosine and Schlick's Fresnel term, `F(v . h) D(n . h) G2(v, w) /
+/// Reflectance at normal incidence up to which [`Fresnel`] is a dielectric's (IOR 2.6;
+/// glass is 0.04, water 0.02, diamond 0.17).
+pub const DIELECTRIC_F0: f64 = 0.2;
+/// Reflectance at normal incidence from which [`Fresnel`] is a metal's.
+pub const METAL_F0: f64 = 0.4;
+
+/// The Fresnel term of a surface that reflects `f0` at normal incidence, as Cycles'
+/// Principled BSDF has it: a dielectric layer reflects by the Fresnel equations of its
+/// IOR, `(1 + sqrt f0) / (1 - sqrt f0)` (unpolarised, Walter et al. 2007, "Microfacet
+/// Models for Refraction", Eq. 22), and a metal by Schlick's approximation (its F82 tint
+/// white, the default). A reflectance up to [`DIELECTRIC_F0`] is read as a dielectric's,
+/// from [`METAL_F0`] as a metal's, and one between as their mix. At `v . h = 0.6`, where
+/// a lamp behind a glass-like surface seen at `n . v = 0.35` meets its highlight, the
+/// equations give 0.063 and Schlick 0.049.
+#[derive(Clone, Copy, Debug)]
+pub struct Fresnel {
+    f0: f64,
+    /// The IOR's square.
+    eta_squared: f64,
+    /// The share of Schlick's term.
+    metal: f64,
+}
+
+impl Fresnel {
+    pub fn new(f0: f64) -> Self {
+        let f0 = f0.clamp(0.0, 1.0);
+        let metal = ((f0 - DIELECTRIC_F0) / (METAL_F0 - DIELECTRIC_F0)).clamp(0.0, 1.0);
+        let root = f0.sqrt().min(DIELECTRIC_F0.max(METAL_F0).sqrt());
+        let eta = (1.0 + root) / (1.0 - root);
+        Fresnel { f0, eta_squared: eta * eta, metal }
+    }
+
+    /// The reflectance at `v . h = cosine`.
+    #[inline(always)]
+    pub fn at(&self, cosine: f64) -> f64 {
+        let schlick = schlick(self.f0, cosine);
+        if self.metal >= 1.0 {
+            return schlick;
+        }
+        let c = cosine.clamp(0.0, 1.0);
+        let g = (self.eta_squared - 1.0 + c * c).sqrt();
+        let dielectric = if g + c > 1e-12 {
+            let a = (g - c) / (g + c);
+            let b = (c * (g + c) - 1.0) / (c * (g - c) + 1.0);
+            0.5 * a * a * (1.0 + b * b)
+        } else {
+            0.0
+        };
+        dielectric + self.metal * (schlick - dielectric)
+    }
+}
+
+/// GGX's BRDF times the cosine and the [`Fresnel`] term, `F(v . h) D(n . h) G2(v, w) /
 /// (4 n . v)` for `n . w > 0`, given the reflectance `f0` at normal incidence, `n . v`,
 /// `n . w` and `v . w`: what a sharp light at `w` reflects towards `v` per unit
 /// irradiance. With `f0 = 1`, Cycles' single-scattering Glossy BSDF of colour 1, whose
@@ -98,7 +150,7 @@ pub fn ggx_lit(alpha: f64, f0: f64, n_v: f64, n_w: f64, v_w: f64) -> f64 {
 #[derive(Clone, Copy, Debug)]
 pub struct GgxLit {
     alpha: f64,
-    f0: f64,
+    fresnel: Fresnel,
     mu: f64,
     /// `1 + Lambda(n . v)`.
     one_plus_lambda_v: f64,
@@ -107,7 +159,7 @@ pub struct GgxLit {
 impl GgxLit {
     pub fn new(alpha: f64, f0: f64, n_v: f64) -> Self {
         let mu = n_v.clamp(1e-4, 1.0);
-        Self { alpha, f0, mu, one_plus_lambda_v: 1.0 + ggx_lambda(alpha, mu) }
+        Self { alpha, fresnel: Fresnel::new(f0), mu, one_plus_lambda_v: 1.0 + ggx_lambda(alpha, mu) }
     }
 
     /// [`ggx_lit`] at `n . w` and `v . w`.
@@ -120,7 +172,7 @@ impl GgxLit {
         let half_length = half_length_squared.sqrt();
         let n_h = ((self.mu + n_w) / half_length).min(1.0);
         let g2 = 1.0 / (self.one_plus_lambda_v + ggx_lambda(self.alpha, n_w));
-        schlick(self.f0, 0.5 * half_length) * ggx_distribution(self.alpha, n_h) * g2 / (4.0 * self.mu)
+        self.fresnel.at(0.5 * half_length) * ggx_distribution(self.alpha, n_h) * g2 / (4.0 * self.mu)
     }
 }
 
@@ -150,40 +202,49 @@ pub fn lamp_scale_table(lobe: SharpLobe, albedo: &[f32], f0: f64) -> Vec<f32> {
     }
 }
 
-/// GGX's albedo with Schlick's term of reflectance `f0` ([`SharpLobe::fresnel_albedo`])
-/// over `n . v`, as [`albedo_table`] holds it at `f0 = 1`. It is linear in `f0`, so it is
-/// mixed from the tables at `f0 = 1` and `f0 = 0`, each integrated once per lobe and
-/// process.
+/// GGX's albedo with the [`Fresnel`] term of reflectance `f0`
+/// ([`SharpLobe::fresnel_albedo`]) over `n . v`, as [`albedo_table`] holds it at `f0 = 1`;
+/// integrated once per lobe, reflectance and process.
 fn fresnel_albedo_table(alpha: f64, f0: f64) -> Vec<f32> {
-    static AT_ZERO: Memo<u64, Vec<f32>> = Memo::new();
+    static TABLES: Memo<(u64, u64), Vec<f32>> = Memo::new();
     let lobe = SharpLobe::Ggx { alpha };
-    let at_zero = AT_ZERO.get_or_build(alpha.to_bits(), || {
-        (0..ALBEDO_ENTRIES).map(|i| lobe.fresnel_albedo(i as f64 / (ALBEDO_ENTRIES - 1) as f64, 0.0) as f32).collect()
+    let table = TABLES.get_or_build((alpha.to_bits(), f0.to_bits()), || {
+        (0..ALBEDO_ENTRIES).map(|i| lobe.fresnel_albedo(i as f64 / (ALBEDO_ENTRIES - 1) as f64, f0) as f32).collect()
     });
-    let mix = |one: f32, zero: f32| (f0 * f64::from(one) + (1.0 - f0) * f64::from(zero)) as f32;
-    albedo_table(lobe).iter().zip(at_zero.iter()).map(|(&one, &zero)| mix(one, zero)).collect()
+    table.to_vec()
 }
 
 /// The least reflectance [`lamp_fresnel`] gives: water's (IOR 1.33).
 pub const MIN_LAMP_FRESNEL: f64 = 0.02;
 
 /// Each Phong material's reflectance at normal incidence for the Fresnel term the sharp
-/// lights reflect with ([`ggx_lit`]), where the colours come from the G-buffer's passes:
-/// the Glossy Color pass is Cycles' albedo of a Principled BSDF's specular layer, Fresnel
-/// included, and the table entry holds its mean over the material's pixels (the
-/// exporter's `fit_to_passes`), from which the reflectance is worked out
-/// ([`fresnel_from_albedo`], the mean of R, G and B, at least [`MIN_LAMP_FRESNEL`]). Empty
-/// without passes: the converted materials are Glossy BSDFs, which have no Fresnel term.
+/// lights reflect with ([`ggx_lit`]), where the colours come from the G-buffer's passes,
+/// at least [`MIN_LAMP_FRESNEL`]:
+///
+/// - the table's `fresnel` where the exporter gives it (a Principled BSDF whose IOR,
+///   Specular IOR Level, Specular Tint and Metallic are not driven by nodes);
+/// - otherwise worked out from the Glossy Color pass, Cycles' albedo of the specular
+///   layer, Fresnel included, whose mean over the material's pixels the table entry holds
+///   (the exporter's `fit_to_passes`; [`fresnel_from_albedo`], the mean of R, G and B).
+///   The mean is read at `n . v = 1/2`, so a material seen at other angles is given
+///   another reflectance: a glass-like tile (0.04) seen at `n . v` 0.3 to 0.45 is read as
+///   0.078, and its highlight under a lamp behind it is 6 % of its light too bright
+///   (`blender_scripts/scenes/principled_tiles.py`).
+///
+/// Empty without passes: the converted materials are Glossy BSDFs, which have no Fresnel
+/// term.
 pub fn lamp_fresnel(scene: &Scene) -> BTreeMap<u32, f64> {
     if !scene.colour_passes() {
         return BTreeMap::new();
     }
-    let phong = |(&index, material): (&u32, &Material)| match material {
-        Material::Phong { specular, exponent, .. } => {
+    let phong = |(&index, material): (&u32, &Material)| {
+        let Material::Phong { specular, exponent, .. } = material else { return None };
+        let from_pass = || {
             let albedo = specular.iter().map(|&c| f64::from(c)).sum::<f64>() / 3.0;
-            Some((index, fresnel_from_albedo(ggx_alpha(f64::from(*exponent)), albedo, MIN_LAMP_FRESNEL)))
-        }
-        _ => None,
+            fresnel_from_albedo(ggx_alpha(f64::from(*exponent)), albedo, MIN_LAMP_FRESNEL)
+        };
+        let given = scene.fresnel.get(&index).map(|&f0| f0.max(MIN_LAMP_FRESNEL));
+        Some((index, given.unwrap_or_else(from_pass)))
     };
     scene.materials.iter().filter_map(phong).collect()
 }
@@ -207,15 +268,40 @@ pub fn smooth_over_disk(alpha: f64, n_v: f64, one_minus_cos: f64, n_axis: f64) -
 }
 
 /// The reflectance at normal incidence `f0` whose GGX albedo with Fresnel
-/// ([`SharpLobe::fresnel_albedo`], linear in `f0`) is `albedo` at `n . v = 1/2`, between
-/// `least` and 1: what a Glossy Color pass's mean says of a Principled BSDF's specular
-/// layer (Cycles' albedo also holds its multiple scattering, which this reads as a
-/// higher `f0`: 0.9 of a rough dielectric's single-scattering albedo or less).
+/// ([`SharpLobe::fresnel_albedo`], which rises with `f0`) is `albedo` at `n . v = 1/2`,
+/// between `least` and 1: what a Glossy Color pass's mean says of a Principled BSDF's
+/// specular layer (Cycles' albedo also holds its multiple scattering, which this reads as
+/// a higher `f0`: 0.9 of a rough dielectric's single-scattering albedo or less). Worked
+/// out once per process and key: every frame's lighting asks for it.
 pub fn fresnel_from_albedo(alpha: f64, albedo: f64, least: f64) -> f64 {
-    let at = |f0: f64| albedo_lookup(&fresnel_albedo_table(alpha, f0), 0.5);
-    let (one, zero) = (at(1.0), at(0.0));
-    ((albedo - zero) / (one - zero).max(1e-9)).clamp(least, 1.0)
+    static FOUND: Memo<(u64, u64, u64), f64> = Memo::new();
+    *FOUND.get_or_build((alpha.to_bits(), albedo.to_bits(), least.to_bits()), || bisect_fresnel(alpha, albedo, least))
 }
+
+/// [`fresnel_from_albedo`] worked out: the albedo rises with the reflectance.
+fn bisect_fresnel(alpha: f64, albedo: f64, least: f64) -> f64 {
+    let lobe = SharpLobe::Ggx { alpha };
+    let at = |f0: f64| lobe.fresnel_albedo(0.5, f0);
+    let (mut low, mut high) = (least, 1.0);
+    if at(low) >= albedo {
+        return low;
+    }
+    if at(high) <= albedo {
+        return high;
+    }
+    for _ in 0..FRESNEL_BISECTIONS {
+        let middle = 0.5 * (low + high);
+        if at(middle) < albedo {
+            low = middle;
+        } else {
+            high = middle;
+        }
+    }
+    0.5 * (low + high)
+}
+
+/// Halvings of [`fresnel_from_albedo`]'s interval: the reflectance to 1e-6.
+const FRESNEL_BISECTIONS: usize = 20;
 
 /// The least share of the environment's albedo a sharp light's scale divides by
 /// ([`lamp_scale_table`]). The least GGX albedo with Fresnel is about 0.006 (alpha 1,
@@ -287,10 +373,11 @@ impl SharpLobe {
         self.fresnel_albedo(mu, 1.0)
     }
 
-    /// [`Self::albedo`] with GGX's light weighted by Schlick's Fresnel term of reflectance
+    /// [`Self::albedo`] with GGX's light weighted by the [`Fresnel`] term of reflectance
     /// `f0` ([`ggx_lit`]); a Phong lobe's is its albedo.
     pub fn fresnel_albedo(self, mu: f64, f0: f64) -> f64 {
         const STEPS: usize = 64;
+        let fresnel = Fresnel::new(f0);
         let mu = mu.clamp(1e-4, 1.0);
         let v = [(1.0 - mu * mu).sqrt(), 0.0, mu];
         let mut sum = 0.0;
@@ -310,7 +397,7 @@ impl SharpLobe {
                         } else {
                             // f cos / pdf(l) = G2 (v . h) / ((n . v) (n . h)).
                             let g2 = 1.0 / (1.0 + ggx_lambda(alpha, mu) + ggx_lambda(alpha, l_z));
-                            schlick(f0, vh) * g2 * vh / (mu * h[2])
+                            fresnel.at(vh) * g2 * vh / (mu * h[2])
                         }
                     }
                     SharpLobe::Phong { exponent } => {
@@ -362,6 +449,17 @@ pub fn albedo_table(lobe: SharpLobe) -> Vec<f32> {
         (0..ALBEDO_ENTRIES).map(|i| lobe.albedo(i as f64 / (ALBEDO_ENTRIES - 1) as f64) as f32).collect()
     });
     table.to_vec()
+}
+
+/// What the environment's glossy term is scaled by over `n . v`: the lobe's own albedo
+/// ([`albedo_table`]), or 1 where the G-buffer's Glossy Color pass holds Cycles' albedo
+/// and multiplies the lobe per pixel.
+pub fn environment_albedo_table(lobe: SharpLobe, colour_passes: bool) -> Vec<f32> {
+    if colour_passes {
+        vec![1.0; ALBEDO_ENTRIES]
+    } else {
+        albedo_table(lobe)
+    }
 }
 
 /// Linear interpolation of an [`albedo_table`] at `n . v = mu`.
@@ -1168,6 +1266,36 @@ mod tests {
         let d = crate::scene::light::equirectangular_to_direction(0.525, 0.7);
         assert_eq!(mirror.lookup(d), map.lookup(d).map(|c| 2.0 * c));
         assert!(direction_to_equirectangular(d)[0] > 0.5);
+    }
+
+    /// The Fresnel term against Snell's law and the amplitudes of the s and p waves
+    /// (Born and Wolf): a dielectric of IOR 1.5 (reflectance 0.04) and one of 1.33 (water,
+    /// 0.02) to 1e-12 at every angle; a metal's (0.9) is Schlick's; each is its reflectance
+    /// at normal incidence, and 1 at grazing.
+    #[test]
+    fn fresnel_matches_the_fresnel_equations() {
+        let equations = |eta: f64, c: f64| {
+            let sin_t = (1.0 - c * c).sqrt() / eta;
+            let cos_t = (1.0 - sin_t * sin_t).sqrt();
+            let s = (c - eta * cos_t) / (c + eta * cos_t);
+            let p = (eta * c - cos_t) / (eta * c + cos_t);
+            0.5 * (s * s + p * p)
+        };
+        for eta in [1.5f64, 1.33] {
+            let f0 = ((eta - 1.0) / (eta + 1.0)).powi(2);
+            let fresnel = Fresnel::new(f0);
+            for i in 0..=100 {
+                let c = i as f64 / 100.0;
+                let (got, expected) = (fresnel.at(c), if c > 0.0 { equations(eta, c) } else { 1.0 });
+                assert!((got - expected).abs() < 1e-12, "IOR {eta}, cos {c}: {got} against {expected}");
+            }
+            assert!((fresnel.at(1.0) - f0).abs() < 1e-12);
+        }
+        let metal = Fresnel::new(0.9);
+        for c in [0.0, 0.3, 0.7, 1.0] {
+            assert!((metal.at(c) - schlick(0.9, c)).abs() < 1e-15);
+        }
+        assert_eq!(Fresnel::new(1.0).at(0.4), 1.0);
     }
 
     /// GGX's directional albedo against an independent integral of `D G2 / (4 n.v)` over

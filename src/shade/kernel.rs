@@ -10,8 +10,8 @@ use super::fitted_depth::{
 };
 use super::frame::{pixel_source, PixelSource, PixelWork};
 use super::glossy::{
-    albedo_lookup, albedo_table, cone_share, cone_weights, ggx_alpha, lamp_scale_table, smooth_over_disk, GgxLit,
-    MapLevels, Prefiltered, SharpLobe, ALBEDO_ENTRIES,
+    albedo_lookup, cone_share, cone_weights, environment_albedo_table, ggx_alpha, lamp_scale_table, smooth_over_disk,
+    GgxLit, MapLevels, Prefiltered, SharpLobe,
 };
 pub use super::point::{above_ground, reflect_view, SurfacePoint};
 use super::settings::{GlossyMethod, ShadingSettings, MAX_DIRECTIONS};
@@ -317,8 +317,7 @@ impl<T: Real> ShadingKernel<T> {
                                     map
                                 }
                             };
-                            let albedo =
-                                if colour_passes { vec![1.0; ALBEDO_ENTRIES] } else { albedo_table(sharp_lobe) };
+                            let albedo = environment_albedo_table(sharp_lobe, colour_passes);
                             let fresnel = lamp_fresnel.get(&index).copied().unwrap_or(1.0);
                             SharpGlossy {
                                 lobe: sharp_lobe,
