@@ -385,7 +385,7 @@ fn fresnel_at(f0: f32, c: vec4<f32>) -> vec4<f32> {
     if metal >= 1.0 {
         return schlick;
     }
-    let root = min(sqrt(max(f0, 0.0)), sqrt(max(DIELECTRIC_F0, METAL_F0)));
+    let root = min(sqrt(max(f0, 0.0)), sqrt(METAL_F0));
     let eta = (1.0 + root) / (1.0 - root);
     let g = sqrt(eta * eta - 1.0 + c * c);
     let a = (g - c) / max(g + c, vec4<f32>(1e-12));

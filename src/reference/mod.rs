@@ -147,8 +147,8 @@ use crate::shade::frame::{mirrored_suns, pixel_source, PixelSource, Tint};
 use crate::shade::glossy::{
     albedo_lookup, environment_albedo_table, ggx_alpha, lamp_fresnel, lamp_scale_table, GgxLit, SharpLobe,
 };
-use crate::shade::kernel::reflect_view;
-use crate::shade::kernel::SurfacePoint;
+use crate::shade::kernel::{glossy_map, SurfacePoint};
+use crate::shade::point::{reflect_view, view_direction};
 use crate::shade::GlossyMethod;
 use rayon::prelude::*;
 use std::collections::BTreeMap;
@@ -367,10 +367,10 @@ struct GgxMaterial {
 }
 
 impl GgxMaterial {
-    /// Every Phong material's, where the kernel shades `light`'s glossy term as GGX (a
-    /// light given as SH coefficients has no map and is always shaded in log-SH).
+    /// Every Phong material's, where the kernel shades `light`'s glossy term as GGX: with
+    /// `--glossy ggx`, under a light with a map to prefilter ([`glossy_map`]).
     fn of_scene(scene: &Scene, light: &Light, glossy: GlossyMethod) -> BTreeMap<u32, GgxMaterial> {
-        if glossy != GlossyMethod::Ggx || matches!(light, Light::Sh(_)) {
+        if glossy != GlossyMethod::Ggx || glossy_map(light).is_none() {
             return BTreeMap::new();
         }
         let fresnel = lamp_fresnel(scene);
@@ -396,11 +396,6 @@ impl GgxMaterial {
             ..phong
         }
     }
-}
-
-/// The unit direction from `p` to the eye, or `n` where they coincide.
-fn view_direction(eye: [f64; 3], p: [f64; 3], n: [f64; 3]) -> [f64; 3] {
-    integrate::unit([eye[0] - p[0], eye[1] - p[1], eye[2] - p[2]]).unwrap_or(n)
 }
 
 /// What every pixel's integration reads.

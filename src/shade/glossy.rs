@@ -109,7 +109,9 @@ impl Fresnel {
     pub fn new(f0: f64) -> Self {
         let f0 = f0.clamp(0.0, 1.0);
         let metal = ((f0 - DIELECTRIC_F0) / (METAL_F0 - DIELECTRIC_F0)).clamp(0.0, 1.0);
-        let root = f0.sqrt().min(DIELECTRIC_F0.max(METAL_F0).sqrt());
+        // Capped where the dielectric has no share, so that a reflectance of 1 (no Fresnel
+        // term) still has a finite IOR.
+        let root = f0.sqrt().min(METAL_F0.sqrt());
         let eta = (1.0 + root) / (1.0 - root);
         Fresnel { f0, eta_squared: eta * eta, metal }
     }

@@ -23,12 +23,18 @@ pub fn above_ground(p: [f64; 3], ground: f64) -> bool {
 /// The view direction mirrored about `n`: `R = 2 (n . V) n - V`, `V` from `p` towards
 /// the eye. Falls back to `n` when the eye sits on `p`.
 pub fn reflect_view(eye: [f64; 3], p: [f64; 3], n: [f64; 3]) -> [f64; 3] {
-    let v = [eye[0] - p[0], eye[1] - p[1], eye[2] - p[2]];
-    let length = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
-    if !(length > 0.0) {
-        return n;
-    }
-    let v = v.map(|c| c / length);
+    let Some(v) = towards_eye(eye, p) else { return n };
     let d = 2.0 * (n[0] * v[0] + n[1] * v[1] + n[2] * v[2]);
     [d * n[0] - v[0], d * n[1] - v[1], d * n[2] - v[2]]
+}
+
+/// The unit direction `V` from `p` towards the eye, or `n` when the eye sits on `p`.
+pub fn view_direction(eye: [f64; 3], p: [f64; 3], n: [f64; 3]) -> [f64; 3] {
+    towards_eye(eye, p).unwrap_or(n)
+}
+
+fn towards_eye(eye: [f64; 3], p: [f64; 3]) -> Option<[f64; 3]> {
+    let v = [eye[0] - p[0], eye[1] - p[1], eye[2] - p[2]];
+    let length = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+    (length > 0.0).then(|| v.map(|c| c / length))
 }
