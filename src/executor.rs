@@ -247,7 +247,8 @@ impl Executor {
     ) -> Result<bounce::Surroundings, ExecutorError> {
         // The secondary points are packed side by side, not neighbours: each is shaded alone.
         let one_by_one = ShadingSettings { visibility_grid: 1, ..*settings };
-        let job = ShadeJob::new(scene, plan.points(), &one_by_one);
+        let points_scene = plan.points_scene(scene);
+        let job = ShadeJob::new(&points_scene, plan.points(), &one_by_one);
         let direct = self.shade_direct(job, Outputs::Passes, &mut StageTimings::default())?;
         let direct = direct.into_passes().expect("shaded into passes");
         Ok(plan.lit(scene, &direct.diffuse, &direct.visibility))

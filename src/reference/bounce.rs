@@ -1,7 +1,10 @@
-//! Bounce light in the reference: paths of up to `bounces` diffuse bounces off the same
-//! proxies the fast path reflects from (the height field or the ground plane, and the
-//! blocker spheres), with their albedos baked the same way
-//! ([`SurfaceAlbedos`](crate::shade::bounce::SurfaceAlbedos)).
+//! Bounce light in the reference: paths of up to `bounces` bounces off the same proxies
+//! the fast path reflects from (the height field or the ground plane, and the blocker
+//! spheres), with their albedos and the spheres' specular reflectances baked the same
+//! way ([`SurfaceAlbedos`](crate::shade::bounce::SurfaceAlbedos)). The terrain reflects
+//! diffusely; a sphere diffusely and as a mirror of its object's specular reflectance
+//! (the fast path's mirror-ball mean, traced exactly: the mirrored ray's own first hit,
+//! or the light along it, with the Sun lamps' disks).
 //!
 //! At a receiver, `samples` directions are drawn by the cosine (stratified on a square
 //! grid, jittered by the pixel's seed); each ray's first hit, exact for the spheres and
@@ -18,16 +21,19 @@ use super::Context;
 use crate::logsh::{own_sphere_holds, Lobe};
 use crate::reference::LobeTerm;
 use crate::shade::bounce::{ray_hits_sphere, terrain_hit, SurfaceAlbedos};
+use crate::shade::frame::suns_along;
 use crate::shade::kernel::above_ground;
 use crate::vector::{dot, frame_around};
 use std::f64::consts::TAU;
 
-/// What a bounce ray met: the point, its unit normal, its object and its albedo.
+/// What a bounce ray met: the point, its unit normal, its object, its albedo and its
+/// specular reflectance.
 struct Hit {
     point: [f64; 3],
     normal: [f64; 3],
     object: u32,
     albedo: [f32; 3],
+    specular: [f32; 3],
 }
 
 /// A small deterministic generator (SplitMix64) for the jitter of the strata.
@@ -70,13 +76,42 @@ impl Context<'_> {
             let w: [f64; 3] = std::array::from_fn(|k| radius * (phi.cos() * e1[k] + phi.sin() * e2[k]) + up * n[k]);
             let Some(hit) = self.first_hit(albedos, p, n, w, object) else { continue };
             let hit_seed = seed.wrapping_mul(0x2545_f491_4f6c_dd1d).wrapping_add(i as u64 + 1);
-            let direct = self.white_direct(hit.point, hit.normal, hit.object, hit_seed);
-            let further = self.bounced(albedos, hit.point, hit.normal, hit.object, bounces - 1, hit_seed);
-            for c in 0..3 {
-                sum[c] += f64::from(hit.albedo[c]) * (direct[c] + further[c]);
-            }
+            let reflected = self.reflected_by(albedos, &hit, w, bounces - 1, hit_seed);
+            (0..3).for_each(|c| sum[c] += reflected[c]);
         }
         sum.map(|s| s / (side * side) as f64)
+    }
+
+    /// The radiance `hit`, met along unit `w`, sends back along `-w`: its albedo times
+    /// its direct light and its own bounce (`bounces` more), and its specular reflectance
+    /// times what arrives along the mirror direction: the light, where nothing is met
+    /// (the Sun lamps' disks included), or, with a bounce left, what the surface met there
+    /// reflects.
+    fn reflected_by(&self, albedos: &SurfaceAlbedos, hit: &Hit, w: [f64; 3], bounces: usize, seed: u64) -> [f64; 3] {
+        let direct = self.white_direct(hit.point, hit.normal, hit.object, seed);
+        let further = self.bounced(albedos, hit.point, hit.normal, hit.object, bounces, seed);
+        let mut out: [f64; 3] = std::array::from_fn(|c| f64::from(hit.albedo[c]) * (direct[c] + further[c]));
+        if hit.specular != [0.0; 3] {
+            let along = dot(w, hit.normal);
+            let mirror: [f64; 3] = std::array::from_fn(|k| w[k] - 2.0 * along * hit.normal[k]);
+            let arriving = match self.first_hit(albedos, hit.point, hit.normal, mirror, hit.object) {
+                Some(next) if bounces > 0 => self.reflected_by(
+                    albedos,
+                    &next,
+                    mirror,
+                    bounces - 1,
+                    seed.wrapping_mul(0x9e37_79b9).wrapping_add(7),
+                ),
+                Some(_) => [0.0; 3],
+                None => {
+                    let suns = suns_along(&self.frame.suns, mirror);
+                    let sky = self.light_along(mirror);
+                    std::array::from_fn(|c| sky[c] + f64::from(suns[c]))
+                }
+            };
+            (0..3).for_each(|c| out[c] += f64::from(hit.specular[c]) * arriving[c]);
+        }
+        out
     }
 
     /// The direct light a white diffuse surface at `p` reflects (`E / pi`).
@@ -103,7 +138,8 @@ impl Context<'_> {
             let Some(t) = ray_hits_sphere(p, w, sphere.center, sphere.radius) else { continue };
             let point: [f64; 3] = std::array::from_fn(|k| p[k] + t * w[k]);
             let normal = std::array::from_fn(|k| (point[k] - sphere.center[k]) / sphere.radius);
-            take(t, Hit { point, normal, object: sphere.object, albedo: albedos.of_object(sphere.object) });
+            let (albedo, specular) = (albedos.of_object(sphere.object), albedos.specular_of_object(sphere.object));
+            take(t, Hit { point, normal, object: sphere.object, albedo, specular });
         }
         if let Some(field) = self.occluders.field {
             let spacing = field.spacing();
@@ -111,12 +147,12 @@ impl Context<'_> {
             let size = (0..2).map(|a| field.max()[a] - field.min()[a]).fold(0.0, f64::max);
             if let Some((point, t)) = terrain_hit(|x, y| field.height_at(x, y), p, w, step, 4.0 * size) {
                 let normal = field.normal_at(point[0], point[1]);
-                take(t, Hit { point, normal, object: 0, albedo: albedos.terrain });
+                take(t, Hit { point, normal, object: 0, albedo: albedos.terrain, specular: [0.0; 3] });
             }
         } else if let Some(ground) = self.occluders.ground.filter(|&z| above_ground(p, z) && w[2] < 0.0) {
             let t = (ground - p[2]) / w[2];
             let point = std::array::from_fn(|k| p[k] + t * w[k]);
-            take(t, Hit { point, normal: [0.0, 0.0, 1.0], object: 0, albedo: albedos.terrain });
+            take(t, Hit { point, normal: [0.0, 0.0, 1.0], object: 0, albedo: albedos.terrain, specular: [0.0; 3] });
         }
         best.map(|(_, hit)| hit)
     }

@@ -8,24 +8,26 @@ impl Surroundings {
         self.terrain.as_ref().map_or(0, |t| t.side * t.side) + self.spheres.len() * SPHERE_DIRECTIONS
     }
 
-    /// Sets the radiance of the secondary points, in [`SurroundingsPlan::points`]' order;
+    /// Sets the light of the secondary points, in [`SurroundingsPlan::points`]' order: a
+    /// texel's radiance, a sphere's point's irradiance over pi ([`SphereLight::reflect`]);
     /// a sphere's point under the terrain is left out (`None`).
-    pub(super) fn set_radiance(&mut self, radiance: &[[f32; 3]]) {
+    pub(super) fn set_light(&mut self, light: &[[f32; 3]]) {
         let finite = |c: [f32; 3]| c.map(|v| if v.is_finite() { v.max(0.0) } else { 0.0 });
         let mut next = 0;
         if let Some(grid) = &mut self.terrain {
             let texels = grid.side * grid.side;
-            grid.radiance = radiance[..texels].iter().map(|&c| finite(c)).collect();
+            grid.radiance = light[..texels].iter().map(|&c| finite(c)).collect();
             next = texels;
         }
         let terrain = &self.terrain;
         for sphere in &mut self.spheres {
-            for k in 0..SPHERE_DIRECTIONS {
+            let irradiance = std::array::from_fn(|k| {
                 let m = sphere_direction(k);
                 let p: [f64; 3] = std::array::from_fn(|a| sphere.centre[a] + sphere.radius * m[a]);
                 let buried = terrain.as_ref().is_some_and(|t| p[2] < t.height(p[0], p[1]));
-                sphere.radiance[k] = (!buried).then(|| finite(radiance[next + k]));
-            }
+                (!buried).then(|| finite(light[next + k]))
+            });
+            sphere.reflect(irradiance);
             next += SPHERE_DIRECTIONS;
         }
     }
