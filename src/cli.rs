@@ -75,7 +75,7 @@ pub struct ReferenceArgs {
     /// How a supersampled scene's samples are resolved to the camera's pixels (see `logsh shade --help`).
     #[arg(long, value_enum, default_value_t = crate::shade::PixelFilter::Box)]
     pub pixel_filter: crate::shade::PixelFilter,
-    /// Diffuse bounces of light off the proxies (height field or ground plane, blocker spheres), 0 to 3: paths traced with exact visibility, the truth for logsh's --bounces.
+    /// Bounces of light off the proxies (height field or ground plane, blocker spheres; diffuse, and mirrored off the spheres of a specular object), 0 to 3: paths traced with exact visibility, the truth for logsh's --bounces.
     #[arg(long, default_value_t = 0)]
     pub bounces: usize,
     /// Rays per receiver and bounce (cosine-weighted, stratified); the bounce's noise falls as one over their square root.

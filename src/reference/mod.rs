@@ -201,7 +201,7 @@ pub struct ReferenceOptions {
     /// meridians a pixel converges when two successive refinements both change it by at
     /// most `tolerance`; sampled, when the statistical error estimate is at most it.
     pub max_level: u32,
-    /// Diffuse bounces of light off the proxies ([`bounce`]), 0 for direct light only.
+    /// Bounces of light off the proxies ([`bounce`]), 0 for direct light only.
     pub bounces: usize,
     /// Rays per receiver and bounce.
     pub bounce_samples: usize,

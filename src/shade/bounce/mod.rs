@@ -860,6 +860,39 @@ mod tests {
         }
     }
 
+    /// A mirror sphere under a light of radiance `L w_z^4` from direction `w` (no
+    /// ground): by Funk and Hecke, a point of normal `m` has irradiance over pi
+    /// `L (1/5 + (1/4)(4/7) P_2(m_z) - (1/24)(8/35) P_4(m_z))` (the clamped cosine's
+    /// factors over pi on the light's Legendre parts), and the mean incident radiance is
+    /// `L / 5`. Lebedev's rule is exact for it where equal weights are not (0.2063 L). The
+    /// sphere sends its specular reflectance times that mean to every side, and its
+    /// diffuse albedo times its side's own irradiance.
+    #[test]
+    fn a_mirror_sphere_sends_its_reflectance_times_the_mean_incident_radiance() {
+        let light = 0.8f64;
+        let (albedo, specular) = (0.25f32, 0.9f32);
+        let legendre = |z: f64| ((3.0 * z * z - 1.0) / 2.0, (35.0 * z.powi(4) - 30.0 * z * z + 3.0) / 8.0);
+        let side = |k: usize| {
+            let (p2, p4) = legendre(sphere_direction(k)[2]);
+            light * (0.2 + 0.25 * (4.0 / 7.0) * p2 - (1.0 / 24.0) * (8.0 / 35.0) * p4)
+        };
+        let mut sphere = SphereLight {
+            centre: [0.0, 0.0, 1.0],
+            radius: 1.0,
+            object: 1,
+            albedo: [albedo; 3],
+            specular: [specular; 3],
+            radiance: [None; SPHERE_DIRECTIONS],
+            overlap: 1.0,
+        };
+        sphere.reflect(std::array::from_fn(|k| Some([side(k) as f32; 3])));
+        for k in 0..SPHERE_DIRECTIONS {
+            let expected = f64::from(albedo) * side(k) + f64::from(specular) * light / 5.0;
+            let got = f64::from(sphere.radiance[k].expect("every point lit")[0]);
+            assert!((got - expected).abs() < 1e-6, "point {k}: {got} against {expected}");
+        }
+    }
+
     /// Over an infinite plane of uniform radiance `L`, a receiver whose normal leans
     /// `beta` from the zenith sees the plane over `(1 - cos beta) / 2` of its cosine
     /// lobe: `E = pi L (1 - cos beta) / 2` (the closed form of a tilted plate over a
