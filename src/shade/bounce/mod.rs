@@ -39,6 +39,7 @@ use crate::scene::{Frame, GBuffer, Material, Scene};
 use crate::sh::basis::eval_basis;
 use crate::sh::rotation::add_rotated_zonal;
 use rayon::prelude::*;
+use std::borrow::Cow;
 use std::collections::BTreeMap;
 use std::f64::consts::PI;
 
@@ -319,8 +320,8 @@ fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
 /// [`Self::lit`].
 pub struct SurroundingsPlan {
     points: Frame,
-    /// The material index of the spheres' points ([`Self::points_scene`]).
-    white: u32,
+    /// What the spheres' points are shaded with ([`Self::points_scene`]).
+    sphere_points: PointMaterial,
     terrain: Option<TerrainGrid>,
     spheres: Vec<SphereLight>,
     bounces: usize,
@@ -536,9 +537,9 @@ impl SurroundingsPlan {
             return Ok(None);
         }
 
-        let white = (1..=u32::MAX).find(|m| !scene.materials.contains_key(m)).expect("a free material index");
-        let points = secondary_points(scene, frame, terrain.as_ref(), &spheres, white);
-        Ok(Some(Self { points, white, terrain, spheres, bounces: settings.bounces }))
+        let sphere_points = PointMaterial::of(scene);
+        let points = secondary_points(scene, frame, terrain.as_ref(), &spheres, sphere_points.index);
+        Ok(Some(Self { points, sphere_points, terrain, spheres, bounces: settings.bounces }))
     }
 
     /// The secondary points as a frame to shade with direct light, with
@@ -547,26 +548,36 @@ impl SurroundingsPlan {
         &self.points
     }
 
-    /// `scene` with the white diffuse material the spheres' points are shaded with, so
-    /// that their diffuse pass is their irradiance over pi, which each sphere reflects
-    /// through both its albedo and its specular reflectance ([`SphereLight`]).
-    pub fn points_scene(&self, scene: &Scene) -> Scene {
+    /// The scene to shade [`Self::points`] with: `scene` itself, or, where none of its
+    /// materials can stand for the spheres' points ([`PointMaterial`]), a copy with a
+    /// white diffuse material added.
+    pub fn points_scene<'a>(&self, scene: &'a Scene) -> Cow<'a, Scene> {
+        if !self.sphere_points.added {
+            return Cow::Borrowed(scene);
+        }
         let mut with_white = scene.clone();
-        with_white.materials.insert(self.white, Material::Diffuse { albedo: [1.0; 3] });
-        with_white
+        with_white.materials.insert(self.sphere_points.index, Material::Diffuse { albedo: [1.0; 3] });
+        Cow::Owned(with_white)
     }
 
     /// The surroundings lit: `direct` is the diffuse pass of [`Self::points`] shaded
-    /// with [`Self::points_scene`] (a texel's albedo, a sphere's point white, times
-    /// direct irradiance over pi), `visibility` their visibility pass; each bounce after
-    /// the first gathers at the points what the one before left on them.
+    /// with [`Self::points_scene`] (a texel's albedo, a sphere's point the albedo of
+    /// [`PointMaterial`], times direct irradiance over pi), `visibility` their visibility
+    /// pass; each bounce after the first gathers at the points what the one before left
+    /// on them.
     pub fn lit(self, scene: &Scene, direct: &[[f32; 3]], visibility: &[f32]) -> Surroundings {
-        let Self { points, terrain, spheres, bounces, .. } = self;
+        let Self { points, sphere_points, terrain, spheres, bounces } = self;
         let mut surroundings = Surroundings { terrain, spheres, turn: WedgeOperator::new(ORDER, AZIMUTHS).turn() };
-        surroundings.set_light(direct);
+        let side = surroundings.terrain.as_ref().map_or(0, |t| t.side);
+        // The spheres' points as irradiance over pi: their shading's albedo divided out.
+        let direct: Vec<[f32; 3]> = direct
+            .iter()
+            .enumerate()
+            .map(|(i, d)| if i < side * side { *d } else { std::array::from_fn(|c| d[c] / sphere_points.albedo[c]) })
+            .collect();
+        surroundings.set_light(&direct);
         let g = &points.gbuffer;
         let count = surroundings.point_count();
-        let side = surroundings.terrain.as_ref().map_or(0, |t| t.side);
         // The texels gather on every other row and column, the rest interpolate between
         // them: bounce light varies over several texels.
         let on_lattice = |c: usize| c % 2 == 0 || c + 1 == side;
@@ -611,6 +622,54 @@ impl SurroundingsPlan {
     }
 }
 
+/// The material the spheres' secondary points are shaded with, and the albedo their
+/// diffuse pass then carries, which [`SurroundingsPlan::lit`] divides out to leave their
+/// irradiance over pi ([`SphereLight`] applies the sphere's own albedo and reflectance).
+/// It is one of the scene's materials where one has an albedo of at least
+/// [`MIN_POINT_ALBEDO`] in every channel, so that the points are shaded with the frame's
+/// own kernel (built once per sequence, `crate::shade::plan`); otherwise a white diffuse
+/// material of a free index, added to a copy of the scene.
+#[derive(Clone, Copy, Debug)]
+struct PointMaterial {
+    index: u32,
+    albedo: [f32; 3],
+    added: bool,
+}
+
+/// The least albedo, per channel, of a material the spheres' points are shaded with, so
+/// that what the kernel forms with it stays far from f32's underflow, which the division
+/// that undoes it would expose.
+const MIN_POINT_ALBEDO: f32 = 0.01;
+
+impl PointMaterial {
+    fn of(scene: &Scene) -> Self {
+        let albedo_of = |m: &Material| match *m {
+            Material::Diffuse { albedo } | Material::Heightfield { albedo } | Material::Phong { albedo, .. } => {
+                Some(albedo)
+            }
+            Material::Water { .. } => None,
+        };
+        let least = |a: &[f32; 3]| a.iter().copied().fold(f32::INFINITY, f32::min);
+        let brightest = scene
+            .materials
+            .iter()
+            .filter_map(|(&index, m)| albedo_of(m).map(|a| (index, a)))
+            .filter(|(_, a)| least(a) >= MIN_POINT_ALBEDO)
+            .max_by(|(_, a), (_, b)| least(a).total_cmp(&least(b)));
+        match brightest {
+            // With colour passes the kernel shades the table white and the points' Diffuse
+            // Color, white, tints it.
+            Some((index, albedo)) => {
+                Self { index, albedo: if scene.colour_passes() { [1.0; 3] } else { albedo }, added: false }
+            }
+            None => {
+                let index = (1..=u32::MAX).find(|m| !scene.materials.contains_key(m)).expect("a free material index");
+                Self { index, albedo: [1.0; 3], added: true }
+            }
+        }
+    }
+}
+
 /// The largest blockers (at most [`MAX_SPHERE_LIGHTS`]) as lights, each with the diffuse
 /// albedo and specular reflectance `surface` gives its object.
 fn largest_spheres(frame: &Frame, surface: impl Fn(u32) -> ([f32; 3], [f32; 3])) -> Vec<SphereLight> {
@@ -636,13 +695,13 @@ fn largest_spheres(frame: &Frame, surface: impl Fn(u32) -> ([f32; 3], [f32; 3]))
 
 /// The secondary points of `frame`'s surroundings as a frame of their own, packed side
 /// by side in a G-buffer: the terrain grid's texels, then each sphere's directions, just
-/// above its surface, of the white material `white`.
+/// above its surface, of the material `sphere_material` (their Diffuse Color white).
 fn secondary_points(
     scene: &Scene,
     frame: &Frame,
     terrain: Option<&TerrainGrid>,
     spheres: &[SphereLight],
-    white: u32,
+    sphere_material: u32,
 ) -> Frame {
     let mut position = Vec::new();
     let mut normal = Vec::new();
@@ -666,7 +725,7 @@ fn secondary_points(
             let p: [f64; 3] = std::array::from_fn(|a| sphere.centre[a] + lift * m[a]);
             position.push(p.map(|v| v as f32));
             normal.push(m.map(|v| v as f32));
-            material.push(white);
+            material.push(sphere_material);
             object.push(sphere.object);
             albedo.push([1.0; 3]);
         }
