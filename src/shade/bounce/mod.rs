@@ -643,17 +643,12 @@ const MIN_POINT_ALBEDO: f32 = 0.01;
 
 impl PointMaterial {
     fn of(scene: &Scene) -> Self {
-        let albedo_of = |m: &Material| match *m {
-            Material::Diffuse { albedo } | Material::Heightfield { albedo } | Material::Phong { albedo, .. } => {
-                Some(albedo)
-            }
-            Material::Water { .. } => None,
-        };
         let least = |a: &[f32; 3]| a.iter().copied().fold(f32::INFINITY, f32::min);
+        // Water's diffuse colour is black, so it never qualifies.
         let brightest = scene
             .materials
             .iter()
-            .filter_map(|(&index, m)| albedo_of(m).map(|a| (index, a)))
+            .map(|(&index, m)| (index, m.pass_colours().0))
             .filter(|(_, a)| least(a) >= MIN_POINT_ALBEDO)
             .max_by(|(_, a), (_, b)| least(a).total_cmp(&least(b)));
         match brightest {
