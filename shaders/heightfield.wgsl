@@ -266,8 +266,8 @@ fn azimuth(k: u32) -> vec2<f32> {
 }
 
 // The slice of azimuth k under the horizon at elevation sigma: the band from the
-// horizontal (or the tangent plane, where higher, when `fold_tangent`) up to the horizon
-// takes its fitted depth.
+// horizontal (from the tangent plane when `fold_tangent`) up to the horizon takes its
+// fitted depth (kernel.rs, add_horizon_slices).
 fn horizon_slice(k: u32, sigma: f32, n: vec3<f32>, fold_tangent: bool, log_epsilon: f32) -> array<f32, ORDER_CAP> {
     var top = sigma;
     var base = 0.0;
@@ -275,7 +275,7 @@ fn horizon_slice(k: u32, sigma: f32, n: vec3<f32>, fold_tangent: bool, log_epsil
         let dir = azimuth(k);
         let tangent_elevation = atan(-(n.x * dir.x + n.y * dir.y) / n.z);
         top = max(top, tangent_elevation);
-        base = max(base, tangent_elevation);
+        base = tangent_elevation;
     }
     return banded_slice(log_epsilon, base, top);
 }

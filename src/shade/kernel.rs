@@ -556,8 +556,9 @@ impl<T: Real> ShadingKernel<T> {
     /// The height field's log vector from the tangents of its horizons' elevations along
     /// the kernel's azimuths (`banded_slice_of_tangents`, turned by the wedge operator),
     /// added to `acc`: each band from the horizontal, or from the tangent plane of
-    /// `fold_normal` where given and higher, up to its horizon takes its fitted depth;
-    /// below it stays at log(eps).
+    /// `fold_normal` where given, up to its horizon takes its fitted depth; below it stays
+    /// at log(eps). The fit's receiver faces +Z, so its bands start at its tangent plane: a
+    /// tilted receiver's start at its own, below the horizontal on its downhill side too.
     fn add_horizon_slices(&self, turn: &WedgeTurn<T>, tangents: &[f64], fold_normal: Option<[f64; 3]>, acc: &mut [T]) {
         // Eight azimuths at a time: their slices, then their part of the turn.
         const RUN: usize = 8;
@@ -572,7 +573,7 @@ impl<T: Real> ShadingKernel<T> {
                     let (sin, cos) = self.azimuths[run * RUN + k];
                     let tangent_plane = -(n[0] * cos + n[1] * sin) / n[2];
                     *sigma = sigma.max(tangent_plane);
-                    *base = base.max(tangent_plane);
+                    *base = tangent_plane;
                 }
             }
             self.banded_slices(&bases[..tangents.len()], &sigmas[..tangents.len()], &mut slices);
