@@ -245,6 +245,18 @@ pub(super) const WATER_IOR: f64 = 1.33;
 pub(super) const SHARP_EXPONENT: f64 = 50.0;
 pub(super) const BLURRED_BELOW: f64 = 8.0;
 
+/// The share of a Phong lobe of exponent `s` read as the cosine lobe about the normal
+/// (`E / pi`), the rest as the incident radiance blurred about the mirror direction:
+/// `1 / (1 + s)`, exact at both limits. The blur alone (`exp(-l^2 / 2s)`) is the narrow
+/// lobe's limit; a broad one then reads the whole sphere, half of it below the tangent
+/// plane where a receiver on the ground sees the ground, while Phong's BRDF at `s = 0`
+/// is constant and weighs the incident radiance by the cosine alone. On a terrain of
+/// Principled sand (`s` 0.26, specular 0.035) the bounce was 0.0264 against the 0.0161
+/// Cycles' light paths add to its direct light (`sun_lamp`), 0.0187 with this share.
+pub(super) fn broad_share(s: f64) -> f64 {
+    1.0 / (1.0 + s.max(0.0))
+}
+
 impl Receiver {
     /// Pixel `i` of `frame`, `None` on the background, black materials and water without
     /// colour passes (a mirror of its tint, the converted material).
@@ -315,8 +327,12 @@ impl Receiver {
             eval_basis(ORDER, self.mirror, &mut y);
             let lobe = |l: usize| (-((l * l) as f64) / (2.0 * s)).exp();
             let blurred = incident.map(|part| convolved_with(&part, &y, lobe));
+            let broad = broad_share(s);
             let both: [[f64; 3]; 2] = std::array::from_fn(|part| {
-                std::array::from_fn(|c| sharp * along[part][c] + (1.0 - sharp) * blurred[part][c])
+                std::array::from_fn(|c| {
+                    let lobe = (1.0 - broad) * blurred[part][c] + broad * e[part][c] / PI;
+                    sharp * along[part][c] + (1.0 - sharp) * lobe
+                })
             });
             both
         });

@@ -947,6 +947,42 @@ mod tests {
         }
     }
 
+    /// A broad Phong lobe over a lit plane reads the cosine lobe about its normal: at
+    /// `s = 0` exactly `E / pi`, which for a receiver leaning `beta` is `L (1 - cos beta) /
+    /// 2`; and a receiver facing up, which sees none of the plane, gets at most a fifth of
+    /// what the mirror blur alone read at `s = 0.26` (half the plane's radiance, from
+    /// below its tangent plane).
+    #[test]
+    fn a_broad_glossy_lobe_reads_no_light_from_below_its_tangent_plane() {
+        let radiance = 0.8;
+        let surroundings = flat(radiance as f32, 0.0);
+        let receiver = |n: [f64; 3], exponent: f64| {
+            let position = [0.3, -0.2, 1.0];
+            let view_origin = [0.3, -4.0, 3.0];
+            let mirror = crate::shade::point::reflect_view(view_origin, position, n);
+            let point = SurfacePoint { position, normal: n, view_origin, material: 1, object: 0 };
+            let receiver = gather::Receiver {
+                point,
+                albedo: [0.0; 3],
+                specular: [1.0; 3],
+                exponent: Some(exponent),
+                mirror,
+                transmitted: None,
+                visibility: None,
+            };
+            let incident = surroundings.incident(position, n, 0);
+            f64::from(receiver.reflected(&incident, &surroundings)[0][0])
+        };
+        let facing_up = receiver([0.0, 0.0, 1.0], 0.26);
+        assert!(facing_up <= 0.1 * radiance, "facing up: {facing_up}, the blur alone reads about {}", 0.5 * radiance);
+        for degrees in [0.0f64, 60.0, 120.0] {
+            let beta = degrees.to_radians();
+            let exact = radiance * (1.0 - beta.cos()) / 2.0;
+            let got = receiver([beta.sin(), 0.0, beta.cos()], 0.0);
+            assert!((got - exact).abs() <= 0.03 * radiance, "{degrees} deg: {got} against {exact}");
+        }
+    }
+
     /// Over an infinite plane of uniform radiance `L`, a receiver whose normal leans
     /// `beta` from the zenith sees the plane over `(1 - cos beta) / 2` of its cosine
     /// lobe: `E = pi L (1 - cos beta) / 2` (the closed form of a tilted plate over a
