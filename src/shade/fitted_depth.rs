@@ -165,9 +165,8 @@ pub fn depth_at<T: Real>(log_depths: &[T], angle: T) -> T {
 /// The log visibility of one azimuthal slice whose horizon lies at elevation `sigma`:
 /// `log(eps)` up to `base` (the tangent plane's elevation, or the horizontal where the
 /// tangent plane is not folded in), and the band from `base` to `sigma` at the depth
-/// `bands` fits for its width
-/// (paper 000 Eq. 15 with two depths; `nlp_slice` is linear in its depth). With every
-/// band at `log(eps)` it is [`nlp_slice`] itself.
+/// `bands` fits for its width (paper 000 Eq. 15 with two depths; `nlp_slice` is linear in
+/// its depth). With every band at `log(eps)` it is [`nlp_slice`] itself.
 pub fn banded_slice<T: Real>(order: usize, log_epsilon: T, bands: &[T], base: T, sigma: T, out: &mut [T]) {
     if sigma <= base {
         nlp_slice(order, log_epsilon, sigma, out);
