@@ -328,13 +328,12 @@ impl Receiver {
             let lobe = |l: usize| (-((l * l) as f64) / (2.0 * s)).exp();
             let blurred = incident.map(|part| convolved_with(&part, &y, lobe));
             let broad = broad_share(s);
-            let both: [[f64; 3]; 2] = std::array::from_fn(|part| {
+            std::array::from_fn::<[f64; 3], 2, _>(|part| {
                 std::array::from_fn(|c| {
-                    let lobe = (1.0 - broad) * blurred[part][c] + broad * e[part][c] / PI;
-                    sharp * along[part][c] + (1.0 - sharp) * lobe
+                    let read = (1.0 - broad) * blurred[part][c] + broad * e[part][c] / PI;
+                    sharp * along[part][c] + (1.0 - sharp) * read
                 })
-            });
-            both
+            })
         });
         std::array::from_fn(|part| {
             let e = e[part].map(|v| scales[part] * v);
