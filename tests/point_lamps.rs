@@ -76,10 +76,7 @@ fn lamp_behind_a_sphere_matches_the_closed_form() {
 #[test]
 fn a_lamp_below_a_slope_that_faces_it_lights_it() {
     const SLOPE: f64 = 0.5;
-    let dir = tempfile::tempdir().unwrap();
-    let spec = SphereOverPlane { spheres: vec![], width: 96, height: 54, ..Default::default() };
-    sphere_over_plane(dir.path(), &spec).unwrap();
-    let scene = Scene::load(dir.path()).unwrap();
+    let (_dir, scene) = support::open_plane(96, 54);
     let mut frame = scene.frame(1).unwrap();
     frame.light = Arc::new(Light::Constant([0.0; 3]));
     // The plane z = SLOPE x, as a height field and in the G-buffer.

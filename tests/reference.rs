@@ -92,10 +92,7 @@ fn sphere_over_plane_matches_the_closed_form() {
 
 #[test]
 fn unoccluded_plane_is_its_albedo() {
-    let dir = tempfile::tempdir().unwrap();
-    let spec = SphereOverPlane { spheres: vec![], width: 24, height: 14, ..Default::default() };
-    sphere_over_plane(dir.path(), &spec).unwrap();
-    let scene = Scene::load(dir.path()).unwrap();
+    let (_dir, scene) = support::open_plane(24, 14);
     let frame = scene.frame(1).unwrap();
     let out = render(&scene, &frame, &options(1e-4, 6));
     let mut worst = 0.0f64;
@@ -126,10 +123,7 @@ fn unoccluded_plane_is_its_albedo() {
 #[test]
 fn an_unoccluded_ggx_plane_reflects_its_albedo() {
     use logsh::shade::glossy::{albedo_lookup, albedo_table, ggx_alpha, SharpLobe};
-    let dir = tempfile::tempdir().unwrap();
-    let spec = SphereOverPlane { spheres: vec![], width: 32, height: 18, ..Default::default() };
-    sphere_over_plane(dir.path(), &spec).unwrap();
-    let mut scene = Scene::load(dir.path()).unwrap();
+    let (_dir, mut scene) = support::open_plane(32, 18);
     for exponent in [2.0f32, 40.0] {
         scene.materials.insert(PLANE_MATERIAL, Material::Phong { albedo: [0.0; 3], specular: [1.0; 3], exponent });
         let frame = scene.frame(1).unwrap();

@@ -132,10 +132,7 @@ fn unoccluded_plane_comes_out_as_its_albedo() {
 /// 30 degrees against the exact 0.992 and 0.933; it reads 0.992 and 0.922.
 #[test]
 fn an_incline_takes_the_share_of_its_tilted_plane() {
-    let dir = tempfile::tempdir().unwrap();
-    let spec = SphereOverPlane { spheres: vec![], width: 32, height: 18, ..Default::default() };
-    sphere_over_plane(dir.path(), &spec).unwrap();
-    let mut scene = Scene::load(dir.path()).unwrap();
+    let (_dir, mut scene) = support::open_plane(32, 18);
     scene.materials.insert(20, logsh::scene::Material::Heightfield { albedo: [1.0; 3] });
     let flat = scene.frame(1).unwrap();
     let settings = ShadingSettings::default();

@@ -74,10 +74,7 @@ fn sun_behind_a_sphere_matches_the_closed_form() {
 fn a_sun_lamp_reflects_off_a_rough_plane_as_ggx_does() {
     use logsh::scene::Material;
     use logsh::shade::glossy::{ggx_alpha, ggx_lit, SharpLobe};
-    let dir = tempfile::tempdir().unwrap();
-    let spec = SphereOverPlane { spheres: vec![], width: 64, height: 36, ..Default::default() };
-    sphere_over_plane(dir.path(), &spec).unwrap();
-    let mut scene = Scene::load(dir.path()).unwrap();
+    let (_dir, mut scene) = support::open_plane(64, 36);
     let exponent = 3.0f32;
     scene.materials.insert(PLANE_MATERIAL, Material::Phong { albedo: [0.0; 3], specular: [1.0; 3], exponent });
     let mut frame = scene.frame(1).unwrap();

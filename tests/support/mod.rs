@@ -8,6 +8,16 @@ pub mod sharp;
 
 pub use executors::*;
 
+/// `sphere_over_plane`'s plane with no spheres, `width` x `height` pixels, written to a
+/// temporary directory and loaded; the directory lasts as long as the returned guard.
+pub fn open_plane(width: u32, height: u32) -> (tempfile::TempDir, logsh::scene::Scene) {
+    let dir = tempfile::tempdir().unwrap();
+    let spec = logsh::synth::SphereOverPlane { spheres: vec![], width, height, ..Default::default() };
+    logsh::synth::sphere_over_plane(dir.path(), &spec).unwrap();
+    let scene = logsh::scene::Scene::load(dir.path()).unwrap();
+    (dir, scene)
+}
+
 /// `to`, made a copy of the files of the scene directory `from` (its folders left out).
 pub fn copy_scene(from: &std::path::Path, to: &std::path::Path) {
     std::fs::create_dir_all(to).unwrap();
