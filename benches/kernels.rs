@@ -104,7 +104,8 @@ fn blocker_packets(c: &mut Criterion) {
     use logsh::sh::add_rotated_zonal;
     use logsh::shade::blocker_tree::BlockerTree;
     use logsh::shade::cap_packet::{CapPacket, Receiver, LANES};
-    use logsh::shade::fitted_depth::{depth_at, DEPTH_INTERVALS};
+    use logsh::shade::fitted_depth::{depth_at, overlapped_depth, DEPTH_INTERVALS};
+    const LOG_EPSILON: f32 = -std::f32::consts::LN_10;
     let spheres: Vec<Sphere> = (0..400)
         .map(|i| {
             Sphere::new(
@@ -130,12 +131,14 @@ fn blocker_packets(c: &mut Criterion) {
                     let (p, n) = (r.position.map(f64::from), r.normal.map(f64::from));
                     let mut acc = [0.0f32; MAX_COEFFICIENTS];
                     let mut zonal = [0.0f32; 8];
-                    tree.visit(p, n, 0, |s| {
+                    tree.visit(p, n, 0, |s, share| {
                         let centre = s.center.map(|c| c as f32);
                         if let BlockerView::Cap { direction, alpha, weight } =
                             view_blocker(r.position, r.normal, centre, s.radius as f32, false)
                         {
-                            cap_log_zh(order, depth_at(&depths, alpha), alpha, &mut zonal[..order]);
+                            let depth =
+                                overlapped_depth(depth_at(&depths, alpha), share as f32, LOG_EPSILON, depths[0]);
+                            cap_log_zh(order, depth, alpha, &mut zonal[..order]);
                             add_rotated_zonal(order, &zonal[..order], weight, direction, &mut acc[..order * order]);
                         }
                     });
@@ -144,7 +147,7 @@ fn blocker_packets(c: &mut Criterion) {
                 black_box(total)
             })
         });
-        let packet = CapPacket::new(&tree, order, &depths, false);
+        let packet = CapPacket::new(&tree, order, &depths, LOG_EPSILON, false);
         c.bench_function(&format!("caps400/packets of 8/order{order}"), |b| {
             b.iter(|| {
                 let mut total = 0.0f32;

@@ -15,10 +15,23 @@ fn cap_log_zh(log_depth: f32, alpha: f32) -> array<f32, ORDER_CAP> {
     return out;
 }
 
+// The depth of a cap of fitted depth `depth` whose sphere owns `share` of its solid angle
+// (fitted_depth.rs, overlapped_depth): narrow caps, which exp takes linearly, scaled by
+// the share, so that overlapping proxies of one object take their union.
+fn overlapped_depth(depth: f32, share: f32) -> f32 {
+    let range = params.log_epsilon - tables[T_CAP_DEPTH];
+    if share >= 1.0 || !(range < 0.0) {
+        return depth;
+    }
+    let lambda = clamp((params.log_epsilon - depth) / range, 0.0, 1.0);
+    return depth * (1.0 - lambda * (1.0 - share));
+}
+
 // Adds one sphere's cap as seen from receiver p with normal n (cap.rs, view_blocker):
 // culled when its centre is on or behind the tangent plane (paper 000, end of Section
-// 4.2); a receiver inside the sphere sees the hemisphere towards its centre.
-fn add_sphere(p: vec3<f32>, n: vec3<f32>, sphere: vec4<f32>, acc: ptr<function, array<f32, COUNT_CAP>>) {
+// 4.2); a receiver inside the sphere sees the hemisphere towards its centre. Its depth is
+// the fitted one, overlapped by the sphere's share of its solid angle.
+fn add_sphere(p: vec3<f32>, n: vec3<f32>, sphere: vec4<f32>, share: f32, acc: ptr<function, array<f32, COUNT_CAP>>) {
     let d = sphere.xyz - p;
     let distance = length(d);
     if !(distance > 0.0) {
@@ -30,7 +43,7 @@ fn add_sphere(p: vec3<f32>, n: vec3<f32>, sphere: vec4<f32>, acc: ptr<function, 
     }
     let ratio = min(sphere.w / distance, 1.0);
     let alpha = asin(ratio);
-    var zonal = cap_log_zh(fitted_depth(T_CAP_DEPTH, alpha), alpha);
+    var zonal = cap_log_zh(overlapped_depth(fitted_depth(T_CAP_DEPTH, alpha), share), alpha);
     var weight = 1.0;
     if RATIO_ATTENUATION {
         weight = ratio;
@@ -68,7 +81,7 @@ fn visit_blockers(p: vec3<f32>, n: vec3<f32>, object: u32, acc: ptr<function, ar
         }
         if node.leaf != 0u {
             if !(object != 0u && node.object == object && own_sphere_holds(p, node.equivalent)) {
-                add_sphere(p, n, node.equivalent, acc);
+                add_sphere(p, n, node.equivalent, node.share, acc);
             }
             i = node.skip;
             continue;
@@ -76,7 +89,7 @@ fn visit_blockers(p: vec3<f32>, n: vec3<f32>, object: u32, acc: ptr<function, ar
         let distance = length(d);
         if distance > r && r <= params.cluster_ratio * distance {
             if node.equivalent.w >= NEGLIGIBLE_RATIO * length(node.equivalent.xyz - p) {
-                add_sphere(p, n, node.equivalent, acc);
+                add_sphere(p, n, node.equivalent, node.share, acc);
             }
             i = node.skip;
             continue;

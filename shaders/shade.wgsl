@@ -414,6 +414,59 @@ fn widened_ggx_lit(material: GpuMaterial, patch_radius: f32, n_v: f32, n_w: vec4
     return select(vec4<f32>(0.0), value, n_w > vec4<f32>(0.0) & half_length_squared > vec4<f32>(1e-12));
 }
 
+// E(n) / pi, the open receiver's diffuse light in full (kernel.rs, OpenIrradiance): the
+// order-8 basis at n, as eval_basis makes it, dotted with the weighted light.
+fn irradiance_at(d: vec3<f32>) -> vec3<f32> {
+    let count = IRRADIANCE_ORDER * IRRADIANCE_ORDER;
+    var sum = vec3<f32>(0.0);
+    var cm = 1.0;
+    var sm = 0.0;
+    for (var m = 0u; m < IRRADIANCE_ORDER; m++) {
+        var q_prev = 0.0;
+        var q = tables[T_IRRADIANCE_FACTORIAL + m];
+        for (var l = m; l < IRRADIANCE_ORDER; l++) {
+            if l == m + 1u {
+                q_prev = q;
+                q = d.z * f32(2u * m + 1u) * q_prev;
+            } else if l > m + 1u {
+                let next = (f32(2u * l - 1u) * d.z * q - f32(l + m - 1u) * q_prev) / f32(l - m);
+                q_prev = q;
+                q = next;
+            }
+            let centre = l * (l + 1u);
+            let k = tables[T_IRRADIANCE_NORMALISATION + centre + m] * q;
+            if m == 0u {
+                sum += k * irradiance_light(centre, count);
+            } else {
+                sum += k * (cm * irradiance_light(centre + m, count) + sm * irradiance_light(centre - m, count));
+            }
+        }
+        let c = cm * d.x - sm * d.y;
+        sm = cm * d.y + sm * d.x;
+        cm = c;
+    }
+    return sum;
+}
+
+fn irradiance_light(i: u32, count: u32) -> vec3<f32> {
+    return vec3<f32>(tables[T_IRRADIANCE + i], tables[T_IRRADIANCE + count + i], tables[T_IRRADIANCE + 2u * count + i]);
+}
+
+// The environment's diffuse light at normal n from log-SH's lit = exp*(V + D) . L (lit.rs,
+// open_corrected): E(n) / pi times lit / exp*(T + D) . L per channel in [0, 1].
+fn open_corrected(lit: vec3<f32>, n: vec3<f32>) -> vec3<f32> {
+    if !IRRADIANCE {
+        return lit;
+    }
+    var open: array<f32, COUNT_CAP>;
+    var zonal = load_zonal(T_DIFFUSE_OPEN);
+    add_rotated_zonal(&zonal, 1.0, n, &open);
+    let unoccluded = dot_light(&open);
+    let full = max(irradiance_at(n), vec3<f32>(0.0));
+    let share = clamp(lit / max(unoccluded, vec3<f32>(1e-30)), vec3<f32>(0.0), vec3<f32>(1.0));
+    return select(lit, full * share, unoccluded > vec3<f32>(OPEN_LIGHT_FLOOR));
+}
+
 // The lobe's albedo at n . v = mu, linearly (glossy.rs, albedo_lookup).
 fn albedo_lookup(offset: u32, mu: f32) -> f32 {
     let x = clamp(mu, 0.0, 1.0) * f32(ALBEDO_ENTRIES - 1u);
@@ -457,7 +510,14 @@ fn prefiltered_glossy(occlusion: ptr<function, array<f32, COUNT_CAP>>, material:
         }
     }
     let occluded = share * by_cone + (1.0 - share) * by_sh;
-    let weight = albedo_lookup(albedo, dot(n, r)) * occluded;
+    // glossy.rs, below_tangent_divisor: P(R) as the mean over the lobe above the tangent
+    // plane, where the map's lower hemisphere is black.
+    var divisor = 1.0;
+    if SKY_ONLY {
+        let above = max(albedo_lookup(open_lobe + ORDER, dot(n, r)), 0.25);
+        divisor = 1.0 - clamp(n.z, 0.0, 1.0) * (1.0 - above);
+    }
+    let weight = albedo_lookup(albedo, dot(n, r)) * occluded / divisor;
     return prefiltered_lookup(material.sharp_map, r) * weight;
 }
 
@@ -653,7 +713,7 @@ fn shade(@builtin(global_invocation_id) id: vec3<u32>) {
         if slot != SLOT_UNKNOWN {
             let material = materials[slot];
             let lit_diffuse = lit(&v, T_DIFFUSE, n);
-            diffuse = lit_diffuse * material.albedo.xyz;
+            diffuse = open_corrected(lit_diffuse, n) * material.albedo.xyz;
 //#if PHONG
             if material.kind == MATERIAL_PHONG && enabled(FEATURE_PHONG) {
                 let reflected = record.reflected.xyz;

@@ -176,7 +176,9 @@ gpu_struct! {
         leaf: u32,
         /// Object index of the equivalent sphere (0: none).
         object: u32,
-        pad: u32,
+        /// The share of the equivalent sphere's solid angle that is its own
+        /// ([`crate::shade::blocker_tree::overlap_shares`]).
+        share: f32,
     }
 }
 

@@ -591,10 +591,12 @@ fn primitives_fit_their_volume() {
 
 /// `blender_scripts/relight_compositor.py` builds the diffuse relight in Blender's
 /// compositor from a frame's transfer layers; turned 40 degrees there, it equals `logsh
-/// relight --light-rotation 40`'s diffuse pass (which turns the map by resampling it, the
-/// compositor the SH vector exactly), whether its light.json comes from an unturned
-/// relight or from that turned one (which it turns back first, as docs/compositing.md's
-/// example has it). A light of another order than the frame's is refused, both named.
+/// relight --light-rotation 40`'s diffuse term before logsh corrects it to the map's
+/// irradiance (`albedo max(sh_diffuse . L, 0) + lamps_diffuse` with that relight's light;
+/// it turns the map by resampling it, the compositor the SH vector exactly), whether its
+/// light.json comes from an unturned relight or from that turned one (which it turns back
+/// first, as docs/compositing.md's example has it). A light of another order than the
+/// frame's is refused, both named.
 #[test]
 fn the_compositor_recipe_relights_the_diffuse_pass() {
     let Some(python) = bpy_python() else { return };
@@ -629,15 +631,42 @@ fn the_compositor_recipe_relights_the_diffuse_pass() {
         }
         sum / 3.0
     };
-    let (to_turned, to_unturned) = (mean(&blender, &relit), mean(&blender, &before));
+    // The relight at 40 degrees' diffuse term before its correction, from the frame's
+    // layers and that relight's light.json (its light, turned).
+    let layers = raw_channels(&frame);
+    let description: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(turned.join("render.0001.light.json")).unwrap()).unwrap();
+    let light: Vec<[f64; 3]> = serde_json::from_value(description["sh"].clone()).unwrap();
+    let uncorrected: HashMap<String, Vec<f32>> = ["R", "G", "B"]
+        .iter()
+        .enumerate()
+        .map(|(c, name)| {
+            let (albedo, lamps) = (&layers[&format!("albedo.{name}")], &layers[&format!("lamps_diffuse.{name}")]);
+            let values = (0..albedo.len())
+                .map(|i| {
+                    let dot: f64 = (0..light.len())
+                        .map(|k| {
+                            let channel = format!("sh_diffuse_{}.{}", k - k % 4, ["R", "G", "B", "A"][k % 4]);
+                            f64::from(layers[&channel][i]) * light[k][c]
+                        })
+                        .sum();
+                    (f64::from(albedo[i]) * dot.max(0.0) + f64::from(lamps[i])) as f32
+                })
+                .collect();
+            (format!("diffuse.{name}"), values)
+        })
+        .collect();
+    let (to_turned, to_unturned) = (mean(&blender, &uncorrected), mean(&blender, &before));
     println!(
-        "Blender's compositor turned 40 degrees: {to_turned:.5} from logsh relight at 40, {to_unturned:.5} from 0"
+        "Blender's compositor turned 40 degrees: {to_turned:.5} from logsh relight at 40 before its correction, \
+         {:.5} after it, {to_unturned:.5} from 0",
+        mean(&blender, &relit)
     );
     assert!(to_turned <= 2e-3, "the compositor's relight differs from logsh relight by {to_turned}");
     assert!(to_unturned > 3.0 * to_turned, "the compositor must turn the light: {to_unturned}");
     // From the turned relight's light.json, turned back first: the same composite.
     let from_turned = composite(&turned.join("render.0001.light.json"), "from_turned.exr");
-    let again = mean(&from_turned, &relit);
+    let again = mean(&from_turned, &uncorrected);
     println!("from the light.json of the relight at 40 degrees: {again:.5} from logsh relight at 40");
     assert!(again <= 2e-3, "from the turned light, the compositor's relight differs by {again}");
     // A light of order 3 on a frame of order 4: refused, both named.

@@ -229,7 +229,7 @@ fn blocker_tree_and_own_spheres_match() {
     // The cloud is seen through clusters: from the ground, fewer caps than spheres.
     let tree = logsh::shade::blocker_tree::BlockerTree::new(&frame.blockers, ShadingSettings::default().cluster_ratio);
     let mut caps = 0;
-    tree.visit([0.0, 0.0, 0.0], [0.0, 0.0, 1.0], 0, |_| caps += 1);
+    tree.visit([0.0, 0.0, 0.0], [0.0, 0.0, 1.0], 0, |_, _| caps += 1);
     assert!(caps < frame.blockers.len() / 2, "{caps} caps seen of {} spheres", frame.blockers.len());
     for overlap_floor in [true, false] {
         let settings = ShadingSettings { overlap_floor, ..ShadingSettings::default() };

@@ -267,6 +267,18 @@ impl ProgramTables {
         // Lobes: order log-ZH values then the log of the peak.
         t.push("T_TANGENT", kernel.tangent.iter().copied());
         t.push("T_DIFFUSE", kernel.diffuse.zonal.iter().copied().chain([kernel.diffuse.log_peak as f32]));
+        // The open receiver's diffuse light in full (kernel.rs, OpenIrradiance): the
+        // light's order-8 coefficients weighted by the rotated cosine, R then G then B, the
+        // basis factors up to order 8, and exp*(T + D) as ZH.
+        let eight = crate::shade::kernel::IRRADIANCE_ORDER;
+        let weighted = kernel.irradiance.as_ref().map(|irradiance| irradiance.weighted_light());
+        t.push("T_IRRADIANCE", weighted.iter().flat_map(|w| w.iter().flatten().map(|&v| v as f32)));
+        t.push(
+            "T_IRRADIANCE_NORMALISATION",
+            (0..eight).flat_map(|l| (-(l as i64)..=l as i64).map(move |m| real_normalisation(l, m) as f32)),
+        );
+        t.push("T_IRRADIANCE_FACTORIAL", (0..eight).map(|m| double_factorial_odd(m) as f32));
+        t.push("T_DIFFUSE_OPEN", kernel.diffuse_open.iter().copied());
         let (materials, slots) = material_slots(kernel, &mut t);
         // The disk pattern (x, then y), the suns (src/shade/sun.rs) and the point lamps
         // (src/scene/light.rs, PointLight).
@@ -366,7 +378,8 @@ fn material_slots(kernel: &ShadingKernel<f32>, t: &mut TableBuilder) -> (Vec<Gpu
                         .chain(weights)
                         .chain(sharp.albedo.iter().copied())
                         .chain(sharp.lamp_scale.iter().copied())
-                        .chain(sharp.open.iter().copied()),
+                        .chain(sharp.open.iter().copied())
+                        .chain(sharp.share_above.iter().copied()),
                 );
                 (map, tables as u32)
             }
@@ -519,7 +532,11 @@ fn prelude(
         ("RATIO_ATTENUATION", Bool(kernel.ratio_attenuation)),
         ("DEPTH_INTERVALS", U32(crate::shade::fitted_depth::DEPTH_INTERVALS)),
         ("OVERLAP_FLOOR", Bool(kernel.overlap_floor)),
+        ("IRRADIANCE", Bool(kernel.irradiance.is_some())),
+        ("IRRADIANCE_ORDER", U32(crate::shade::kernel::IRRADIANCE_ORDER)),
+        ("OPEN_LIGHT_FLOOR", F32(crate::shade::kernel::OPEN_LIGHT_FLOOR)),
         ("GROUND", Bool(kernel.ground.is_some())),
+        ("SKY_ONLY", Bool(kernel.sky_only)),
         ("GROUND_HEIGHT", F32(kernel.ground.unwrap_or(0.0))),
         ("OWN_SPHERE_REACH", F32(crate::logsh::OWN_SPHERE_REACH)),
         ("NEGLIGIBLE_RATIO", F32(crate::shade::blocker_tree::NEGLIGIBLE_RATIO)),

@@ -32,6 +32,7 @@
 use crate::gpu_layout::GpuBlockerNode;
 use crate::logsh::own_sphere_holds;
 use crate::scene::Sphere;
+use crate::vector::{cross, dot, normalize};
 use std::cell::Cell;
 use std::ops::ControlFlow;
 
@@ -57,6 +58,10 @@ pub struct BlockerNode {
     pub bounds: Sphere,
     /// The subtree seen from afar as one sphere (for a leaf, its sphere).
     pub equivalent: Sphere,
+    /// The share of the equivalent sphere's solid angle that is its own
+    /// ([`overlap_shares`]): below 1 for a leaf whose object's spheres overlap, 1 for a
+    /// cluster, whose equivalent already counts its members' overlap once.
+    pub share: f64,
     /// Index of the node after this subtree.
     pub skip: u32,
     pub leaf: bool,
@@ -76,7 +81,8 @@ impl BlockerTree {
     /// Builds the tree of `spheres` by median splits along the longest axis of their
     /// centres (`O(N log^2 N)`). Spheres of radius 0 block nothing and are left out.
     pub fn new(spheres: &[Sphere], cluster_ratio: f64) -> Self {
-        let mut items: Vec<Sphere> = spheres.iter().copied().filter(|s| s.radius > 0.0).collect();
+        let blocking: Vec<Sphere> = spheres.iter().copied().filter(|s| s.radius > 0.0).collect();
+        let mut items: Vec<(Sphere, f64)> = blocking.iter().copied().zip(overlap_shares(&blocking)).collect();
         let mut nodes = Vec::with_capacity(2 * items.len());
         if !items.is_empty() {
             build(&mut items, &mut nodes);
@@ -90,7 +96,7 @@ impl BlockerTree {
                 skip: node.skip,
                 leaf: node.leaf as u32,
                 object: node.equivalent.object,
-                pad: 0,
+                share: node.share as f32,
             })
             .collect();
         Self { nodes, cluster_ratio, f32_nodes }
@@ -107,9 +113,10 @@ impl BlockerTree {
     }
 
     /// Calls `see` with every sphere (or cluster's equivalent sphere) that a receiver of
-    /// object `object` at `p` with unit normal `n` sees (module doc). The receiver's own
-    /// spheres that hold it are not seen ([`own_sphere_holds`]).
-    pub fn visit(&self, p: [f64; 3], n: [f64; 3], object: u32, see: impl FnMut(&Sphere)) {
+    /// object `object` at `p` with unit normal `n` sees (module doc), and its share of its
+    /// solid angle ([`BlockerNode::share`]). The receiver's own spheres that hold it are
+    /// not seen ([`own_sphere_holds`]).
+    pub fn visit(&self, p: [f64; 3], n: [f64; 3], object: u32, see: impl FnMut(&Sphere, f64)) {
         self.walk(p, n, object, see, |node, d| {
             if node.leaf {
                 return Step::Enter;
@@ -148,7 +155,7 @@ impl BlockerTree {
         mut see: impl FnMut(&Sphere) -> ControlFlow<()>,
     ) {
         let done = Cell::new(false);
-        let see = |sphere: &Sphere| {
+        let see = |sphere: &Sphere, _share: f64| {
             if see(sphere).is_break() {
                 done.set(true);
             }
@@ -193,7 +200,7 @@ impl BlockerTree {
         p: [f64; 3],
         n: [f64; 3],
         object: u32,
-        mut see: impl FnMut(&Sphere),
+        mut see: impl FnMut(&Sphere, f64),
         mut step: impl FnMut(&BlockerNode, [f64; 3]) -> Step,
     ) {
         let mut i = 0;
@@ -209,13 +216,13 @@ impl BlockerTree {
             match step(node, d) {
                 Step::Skip => i = next,
                 Step::Cluster => {
-                    see(&node.equivalent);
+                    see(&node.equivalent, node.share);
                     i = next;
                 }
                 Step::Enter if node.leaf => {
                     let s = &node.equivalent;
                     if !(object != 0 && s.object == object && own_sphere_holds(p, s.center, s.radius)) {
-                        see(s);
+                        see(s, node.share);
                     }
                     i = next;
                 }
@@ -252,31 +259,33 @@ enum Step {
     Enter,
 }
 
-/// Appends the subtree of `items` in depth-first order; returns its root's index.
-fn build(items: &mut [Sphere], nodes: &mut Vec<BlockerNode>) -> usize {
+/// Appends the subtree of `items` (each sphere with its [`overlap_shares`] entry) in
+/// depth-first order; returns its root's index.
+fn build(items: &mut [(Sphere, f64)], nodes: &mut Vec<BlockerNode>) -> usize {
     let index = nodes.len();
-    if items.len() == 1 {
-        nodes.push(BlockerNode { bounds: items[0], equivalent: items[0], skip: index as u32 + 1, leaf: true });
+    if let [(sphere, share)] = *items {
+        nodes.push(BlockerNode { bounds: sphere, equivalent: sphere, share, skip: index as u32 + 1, leaf: true });
         return index;
     }
-    nodes.push(BlockerNode { bounds: items[0], equivalent: items[0], skip: 0, leaf: false });
+    let first = items[0].0;
+    nodes.push(BlockerNode { bounds: first, equivalent: first, share: 1.0, skip: 0, leaf: false });
     let (lo, hi) = centre_bounds(items);
     let axis = (0..3).max_by(|&a, &b| (hi[a] - lo[a]).total_cmp(&(hi[b] - lo[b]))).expect("three axes");
     let middle = items.len() / 2;
-    items.select_nth_unstable_by(middle, |a, b| a.center[axis].total_cmp(&b.center[axis]));
+    items.select_nth_unstable_by(middle, |a, b| a.0.center[axis].total_cmp(&b.0.center[axis]));
     let (left, right) = items.split_at_mut(middle);
     let a = build(left, nodes);
     let b = build(right, nodes);
     let bounds = enclosing(&nodes[a].bounds, &nodes[b].bounds);
-    let equivalent = combined(&nodes[a].equivalent, &nodes[b].equivalent, bounds.radius);
-    nodes[index] = BlockerNode { bounds, equivalent, skip: nodes.len() as u32, leaf: false };
+    let equivalent = combined(&nodes[a], &nodes[b], bounds.radius);
+    nodes[index] = BlockerNode { bounds, equivalent, share: 1.0, skip: nodes.len() as u32, leaf: false };
     index
 }
 
-fn centre_bounds(items: &[Sphere]) -> ([f64; 3], [f64; 3]) {
+fn centre_bounds(items: &[(Sphere, f64)]) -> ([f64; 3], [f64; 3]) {
     let mut lo = [f64::INFINITY; 3];
     let mut hi = [f64::NEG_INFINITY; 3];
-    for s in items {
+    for (s, _) in items {
         for k in 0..3 {
             lo[k] = lo[k].min(s.center[k]);
             hi[k] = hi[k].max(s.center[k]);
@@ -302,13 +311,94 @@ fn enclosing(a: &Sphere, b: &Sphere) -> Sphere {
     Sphere { center, radius, object }
 }
 
-/// The equivalent sphere of two clusters (module doc), at most `bound` in radius.
-fn combined(a: &Sphere, b: &Sphere, bound: f64) -> Sphere {
-    let (wa, wb) = (a.radius * a.radius, b.radius * b.radius);
+/// The equivalent sphere of two subtrees (module doc), at most `bound` in radius: each
+/// sphere weighs by its own solid angle, its radius squared times its share.
+fn combined(a: &BlockerNode, b: &BlockerNode, bound: f64) -> Sphere {
+    let (a, wa) = (&a.equivalent, a.share * a.equivalent.radius * a.equivalent.radius);
+    let (b, wb) = (&b.equivalent, b.share * b.equivalent.radius * b.equivalent.radius);
     let total = wa + wb;
     let center = [0, 1, 2].map(|k| (wa * a.center[k] + wb * b.center[k]) / total);
     let object = if a.object == b.object { a.object } else { 0 };
     Sphere { center, radius: total.sqrt().min(bound), object }
+}
+
+/// Directions of projection over which [`overlap_shares`] averages (a hemisphere holds
+/// them all: a projection along `-u` is the mirror image of one along `u`).
+const SHARE_DIRECTIONS: usize = 16;
+
+/// Cells along each side of the square an object's spheres are projected onto.
+const SHARE_GRID: usize = 48;
+
+/// Each sphere's share of its own solid angle: for the spheres of one object (`object !=
+/// 0`), the area of the union of their silhouettes over the sum of their areas, averaged
+/// over [`SHARE_DIRECTIONS`] parallel projections; 1 for a sphere alone and for those of
+/// no object.
+///
+/// A mesh's proxies overlap (a torus is 14 spheres, each reaching into the next), and
+/// log visibilities add: where the caps are narrow enough that `exp` is linear in their
+/// depth, each takes its own solid angle, so the overlap takes twice its share.
+/// Measured on `primitives.py` against the reference renderer (exact visibility of the
+/// same spheres), the floor around objects of 4 to 14 spheres came out 2.8 to 3.8 % too
+/// dark, and around a single sphere 1.4 to 3.7 % too bright. The kernel scales each
+/// narrow cap's depth by this share ([`super::fitted_depth::overlapped_depth`]). Estimated
+/// on a grid of `SHARE_GRID^2` cells per projection: within about 2 % for a pair of
+/// equal spheres half overlapping (the unit test).
+pub fn overlap_shares(spheres: &[Sphere]) -> Vec<f64> {
+    let mut shares = vec![1.0; spheres.len()];
+    let mut by_object: std::collections::BTreeMap<u32, Vec<usize>> = std::collections::BTreeMap::new();
+    for (i, s) in spheres.iter().enumerate() {
+        if s.object != 0 {
+            by_object.entry(s.object).or_default().push(i);
+        }
+    }
+    for members in by_object.values().filter(|m| m.len() > 1) {
+        let share = union_share(&members.iter().map(|&i| spheres[i]).collect::<Vec<_>>());
+        for &i in members {
+            shares[i] = share;
+        }
+    }
+    shares
+}
+
+/// The mean over [`SHARE_DIRECTIONS`] projections of the union of the spheres' disks
+/// over the sum of their areas, in `(0, 1]`.
+fn union_share(spheres: &[Sphere]) -> f64 {
+    let area: f64 = spheres.iter().map(|s| std::f64::consts::PI * s.radius * s.radius).sum();
+    let mut total = 0.0;
+    let mut covered = vec![false; SHARE_GRID * SHARE_GRID];
+    for k in 0..SHARE_DIRECTIONS {
+        // A Fibonacci spiral over the upper hemisphere.
+        let z = 1.0 - (k as f64 + 0.5) / SHARE_DIRECTIONS as f64;
+        let phi = k as f64 * std::f64::consts::PI * (3.0 - 5f64.sqrt());
+        let w = [(1.0 - z * z).sqrt() * phi.cos(), (1.0 - z * z).sqrt() * phi.sin(), z];
+        let helper = if w[0].abs() < 0.9 { [1.0, 0.0, 0.0] } else { [0.0, 1.0, 0.0] };
+        let u = normalize(cross(helper, w));
+        let v = cross(w, u);
+        let disks: Vec<[f64; 3]> = spheres.iter().map(|s| [dot(s.center, u), dot(s.center, v), s.radius]).collect();
+        let lo = [0, 1].map(|a| disks.iter().map(|d| d[a] - d[2]).fold(f64::INFINITY, f64::min));
+        let hi = [0, 1].map(|a| disks.iter().map(|d| d[a] + d[2]).fold(f64::NEG_INFINITY, f64::max));
+        let cell = (hi[0] - lo[0]).max(hi[1] - lo[1]) / SHARE_GRID as f64;
+        covered.fill(false);
+        for d in &disks {
+            let range = |a: usize| {
+                let first = ((d[a] - d[2] - lo[a]) / cell).floor().max(0.0) as usize;
+                let last = (((d[a] + d[2] - lo[a]) / cell).ceil() as usize).min(SHARE_GRID);
+                first..last
+            };
+            for row in range(1) {
+                let y = lo[1] + (row as f64 + 0.5) * cell - d[1];
+                for column in range(0) {
+                    let x = lo[0] + (column as f64 + 0.5) * cell - d[0];
+                    if x * x + y * y <= d[2] * d[2] {
+                        covered[row * SHARE_GRID + column] = true;
+                    }
+                }
+            }
+        }
+        let union = covered.iter().filter(|&&c| c).count() as f64 * cell * cell;
+        total += union / area;
+    }
+    (total / SHARE_DIRECTIONS as f64).clamp(f64::MIN_POSITIVE, 1.0)
 }
 
 #[cfg(test)]
@@ -377,7 +467,7 @@ mod tests {
         let tree = BlockerTree::new(&spheres, 0.0);
         let (p, n) = ([0.3, -0.2, 0.0], [0.0, 0.6, 0.8]);
         let mut seen = Vec::new();
-        tree.visit(p, n, 0, |s| seen.push(*s));
+        tree.visit(p, n, 0, |s, _| seen.push(*s));
         let mut expected: Vec<Sphere> = spheres
             .iter()
             .copied()
@@ -395,7 +485,7 @@ mod tests {
         let tree = BlockerTree::new(&spheres, 0.15);
         let p = [0.0, 0.0, -40.0];
         let mut seen = Vec::new();
-        tree.visit(p, [0.0, 0.0, 1.0], 0, |s| seen.push(*s));
+        tree.visit(p, [0.0, 0.0, 1.0], 0, |s, _| seen.push(*s));
         assert!(seen.len() < 100, "{} caps seen", seen.len());
         let solid_angle = |list: &[Sphere]| -> f64 {
             list.iter()
@@ -415,7 +505,7 @@ mod tests {
         spheres.push(Sphere { center: [0.0, 0.0, 1.0], radius: 1.0, object: 4 });
         let tree = BlockerTree::new(&spheres, 0.15);
         let mut seen = Vec::new();
-        tree.visit([0.0, 0.0, 0.0], [0.0, 0.0, 1.0], 3, |s| seen.push(s.object));
+        tree.visit([0.0, 0.0, 0.0], [0.0, 0.0, 1.0], 3, |s, _| seen.push(s.object));
         assert_eq!(seen, vec![4]);
     }
 }

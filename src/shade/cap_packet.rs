@@ -51,12 +51,22 @@ pub struct CapPacket<'a> {
     /// Each cap's log depth per angular radius, `DEPTH_INTERVALS + 1` entries over
     /// `[0, pi/2]` ([`super::fitted_depth::depth_at`]).
     pub cap_depths: &'a [f32],
+    /// `log(eps)`, where an overlapped cap's depth ends
+    /// ([`super::fitted_depth::overlapped_depth`]).
+    pub log_epsilon: f32,
     pub ratio_attenuation: bool,
 }
 
 impl<'a> CapPacket<'a> {
-    pub fn new(tree: &'a BlockerTree, order: usize, cap_depths: &'a [f32], ratio_attenuation: bool) -> Self {
-        Self { nodes: tree.f32_nodes(), cluster_ratio: tree.cluster_ratio as f32, order, cap_depths, ratio_attenuation }
+    pub fn new(
+        tree: &'a BlockerTree,
+        order: usize,
+        cap_depths: &'a [f32],
+        log_epsilon: f32,
+        ratio_attenuation: bool,
+    ) -> Self {
+        let cluster_ratio = tree.cluster_ratio as f32;
+        Self { nodes: tree.f32_nodes(), cluster_ratio, order, cap_depths, log_epsilon, ratio_attenuation }
     }
 
     /// Whether [`Self::sum`] runs here: the processor has AVX2 and FMA.
@@ -223,7 +233,7 @@ mod lanes {
                 let own = if node.object != 0 { _mm256_and_ps(same, holds) } else { _mm256_setzero_ps() };
                 let seen = _mm256_andnot_ps(own, front);
                 if _mm256_movemask_ps(seen) != 0 {
-                    add_caps::<N>(packet, basis, &lanes, node.equivalent, seen, &mut acc);
+                    add_caps::<N>(packet, basis, &lanes, node.equivalent, node.share, seen, &mut acc);
                 }
                 next = blend_i32(next, jump, active);
                 i = skip;
@@ -243,7 +253,7 @@ mod lanes {
                 let reach2 = _mm256_mul_ps(_mm256_set1_ps(negligible2), dot(q, q));
                 let seen = _mm256_and_ps(far, _mm256_cmp_ps::<_CMP_GE_OQ>(_mm256_set1_ps(e[3] * e[3]), reach2));
                 if _mm256_movemask_ps(seen) != 0 {
-                    add_caps::<N>(packet, basis, &lanes, e, seen, &mut acc);
+                    add_caps::<N>(packet, basis, &lanes, e, node.share, seen, &mut acc);
                 }
             }
             let down = _mm256_andnot_ps(cluster, front);
@@ -270,14 +280,17 @@ mod lanes {
     /// centre is on or behind the tangent plane or at the receiver, a hemisphere from
     /// inside. `y_l^m` scaled by the rotated ZH `sqrt(4 pi / (2l + 1)) V_l`, which for the
     /// cap's closed form is `2 pi depth (P_{l-1} - P_{l+1}) / (2l + 1)` (`1 - x` at `l =
-    /// 0`), times the ratio weight.
+    /// 0`), times the ratio weight; the depth is the fitted one for the cap's radius,
+    /// overlapped by the sphere's `share` ([`super::super::fitted_depth::overlapped_depth`]).
     #[target_feature(enable = "avx2,fma")]
     #[inline]
+    #[allow(clippy::too_many_arguments)]
     unsafe fn add_caps<const N: usize>(
         packet: &CapPacket,
         basis: &LaneBasis,
         lanes: &Packet,
         sphere: [f32; 4],
+        share: f32,
         seen: __m256,
         acc: &mut [__m256; MAX_COEFFICIENTS],
     ) {
@@ -310,6 +323,15 @@ mod lanes {
         let ratio = _mm256_and_ps(keep, ratio);
         let alpha = asin(ratio);
         let depth = crate::shade::fitted_depth::depth_at_lanes(packet.cap_depths, alpha);
+        let range = packet.log_epsilon - packet.cap_depths[0];
+        let depth = if share < 1.0 && range < 0.0 {
+            // `overlapped_depth`, the share and the range the same in every lane.
+            let lambda = _mm256_div_ps(_mm256_sub_ps(_mm256_set1_ps(packet.log_epsilon), depth), _mm256_set1_ps(range));
+            let lambda = _mm256_min_ps(_mm256_max_ps(lambda, zero), one);
+            _mm256_mul_ps(depth, _mm256_sub_ps(one, _mm256_mul_ps(lambda, _mm256_set1_ps(1.0 - share))))
+        } else {
+            depth
+        };
         let weight = if packet.ratio_attenuation { ratio } else { one };
         let scale =
             _mm256_and_ps(keep, _mm256_mul_ps(_mm256_mul_ps(_mm256_set1_ps(std::f32::consts::TAU), weight), depth));
@@ -460,7 +482,10 @@ mod tests {
     use crate::logsh::{cap_log_zh, training::SplitMix, view_blocker, BlockerView};
     use crate::scene::Sphere;
     use crate::sh::{add_rotated_zonal, coefficient_count};
-    use crate::shade::fitted_depth::depth_at;
+    use crate::shade::fitted_depth::{depth_at, overlapped_depth};
+
+    /// The packets' `log(eps)` in these tests.
+    const LOG_EPSILON: f64 = -std::f64::consts::LN_10;
 
     /// What the kernel's walk sums for one receiver, in f64: every sphere or cluster
     /// [`BlockerTree::visit`] sees, its cap at its fitted depth, rotated and added.
@@ -468,11 +493,12 @@ mod tests {
         let (p, n) = (receiver.position.map(f64::from), receiver.normal.map(f64::from));
         let mut acc = vec![0.0; coefficient_count(order)];
         let mut zonal = vec![0.0; order];
-        tree.visit(p, n, receiver.object, |sphere| {
+        tree.visit(p, n, receiver.object, |sphere, share| {
             if let BlockerView::Cap { direction, alpha, weight } =
                 view_blocker(p, n, sphere.center, sphere.radius, ratio)
             {
-                cap_log_zh(order, depth_at(depths, alpha), alpha, &mut zonal);
+                let depth = overlapped_depth(depth_at(depths, alpha), share, LOG_EPSILON, depths[0]);
+                cap_log_zh(order, depth, alpha, &mut zonal);
                 add_rotated_zonal(order, &zonal, weight, direction, &mut acc);
             }
         });
@@ -506,7 +532,7 @@ mod tests {
             let tree = BlockerTree::new(&spheres, cluster_ratio);
             for order in 3..=8 {
                 for ratio in [false, true] {
-                    let packet = CapPacket::new(&tree, order, &depths32, ratio);
+                    let packet = CapPacket::new(&tree, order, &depths32, LOG_EPSILON as f32, ratio);
                     for size in [8, 5, 1] {
                         let receivers: Vec<Receiver> = (0..size)
                             .map(|k| {
@@ -545,7 +571,7 @@ mod tests {
         }
         let tree = BlockerTree::new(&[Sphere::new([0.0, 0.0, 1.0], 0.5), Sphere::new([3.0, 0.0, 1.0], 0.0)], 0.35);
         let depths = vec![-2.3f32; DEPTH_INTERVALS + 1];
-        let packet = CapPacket::new(&tree, 4, &depths, true);
+        let packet = CapPacket::new(&tree, 4, &depths, LOG_EPSILON as f32, true);
         let receivers = [
             Receiver { position: [0.0, 0.0, 1.0], normal: [0.0, 0.0, 1.0], object: 0 },
             Receiver { position: [0.0, 0.0, 0.5], normal: [0.0, 0.0, 1.0], object: 0 },

@@ -162,6 +162,24 @@ pub fn depth_at<T: Real>(log_depths: &[T], angle: T) -> T {
     log_depths[k] + t * (log_depths[k + 1] - log_depths[k])
 }
 
+/// The depth of a cap of fitted depth `depth` whose sphere owns `share` of its solid
+/// angle ([`super::blocker_tree::overlap_shares`]): `depth (1 - lambda (1 - share))`, with
+/// `lambda = (log(eps) - depth) / (log(eps) - shallowest)` in `[0, 1]`, `shallowest` the
+/// table's depth for the smallest caps. A narrow cap (`lambda` 1), which `exp` takes
+/// linearly, blocks `share` of what it would alone, so overlapping narrow caps together
+/// take their union; a wide one (`lambda` 0, the depth `log(eps)`) keeps its depth, as
+/// the overlap floor already clamps where several cover a direction. The WGSL pass and
+/// the packets compute the same (`overlapped_depth` in `shaders/logsh.wgsl`).
+#[inline(always)]
+pub fn overlapped_depth<T: Real>(depth: T, share: T, log_epsilon: T, shallowest: T) -> T {
+    let range = log_epsilon - shallowest;
+    if !(range < T::zero()) {
+        return depth;
+    }
+    let lambda = ((log_epsilon - depth) / range).max(T::zero()).min(T::one());
+    depth * (T::one() - lambda * (T::one() - share))
+}
+
 /// The log visibility of one azimuthal slice whose horizon lies at elevation `sigma`:
 /// `log(eps)` up to `base` (the tangent plane's elevation, or the horizontal where the
 /// tangent plane is not folded in), and the band from `base` to `sigma` at the depth

@@ -416,6 +416,28 @@ impl SharpLobe {
         }
         sum / (STEPS * STEPS) as f64
     }
+
+    /// The share of the lobe about `R`, as the map is prefiltered with it, that lies above
+    /// the tangent plane at `n . R = mu`, by a 64 x 64 midpoint rule over its distribution
+    /// (half vectors drawn from `D cos` about `R`, each direction at twice their angle); 1
+    /// for a Phong lobe, whose albedo already holds that share.
+    pub fn share_above_tangent_plane(self, mu: f64) -> f64 {
+        const STEPS: usize = 64;
+        let SharpLobe::Ggx { alpha } = self else { return 1.0 };
+        let mu = mu.clamp(0.0, 1.0);
+        // R = (sqrt(1 - mu^2), 0, mu); t = (-mu, 0, sqrt(1 - mu^2)) in its plane.
+        let across = (1.0 - mu * mu).sqrt();
+        let mut above = 0usize;
+        for i in 0..STEPS {
+            let xi = (i as f64 + 0.5) / STEPS as f64;
+            let theta = 2.0 * (alpha * (xi / (1.0 - xi)).sqrt()).atan();
+            for j in 0..STEPS {
+                let phi = 2.0 * PI * (j as f64 + 0.5) / STEPS as f64;
+                above += usize::from(mu * theta.cos() + across * theta.sin() * phi.cos() > 0.0);
+            }
+        }
+        above as f64 / (STEPS * STEPS) as f64
+    }
 }
 
 /// The lobe's value at each direction of its core's [`super::sun::DiskDirections`] (the disk of
@@ -463,6 +485,46 @@ pub fn environment_albedo_table(lobe: SharpLobe, colour_passes: bool) -> Vec<f32
         albedo_table(lobe)
     }
 }
+
+/// [`SharpLobe::share_above_tangent_plane`] over `n . R` in `[0, 1]`, [`ALBEDO_ENTRIES`]
+/// entries read with [`albedo_lookup`], worked out once per lobe and process.
+pub fn share_above_table(lobe: SharpLobe) -> Vec<f32> {
+    static TABLES: Memo<(bool, u64), Vec<f32>> = Memo::new();
+    let key = match lobe {
+        SharpLobe::Ggx { alpha } => (true, alpha.to_bits()),
+        SharpLobe::Phong { exponent } => (false, exponent.to_bits()),
+    };
+    let table = TABLES.get_or_build(key, || {
+        (0..ALBEDO_ENTRIES)
+            .map(|i| lobe.share_above_tangent_plane(i as f64 / (ALBEDO_ENTRIES - 1) as f64) as f32)
+            .collect()
+    });
+    table.to_vec()
+}
+
+/// What the prefiltered light `P(R)` is divided by, so that it reads as the mean light
+/// over the part of the lobe above the tangent plane: `1 - w (1 - share)`, `share` the
+/// lobe's share above the tangent plane at `n . R` ([`share_above_table`]) and `w =
+/// max(n_z, 0)` where the map's lower hemisphere is black (a ground plane or a height
+/// field hides it), 0 elsewhere.
+///
+/// The split sum's lobe about `R` is the `n = v = R` case; nearer grazing it reaches below
+/// the tangent plane, which the surface never reflects. On a floor the part below is the
+/// black lower hemisphere, so `P(R)` is `share` times the mean over the rest: a Principled
+/// floor of roughness 1 seen at `n . v = 0.16` (`glossy.py`) kept half of Cycles'
+/// specular layer. On a wall the part below its tangent plane is sky as much as the part
+/// above is, and `P(R)` is that mean already: hence the weight `n_z`.
+pub fn below_tangent_divisor(share_above: &[f32], n_dot_r: f64, normal_z: f64, sky_only: bool) -> f64 {
+    if !sky_only {
+        return 1.0;
+    }
+    let w = normal_z.clamp(0.0, 1.0);
+    1.0 - w * (1.0 - albedo_lookup(share_above, n_dot_r).max(MIN_SHARE_ABOVE))
+}
+
+/// The least share [`below_tangent_divisor`] divides by: a lobe about a grazing `R`
+/// keeps about half of itself above the tangent plane.
+const MIN_SHARE_ABOVE: f64 = 0.25;
 
 /// Linear interpolation of an [`albedo_table`] at `n . v = mu`.
 pub fn albedo_lookup(table: &[f32], mu: f64) -> f64 {
@@ -558,6 +620,20 @@ impl MapLevels {
         let convolution = Convolution::new(parts, handover, lobe, output.width, output.height);
         Prefiltered::new(output.width, output.height, Source::Convolution(Box::new(convolution)))
     }
+}
+
+/// The core's share of a direction at `cos theta = z` from the lobe's axis: 1 up to the
+/// handover's first cosine, 0 beyond its second, a smoothstep in `cos theta` between. A
+/// lobe whose core reaches round the sphere (GGX from `alpha` 0.8 on, whose half-width
+/// is over 120 degrees) has both cosines at -1, and the core takes every direction: the
+/// ratio between them, 0 / 0 at the antipode, once made a texel's weights NaN and its
+/// table empty, and the map of such a lobe came out as the raw map's texels.
+fn core_fade([fade_start, fade_end]: [f64; 2], z: f64) -> f64 {
+    if fade_start - fade_end <= 0.0 {
+        return if z >= fade_end { 1.0 } else { 0.0 };
+    }
+    let t = ((fade_start - z) / (fade_start - fade_end)).clamp(0.0, 1.0);
+    1.0 - t * t * (3.0 - 2.0 * t)
 }
 
 /// One reduction: each texel the solid-angle-weighted mean of the 2 x 2 it covers.
@@ -825,11 +901,7 @@ impl Convolution {
     /// The table of output row `row` and phase `phase`: the weights of the texel at
     /// column `phase`, the reach of each part about its axis.
     fn table(&self, width: usize, height: usize, phase: usize, row: usize) -> WeightTable {
-        let [fade_start, fade_end] = self.handover;
-        let fade_out = |z: f64| {
-            let t = ((fade_start - z) / (fade_start - fade_end)).clamp(0.0, 1.0);
-            1.0 - t * t * (3.0 - 2.0 * t)
-        };
+        let fade_out = |z: f64| core_fade(self.handover, z);
         let theta = polar(row, height);
         let axis = direction(theta.sin_cos(), azimuth(phase, width).sin_cos());
         let (mut runs, mut weights, mut total) = (Vec::new(), Vec::<f64>::new(), 0.0f64);
@@ -1041,11 +1113,7 @@ mod tests {
         column: usize,
         row: usize,
     ) -> [f32; 3] {
-        let [fade_start, fade_end] = handover;
-        let fade_out = |z: f64| {
-            let t = ((fade_start - z) / (fade_start - fade_end)).clamp(0.0, 1.0);
-            1.0 - t * t * (3.0 - 2.0 * t)
-        };
+        let fade_out = |z: f64| super::core_fade(handover, z);
         let theta = polar(row, height);
         let axis = direction(theta.sin_cos(), azimuth(column, width).sin_cos());
         let (mut sum, mut weights) = ([0.0f64; 3], 0.0f64);

@@ -6,12 +6,13 @@ use super::blocker_tree::BlockerTree;
 use super::cap_packet::{CapPacket, Receiver, LANES};
 pub use super::exponentiator::{quadrature_weight, sh_space_max_magnitude, Exponentiator, SH_SPACE_BLEND};
 use super::fitted_depth::{
-    banded_slice_of_tangents, banded_slices_of_tangents, depth_at, fitted_depths, DepthKey, DEPTH_INTERVALS,
+    banded_slice_of_tangents, banded_slices_of_tangents, depth_at, fitted_depths, overlapped_depth, DepthKey,
+    DEPTH_INTERVALS,
 };
 use super::frame::{pixel_source, PixelSource, PixelWork};
 use super::glossy::{
-    albedo_lookup, cone_share, cone_weights, environment_albedo_table, ggx_alpha, lamp_scale_table, smooth_over_disk,
-    GgxLit, MapLevels, Prefiltered, SharpLobe,
+    albedo_lookup, below_tangent_divisor, cone_share, cone_weights, environment_albedo_table, ggx_alpha,
+    lamp_scale_table, share_above_table, smooth_over_disk, GgxLit, MapLevels, Prefiltered, SharpLobe,
 };
 pub use super::point::{above_ground, reflect_view, SurfacePoint};
 use super::settings::{GlossyMethod, ShadingSettings, MAX_DIRECTIONS};
@@ -62,6 +63,9 @@ pub(crate) struct SharpGlossy<T> {
     pub(crate) prefiltered: Arc<Prefiltered>,
     /// The lobe's albedo over `n . v` ([`super::glossy::albedo_table`]).
     pub(crate) albedo: Vec<f32>,
+    /// The lobe's share above the tangent plane over `n . R`
+    /// ([`super::glossy::share_above_table`]).
+    pub(crate) share_above: Vec<f32>,
     /// What a sharp light's glossy term is scaled by over `n . v`
     /// ([`super::glossy::lamp_scale_table`]).
     pub(crate) lamp_scale: Vec<f32>,
@@ -78,6 +82,70 @@ pub(crate) struct SharpGlossy<T> {
     /// The cone's directions about +Z.
     pub(crate) core: DiskShape,
 }
+
+/// Bands of [`OpenIrradiance`]: the clamped cosine's ZH falls as `l^-5/2`, so the bands
+/// from 8 on hold under 0.5 % of an open receiver's light under any map.
+pub const IRRADIANCE_ORDER: usize = crate::sh::MAX_ORDER;
+
+/// `E(n) / pi` of the light's map, the open receiver's diffuse light in full: the map's
+/// order-8 projection dotted with the clamped cosine rotated to `n` (Ramamoorthi and
+/// Hanrahan 2001, with four more bands), evaluated per receiver.
+#[derive(Clone, Debug)]
+pub(crate) struct OpenIrradiance {
+    /// The map's SH coefficients per colour channel, `IRRADIANCE_ORDER^2` each.
+    light: [Vec<f64>; 3],
+    /// ZH of `max(cos, 0) / pi` about +Z, `IRRADIANCE_ORDER` values.
+    cosine: Vec<f64>,
+}
+
+impl OpenIrradiance {
+    /// The irradiance of `map` times `strength`.
+    pub(crate) fn new(map: &EnvironmentMap, strength: f32) -> Self {
+        let order = IRRADIANCE_ORDER;
+        let coefficients = crate::scene::light::project_texels(map, order);
+        let channel = |c: usize| coefficients.iter().map(|rgb| rgb[c] * f64::from(strength)).collect::<Vec<f64>>();
+        const STEPS: usize = 4096;
+        let mut p = [0.0f64; IRRADIANCE_ORDER];
+        let mut cosine = vec![0.0; order];
+        for k in 0..STEPS {
+            let theta = (k as f64 + 0.5) / STEPS as f64 * FRAC_PI_2;
+            crate::sh::basis::legendre(order, theta.cos(), &mut p);
+            for (l, z) in cosine.iter_mut().enumerate() {
+                let y = ((2 * l + 1) as f64 / (4.0 * std::f64::consts::PI)).sqrt() * p[l];
+                *z += 2.0 * theta.cos() * y * theta.sin() * FRAC_PI_2 / STEPS as f64;
+            }
+        }
+        Self { light: [channel(0), channel(1), channel(2)], cosine }
+    }
+
+    /// The coefficients the GPU pass dots with the basis at `n` (`irradiance_at` in
+    /// `shaders/shade.wgsl`): per channel, each light coefficient times its band's
+    /// rotated cosine, `IRRADIANCE_ORDER^2` values each.
+    pub(crate) fn weighted_light(&self) -> [Vec<f64>; 3] {
+        self.light.each_ref().map(|light| {
+            light
+                .iter()
+                .enumerate()
+                .map(|(i, l)| {
+                    let band = (i as f64).sqrt() as usize;
+                    l * crate::sh::basis::funk_hecke_factor(band) * self.cosine[band]
+                })
+                .collect()
+        })
+    }
+
+    /// `E(n) / pi` per colour channel.
+    pub(crate) fn at(&self, n: [f64; 3]) -> [f64; 3] {
+        let count = IRRADIANCE_ORDER * IRRADIANCE_ORDER;
+        let mut rotated = [0.0f64; MAX_COEFFICIENTS];
+        add_rotated_zonal(IRRADIANCE_ORDER, &self.cosine, 1.0, n, &mut rotated[..count]);
+        self.light.each_ref().map(|light| light.iter().zip(&rotated[..count]).map(|(l, r)| l * r).sum())
+    }
+}
+
+/// The open receiver's log-SH light below which [`ShadingKernel::open_corrected`] keeps
+/// log-SH's own value: a channel the light leaves dark.
+pub(crate) const OPEN_LIGHT_FLOOR: f64 = 1e-6;
 
 /// The sharpest Phong lobe given to log-SH (the glossy term with `--glossy sh`, the
 /// specular occlusion's lobe otherwise): the log-ZH tables are exact up to it
@@ -197,6 +265,15 @@ pub struct ShadingKernel<T> {
     /// Height of the scene's ground plane, which hides the lower hemisphere from
     /// receivers above it.
     pub(crate) ground: Option<f64>,
+    /// The glossy term's map has its lower hemisphere black: a ground plane or a height
+    /// field hides it ([`super::glossy::MapLevels::new`]).
+    pub(crate) sky_only: bool,
+    /// The light's map prefiltered with the clamped cosine, `E(n) / pi`: the open
+    /// receiver's diffuse light in full, which log-SH's `exp*(T + D) . L` at order n
+    /// approximates (none for a light given as SH alone).
+    pub(crate) irradiance: Option<OpenIrradiance>,
+    /// `exp*(T + D)` about +Z as ZH: the open receiver's diffuse transfer in log-SH.
+    pub(crate) diffuse_open: Vec<T>,
 }
 
 impl<T: Real> ShadingKernel<T> {
@@ -231,7 +308,9 @@ impl<T: Real> ShadingKernel<T> {
         let mut tangent = vec![T::zero(); order];
         cap_log_zh(order, T::of(epsilon.ln()), T::of(FRAC_PI_2), &mut tangent);
         let exp = Exponentiator::new(order, settings.exp, settings.hyb_threshold);
-        let materials = Self::material_lobes(settings, materials, lamp_fresnel, colour_passes, residual, ground, &exp);
+        let sky_only = ground.is_some() || has_heightfield;
+        let materials =
+            Self::material_lobes(settings, materials, lamp_fresnel, colour_passes, residual, sky_only, &exp);
         let (cap_depths, band_depths) = Self::depth_tables(settings, has_heightfield, &exp);
         let wedge = has_heightfield.then(|| WedgeOperator::new(order, settings.horizon.directions));
         let channel = |c: usize| light.iter().map(|rgb| T::of(rgb[c])).collect::<Vec<T>>();
@@ -243,6 +322,18 @@ impl<T: Real> ShadingKernel<T> {
                 &[channel64(0), channel64(1), channel64(2)],
             )
         });
+        let diffuse_open: Vec<T> = {
+            let table: LobeTable<T> = LobeTable::new(order, Lobe::Diffuse, epsilon);
+            let count = coefficient_count(order);
+            let mut f = vec![T::zero(); count];
+            add_rotated_zonal(order, &table.zonal, T::one(), [T::zero(), T::zero(), T::one()], &mut f);
+            if settings.tangent_occlusion {
+                add_rotated_zonal(order, &tangent, T::one(), [T::zero(), T::zero(), -T::one()], &mut f);
+            }
+            let mut e = vec![T::zero(); count];
+            exp.exp(&f, None, table.log_peak, &mut e);
+            (0..order).map(|l| e[l * l + l]).collect()
+        };
         Self {
             order,
             log_epsilon: T::of(epsilon.ln()),
@@ -271,6 +362,9 @@ impl<T: Real> ShadingKernel<T> {
             suns: suns.iter().map(SunDisk::new).collect(),
             points: points.to_vec(),
             ground,
+            sky_only,
+            irradiance: glossy_map(residual).map(|(map, strength)| OpenIrradiance::new(&map, strength)),
+            diffuse_open,
         }
     }
 
@@ -283,7 +377,7 @@ impl<T: Real> ShadingKernel<T> {
         lamp_fresnel: &BTreeMap<u32, f64>,
         colour_passes: bool,
         residual: &Light,
-        ground: Option<f64>,
+        sky_only: bool,
         exp: &Exponentiator,
     ) -> BTreeMap<u32, MaterialLobes<T>> {
         let order = settings.order;
@@ -293,7 +387,7 @@ impl<T: Real> ShadingKernel<T> {
         let levels = (any_phong && settings.glossy != GlossyMethod::Sh)
             .then(|| glossy_map(residual))
             .flatten()
-            .map(|(map, strength)| MapLevels::new(&map, strength, ground.is_some()));
+            .map(|(map, strength)| MapLevels::new(&map, strength, sky_only));
         let mut prefiltered: Vec<(SharpLobe, Arc<Prefiltered>)> = Vec::new();
         materials
             .iter()
@@ -325,6 +419,7 @@ impl<T: Real> ShadingKernel<T> {
                                 lamp_scale: lamp_scale_table(sharp_lobe, &albedo, fresnel),
                                 lamp_fresnel: fresnel,
                                 albedo,
+                                share_above: share_above_table(sharp_lobe),
                                 open: open_lobe(order, exp, &table),
                                 cone_share: cone_share(sharp_lobe, order),
                                 cone_weights: cone_weights(sharp_lobe),
@@ -421,7 +516,8 @@ impl<T: Real> ShadingKernel<T> {
             return CapSums::default();
         };
         let count = coefficient_count(self.order);
-        let packet = CapPacket::new(tree, self.order, &self.cap_depths_f32, self.ratio_attenuation);
+        let log_epsilon = self.log_epsilon.to_f32().unwrap_or(0.0);
+        let packet = CapPacket::new(tree, self.order, &self.cap_depths_f32, log_epsilon, self.ratio_attenuation);
         let mut sums = vec![0.0f32; points.len() * count];
         for (chunk, out) in points.chunks(LANES).zip(sums.chunks_mut(LANES * count)) {
             let receivers: Vec<Receiver> = chunk
@@ -609,10 +705,13 @@ impl<T: Real> ShadingKernel<T> {
         let order = self.order;
         let (pt, nt) = (p.map(T::of), n.map(T::of));
         let mut zonal = [T::zero(); crate::sh::MAX_ORDER];
-        tree.visit(p, n, object, |sphere| {
+        let shallowest = self.cap_depths[0];
+        tree.visit(p, n, object, |sphere, share| {
             let view = view_blocker(pt, nt, sphere.center.map(T::of), T::of(sphere.radius), self.ratio_attenuation);
             if let BlockerView::Cap { direction, alpha, weight } = view {
-                cap_log_zh(order, depth_at(&self.cap_depths, alpha), alpha, &mut zonal[..order]);
+                let fitted = depth_at(&self.cap_depths, alpha);
+                let depth = overlapped_depth(fitted, T::of(share), self.log_epsilon, shallowest);
+                cap_log_zh(order, depth, alpha, &mut zonal[..order]);
                 add_rotated_zonal(order, &zonal[..order], weight, direction, acc);
                 if let Some(occlusion) = occlusion.as_deref_mut() {
                     add_rotated_zonal(order, &zonal[..order], weight, direction, occlusion);
@@ -832,6 +931,7 @@ fn is_f32<T: Real>() -> bool {
 
 // The same shading split into compositing passes and visibility terms (`logsh render`).
 mod lit;
+pub(crate) use lit::open_corrected_channel;
 mod pixel_passes;
 mod transfer;
 pub(crate) use pixel_passes::ratio as visibility_ratio;

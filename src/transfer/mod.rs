@@ -22,13 +22,14 @@
 //! | `glossy_lobe.V` | float | what the glossy term reads: 0 nothing, 1 the light itself (mirror, background), 2 `sh_specular`, `3 + j` the header's prefiltered lobe `j` |
 //! | `glossy_direction.{X,Y,Z}` | float | the direction it reads along: the mirrored view, or the camera ray |
 //! | `glossy_weight.{X,Y}` | colour | prefiltered lobes: `A share cone` and `A (1 - share)` |
+//! | `diffuse_normal.{X,Y,Z}` | float | the normal the diffuse light is corrected at (the surface's, or under water the reflected surface's); only in frames whose header records `open_diffuse` |
 //! | `horizon.0` to `horizon.<S-1>` | half | the height field's highest horizon tangent over each of `S` sectors of the W azimuths `2 pi k / W` (`k S / W` the sector; `S = min(16, W)`, each azimuth's own by default, recorded in the header; 4 or 8 in files that do not record it, as many as they hold), rounded up, infinite where none was marched ([`crate::heightfield::HorizonPyramid::sector_maxima`]); only in frames whose height field may shadow a Sun lamp, or a sun the render took out of its map, at some turn ([`crate::heightfield::HorizonPyramid::may_rise_at_any_azimuth`]) |
 //!
 //! `D` is the diffuse lobe about the normal, `V` the log visibility, `T` the tangent and
 //! ground planes alone. Relit, per pixel and colour channel, with `L` the light's SH vector:
 //!
 //! ```text
-//! diffuse   = albedo max(sh_diffuse . L, 0) + lamps_diffuse
+//! diffuse   = albedo C(max(sh_diffuse . L, 0)) + lamps_diffuse
 //! specular  = specular_colour G + lamps_specular            (alpha 1)
 //! environment = specular_colour G                            (alpha 0, the background)
 //! G = max(sh_specular . L, 0)                         lobe 2
@@ -36,10 +37,15 @@
 //!   = light(R)                                        lobe 1
 //! ratio = lum(max(sh_specular . L, 0)) / lum(max(open_j(R) . L, 0)), clamped to [0, 1]
 //! visibility_x = lum(max(sh_x . L, 0)) / lum(max(sh_unoccluded . L, 0))
+//! C(d) = E(n) / pi clamp(d / max(open(n) . L, 0), 0, 1)  n = diffuse_normal, per channel
 //! ```
 //!
 //! with `P_j` the light prefiltered with lobe `j` and `open_j` its exponentiated lobe
-//! (both as [`crate::shade::glossy`] builds them; the header lists the lobes).
+//! (both as [`crate::shade::glossy`] builds them; the header lists the lobes). `C` is the
+//! render's correction of the diffuse light to the map's irradiance `E` (its order-8
+//! projection), `open` the header's `open_diffuse` ZH turned to `n`
+//! ([`crate::shade::kernel::open_corrected_channel`]); where the header records no
+//! `open_diffuse` (a light without a map), or `open(n) . L` is dark, `C(d) = d`.
 //!
 //! # Header (`logshTransfer`, a JSON text attribute of the part)
 //!
@@ -47,17 +53,19 @@
 //! frame was shaded with (map file, strength, Mapping rotation, turn), the window, whether
 //! the ground plane hides the lower hemisphere, the prefiltered lobes, the scene's Sun
 //! lamps as rendered (azimuth and elevation), the render's `--light-rotation` and its
-//! shading settings, checksums of what the Sun lamps were shaded from, and the `horizon`
-//! layer's sectors.
+//! shading settings, checksums of what the Sun lamps were shaded from, the `horizon`
+//! layer's sectors, and the open receiver's diffuse ZH where the diffuse light is
+//! corrected.
 //!
 //! # Size
 //!
 //! Per pixel at order `n`, in half floats: `n^2` per transfer layer (diffuse, unoccluded,
 //! specular with a Phong material, heightfield and blockers with both occluders), 14
-//! colour values and 4 floats, and 6 colour values more with a Sun lamp, with 16 halves
-//! more where a height field may shadow it at some turn. At order 4 with everything but a
-//! Sun lamp, `5 x 16 x 2 + 14 x 2 + 4 x 4 = 204` bytes, 106 MB uncompressed at 960 x 540
-//! before ZIP; a diffuse scene of spheres only, `2 x 16 x 2 + 44 = 108` bytes.
+//! colour values and 4 floats, 3 floats more under a map (`diffuse_normal`), and 6
+//! colour values more with a Sun lamp, with 16 halves more where a height field may
+//! shadow it at some turn. At order 4 with everything but a Sun lamp, under a map,
+//! `5 x 16 x 2 + 14 x 2 + 7 x 4 = 216` bytes, 112 MB uncompressed at 960 x 540 before
+//! ZIP; a diffuse scene of spheres only, `2 x 16 x 2 + 56 = 120` bytes.
 //!
 //! # What a relight shades again
 //!

@@ -58,7 +58,7 @@ fn header<T: Real>(kernel: &ShadingKernel<T>, plan: &FramePlan, light: LightSour
         sh: ShConvention::of_order(kernel.order()),
         light,
         light_window: window.get_name().to_string(),
-        sky_only: kernel.has_ground(),
+        sky_only: kernel.sky_only(),
         heightfield: plan.terrain.is_some(),
         blockers: !plan.blockers.is_empty(),
         lobes: kernel
@@ -77,6 +77,7 @@ fn header<T: Real>(kernel: &ShadingKernel<T>, plan: &FramePlan, light: LightSour
         view: plan.scene.view.absolute_spec(&plan.scene.dir),
         light_file_crc: plan.frame.light_file_crc,
         horizon_sectors: None,
+        open_diffuse: kernel.open_diffuse().unwrap_or_default(),
     }
 }
 

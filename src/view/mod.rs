@@ -79,6 +79,7 @@ use crate::scene::ViewTransform;
 use crate::shade::bounce::IndirectParts;
 use crate::transfer::{RelightLight, RelightOptions, SunLampFrame, SunLampTurn, TransferFrame};
 use anyhow::{anyhow, Context, Result};
+use rayon::prelude::*;
 use std::borrow::Cow;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
@@ -178,6 +179,7 @@ impl SharpLights {
         frame.glossy_lobe = Vec::new();
         frame.glossy_direction = Vec::new();
         frame.glossy_weight = Vec::new();
+        frame.diffuse_normal = None;
         let prepared = turn.as_ref().ok().zip(prepared).map(|(turn, prepared)| (turn.clone(), prepared));
         Self { file: file.to_path_buf(), lamps: frame, shown, suns, turn, prepared: Mutex::new(prepared) }
     }
@@ -686,6 +688,21 @@ fn frame_bodies(
     ] {
         put(name, 3, &at_shown(values.as_flattened(), 3));
     }
+    // The open receiver's light at each pixel's normal under the frame's own light, and
+    // the normal, which the page turns with the light.
+    if let Some(normals) = frame.diffuse_normal.as_ref().filter(|_| light.corrects_diffuse()) {
+        let normals = at_shown(normals.as_flattened(), 3);
+        let order = frame.order();
+        let open: Vec<f32> = normals
+            .par_chunks(3)
+            .flat_map_iter(|n| {
+                let n = [n[0], n[1], n[2]].map(f64::from);
+                light.open_diffuse_at(order, n).unwrap_or_default().into_iter().flatten()
+            })
+            .collect();
+        put("diffuse_normal", 3, &normals);
+        put("open_diffuse_light", 6, &open);
+    }
     if let Some(indirect) = &indirect {
         put("indirect", 3, &at_shown(indirect.as_flattened(), 3));
     }
@@ -739,6 +756,9 @@ fn frame_bodies(
         "order": frame.order(),
         "light": light.sh(),
         "lobes": frame.header.lobes.len(),
+        // The grids end with the open receiver's irradiance and light, by which the page
+        // corrects the diffuse light as the render did.
+        "open_diffuse": frame.diffuse_normal.is_some() && light.corrects_diffuse(),
         "pixels": layout,
         "maps": map_layout,
         "cycles": cycles.is_some(),

@@ -38,20 +38,35 @@ impl<T: Real> ShadingKernel<T> {
         point: &SurfacePoint,
     ) -> ([T; 3], [f32; 3], [f32; 3]) {
         let n = point.normal;
-        let scale = |c: [T; 3], k: [f32; 3]| [0, 1, 2].map(|i| c[i].to_f32().unwrap_or(0.0) * k[i]);
         let lit_diffuse = self.lit(visibility, &self.diffuse, n);
+        let diffuse_light = self.open_corrected(lit_diffuse, n);
+        let scale = |c: [T; 3], k: [f32; 3]| [0, 1, 2].map(|i| c[i].to_f32().unwrap_or(0.0) * k[i]);
         match &lobes.material {
             Material::Diffuse { albedo } | Material::Heightfield { albedo } => {
-                (lit_diffuse, scale(lit_diffuse, *albedo), [0.0; 3])
+                (lit_diffuse, scale(diffuse_light, *albedo), [0.0; 3])
             }
             Material::Phong { albedo, specular, .. } => {
-                let diffuse = scale(lit_diffuse, *albedo);
+                let diffuse = scale(diffuse_light, *albedo);
                 let phong = lobes.phong.as_ref().expect("phong materials carry their lobe");
                 let glossy = self.glossy_lit(occluders, visibility, occlusion, phong, lobes, point, *specular);
                 (lit_diffuse, diffuse, glossy)
             }
             Material::Water { .. } => ([T::zero(); 3], [0.0; 3], [0.0; 3]),
         }
+    }
+
+    /// The environment's diffuse light at a receiver of normal `n` whose log-SH light is
+    /// `lit = exp*(V + D) . L`: the open receiver's light in full, `E(n) / pi` from the
+    /// order-8 projection of the map ([`OpenIrradiance`]), times log-SH's share of it, `lit / exp*(T + D) . L` per channel in
+    /// `[0, 1]`; `lit` itself without a map or where the open receiver gets no light.
+    pub(crate) fn open_corrected(&self, lit: [T; 3], n: [f64; 3]) -> [T; 3] {
+        let Some(irradiance) = &self.irradiance else { return lit };
+        let open = open_lit(self.order, &self.diffuse_open, n, &self.light);
+        let full = irradiance.at(n);
+        [0, 1, 2].map(|c| {
+            let lit = lit[c].to_f64().unwrap_or(0.0);
+            T::of(open_corrected_channel(lit, open[c].to_f64().unwrap_or(0.0), full[c]))
+        })
     }
 
     /// The glossy radiance of a Phong material at `point`, times its specular colour: the
@@ -132,7 +147,9 @@ impl<T: Real> ShadingKernel<T> {
             0.0
         };
         // n . v = n . R, R the view mirrored about n.
-        let albedo = albedo_lookup(&sharp.albedo, dot(reflected, point.normal));
+        let n_dot_r = dot(reflected, point.normal);
+        let divisor = below_tangent_divisor(&sharp.share_above, n_dot_r, point.normal[2], self.sky_only);
+        let albedo = albedo_lookup(&sharp.albedo, n_dot_r) / divisor;
         (albedo * share * by_cone, albedo * (1.0 - share))
     }
 
@@ -255,5 +272,16 @@ impl<T: Real> ShadingKernel<T> {
             }
         }
         (as_f32(diffuse, glossy), suns_alone)
+    }
+}
+
+/// One colour channel of [`ShadingKernel::open_corrected`], which a relight shares:
+/// `full * clamp(lit / open, 0, 1)`, `full` the open receiver's light from the map's
+/// irradiance and `open` its log-SH light; `lit` itself where `open` is dark.
+pub(crate) fn open_corrected_channel(lit: f64, open: f64, full: f64) -> f64 {
+    if open > OPEN_LIGHT_FLOOR {
+        full.max(0.0) * (lit / open).clamp(0.0, 1.0)
+    } else {
+        lit
     }
 }

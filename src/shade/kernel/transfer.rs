@@ -5,7 +5,9 @@
 //! `exp*(V + lobe)` does not depend on the light (paper 000, Eq. 9: visibility and BRDF are
 //! summed in log space, the light enters only in the final dot product), so
 //! `max(exp*(V + D) . L', 0)` is the diffuse term under any light `L'` with exactly the
-//! visibility the point had. The prefiltered glossy term keeps what does not depend on
+//! visibility the point had, corrected at the point's normal to the map's irradiance as
+//! [`ShadingKernel::open_corrected`] corrects it (the normal is kept, and the open
+//! receiver's ZH in the header). The prefiltered glossy term keeps what does not depend on
 //! the light (the cone test, the lobe's albedo, the mirror direction) and the transfer its
 //! log-SH share of the specular occlusion needs; the scene's own lamps are light that a
 //! relight leaves where it was, kept as radiance.
@@ -64,6 +66,9 @@ pub struct PointTransfer {
     /// rounded up, where they were marched (infinite otherwise): what bounds the horizons
     /// of the Sun lamps a relight turns ([`crate::heightfield::HorizonsBetween`]).
     pub horizons: [f32; HORIZON_SECTORS],
+    /// The normal at which the diffuse light was corrected to the map's irradiance
+    /// ([`ShadingKernel::open_corrected`]): the point's own.
+    pub normal: [f32; 3],
 }
 
 impl PointTransfer {
@@ -82,6 +87,7 @@ impl PointTransfer {
         sun_lamps_diffuse: [0.0; 3],
         sun_lamps_specular: [0.0; 3],
         horizons: [f32::INFINITY; HORIZON_SECTORS],
+        normal: [0.0; 3],
     };
 }
 
@@ -95,10 +101,18 @@ impl<T: Real> ShadingKernel<T> {
             .collect()
     }
 
-    /// Whether the ground plane hides the lower hemisphere (from the prefiltered glossy
-    /// term's map too).
-    pub fn has_ground(&self) -> bool {
-        self.ground.is_some()
+    /// Whether the prefiltered glossy term's map has its lower hemisphere black: a ground
+    /// plane or a height field hides it.
+    pub fn sky_only(&self) -> bool {
+        self.sky_only
+    }
+
+    /// The open receiver's diffuse ZH about +Z, `exp*(T + D)`, where the diffuse light is
+    /// corrected to the map's irradiance ([`Self::open_corrected`]); `None` where it is not
+    /// (a light without a map).
+    pub fn open_diffuse(&self) -> Option<Vec<f64>> {
+        self.irradiance.as_ref()?;
+        Some(self.diffuse_open.iter().map(|v| v.to_f64().unwrap_or(0.0)).collect())
     }
 
     /// `exp*(visibility + lobe about axis)`, floored as [`Self::lit`] floors it, into `out`:
@@ -172,7 +186,8 @@ impl<T: Real> ShadingKernel<T> {
                 .each_ref()
                 .map(|l| l.iter().zip(&t[..count]).map(|(a, b)| a.to_f32().unwrap_or(0.0) * b).sum::<f32>().max(0.0))
         };
-        let mut out = PointTransfer { albedo, specular_colour, horizons, ..PointTransfer::DARK };
+        let normal = n.map(|c| c as f32);
+        let mut out = PointTransfer { albedo, specular_colour, horizons, normal, ..PointTransfer::DARK };
         self.transfer(&full, &self.diffuse, n, &mut out.diffuse);
         let none = Occluders { blockers: None, horizons: None };
         let mut unoccluded = [T::zero(); MAX_COEFFICIENTS];
@@ -180,6 +195,8 @@ impl<T: Real> ShadingKernel<T> {
         self.transfer(&unoccluded, &self.diffuse, n, &mut out.unoccluded);
         let (lit_diffuse, lit_unoccluded) = (lit(&out.diffuse), lit(&out.unoccluded));
         let visibility = visibility_ratio(lit_diffuse, lit_unoccluded);
+        let diffuse_light =
+            self.open_corrected(lit_diffuse.map(|c| T::of(f64::from(c))), n).map(|c| c.to_f32().unwrap_or(0.0));
         let (visibility_heightfield, visibility_blockers) =
             self.split_visibility(occluders, point, caps, &full, &unoccluded, visibility, |set, log| {
                 let transfer = match set {
@@ -221,7 +238,7 @@ impl<T: Real> ShadingKernel<T> {
         let (extracted_diffuse, extracted_specular) =
             self.sharp_lit(occluders, point, &lobes.material, &self.suns[scene_suns..], false, None).0;
         let passes = PixelPasses {
-            diffuse: [0, 1, 2].map(|k| lit_diffuse[k] * albedo[k] + (out.lamps_diffuse[k] + extracted_diffuse[k])),
+            diffuse: [0, 1, 2].map(|k| diffuse_light[k] * albedo[k] + (out.lamps_diffuse[k] + extracted_diffuse[k])),
             specular: [0, 1, 2]
                 .map(|k| glossy[k] * specular_colour[k] + (out.lamps_specular[k] + extracted_specular[k])),
             visibility,

@@ -116,6 +116,13 @@ pub struct TransferHeader {
     /// (`UNRECORDED_SECTORS`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub horizon_sectors: Option<usize>,
+    /// The open receiver's diffuse ZH about +Z, `exp*(T + D)` (`order` values), where the
+    /// render corrected the diffuse light to its map's irradiance
+    /// ([`crate::shade::kernel::open_corrected_channel`]); the frame then holds the
+    /// `diffuse_normal` layer it was corrected at. Empty without a map, and in files
+    /// written before the correction.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub open_diffuse: Vec<f64>,
 }
 
 /// The sectors the `horizon` layer kept before its header recorded them: quarters, then
@@ -189,6 +196,9 @@ impl TransferHeader {
             if !width || lobe.open.len() != order || !finite(&lobe.open) {
                 return bad(format!("the lobe of material {} is not a finite lobe of order {order}", lobe.material));
             }
+        }
+        if !(self.open_diffuse.is_empty() || self.open_diffuse.len() == order && finite(&self.open_diffuse)) {
+            return bad(format!("open_diffuse is not {order} finite values"));
         }
         Ok(())
     }
@@ -267,6 +277,10 @@ pub struct TransferFrame {
     /// ([`super::SunLampTurn`]). `None` in other frames and in files written before it was
     /// kept.
     pub horizons: Option<Vec<f32>>,
+    /// Per pixel, the normal at which the diffuse light was corrected to the map's
+    /// irradiance (the surface's, or the reflected surface's under water), where the
+    /// header holds `open_diffuse`.
+    pub diffuse_normal: Option<Vec<[f32; 3]>>,
     /// The render's bounce light from the terrain and from the blockers
     /// (`indirect_heightfield`, `indirect_blockers`), which a relight keeps as rendered;
     /// `None` in a frame written before bounce light, or while one is being shaded.
@@ -312,6 +326,7 @@ pub struct TransferRow<'a> {
     alpha: &'a mut [f32],
     /// One value per sector and pixel.
     horizons: Option<&'a mut [f32]>,
+    diffuse_normal: Option<&'a mut [[f32; 3]]>,
 }
 
 impl TransferRow<'_> {
@@ -390,6 +405,9 @@ impl TransferRow<'_> {
                 *kept = half_at_least(tangent);
             }
         }
+        if let Some(layer) = &mut self.diffuse_normal {
+            layer[x] = point.normal;
+        }
     }
 }
 
@@ -409,6 +427,7 @@ impl TransferFrame {
         let coefficients = n * coefficient_count(header.sh.order);
         let layer = |present: bool| present.then(|| vec![0.0; coefficients]);
         let sun_lamps = !header.sun_lamps.is_empty();
+        let corrected = !header.open_diffuse.is_empty();
         Self {
             width,
             height,
@@ -429,6 +448,7 @@ impl TransferFrame {
             glossy_weight: vec![[0.0; 2]; n],
             alpha: vec![0.0; n],
             horizons: (horizon_sectors > 0).then(|| vec![f32::INFINITY; n * horizon_sectors]),
+            diffuse_normal: corrected.then(|| vec![[0.0; 3]; n]),
             bounce: None,
             position: std::sync::Arc::from([]),
             normal: std::sync::Arc::from([]),
@@ -472,6 +492,7 @@ impl TransferFrame {
         let mut glossy_weight = self.glossy_weight.chunks_mut(width);
         let mut alpha = self.alpha.chunks_mut(width);
         let mut horizons = self.horizons.as_deref_mut().map(|layer| layer.chunks_mut((width * sectors).max(1)));
+        let mut diffuse_normal = self.diffuse_normal.as_deref_mut().map(|layer| layer.chunks_mut(width));
         let row = "every layer has a row per row of the frame";
         (0..self.height)
             .map(|_| TransferRow {
@@ -492,6 +513,7 @@ impl TransferFrame {
                 glossy_weight: glossy_weight.next().expect(row),
                 alpha: alpha.next().expect(row),
                 horizons: horizons.as_mut().map(|rows| rows.next().expect(row)),
+                diffuse_normal: diffuse_normal.as_mut().map(|rows| rows.next().expect(row)),
             })
             .collect()
     }
@@ -538,6 +560,9 @@ impl TransferFrame {
             if let Some(values) = values {
                 channels.extend(OutputChannel::layer(layer, &rgb, values.as_flattened(), colour));
             }
+        }
+        if let Some(values) = &self.diffuse_normal {
+            channels.extend(OutputChannel::layer("diffuse_normal", &xyz, values.as_flattened(), SampleType::Float));
         }
         if let Some(values) = &self.horizons {
             let sectors = self.horizon_sectors();

@@ -23,6 +23,7 @@ struct HeldLayers {
     /// Horizon channels per pixel, 0 where the file holds none.
     horizon_sectors: usize,
     bounce: bool,
+    diffuse_normal: bool,
 }
 
 impl TransferFrame {
@@ -82,6 +83,7 @@ impl TransferFrame {
             glossy_weight: sized(spare.glossy_weight, n),
             alpha: sized(spare.alpha, n),
             horizons: (sectors > 0).then(|| sized(spare.horizons.unwrap_or_default(), n * sectors)),
+            diffuse_normal: held.diffuse_normal.then(|| sized(spare.diffuse_normal.unwrap_or_default(), n)),
             bounce: held.bounce.then(|| {
                 let [heightfield, blockers] = spare.bounce.map(|b| [b.heightfield, b.blockers]).unwrap_or_default();
                 IndirectParts { heightfield: sized(heightfield, n), blockers: sized(blockers, n) }
@@ -114,6 +116,7 @@ impl TransferFrame {
             glossy_weight,
             alpha,
             horizons,
+            diffuse_normal,
             bounce,
             position,
             normal,
@@ -139,6 +142,9 @@ impl TransferFrame {
         }
         targets.push(named(glossy_weight.as_flattened_mut(), "glossy_weight.", &["X", "Y"]));
         targets.push(named(alpha, "", &["A"]));
+        if let Some(values) = diffuse_normal {
+            targets.push(named(values.as_flattened_mut(), "diffuse_normal.", &xyz));
+        }
         if let Some(parts) = bounce {
             targets.push(named(parts.heightfield.as_flattened_mut(), "indirect_heightfield.", &rgb));
             targets.push(named(parts.blockers.as_flattened_mut(), "indirect_blockers.", &rgb));
@@ -259,7 +265,15 @@ impl HeldLayers {
                  where it does",
             ));
         }
+        let diffuse_normal = channels.has("diffuse_normal.X");
+        if diffuse_normal == header.open_diffuse.is_empty() {
+            return Err(SceneError::invalid(
+                file,
+                "holds diffuse_normal where its header records no open_diffuse, or lacks it where it does",
+            ));
+        }
         Ok(Self {
+            diffuse_normal,
             heightfield_and_blockers: has_heightfield,
             specular: has_sh("sh_specular"),
             sun_lamps,

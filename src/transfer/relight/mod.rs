@@ -9,7 +9,7 @@ use crate::scene::light::{equirectangular_to_direction, file_crc, lookup_coordin
 use crate::scene::{EnvironmentMap, Light, LightSource, SceneError, SunLight};
 use crate::shade::compositing::ShadedPasses;
 use crate::shade::glossy::{MapLevels, Prefiltered};
-use crate::shade::kernel::{glossy_map, occlusion_ratio, visibility_ratio};
+use crate::shade::kernel::{glossy_map, occlusion_ratio, open_corrected_channel, visibility_ratio, OpenIrradiance};
 use crate::shade::LightWindow;
 use clap::ValueEnum;
 use dots::*;
@@ -113,10 +113,13 @@ pub struct RelightLight {
     /// Per lobe of the header, the light convolved with its open lobe
     /// ([`open_light_blocks`]).
     open: Vec<Blocks>,
+    /// Where the frame's diffuse light is corrected to the map's irradiance
+    /// ([`TransferHeader::open_diffuse`]): the light's.
+    open_diffuse: Option<OpenDiffuse>,
     /// Whether the suns of its map are taken out ([`Self::with_sharp_suns`]).
     sharp: bool,
     /// What it was built for, to be reused by the next frame of a sequence.
-    key: (usize, String, bool, Vec<super::layers::PrefilteredLobe>),
+    key: (usize, String, bool, Vec<super::layers::PrefilteredLobe>, Vec<f64>),
     /// The CRC-32 of its map's file as it was read ([`crate::scene::light::file_crc`]).
     map_crc: Option<u32>,
 }
@@ -185,8 +188,14 @@ impl RelightLight {
         let prefiltered =
             header.lobes.iter().map(|lobe| levels.as_ref().map(|levels| levels.prefilter(lobe.lobe))).collect();
         let open = header.lobes.iter().map(|lobe| open_light_blocks(&sh, &lobe.open)).collect();
-        let key = (order, header.light_window.clone(), header.sky_only, header.lobes.clone());
-        Ok(Self { source, light, sharp_suns, sh, blocks, prefiltered, open, sharp, key, map_crc })
+        let open_diffuse =
+            (!header.open_diffuse.is_empty()).then(|| glossy_map(held)).flatten().map(|(map, strength)| OpenDiffuse {
+                irradiance: OpenIrradiance::new(&map, strength),
+                open: open_light_blocks(&sh, &header.open_diffuse),
+            });
+        let key =
+            (order, header.light_window.clone(), header.sky_only, header.lobes.clone(), header.open_diffuse.clone());
+        Ok(Self { source, light, sharp_suns, sh, blocks, prefiltered, open, open_diffuse, sharp, key, map_crc })
     }
 
     /// The suns taken out of its map, shaded per pixel from the scene, not by the SH
@@ -218,7 +227,38 @@ impl RelightLight {
     pub fn serves(&self, source: &LightSource, header: &TransferHeader, sharp: bool) -> bool {
         self.source == *source
             && self.sharp == sharp
-            && self.key == (header.sh.order, header.light_window.clone(), header.sky_only, header.lobes.clone())
+            && self.key
+                == (
+                    header.sh.order,
+                    header.light_window.clone(),
+                    header.sky_only,
+                    header.lobes.clone(),
+                    header.open_diffuse.clone(),
+                )
+    }
+}
+
+/// The light of a frame's open receiver, by which a relight corrects its diffuse light
+/// as the render did ([`crate::shade::kernel::open_corrected_channel`]).
+struct OpenDiffuse {
+    /// `E(n) / pi` of the light's map.
+    irradiance: OpenIrradiance,
+    /// The light convolved with the open receiver's ZH ([`open_light_blocks`]).
+    open: Blocks,
+}
+
+impl OpenDiffuse {
+    /// `lit`, the diffuse light `exp*(V + D) . L`, corrected at the normal `n`.
+    ///
+    /// # Safety
+    /// The processor has what `D` needs ([`Dots::dot`]).
+    #[inline(always)]
+    unsafe fn corrected<D: Dots>(&self, lit: [f32; 3], n: [f32; 3], order: usize) -> [f32; 3] {
+        let n = n.map(f64::from);
+        // SAFETY: the caller holds `D`'s contract.
+        let open = unsafe { open_light::<D>(&self.open, order, n) };
+        let full = self.irradiance.at(n);
+        [0, 1, 2].map(|c| open_corrected_channel(f64::from(lit[c]), f64::from(open[c]), full[c]) as f32)
     }
 }
 
@@ -233,14 +273,29 @@ pub struct SampledMap {
 impl SampledMap {
     /// `radiance` at the texel centres of a `width` x `height` grid.
     fn sample(width: usize, height: usize, radiance: impl Fn([f64; 3]) -> [f32; 3] + Sync) -> Self {
+        Self::sample_rows(width, height, |row| 1.0 - (row as f64 + 0.5) / height as f64, radiance)
+    }
+
+    /// `radiance` on a grid whose first row is the zenith and last the nadir, `height`
+    /// rows evenly apart from pole to pole: a receiver facing straight up, as floors do,
+    /// reads it exactly.
+    fn sample_from_pole_to_pole(width: usize, height: usize, radiance: impl Fn([f64; 3]) -> [f32; 3] + Sync) -> Self {
+        Self::sample_rows(width, height, |row| 1.0 - row as f64 / (height - 1).max(1) as f64, radiance)
+    }
+
+    /// `radiance` at the column centres of a `width` x `height` grid, row `r` at the
+    /// map's `v = v_of(r)`.
+    fn sample_rows(
+        width: usize,
+        height: usize,
+        v_of: impl Fn(usize) -> f64 + Sync,
+        radiance: impl Fn([f64; 3]) -> [f32; 3] + Sync,
+    ) -> Self {
         let texels = (0..width * height)
             .into_par_iter()
             .map(|i| {
                 let (column, row) = (i % width, i / width);
-                radiance(equirectangular_to_direction(
-                    (column as f64 + 0.5) / width as f64,
-                    1.0 - (row as f64 + 0.5) / height as f64,
-                ))
+                radiance(equirectangular_to_direction((column as f64 + 0.5) / width as f64, v_of(row)))
             })
             .collect();
         Self { width, height, texels }
@@ -253,6 +308,12 @@ pub const SAMPLED_MAP_WIDTH: usize = 1024;
 /// The grid of the open lobes' light: band-limited at order 8 or less, so a texel every
 /// 5.6 degrees holds it to bilinear accuracy.
 const OPEN_LIGHT_GRID: [usize; 2] = [64, 32];
+
+/// The grid of the open receiver's light by normal, from pole to pole
+/// ([`RelightLight::sampled_maps`]), which the viewer reads only for the change a turn
+/// makes to each pixel's exact value: a texel every 1.4 degrees holds its bands
+/// bilinearly.
+const OPEN_DIFFUSE_GRID: [usize; 2] = [256, 129];
 
 impl RelightLight {
     /// The light's SH vector per colour channel, as the relight dots it.
@@ -296,8 +357,11 @@ impl RelightLight {
     }
 
     /// What the glossy lookups read, as grids: the light itself (lobe code 1), then each
-    /// prefiltered lobe's map, then each lobe's open light `max(open_j(R) . L, 0)`. Maps
-    /// wider than [`SAMPLED_MAP_WIDTH`] are resampled to it.
+    /// prefiltered lobe's map, then each lobe's open light `max(open_j(R) . L, 0)`; then,
+    /// where the frame's diffuse light is corrected to the map's irradiance
+    /// ([`Self::corrects_diffuse`]), `E(n) / pi` and the open receiver's light
+    /// `max(open(n) . L, 0)` by normal, on grids from pole to pole. Maps wider than
+    /// [`SAMPLED_MAP_WIDTH`] are resampled to it.
     pub fn sampled_maps(&self, order: usize) -> Vec<SampledMap> {
         let size = |width: usize, height: usize| {
             if width > SAMPLED_MAP_WIDTH {
@@ -325,7 +389,31 @@ impl RelightLight {
             // SAFETY: the portable dots need no processor feature.
             maps.push(SampledMap::sample(width, height, |d| unsafe { open_light::<PortableDots>(open, order, d) }));
         }
+        if self.open_diffuse.is_some() {
+            let [width, height] = OPEN_DIFFUSE_GRID;
+            for k in 0..2 {
+                maps.push(SampledMap::sample_from_pole_to_pole(width, height, |d| {
+                    self.open_diffuse_at(order, d).map_or([0.0; 3], |v| v[k])
+                }));
+            }
+        }
         maps
+    }
+
+    /// Whether it corrects the frames' diffuse light to its map's irradiance, as their
+    /// render did ([`TransferHeader::open_diffuse`]).
+    pub fn corrects_diffuse(&self) -> bool {
+        self.open_diffuse.is_some()
+    }
+
+    /// At a receiver of normal `n`, the open receiver's light in full, `E(n) / pi`, and
+    /// in log-SH, `max(open(n) . L, 0)`, per colour channel, by which a frame of SH order
+    /// `order` is corrected ([`Self::corrects_diffuse`]).
+    pub fn open_diffuse_at(&self, order: usize, n: [f64; 3]) -> Option<[[f32; 3]; 2]> {
+        let diffuse = self.open_diffuse.as_ref()?;
+        // SAFETY: the portable dots need no processor feature.
+        let open = unsafe { open_light::<PortableDots>(&diffuse.open, order, n) };
+        Some([diffuse.irradiance.at(n).map(|c| c as f32), open])
     }
 }
 
@@ -624,8 +712,14 @@ unsafe fn relit_pixel<D: Dots>(frame: &TransferFrame, light: &RelightLight, i: u
             (lit, unoccluded, None)
         }
     };
+    let light_of = match (&light.open_diffuse, &frame.diffuse_normal) {
+        // SAFETY: the caller holds `D`'s contract.
+        (Some(open), Some(normals)) => unsafe { open.corrected::<D>(lit, normals[i], frame.order()) },
+        _ => lit,
+    };
     let lamps = frame.lamps_diffuse[i];
-    let diffuse = [albedo[0] * lit[0] + lamps[0], albedo[1] * lit[1] + lamps[1], albedo[2] * lit[2] + lamps[2]];
+    let diffuse =
+        [albedo[0] * light_of[0] + lamps[0], albedo[1] * light_of[1] + lamps[1], albedo[2] * light_of[2] + lamps[2]];
     let lamps = frame.lamps_specular[i];
     let reflected = [colour[0] * glossy[0], colour[1] * glossy[1], colour[2] * glossy[2]];
     let (specular, environment) = if frame.alpha[i] > 0.0 {

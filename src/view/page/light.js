@@ -46,10 +46,12 @@ function mapPlace(x, y, z, out, at) {
 // Bilinear read of an equirectangular map at (u, v) (`mapPlace`): columns wrap, rows
 // clamp; the zenith is the first row. A turn of the light about Z by `turn` moves a
 // direction's u by turn / 2 pi and leaves its v, so a turned read needs no trigonometry.
-function lookup(map, u, v, out) {
+// `poles`: the grid's first and last rows lie on the zenith and the nadir
+// (src/transfer/relight's sample_from_pole_to_pole), not half a row from them.
+function lookup(map, u, v, out, poles = false) {
   const w = map.width, h = map.height, t = map.texels;
   const fx = u * w - 0.5;
-  const fy = Math.min(h - 1, Math.max(0, (1 - v) * h - 0.5));
+  const fy = Math.min(h - 1, Math.max(0, poles ? (1 - v) * (h - 1) : (1 - v) * h - 0.5));
   const x0 = Math.floor(fx), y0 = Math.floor(fy);
   const tx = fx - x0, ty = fy - y0;
   const c0 = ((x0 % w) + w) % w, c1 = (((x0 + 1) % w) + w) % w;
@@ -171,10 +173,30 @@ function glossyPlaces(f) {
   return (f.glossyPlaces = places);
 }
 
+// Where each pixel's diffuse light is corrected to the map's irradiance (`meta.open_diffuse`,
+// src/shade/kernel/lit.rs's open_corrected_channel): the maps' place of its normal, and
+// the two grids' values there at the frame's own turn, which a turn's reads are taken
+// relative to; worked out once per frame.
+function normalPlaces(f) {
+  if (f.normalPlaces) return f.normalPlaces;
+  const normals = f.layers.diffuse_normal, n = normals.length / 3;
+  const { grids, meta } = f;
+  const [irradiance, open] = [grids[1 + 2 * meta.lobes], grids[2 + 2 * meta.lobes]];
+  const places = new Float64Array(2 * n), base = new Float32Array(6 * n), e = [0, 0, 0], o = [0, 0, 0];
+  for (let i = 0; i < n; i++) {
+    mapPlace(normals[3 * i], normals[3 * i + 1], normals[3 * i + 2], places, 2 * i);
+    lookup(irradiance, places[2 * i], places[2 * i + 1], e, true);
+    lookup(open, places[2 * i], places[2 * i + 1], o, true);
+    base.set([...e, ...o], 6 * i);
+  }
+  return (f.normalPlaces = { places, base });
+}
+
 // What lights one pixel under the light turned by `rotation`: `at(i, d, g)` writes the
 // environment's diffuse light (max(T_d . L, 0) per channel, before albedo and strength)
 // into d and its reflected light (before the specular colour and strength) into g;
-// `visibility(i, d)` the visibility term from d.
+// `visibility(i)` the visibility term from the diffuse light `at` read last, before its
+// correction to the map's irradiance (as the render's visibility pass).
 function lighter(f, rotation) {
   const { meta, layers, grids } = f;
   const order = meta.order, count = order * order;
@@ -199,11 +221,33 @@ function lighter(f, rotation) {
     out[1] = s1 > 0 ? s1 : 0;
     out[2] = s2 > 0 ? s2 : 0;
   };
-  const s = [0, 0, 0], m = [0, 0, 0], o = [0, 0, 0], u = [0, 0, 0];
+  const s = [0, 0, 0], m = [0, 0, 0], o = [0, 0, 0], u = [0, 0, 0], e = [0, 0, 0], raw = [0, 0, 0];
+  // The diffuse light corrected as the render corrected it: E(n) / pi times log-SH's share
+  // of the open receiver's light, clamped to [0, 1], where that light is not dark.
+  // Both at the pixel's normal are the server's exact values at the frame's own turn, plus
+  // what the turn changes in the grids there (the grids' error is in the change only).
+  const corrected = meta.open_diffuse && f.layers.diffuse_normal ? normalPlaces(f) : null;
+  const exact = f.layers.open_diffuse_light;
+  const [irradiance, openDiffuse] = [grids[1 + 2 * lobes], grids[2 + 2 * lobes]];
+  const correct = (i, d) => {
+    const { places, base } = corrected;
+    if (du !== 0) {
+      const pu = places[2 * i] + du, pv = places[2 * i + 1];
+      lookup(irradiance, pu, pv, e, true);
+      lookup(openDiffuse, pu, pv, o, true);
+    }
+    for (let k = 0; k < 3; k++) {
+      const full = exact[6 * i + k] + (du !== 0 ? e[k] - base[6 * i + k] : 0);
+      const open = exact[6 * i + 3 + k] + (du !== 0 ? o[k] - base[6 * i + 3 + k] : 0);
+      if (open > 1e-6) d[k] = Math.max(full, 0) * Math.min(1, Math.max(0, d[k] / open));
+    }
+  };
   // `lit`: whether the diffuse light is wanted (a pixel without albedo has none to show
   // but for its visibility term).
   const at = (i, d, g, lit = true) => {
     if (lit) dot(diffuse, i, d); else d[0] = d[1] = d[2] = 0;
+    raw[0] = d[0]; raw[1] = d[1]; raw[2] = d[2];
+    if (lit && corrected) correct(i, d);
     const code = glossy_lobe[i];
     g[0] = g[1] = g[2] = 0;
     if (code > 0) {
@@ -228,10 +272,10 @@ function lighter(f, rotation) {
       }
     }
   };
-  const visibility = (i, d) => {
+  const visibility = (i) => {
     dot(unoccluded, i, u);
     const below = lum(u);
-    return below > 1e-12 ? lum(d) / below : 1;
+    return below > 1e-12 ? lum(raw) / below : 1;
   };
   return { at, visibility };
 }
@@ -267,7 +311,7 @@ function light(f, rotation, step, withVisibility) {
         out.diffuse[3 * b + k] = albedo[3 * i + k] * d[k];
         out.reflected[3 * b + k] = specular_colour[3 * i + k] * g[k];
       }
-      if (withVisibility) out.visibility[b] = visibilityAt(i, d);
+      if (withVisibility) out.visibility[b] = visibilityAt(i);
     }
   }
   return out;

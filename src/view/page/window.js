@@ -179,7 +179,7 @@ function showInspector() {
   group(`relit at ${state.rotation}°, strength ${state.strength.toFixed(2)}`);
   for (const pass of PASSES) {
     if (pass === "indirect" && !f.layers.indirect) continue;
-    passer(pass, f, lamps)(i, diffuse, reflected, pass === "visibility" ? visibility(i, d) : 1, rgb);
+    passer(pass, f, lamps)(i, diffuse, reflected, pass === "visibility" ? visibility(i) : 1, rgb);
     if (pass === "visibility") row(pass, [rgb[0]], "relit", [pass]);
     else row(pass, rgb, "relit", ["R", "G", "B"].map((c) => `${pass}.${c}`));
   }
