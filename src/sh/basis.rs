@@ -243,6 +243,26 @@ pub fn funk_hecke_factor(l: usize) -> f64 {
     }
 }
 
+/// The clamped cosine's SH factor of band `l`, `A_l` (Ramamoorthi and Hanrahan 2001, Eq.
+/// 8): irradiance is `E = sum_lm A_l L_lm y_lm`. `pi` and `2 pi / 3` for bands 0 and 1, 0
+/// for odd bands above, and `2 pi (-1)^(l/2 - 1) / ((l + 2)(l - 1)) l! / (2^l (l/2)!^2)`
+/// for even ones.
+pub fn clamped_cosine_factor(l: usize) -> f64 {
+    use std::f64::consts::PI;
+    match l {
+        0 => PI,
+        1 => 2.0 * PI / 3.0,
+        _ if l % 2 == 1 => 0.0,
+        _ => {
+            let half = l / 2;
+            // l! / (2^l (l/2)!^2), a product of half ratios (2k - 1) / 2k.
+            let central = (1..=half).map(|k| (2 * k - 1) as f64 / (2 * k) as f64).product::<f64>();
+            let sign = if half % 2 == 1 { 1.0 } else { -1.0 };
+            2.0 * PI * sign / ((l + 2) * (l - 1)) as f64 * central
+        }
+    }
+}
+
 fn computed_funk_hecke_factor(l: usize) -> f64 {
     (4.0 * std::f64::consts::PI / (2 * l + 1) as f64).sqrt()
 }

@@ -22,6 +22,7 @@ use crate::logsh::{
     cap_log_zh, lobe_log_zh_as, shared_optimal_lobe_epsilon, view_blocker, BlockerView, Lobe, WedgeOperator, WedgeTurn,
 };
 use crate::scene::{EnvironmentMap, Light, Material, PointLight, SunLight};
+use crate::sh::basis::{clamped_cosine_factor, funk_hecke_factor};
 use crate::sh::{add_rotated_zonal, coefficient_count, ExpMethod, FoldedQuadrature, Real, MAX_COEFFICIENTS};
 use crate::vector::dot;
 use rayon::prelude::*;
@@ -104,17 +105,9 @@ impl OpenIrradiance {
         let order = IRRADIANCE_ORDER;
         let coefficients = crate::scene::light::project_texels(map, order);
         let channel = |c: usize| coefficients.iter().map(|rgb| rgb[c] * f64::from(strength)).collect::<Vec<f64>>();
-        const STEPS: usize = 4096;
-        let mut p = [0.0f64; IRRADIANCE_ORDER];
-        let mut cosine = vec![0.0; order];
-        for k in 0..STEPS {
-            let theta = (k as f64 + 0.5) / STEPS as f64 * FRAC_PI_2;
-            crate::sh::basis::legendre(order, theta.cos(), &mut p);
-            for (l, z) in cosine.iter_mut().enumerate() {
-                let y = ((2 * l + 1) as f64 / (4.0 * std::f64::consts::PI)).sqrt() * p[l];
-                *z += 2.0 * theta.cos() * y * theta.sin() * FRAC_PI_2 / STEPS as f64;
-            }
-        }
+        // A ZH turned to `n` is scaled by the Funk-Hecke factor (paper 000, Eq. 5).
+        let cosine =
+            (0..order).map(|l| clamped_cosine_factor(l) / (std::f64::consts::PI * funk_hecke_factor(l))).collect();
         Self { light: [channel(0), channel(1), channel(2)], cosine }
     }
 
@@ -128,7 +121,7 @@ impl OpenIrradiance {
                 .enumerate()
                 .map(|(i, l)| {
                     let band = (i as f64).sqrt() as usize;
-                    l * crate::sh::basis::funk_hecke_factor(band) * self.cosine[band]
+                    l * funk_hecke_factor(band) * self.cosine[band]
                 })
                 .collect()
         })
@@ -268,9 +261,9 @@ pub struct ShadingKernel<T> {
     /// The glossy term's map has its lower hemisphere black: a ground plane or a height
     /// field hides it ([`super::glossy::MapLevels::new`]).
     pub(crate) sky_only: bool,
-    /// The light's map prefiltered with the clamped cosine, `E(n) / pi`: the open
-    /// receiver's diffuse light in full, which log-SH's `exp*(T + D) . L` at order n
-    /// approximates (none for a light given as SH alone).
+    /// `E(n) / pi` of the light's map: the open receiver's diffuse light in full, which
+    /// log-SH's `exp*(T + D) . L` at order n approximates (none for a light given as SH
+    /// alone).
     pub(crate) irradiance: Option<OpenIrradiance>,
     /// `exp*(T + D)` about +Z as ZH: the open receiver's diffuse transfer in log-SH.
     pub(crate) diffuse_open: Vec<T>,

@@ -106,7 +106,7 @@ impl Surroundings {
     /// `visibility`: the direct light's own visibility of the receiver (the
     /// `visibility` pass), which scales the bounce ([`leak_scale`]).
     pub fn irradiance(&self, p: [f64; 3], n: [f64; 3], object: u32, visibility: Option<f32>) -> [[f64; 3]; 2] {
-        let e = self.incident(p, n, object).map(|incident| convolved(&incident, n, |l| COSINE[l]));
+        let e = self.incident(p, n, object).map(|incident| convolved(&incident, n, clamped_cosine_factor));
         let scales = self.leak_scales(visibility, &e);
         std::array::from_fn(|part| std::array::from_fn(|c| scales[part] * e[part][c]))
     }
@@ -317,7 +317,7 @@ impl Receiver {
         }
         let mut y = [0.0f64; COUNT];
         eval_basis(ORDER, point.normal, &mut y);
-        let e = incident.map(|part| convolved_with(&part, &y, |l| COSINE[l]));
+        let e = incident.map(|part| convolved_with(&part, &y, clamped_cosine_factor));
         let scales = surroundings.leak_scales(self.visibility, &e);
         let glossy = self.exponent.map(|s| {
             let sharp = ((s - BLURRED_BELOW) / (s + SHARP_EXPONENT - BLURRED_BELOW)).max(0.0);

@@ -36,7 +36,7 @@ use crate::heightfield::HeightField;
 use crate::logsh::{cap_log_zh, nlp_slice_of_sine, WedgeOperator, WedgeTurn};
 use crate::scene::gbuffer::SurfaceColours;
 use crate::scene::{Frame, GBuffer, Material, Scene};
-use crate::sh::basis::eval_basis;
+use crate::sh::basis::{clamped_cosine_factor, eval_basis};
 use crate::sh::rotation::add_rotated_zonal;
 use rayon::prelude::*;
 use std::borrow::Cow;
@@ -54,8 +54,6 @@ pub const AZIMUTHS: usize = 16;
 /// Ratio of successive steps along an azimuth: each step's footprint is about a fifth of
 /// its distance, which the grid's texels cover beyond a few texels.
 const STEP_RATIO: f64 = 1.15;
-/// The clamped cosine's SH factors per band.
-const COSINE: [f64; ORDER] = [PI, 2.0 * PI / 3.0, PI / 4.0, 0.0, -PI / 24.0];
 /// What a gather carries per SH coefficient: the radiance in R, G, B, and the occlusion
 /// (radiance 1 wherever the surroundings are), which tells how much of a receiver's
 /// cosine lobe they cover.

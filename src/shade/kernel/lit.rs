@@ -57,8 +57,9 @@ impl<T: Real> ShadingKernel<T> {
 
     /// The environment's diffuse light at a receiver of normal `n` whose log-SH light is
     /// `lit = exp*(V + D) . L`: the open receiver's light in full, `E(n) / pi` from the
-    /// order-8 projection of the map ([`OpenIrradiance`]), times log-SH's share of it, `lit / exp*(T + D) . L` per channel in
-    /// `[0, 1]`; `lit` itself without a map or where the open receiver gets no light.
+    /// order-8 projection of the map ([`OpenIrradiance`]), times log-SH's share of it,
+    /// `lit / exp*(T + D) . L` per channel in `[0, 1]`; `lit` itself without a map or
+    /// where the open receiver gets no light.
     pub(crate) fn open_corrected(&self, lit: [T; 3], n: [f64; 3]) -> [T; 3] {
         let Some(irradiance) = &self.irradiance else { return lit };
         let open = open_lit(self.order, &self.diffuse_open, n, &self.light);
