@@ -200,15 +200,46 @@ fn nlp_slice(log_epsilon: f32, sigma: f32) -> array<f32, ORDER_CAP> {
     return out;
 }
 
+// The band table's row for a pixel whose horizons cover `coverage` of the azimuths, and
+// the weight of the row above it (fitted_depth.rs, band_depths_for): rows of falling
+// coverage, interpolated in log(coverage).
+fn band_rows(coverage: f32) -> vec2<f32> {
+    if BAND_ROWS == 1u || coverage >= tables[T_BAND_COVERAGE] {
+        return vec2<f32>(0.0, 0.0);
+    }
+    var r = BAND_ROWS - 1u;
+    for (var i = 1u; i < BAND_ROWS; i++) {
+        if tables[T_BAND_COVERAGE + i] <= coverage {
+            r = i;
+            break;
+        }
+    }
+    let wider = tables[T_BAND_COVERAGE + r - 1u];
+    let own = tables[T_BAND_COVERAGE + r];
+    return vec2<f32>(f32(r), clamp(log(max(coverage, own) / own) / log(wider / own), 0.0, 1.0));
+}
+
+// The fitted depth of a band of width `width` in the rows `rows` (band_rows).
+fn band_depth(width: f32, rows: vec2<f32>) -> f32 {
+    let r = u32(rows.x);
+    let own = fitted_depth(T_BAND_DEPTH + r * (DEPTH_INTERVALS + 1u), width);
+    if r == 0u {
+        return own;
+    }
+    let wider = fitted_depth(T_BAND_DEPTH + (r - 1u) * (DEPTH_INTERVALS + 1u), width);
+    return own + rows.y * (wider - own);
+}
+
 // A slice with its horizon band at the fitted depth (fitted_depth.rs, banded_slice):
-// log(eps) up to `base`, the band from `base` to `sigma` at the depth for its width.
-fn banded_slice(log_epsilon: f32, base: f32, sigma: f32) -> array<f32, ORDER_CAP> {
+// log(eps) up to `base`, the band from `base` to `sigma` at the depth for its width in
+// the rows `rows`.
+fn banded_slice(log_epsilon: f32, base: f32, sigma: f32, rows: vec2<f32>) -> array<f32, ORDER_CAP> {
     if sigma <= base {
         return nlp_slice(log_epsilon, sigma);
     }
     let below = nlp_slice(1.0, base);
     var out = nlp_slice(1.0, sigma);
-    let depth = fitted_depth(T_BAND_DEPTH, sigma - base);
+    let depth = band_depth(sigma - base, rows);
     for (var l = 0u; l < ORDER; l++) {
         out[l] = log_epsilon * below[l] + depth * (out[l] - below[l]);
     }
@@ -265,37 +296,54 @@ fn azimuth(k: u32) -> vec2<f32> {
     return vec2<f32>(tables[T_AZIMUTHS + 2u * k], tables[T_AZIMUTHS + 2u * k + 1u]);
 }
 
-// The slice of azimuth k under the horizon at elevation sigma: the band from the
-// horizontal (from the tangent plane when `fold_tangent`) up to the horizon takes its
-// fitted depth (kernel.rs, add_horizon_slices).
-fn horizon_slice(k: u32, sigma: f32, n: vec3<f32>, fold_tangent: bool, log_epsilon: f32) -> array<f32, ORDER_CAP> {
-    var top = sigma;
-    var base = 0.0;
+// The band of azimuth k under the horizon at elevation sigma, as (base, top): from the
+// horizontal (from the tangent plane when `fold_tangent`) up to the horizon (kernel.rs,
+// add_horizon_slices).
+fn horizon_band(k: u32, sigma: f32, n: vec3<f32>, fold_tangent: bool) -> vec2<f32> {
     if fold_tangent {
         let dir = azimuth(k);
         let tangent_elevation = atan(-(n.x * dir.x + n.y * dir.y) / n.z);
-        top = max(top, tangent_elevation);
-        base = tangent_elevation;
+        return vec2<f32>(tangent_elevation, max(sigma, tangent_elevation));
     }
-    return banded_slice(log_epsilon, base, top);
+    return vec2<f32>(0.0, sigma);
 }
 
 // The height field's log visibility at p, normal n (kernel.rs, add_visibility): one
-// horizon and slice per azimuth, the tangent plane folded into the horizons when
-// `fold_tangent`, wedges between neighbouring slices.
+// horizon per azimuth, then the slices from them (add_given_horizons).
 fn add_heightfield(p: vec3<f32>, n: vec3<f32>, fold_tangent: bool, log_epsilon: f32, acc: ptr<function, array<f32, COUNT_CAP>>) {
     var above = 0.0;
     var receiver: array<f32, LEVELS>;
     var ceilings: array<f32, STEP_ARRAY>;
     let marchable = march_start(p, &above, &receiver, &ceilings);
+    var sigmas: array<f32, DIRECTIONS>;
+    for (var k = 0u; k < DIRECTIONS; k++) {
+        sigmas[k] = 0.0;
+        if marchable {
+            sigmas[k] = horizon(p.x, p.y, above, azimuth(k), 3.0e38, &receiver, &ceilings);
+        }
+    }
+    add_given_horizons(&sigmas, n, fold_tangent, log_epsilon, acc);
+}
+
+// The height field's log visibility from given horizon elevations: each band at the
+// depth fitted for its width and the horizons' coverage (kernel.rs, add_horizon_slices;
+// fitted_depth.rs, horizon_coverage), wedges between neighbouring slices, the tangent
+// plane folded into the horizons when `fold_tangent`.
+fn add_given_horizons(sigmas: ptr<function, array<f32, DIRECTIONS>>, n: vec3<f32>, fold_tangent: bool, log_epsilon: f32, acc: ptr<function, array<f32, COUNT_CAP>>) {
+    var bands: array<vec2<f32>, DIRECTIONS>;
+    var blocked = 0.0;
+    var most = 0.0;
+    for (var k = 0u; k < DIRECTIONS; k++) {
+        bands[k] = horizon_band(k, (*sigmas)[k], n, fold_tangent);
+        let share = pow(sin(max(bands[k].y - bands[k].x, 0.0)), 2.0);
+        blocked += share;
+        most = max(most, share);
+    }
+    let rows = band_rows(select(1.0, blocked / (most * f32(DIRECTIONS)), most > 0.0));
     var first: array<f32, ORDER_CAP>;
     var previous: array<f32, ORDER_CAP>;
     for (var k = 0u; k < DIRECTIONS; k++) {
-        var sigma = 0.0;
-        if marchable {
-            sigma = horizon(p.x, p.y, above, azimuth(k), 3.0e38, &receiver, &ceilings);
-        }
-        var slice = horizon_slice(k, sigma, n, fold_tangent, log_epsilon);
+        var slice = banded_slice(log_epsilon, bands[k].x, bands[k].y, rows);
         if k == 0u {
             first = slice;
         } else {
@@ -323,20 +371,4 @@ fn store_horizon_tangents(p: vec3<f32>, record: u32) {
     }
 }
 
-// The height field's log visibility from given horizon elevations (add_heightfield
-// without the march).
-fn add_given_horizons(sigmas: ptr<function, array<f32, DIRECTIONS>>, n: vec3<f32>, fold_tangent: bool, log_epsilon: f32, acc: ptr<function, array<f32, COUNT_CAP>>) {
-    var first: array<f32, ORDER_CAP>;
-    var previous: array<f32, ORDER_CAP>;
-    for (var k = 0u; k < DIRECTIONS; k++) {
-        var slice = horizon_slice(k, (*sigmas)[k], n, fold_tangent, log_epsilon);
-        if k == 0u {
-            first = slice;
-        } else {
-            add_wedge(k - 1u, &previous, &slice, acc);
-        }
-        previous = slice;
-    }
-    add_wedge(DIRECTIONS - 1u, &previous, &first, acc);
-}
 //#endif

@@ -263,6 +263,7 @@ impl ProgramTables {
         // (src/shade/fitted_depth.rs).
         t.push("T_CAP_DEPTH", kernel.cap_depths.iter().copied());
         t.push("T_BAND_DEPTH", kernel.band_depths.iter().copied());
+        t.push("T_BAND_COVERAGE", kernel.band_coverages.iter().map(|&c| c as f32));
 
         // Lobes: order log-ZH values then the log of the peak.
         t.push("T_TANGENT", kernel.tangent.iter().copied());
@@ -531,6 +532,7 @@ fn prelude(
         ("TANGENT_OCCLUSION", Bool(kernel.tangent_occlusion)),
         ("RATIO_ATTENUATION", Bool(kernel.ratio_attenuation)),
         ("DEPTH_INTERVALS", U32(crate::shade::fitted_depth::DEPTH_INTERVALS)),
+        ("BAND_ROWS", U32(kernel.band_coverages.len())),
         ("OVERLAP_FLOOR", Bool(kernel.overlap_floor)),
         ("IRRADIANCE", Bool(kernel.irradiance.is_some())),
         ("IRRADIANCE_ORDER", U32(crate::shade::kernel::IRRADIANCE_ORDER)),

@@ -6,8 +6,8 @@ use super::blocker_tree::BlockerTree;
 use super::cap_packet::{CapPacket, Receiver, LANES};
 pub use super::exponentiator::{quadrature_weight, sh_space_max_magnitude, Exponentiator, SH_SPACE_BLEND};
 use super::fitted_depth::{
-    banded_slice_of_tangents, banded_slices_of_tangents, depth_at, fitted_depths, overlapped_depth, DepthKey,
-    DEPTH_INTERVALS,
+    band_coverages, band_depths_for, banded_slice_of_tangents, banded_slices_of_tangents, depth_at, fitted_depths,
+    horizon_coverage, overlapped_depth, DepthKey, DEPTH_INTERVALS,
 };
 use super::frame::{pixel_source, PixelSource, PixelWork};
 use super::glossy::{
@@ -228,7 +228,10 @@ pub struct ShadingKernel<T> {
     pub(crate) cap_depths: Vec<T>,
     /// `cap_depths` in f32, as the packets read them ([`CapPacket`]).
     cap_depths_f32: Vec<f32>,
+    /// Each horizon band's log depth per width, a row of widths per horizon coverage.
     pub(crate) band_depths: Vec<T>,
+    /// The horizon coverage of each row of `band_depths` ([`band_coverages`]).
+    pub(crate) band_coverages: Vec<f64>,
     pub(crate) ratio_attenuation: bool,
     pub(crate) tangent_occlusion: bool,
     /// Floor the log visibility at `log(eps)` per quadrature node
@@ -304,7 +307,7 @@ impl<T: Real> ShadingKernel<T> {
         let sky_only = ground.is_some() || has_heightfield;
         let materials =
             Self::material_lobes(settings, materials, lamp_fresnel, colour_passes, residual, sky_only, &exp);
-        let (cap_depths, band_depths) = Self::depth_tables(settings, has_heightfield, &exp);
+        let (cap_depths, band_depths, band_coverages) = Self::depth_tables(settings, has_heightfield, &exp);
         let wedge = has_heightfield.then(|| WedgeOperator::new(order, settings.horizon.directions));
         let channel = |c: usize| light.iter().map(|rgb| T::of(rgb[c])).collect::<Vec<T>>();
         // The f32 path dots with the light inside the quadrature (`crate::sh::folded`).
@@ -333,6 +336,7 @@ impl<T: Real> ShadingKernel<T> {
             cap_depths_f32: cap_depths.iter().map(|d| d.to_f32().unwrap_or(0.0)).collect(),
             cap_depths,
             band_depths,
+            band_coverages,
             ratio_attenuation: settings.ratio_attenuation,
             tangent_occlusion: settings.tangent_occlusion,
             overlap_floor: settings.overlap_floor,
@@ -428,25 +432,32 @@ impl<T: Real> ShadingKernel<T> {
             .collect()
     }
 
-    /// The log depths of caps and horizon bands per width: fitted where
-    /// `--fitted-depths` asks ([`super::fitted_depth`]), else `log(eps)` throughout.
-    fn depth_tables(settings: &ShadingSettings, has_heightfield: bool, exp: &Exponentiator) -> (Vec<T>, Vec<T>) {
+    /// The log depths of caps per radius and of horizon bands per width, and the horizon
+    /// coverage of each row of the bands' table: fitted where `--fitted-depths` asks
+    /// ([`super::fitted_depth`]), else `log(eps)` throughout in one row.
+    fn depth_tables(
+        settings: &ShadingSettings,
+        has_heightfield: bool,
+        exp: &Exponentiator,
+    ) -> (Vec<T>, Vec<T>, Vec<f64>) {
         let (order, epsilon) = (settings.order, settings.epsilon);
-        if settings.fitted_depths {
-            let key = DepthKey {
-                order,
-                epsilon_bits: epsilon.to_bits(),
-                tangent_occlusion: settings.tangent_occlusion,
-                exp: settings.exp,
-                hyb_threshold_bits: settings.hyb_threshold.to_bits(),
-                directions: if has_heightfield { settings.horizon.directions } else { 0 },
-            };
-            let fitted = fitted_depths(key, exp);
-            let of = |table: &[f64]| table.iter().map(|&d| T::of(d)).collect();
-            (of(&fitted.caps), of(&fitted.bands))
-        } else {
-            (vec![T::of(epsilon.ln()); DEPTH_INTERVALS + 1], vec![T::of(epsilon.ln()); DEPTH_INTERVALS + 1])
+        let flat = || vec![T::of(epsilon.ln()); DEPTH_INTERVALS + 1];
+        if !settings.fitted_depths {
+            return (flat(), flat(), vec![1.0]);
         }
+        let directions = if has_heightfield { settings.horizon.directions } else { 0 };
+        let key = DepthKey {
+            order,
+            epsilon_bits: epsilon.to_bits(),
+            tangent_occlusion: settings.tangent_occlusion,
+            exp: settings.exp,
+            hyb_threshold_bits: settings.hyb_threshold.to_bits(),
+            directions,
+        };
+        let fitted = fitted_depths(key, exp);
+        let of = |table: &[f64]| table.iter().map(|&d| T::of(d)).collect();
+        let coverages = if has_heightfield { band_coverages(directions) } else { vec![1.0] };
+        (of(&fitted.caps), of(&fitted.bands), coverages)
     }
 
     pub fn order(&self) -> usize {
@@ -648,25 +659,32 @@ impl<T: Real> ShadingKernel<T> {
     /// `fold_normal` where given, up to its horizon takes its fitted depth; below it stays
     /// at log(eps). The fit's receiver faces +Z, so its bands start at its tangent plane: a
     /// tilted receiver's start at its own, below the horizontal on its downhill side too.
+    /// The depths are those fitted for the share of the azimuths the bands cover
+    /// ([`horizon_coverage`]).
     fn add_horizon_slices(&self, turn: &WedgeTurn<T>, tangents: &[f64], fold_normal: Option<[f64; 3]>, acc: &mut [T]) {
         // Eight azimuths at a time: their slices, then their part of the turn.
         const RUN: usize = 8;
         let order = self.order;
-        let mut slices = [T::zero(); RUN * crate::sh::MAX_ORDER];
-        for (run, tangents) in tangents.chunks(RUN).enumerate() {
-            let mut bases = [0.0f64; RUN];
-            let mut sigmas = [0.0f64; RUN];
-            sigmas[..tangents.len()].copy_from_slice(tangents);
-            if let Some(n) = fold_normal {
-                for (k, (base, sigma)) in bases.iter_mut().zip(sigmas.iter_mut()).take(tangents.len()).enumerate() {
-                    let (sin, cos) = self.azimuths[run * RUN + k];
-                    let tangent_plane = -(n[0] * cos + n[1] * sin) / n[2];
-                    *sigma = sigma.max(tangent_plane);
-                    *base = tangent_plane;
-                }
+        let directions = tangents.len();
+        let mut bases = [0.0f64; MAX_DIRECTIONS];
+        let mut sigmas = [0.0f64; MAX_DIRECTIONS];
+        sigmas[..directions].copy_from_slice(tangents);
+        if let Some(n) = fold_normal {
+            for (k, (base, sigma)) in bases.iter_mut().zip(sigmas.iter_mut()).take(directions).enumerate() {
+                let (sin, cos) = self.azimuths[k];
+                let tangent_plane = -(n[0] * cos + n[1] * sin) / n[2];
+                *sigma = sigma.max(tangent_plane);
+                *base = tangent_plane;
             }
-            self.banded_slices(&bases[..tangents.len()], &sigmas[..tangents.len()], &mut slices);
-            turn.accumulate_from(run * RUN, &slices[..tangents.len() * order], acc);
+        }
+        let mut bands = [T::zero(); DEPTH_INTERVALS + 1];
+        let coverage = horizon_coverage(&bases[..directions], &sigmas[..directions]);
+        band_depths_for(&self.band_depths, &self.band_coverages, coverage, &mut bands);
+        let mut slices = [T::zero(); RUN * crate::sh::MAX_ORDER];
+        for (run, (bases, sigmas)) in bases[..directions].chunks(RUN).zip(sigmas[..directions].chunks(RUN)).enumerate()
+        {
+            self.banded_slices(&bands, bases, sigmas, &mut slices);
+            turn.accumulate_from(run * RUN, &slices[..bases.len() * order], acc);
         }
     }
 
@@ -714,11 +732,12 @@ impl<T: Real> ShadingKernel<T> {
     }
 
     /// The height field's slices with bands from `bases[k]` up to `sigmas[k]` (tangents of
-    /// elevations) into `out[k * order..]`: [`banded_slices_of_tangents`] in f32 lanes for
+    /// elevations), at the depths of `bands` per width, into `out[k * order..]`:
+    /// [`banded_slices_of_tangents`] in f32 lanes for
     /// the f32 kernel, slice by slice for the f64 oracle.
-    fn banded_slices(&self, bases: &[f64], sigmas: &[f64], out: &mut [T]) {
+    fn banded_slices(&self, bands: &[T], bases: &[f64], sigmas: &[f64], out: &mut [T]) {
         let order = self.order;
-        let (log_epsilon, bands) = (self.log_epsilon, &self.band_depths);
+        let log_epsilon = self.log_epsilon;
         if let (Some(bands32), Some(out32)) = (T::as_f32_slice(bands), T::as_f32_slice_mut(out)) {
             let log_epsilon = log_epsilon.to_f32().unwrap_or(0.0);
             banded_slices_of_tangents(order, log_epsilon, bands32, bases, sigmas, out32);
