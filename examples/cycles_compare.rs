@@ -67,32 +67,60 @@ struct Options {
     flagged: Vec<(String, ShadingSettings)>,
 }
 
+const USAGE: &str =
+    "usage: cycles_compare [--quick] [--noise DIR] [--reference TOLERANCE] [--settings FLAGS]... SCENE_DIR...";
+
+/// Prints `error: message` and ends the process with status 1.
+fn fail(message: impl std::fmt::Display) -> ! {
+    eprintln!("error: {message}");
+    std::process::exit(1);
+}
+
+/// Prints `error: message` and the usage line, and ends the process with status 2.
+fn usage_error(message: impl std::fmt::Display) -> ! {
+    eprintln!("error: {message}\n{USAGE}");
+    std::process::exit(2);
+}
+
 fn options() -> Options {
     let mut args: Vec<String> = std::env::args().skip(1).collect();
-    let noise = args.iter().position(|a| a == "--noise").map(|i| {
-        let dir = PathBuf::from(args.get(i + 1).expect("--noise needs a directory"));
-        args.drain(i..i + 2);
-        dir
-    });
-    let reference_tolerance = args.iter().position(|a| a == "--reference").map(|i| {
-        let tolerance: f64 = args.get(i + 1).and_then(|t| t.parse().ok()).expect("--reference needs a tolerance");
-        args.drain(i..i + 2);
-        tolerance
+    if args.iter().any(|a| a == "--help" || a == "-h") {
+        println!(
+            "Shades exported Blender scenes at logsh's presets and compares each with the Cycles \
+             renders stored beside it (cycles, cycles_bdefault, authored, authored_bdefault .NNNN.exr).\n\n{USAGE}\n\n\
+             --quick               of the presets, `default` alone (with and without bounce light)\n\
+             --noise DIR           also the Cycles noise floor, against DIR/<scene>/cycles.NNNN.exr\n\
+             --reference TOL       also `logsh reference`, converged to TOL per pixel\n\
+             --settings FLAGS      also a row shaded with these `logsh shade` flags (repeatable)"
+        );
+        std::process::exit(0);
+    }
+    let mut value = |flag: &str| {
+        args.iter().position(|a| a == flag).map(|i| {
+            let Some(value) = args.get(i + 1).cloned() else { usage_error(format!("{flag} needs a value")) };
+            args.drain(i..i + 2);
+            value
+        })
+    };
+    let noise = value("--noise").map(PathBuf::from);
+    let reference_tolerance = value("--reference").map(|t| {
+        t.parse::<f64>()
+            .ok()
+            .filter(|t| *t > 0.0)
+            .unwrap_or_else(|| usage_error(format!("--reference {t}: not a positive tolerance")))
     });
     let mut flagged = Vec::new();
-    while let Some(i) = args.iter().position(|a| a == "--settings") {
-        let flags = args.get(i + 1).expect("--settings needs the flags, quoted").clone();
-        args.drain(i..i + 2);
-        let settings = settings_of(&flags).unwrap_or_else(|e| panic!("--settings {flags:?}: {e}"));
+    while let Some(flags) = value("--settings") {
+        let settings = settings_of(&flags).unwrap_or_else(|e| usage_error(format!("--settings {flags:?}: {e}")));
         flagged.push((flags, settings));
     }
     let quick = args.iter().position(|a| a == "--quick").map(|i| args.remove(i)).is_some();
+    if let Some(unknown) = args.iter().find(|a| a.starts_with("--")) {
+        usage_error(format!("unknown option {unknown}"));
+    }
     let dirs: Vec<PathBuf> = args.into_iter().map(PathBuf::from).collect();
     if dirs.is_empty() {
-        eprintln!(
-            "usage: cycles_compare [--quick] [--noise DIR] [--reference TOLERANCE] [--settings FLAGS]... SCENE_DIR..."
-        );
-        std::process::exit(2);
+        usage_error("no scene directory given");
     }
     Options { dirs, quick, noise, reference_tolerance, flagged }
 }
@@ -105,49 +133,45 @@ fn main() {
     println!("| --- | --- | --- | --- | --- | --- | --- | --- | --- |");
     let executor = Executor::cpu();
     for dir in dirs {
-        let scene = Scene::load(&dir).unwrap_or_else(|e| panic!("{e}"));
-        assert!(
-            scene.supersample == 1,
-            "{}: a supersampled scene; compare it with examples/edge_accuracy.rs",
-            dir.display()
-        );
+        let scene = Scene::load(&dir).unwrap_or_else(|e| fail(e));
+        if scene.supersample != 1 {
+            fail(format!("{}: a supersampled scene; compare it with examples/edge_accuracy.rs", dir.display()));
+        }
         let number = scene.default_frame();
-        let frame = scene.frame(number).unwrap_or_else(|e| panic!("{e}"));
+        let frame = scene.frame(number).unwrap_or_else(|e| fail(e));
         let truths: Vec<(&str, Vec<[f32; 3]>)> = TRUTHS
             .iter()
             .filter_map(|&(stem, name)| {
                 let file = dir.join(format!("{stem}.{number:04}.exr"));
-                file.is_file().then(|| (name, read_rgb(&file).unwrap_or_else(|e| panic!("{e}")).2))
+                file.is_file().then(|| (name, read_rgb(&file).unwrap_or_else(|e| fail(e)).2))
             })
             .collect();
-        assert!(
-            !truths.is_empty(),
-            "{}: no Cycles render (cycles.{number:04}.exr, authored.{number:04}.exr)",
-            dir.display()
-        );
+        if truths.is_empty() {
+            fail(format!("{}: no Cycles render (cycles.{number:04}.exr, authored.{number:04}.exr)", dir.display()));
+        }
         let (width, height) = (frame.gbuffer.width, frame.gbuffer.height);
-        let unoccluded = unoccluded_value(&frame)
-            .expect("an SH light has no map to integrate; compare scenes with an environment or constant light");
+        let unoccluded = unoccluded_value(&frame).unwrap_or_else(|| {
+            fail(format!(
+                "{}: an SH light has no map to integrate; compare scenes with an environment or constant light",
+                dir.display()
+            ))
+        });
         eprintln!("{}: frame {number}, unoccluded value {unoccluded:.3?}", dir.display());
         let scene_name =
             dir.file_name().map_or_else(|| dir.display().to_string(), |n| n.to_string_lossy().into_owned());
         let mut images: Vec<(String, Vec<[f32; 3]>)> = Vec::new();
         for (name, settings) in &runs_of(&scene, &frame, quick, &flagged) {
             let job = ShadeJob::new(&scene, &frame, settings);
-            let shaded: ShadedFrame =
-                executor.shade(&job, &mut StageTimings::default()).unwrap_or_else(|e| panic!("{e}"));
-            assert_eq!(
-                [width, height],
-                [shaded.width, shaded.height],
-                "{}: Cycles render and G-buffer differ in size",
-                dir.display()
-            );
+            let shaded: ShadedFrame = executor.shade(&job, &mut StageTimings::default()).unwrap_or_else(|e| fail(e));
+            if [width, height] != [shaded.width, shaded.height] {
+                fail(format!("{}: the shaded frame and the G-buffer differ in size", dir.display()));
+            }
             images.push((name.clone(), shaded.rgba.iter().map(|p| [p[0], p[1], p[2]]).collect()));
         }
         if let Some(tolerance) = reference_tolerance {
             let options = ReferenceOptions { tolerance, ..Default::default() };
             let started = std::time::Instant::now();
-            let truth = render_reference(&scene, &frame, &options, &|_| {}).unwrap_or_else(|e| panic!("{e}"));
+            let truth = render_reference(&scene, &frame, &options, &|_| {}).unwrap_or_else(|e| fail(e));
             eprintln!(
                 "{}: reference ({:?}) {:.1} s, {} pixel(s) above the tolerance {tolerance}",
                 dir.display(),
@@ -159,17 +183,14 @@ fn main() {
             images.push((name, truth.rgba.iter().map(|p| [p[0], p[1], p[2]]).collect()));
         }
         if let Some(noise) = &noise {
-            let (_, _, second) = read_rgb(&noise.join(&scene_name).join(format!("cycles.{number:04}.exr")))
-                .unwrap_or_else(|e| panic!("{e}"));
+            let (_, _, second) =
+                read_rgb(&noise.join(&scene_name).join(format!("cycles.{number:04}.exr"))).unwrap_or_else(|e| fail(e));
             images.push(("Cycles, another seed".to_string(), second));
         }
         for ((truth, cycles), (name, image)) in truths.iter().flat_map(|t| images.iter().map(move |i| (t, i))) {
-            assert_eq!(
-                cycles.len(),
-                width * height,
-                "{}: the {truth} render and the G-buffer differ in size",
-                dir.display()
-            );
+            if cycles.len() != width * height {
+                fail(format!("{}: the {truth} render and the G-buffer differ in size", dir.display()));
+            }
             let error = frame_error(&frame.gbuffer.material, image, cycles, unoccluded);
             let surface: Vec<usize> = (0..image.len()).filter(|&i| frame.gbuffer.material[i] != 0).collect();
             let plain = surface
