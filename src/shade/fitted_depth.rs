@@ -731,6 +731,15 @@ mod tests {
         }
     }
 
+    /// The band table fitted at `order`, `directions` azimuths and `epsilon` (quadrature
+    /// `exp*`), with the exponentiator and wedge operator it was fitted through.
+    fn band_table(order: usize, directions: usize, epsilon: f64) -> (Exponentiator, WedgeOperator, Vec<f64>) {
+        let exp = Exponentiator::new(order, ExpMethod::Quad, 1.0);
+        let wedge = WedgeOperator::new(order, directions);
+        let rows = fit_band_depths(order, epsilon, &exp, &wedge);
+        (exp, wedge, rows)
+    }
+
     /// A slope under a raised horizon: its bands start at its tangent plane, so they cover
     /// a crescent of the azimuths, not all of them. Bands at the depth for their coverage
     /// give the exact cosine-weighted share of the sky above both the horizon and the
@@ -738,9 +747,7 @@ mod tests {
     #[test]
     fn a_slope_under_a_raised_horizon_takes_its_share() {
         let (order, directions, epsilon) = (4, 16, 0.1f64);
-        let exp = Exponentiator::new(order, ExpMethod::Quad, 1.0);
-        let wedge = WedgeOperator::new(order, directions);
-        let rows = fit_band_depths(order, epsilon, &exp, &wedge);
+        let (exp, wedge, rows) = band_table(order, directions, epsilon);
         let coverages = band_coverages(directions);
         let (log_epsilon, count) = (epsilon.ln(), coefficient_count(order));
         let diffuse = lobe_log_zh(order, Lobe::Diffuse, epsilon);
@@ -804,11 +811,8 @@ mod tests {
     /// azimuths, open along the rest.
     #[test]
     fn a_sector_of_horizons_takes_its_share_at_its_coverage() {
-        let (order, directions, epsilon) = (4, 16, 0.1f64);
-        let exp = Exponentiator::new(order, ExpMethod::Quad, 1.0);
-        let wedge = WedgeOperator::new(order, directions);
-        let rows = fit_band_depths(order, epsilon, &exp, &wedge);
-        let coverages = band_coverages(directions);
+        let (_, _, rows) = band_table(4, 16, 0.1);
+        let coverages = band_coverages(16);
         assert_eq!(coverages, [1.0, 0.5, 0.25, 0.125, 0.0625]);
         assert_eq!(rows.len(), coverages.len() * (DEPTH_INTERVALS + 1));
         let width = DEPTH_INTERVALS + 1;
