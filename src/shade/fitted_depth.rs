@@ -141,12 +141,16 @@ pub fn fit_cap_depths(order: usize, epsilon: f64, tangent_occlusion: bool, exp: 
         .collect()
 }
 
-/// The horizon coverages the band table has a row for with `directions` azimuths: the
-/// share of them a sector of horizons spans, from all of them halving down to one.
-pub fn band_coverages(directions: usize) -> Vec<f64> {
+/// The sectors the band table has a row for with `directions` azimuths: how many of them
+/// the horizons span, from all of them halving down to one.
+fn band_sectors(directions: usize) -> impl Iterator<Item = usize> {
     std::iter::successors(Some(directions), |&s| (s > 1).then_some(s / 2))
-        .map(|s| s as f64 / directions as f64)
-        .collect()
+}
+
+/// The horizon coverage of each row of the band table with `directions` azimuths: the
+/// share of them its sector spans ([`band_sectors`]).
+pub fn band_coverages(directions: usize) -> Vec<f64> {
+    band_sectors(directions).map(|s| s as f64 / directions as f64).collect()
 }
 
 /// Rows of `DEPTH_INTERVALS + 1` log depths of a horizon band at widths `w = k pi / (2
@@ -158,7 +162,7 @@ pub fn fit_band_depths(order: usize, epsilon: f64, exp: &Exponentiator, wedge: &
     let log_epsilon = epsilon.ln();
     let directions = wedge.directions;
     let mut open_slice = [0.0; crate::sh::MAX_ORDER];
-    banded_slice(order, log_epsilon, &[log_epsilon; 2], 0.0, 0.0, &mut open_slice[..order]);
+    nlp_slice(order, log_epsilon, 0.0, &mut open_slice[..order]);
     let sector_bowl = |depth: f64, width: f64, sector: usize| {
         let mut slice = [0.0; crate::sh::MAX_ORDER];
         banded_slice(order, log_epsilon, &[depth; 2], 0.0, width, &mut slice[..order]);
@@ -180,10 +184,8 @@ pub fn fit_band_depths(order: usize, epsilon: f64, exp: &Exponentiator, wedge: &
         ((sector - 1) as f64 * full + 2.0 * ramp) / directions as f64
     };
     let open = sector_bowl(log_epsilon, 0.0, directions);
-    band_coverages(directions)
-        .into_iter()
-        .flat_map(|coverage| {
-            let sector = (coverage * directions as f64).round() as usize;
+    band_sectors(directions)
+        .flat_map(|sector| {
             (0..=DEPTH_INTERVALS)
                 .into_par_iter()
                 .map(|k| {
@@ -223,8 +225,9 @@ pub fn horizon_coverage(bases: &[f64], sigmas: &[f64]) -> f64 {
 pub fn band_depths_for<T: Real>(rows: &[T], coverages: &[f64], coverage: f64, out: &mut [T]) {
     let width = DEPTH_INTERVALS + 1;
     let row = |r: usize| &rows[r * width..(r + 1) * width];
+    debug_assert_eq!(rows.len(), coverages.len() * width, "one row of widths per coverage");
     let last = coverages.len() - 1;
-    if rows.len() < coverages.len() * width || coverage >= coverages[0] || last == 0 {
+    if coverage >= coverages[0] || last == 0 {
         out.copy_from_slice(row(0));
         return;
     }
