@@ -1059,6 +1059,49 @@ impl Prefiltered {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The split sum's known bias on a rough lobe (docs/method/materials.md): a floor's
+    /// reflection of a graded sky (radiance `1 + 3 z^2`, with a warm patch) read as the
+    /// lobe's albedo times the lobe-weighted mean of the sky above the floor (what `P /
+    /// below_tangent_divisor` reads), against a quadrature of GGX's BRDF times the cosine.
+    /// The true lobe weighs the zenith through its masking, which a lobe symmetric about
+    /// `R` cannot: 10 to 17 % too dark for alpha 0.7 to 1. Prints the table; fails if the
+    /// bias leaves that range, so that a change to the lobe or its albedo shows here.
+    #[test]
+    fn a_rough_lobes_split_sum_reads_a_graded_sky_too_dark() {
+        let sky = |w: [f64; 3]| 1.0 + 3.0 * w[2] * w[2] + 4.0 * dot(w, [0.6, 0.0, 0.8]).max(0.0).powi(8);
+        let (rings, sectors) = (180, 360);
+        let mut directions = Vec::with_capacity(rings * sectors);
+        for i in 0..rings {
+            let theta = FRAC_PI_2 * (i as f64 + 0.5) / rings as f64;
+            let solid_angle = theta.sin() * (FRAC_PI_2 / rings as f64) * (2.0 * PI / sectors as f64);
+            for j in 0..sectors {
+                let phi = 2.0 * PI * (j as f64 + 0.5) / sectors as f64;
+                let w = [theta.sin() * phi.cos(), theta.sin() * phi.sin(), theta.cos()];
+                directions.push((w, solid_angle, sky(w)));
+            }
+        }
+        for alpha in [0.7, 0.81, 0.9, 1.0] {
+            let lobe = SharpLobe::Ggx { alpha };
+            for mu in [0.15f64, 0.3, 0.5, 0.8] {
+                let v = [-(1.0 - mu * mu).sqrt(), 0.0, mu];
+                let reflected = [-v[0], 0.0, v[2]];
+                let truth: f64 = directions
+                    .iter()
+                    .map(|&(w, d_omega, radiance)| radiance * ggx_lit(alpha, 1.0, mu, w[2], dot(v, w)) * d_omega)
+                    .sum();
+                let (mut light, mut mass) = (0.0, 0.0);
+                for &(w, d_omega, radiance) in &directions {
+                    let weight = lobe.value(dot(reflected, w)) * d_omega;
+                    light += radiance * weight;
+                    mass += weight;
+                }
+                let bias = lobe.albedo(mu) * light / mass / truth - 1.0;
+                println!("alpha {alpha} n . v {mu}: {bias:+.3}");
+                assert!((-0.18..=-0.09).contains(&bias), "alpha {alpha}, n . v {mu}: {bias}");
+            }
+        }
+    }
     use crate::scene::light::direction_to_equirectangular;
 
     /// A sky of the kind the glossy term must mirror: a gradient, coloured patches and a
