@@ -251,7 +251,8 @@ impl Executor {
         let job = ShadeJob::new(&points_scene, plan.points(), &one_by_one);
         let direct = self.shade_direct(job, Outputs::Passes, &mut StageTimings::default())?;
         let direct = direct.into_passes().expect("shaded into passes");
-        Ok(plan.lit(scene, &direct.diffuse, &direct.visibility))
+        let sky = crate::shade::plan::environment_luminance(&one_by_one, &points_scene, plan.points());
+        Ok(plan.lit(scene, &direct.diffuse, &direct.visibility, &sky))
     }
 
     /// Direct light at every pixel of `job.frame`, its samples as they are: the frame

@@ -464,6 +464,14 @@ impl<T: Real> ShadingKernel<T> {
         self.order
     }
 
+    /// The Rec. 709 luminance of the light's SH coefficients.
+    pub(crate) fn light_luminance(&self) -> Vec<f64> {
+        let [r, g, b] = &self.light;
+        let value = |v: T| v.to_f64().unwrap_or(0.0);
+        let weights = LUMINANCE;
+        (0..r.len()).map(|k| weights[0] * value(r[k]) + weights[1] * value(g[k]) + weights[2] * value(b[k])).collect()
+    }
+
     /// Computes the prefiltered texels the glossy pixels of `frame` read, in one parallel
     /// walk of its pixels ([`Prefiltered::prepare`]), for an executor that uploads them
     /// (the GPU program); the CPU path computes each texel the first time it reads it.

@@ -135,6 +135,17 @@ pub fn frame_settings(settings: &ShadingSettings, scene: &Scene, frame: &Frame) 
     marched_with(settings, scene, frame).0
 }
 
+/// The luminance (Rec. 709) of the light `frame`'s kernel holds in SH, the light its
+/// visibility pass is weighted by: the bounce's leak scale weighs the covered share the
+/// same way ([`super::bounce::SkyWeighting`]).
+pub fn environment_luminance(settings: &ShadingSettings, scene: &Scene, frame: &Frame) -> Vec<f64> {
+    let lighting = marched_with(settings, scene, frame).1;
+    match &*lighting.kernel {
+        PlannedKernel::F32(kernel) => kernel.light_luminance(),
+        PlannedKernel::F64(kernel) => kernel.light_luminance(),
+    }
+}
+
 /// [`frame_settings`] and the frame's lighting, which takes the map's suns out: the
 /// kernel reads no level of the march, so it is built before they are chosen.
 fn marched_with(settings: &ShadingSettings, scene: &Scene, frame: &Frame) -> (ShadingSettings, Arc<Lighting>) {

@@ -74,6 +74,10 @@ impl Surroundings {
                 }
             }
         }
+        if let Some(sky) = &self.sky {
+            terrain[OCCLUSION] = sky.weigh(&terrain[OCCLUSION]);
+            blockers[OCCLUSION] = sky.weigh(&blockers[OCCLUSION]);
+        }
         [terrain, blockers]
     }
 
@@ -106,18 +110,23 @@ impl Surroundings {
     /// `visibility`: the direct light's own visibility of the receiver (the
     /// `visibility` pass), which scales the bounce ([`leak_scale`]).
     pub fn irradiance(&self, p: [f64; 3], n: [f64; 3], object: u32, visibility: Option<f32>) -> [[f64; 3]; 2] {
-        let e = self.incident(p, n, object).map(|incident| convolved(&incident, n, clamped_cosine_factor));
-        let scales = self.leak_scales(visibility, &e);
+        let mut y = [0.0f64; COUNT];
+        eval_basis(ORDER, n, &mut y);
+        let e = self.incident(p, n, object).map(|incident| convolved_with(&incident, &y, clamped_cosine_factor));
+        let scales = self.leak_scales(visibility, &e, &y);
         std::array::from_fn(|part| std::array::from_fn(|c| scales[part] * e[part][c]))
     }
 
     /// The [`leak_scale`] of the terrain's and of the blockers' parts of the irradiances
-    /// `e`: those the visibility pass covers, the height field and the blockers (the
-    /// ground plane is the kernel's unoccluded hemisphere, and its bounce is not scaled).
-    pub(super) fn leak_scales(&self, visibility: Option<f32>, e: &[[f64; CHANNELS]; 2]) -> [f64; 2] {
+    /// `e` at the normal whose basis is `y`: those the visibility pass covers, the height
+    /// field and the blockers (the ground plane is the kernel's unoccluded hemisphere, and
+    /// its bounce is not scaled). Their covered share is weighted by the sky as the
+    /// visibility pass weighs it ([`SkyWeighting`]), by the cosine alone without a sky.
+    pub(super) fn leak_scales(&self, visibility: Option<f32>, e: &[[f64; CHANNELS]; 2], y: &[f64; COUNT]) -> [f64; 2] {
         let field = self.terrain.as_ref().is_some_and(|t| t.field.is_some());
-        let covered = if field { e[0][3] + e[1][3] } else { e[1][3] };
-        let scale = leak_scale(visibility, covered / PI);
+        let covered = if field { e[0][OCCLUSION] + e[1][OCCLUSION] } else { e[1][OCCLUSION] };
+        let open = self.sky.as_ref().map_or(PI, |sky| sky.open(y));
+        let scale = leak_scale(visibility, covered / open);
         [if field { scale } else { 1.0 }, scale]
     }
 
@@ -318,7 +327,7 @@ impl Receiver {
         let mut y = [0.0f64; COUNT];
         eval_basis(ORDER, point.normal, &mut y);
         let e = incident.map(|part| convolved_with(&part, &y, clamped_cosine_factor));
-        let scales = surroundings.leak_scales(self.visibility, &e);
+        let scales = surroundings.leak_scales(self.visibility, &e, &y);
         let glossy = self.exponent.map(|s| {
             let sharp = ((s - BLURRED_BELOW) / (s + SHARP_EXPONENT - BLURRED_BELOW)).max(0.0);
             let along =
@@ -359,6 +368,85 @@ pub(super) fn refract(eye: [f64; 3], p: [f64; 3], n: [f64; 3]) -> Option<[f64; 3
     Some(std::array::from_fn(|i| eta * v[i] + scale * n[i]))
 }
 
+/// The sky's luminance as the direct light's visibility pass weighs its directions (the
+/// kernel's SH light, [`crate::shade::plan::environment_luminance`]), for the covered
+/// share [`leak_scale`] compares with the light the visibility lets through.
+///
+/// The visibility pass is `lum(exp*(V + D) . L) / lum(exp*(T + D) . L)`: where the
+/// surroundings cover a dim part of the sky (the horizon under a sky brighter overhead),
+/// `1 - visibility` is smaller than the share of the cosine lobe they cover, though the
+/// fitted depths block that part as they should. Scaled by the unweighted share, the
+/// bounce off the surroundings was cut where nothing leaked: the primitives' floor took
+/// 58 % of the bounce Cycles' light paths give it (`docs/method/bounce-light.md`). So the
+/// gather's occlusion channel is weighted by the sky's luminance `l(w)`: it carries the
+/// order-[`ORDER`] projection of `occlusion(w) l(w)`, and a receiver's covered share is
+/// its cosine convolution over that of `l` alone. Under a constant sky it is the
+/// unweighted share.
+#[derive(Clone, Debug)]
+pub struct SkyWeighting {
+    /// Per node of a product quadrature, `w_i l(x_i)` and the basis at `x_i`.
+    nodes: Vec<(f64, [f64; COUNT])>,
+    /// `l` projected to order [`ORDER`].
+    luminance: [f64; COUNT],
+}
+
+impl SkyWeighting {
+    /// The weighting by a sky of luminance `luminance`, SH coefficients of the kernel's
+    /// order (4 by default): its bands from [`ORDER`] on are dropped, as the gather holds
+    /// nothing finer. `None` for a sky with no light, whose visibility pass is 1.
+    pub fn new(luminance: &[f64]) -> Option<Self> {
+        let mut projected = [0.0f64; COUNT];
+        for (to, from) in projected.iter_mut().zip(luminance) {
+            *to = *from;
+        }
+        if projected[0] <= 0.0 || projected.iter().any(|v| !v.is_finite()) {
+            return None;
+        }
+        // Gauss-Legendre in z with twice as many azimuths: exact for the product of three
+        // functions of order ORDER (degree 3 (ORDER - 1)).
+        let quadrature = crate::sh::quadrature::SphereQuadrature::gauss(ORDER + 2);
+        let nodes = quadrature
+            .directions
+            .iter()
+            .zip(&quadrature.weights)
+            .map(|(&d, &w)| {
+                let mut y = [0.0f64; COUNT];
+                eval_basis(ORDER, d, &mut y);
+                let l: f64 = projected.iter().zip(&y).map(|(a, b)| a * b).sum();
+                (w * l.max(0.0), y)
+            })
+            .collect();
+        Some(Self { nodes, luminance: projected })
+    }
+
+    /// The projection of `occlusion(w) l(w)`, `occlusion` as SH.
+    pub(super) fn weigh(&self, occlusion: &[f64; COUNT]) -> [f64; COUNT] {
+        let mut out = [0.0f64; COUNT];
+        for (weight, y) in &self.nodes {
+            let value: f64 = occlusion.iter().zip(y).map(|(a, b)| a * b).sum();
+            let scaled = weight * value;
+            for (o, b) in out.iter_mut().zip(y) {
+                *o += scaled * b;
+            }
+        }
+        out
+    }
+
+    /// `integral l(w) max(n . w, 0) dw` at the normal whose basis is `y`, as
+    /// [`convolved_with`] convolves the weighted occlusion: `pi` times the luminance
+    /// under a constant sky.
+    pub(super) fn open(&self, y: &[f64; COUNT]) -> f64 {
+        let mut sum = 0.0;
+        for l in 0..ORDER {
+            let factor = clamped_cosine_factor(l);
+            for i in l * l..(l + 1) * (l + 1) {
+                sum += factor * self.luminance[i] * y[i];
+            }
+        }
+        sum.max(1e-12)
+    }
+}
+
 /// What the bounce gathered over a receiver's covered share `occlusion` of its cosine
 /// lobe is scaled by, given the direct light's visibility of it (`visibility`, 1 where
 /// nothing covers it): `(1 - visibility) / occlusion`, at most 1. The log-SH visibility
@@ -386,15 +474,8 @@ pub(super) type Incident = [[f64; COUNT]; CHANNELS];
 /// [`Incident`] as stored at the gather's nodes.
 pub(super) type Incident32 = [[f32; COUNT]; CHANNELS];
 
-/// `sum_lm factor(l) U_lm y_lm(axis)` per channel, clamped at 0: with the clamped
-/// cosine's factors, the irradiance about `axis`.
-pub(super) fn convolved(incident: &Incident, axis: [f64; 3], factor: impl Fn(usize) -> f64) -> [f64; CHANNELS] {
-    let mut y = [0.0f64; COUNT];
-    eval_basis(ORDER, axis, &mut y);
-    convolved_with(incident, &y, factor)
-}
-
-/// [`convolved`] given the basis at the axis, `y`.
+/// `sum_lm factor(l) U_lm y_lm(axis)` per channel, clamped at 0, given the basis at the
+/// axis, `y`: with the clamped cosine's factors, the irradiance about `axis`.
 pub(super) fn convolved_with(incident: &Incident, y: &[f64; COUNT], factor: impl Fn(usize) -> f64) -> [f64; CHANNELS] {
     std::array::from_fn(|c| {
         let mut sum = 0.0;

@@ -44,7 +44,7 @@ use std::collections::BTreeMap;
 use std::f64::consts::PI;
 
 mod gather;
-pub use gather::IndirectParts;
+pub use gather::{IndirectParts, SkyWeighting};
 
 /// The SH order of the gathered radiance.
 const ORDER: usize = 5;
@@ -55,9 +55,12 @@ pub const AZIMUTHS: usize = 16;
 /// its distance, which the grid's texels cover beyond a few texels.
 const STEP_RATIO: f64 = 1.15;
 /// What a gather carries per SH coefficient: the radiance in R, G, B, and the occlusion
-/// (radiance 1 wherever the surroundings are), which tells how much of a receiver's
-/// cosine lobe they cover.
+/// (radiance 1 wherever the surroundings are, times the sky's luminance there once the
+/// gather is weighted by a sky, [`SkyWeighting`]), which tells how much of a receiver's
+/// light they cover.
 const CHANNELS: usize = 4;
+/// The occlusion's channel.
+const OCCLUSION: usize = 3;
 /// The fourteen directions a sphere's secondary points lie along: the axes and the
 /// diagonals.
 const SPHERE_DIRECTIONS: usize = 14;
@@ -334,6 +337,8 @@ pub struct Surroundings {
     terrain: Option<TerrainGrid>,
     spheres: Vec<SphereLight>,
     turn: WedgeTurn<f64>,
+    /// The sky the gather's covered share is weighted by.
+    sky: Option<SkyWeighting>,
 }
 
 /// Whether pixel `i` of `g` is a surface the surroundings summarise: a material, not
@@ -562,10 +567,12 @@ impl SurroundingsPlan {
     /// with [`Self::points_scene`] (a texel's albedo, a sphere's point the albedo of
     /// [`PointMaterial`], times direct irradiance over pi), `visibility` their visibility
     /// pass; each bounce after the first gathers at the points what the one before left
-    /// on them.
-    pub fn lit(self, scene: &Scene, direct: &[[f32; 3]], visibility: &[f32]) -> Surroundings {
+    /// on them. `sky_luminance`: the SH coefficients of the luminance of the light the
+    /// visibility pass weighs by ([`SkyWeighting`]).
+    pub fn lit(self, scene: &Scene, direct: &[[f32; 3]], visibility: &[f32], sky_luminance: &[f64]) -> Surroundings {
         let Self { points, sphere_points, terrain, spheres, bounces } = self;
-        let mut surroundings = Surroundings { terrain, spheres, turn: WedgeOperator::new(ORDER, AZIMUTHS).turn() };
+        let turn = WedgeOperator::new(ORDER, AZIMUTHS).turn();
+        let mut surroundings = Surroundings { terrain, spheres, turn, sky: SkyWeighting::new(sky_luminance) };
         let side = surroundings.terrain.as_ref().map_or(0, |t| t.side);
         // The spheres' points as irradiance over pi: their shading's albedo divided out.
         let direct: Vec<[f32; 3]> = direct
@@ -839,6 +846,71 @@ fn set_overlaps(spheres: &mut [SphereLight]) {
 mod tests {
     use super::*;
 
+    /// The covered share the leak scale reads: under a constant sky, the cosine-weighted
+    /// share (as before the weighting); under a sky four times as bright overhead as at
+    /// the horizon, a cap low on the horizon covers less of the light than of the lobe,
+    /// as a quadrature of `occlusion l cos` over `l cos` finds, within 0.001.
+    #[test]
+    fn the_covered_share_is_weighted_by_the_sky() {
+        let quadrature = crate::sh::quadrature::SphereQuadrature::gauss(48);
+        let project = |f: &dyn Fn([f64; 3]) -> f64| {
+            let mut out = [0.0f64; COUNT];
+            let mut y = [0.0f64; COUNT];
+            for (&d, &w) in quadrature.directions.iter().zip(&quadrature.weights) {
+                eval_basis(ORDER, d, &mut y);
+                let v = w * f(d);
+                for (o, b) in out.iter_mut().zip(&y) {
+                    *o += v * b;
+                }
+            }
+            out
+        };
+        // A cap of 25 degrees, its centre 12 degrees above the horizon, as the gather's
+        // occlusion channel holds it.
+        let mut cap = [0.0f64; ORDER];
+        cap_log_zh(ORDER, 1.0, 25f64.to_radians(), &mut cap);
+        let mut occlusion = [0.0f64; COUNT];
+        let elevation = 12f64.to_radians();
+        add_rotated_zonal(ORDER, &cap, 1.0, [elevation.cos(), 0.0, elevation.sin()], &mut occlusion);
+        let n = [0.0, 0.0, 1.0];
+        let mut y = [0.0f64; COUNT];
+        eval_basis(ORDER, n, &mut y);
+        let cosine_share = |sky: Option<&SkyWeighting>| {
+            let weighted = sky.map_or(occlusion, |sky| sky.weigh(&occlusion));
+            let mut incident = [[0.0f64; COUNT]; CHANNELS];
+            incident[OCCLUSION] = weighted;
+            let e = gather::convolved_with(&incident, &y, clamped_cosine_factor);
+            e[OCCLUSION] / sky.map_or(PI, |sky| sky.open(&y))
+        };
+        let unweighted = cosine_share(None);
+        let constant = SkyWeighting::new(&project(&|_| 0.7)).expect("a lit sky");
+        assert!(
+            (cosine_share(Some(&constant)) - unweighted).abs() < 1e-9,
+            "constant sky: {} against {unweighted}",
+            cosine_share(Some(&constant))
+        );
+
+        let luminance = |d: [f64; 3]| 1.0 + 3.0 * d[2] * d[2];
+        let graded = SkyWeighting::new(&project(&luminance)).expect("a lit sky");
+        let weighted = cosine_share(Some(&graded));
+        let occlusion_at = |d: [f64; 3]| {
+            let mut yd = [0.0f64; COUNT];
+            eval_basis(ORDER, d, &mut yd);
+            occlusion.iter().zip(&yd).map(|(a, b)| a * b).sum::<f64>()
+        };
+        let (mut covered, mut all) = (0.0, 0.0);
+        for (&d, &w) in quadrature.directions.iter().zip(&quadrature.weights) {
+            let lit = w * luminance(d) * d[2].max(0.0);
+            covered += lit * occlusion_at(d);
+            all += lit;
+        }
+        let expected = covered / all;
+        println!("unweighted {unweighted:.4}, weighted {weighted:.4}, quadrature {expected:.4}");
+        assert!(weighted < 0.8 * unweighted, "the dim horizon's share: {weighted} against {unweighted}");
+        assert!((weighted - expected).abs() < 0.001, "{weighted} against {expected}");
+        assert!(SkyWeighting::new(&[0.0; 16]).is_none(), "a black sky weighs nothing");
+    }
+
     /// A flat terrain of uniform radiance `radiance`, as a [`Surroundings`].
     fn flat(radiance: f32, height: f64) -> Surroundings {
         let side = 16;
@@ -852,7 +924,12 @@ mod tests {
             radiance: vec![[radiance; 3]; side * side],
             material: 1,
         };
-        Surroundings { terrain: Some(terrain), spheres: Vec::new(), turn: WedgeOperator::new(ORDER, AZIMUTHS).turn() }
+        Surroundings {
+            terrain: Some(terrain),
+            spheres: Vec::new(),
+            turn: WedgeOperator::new(ORDER, AZIMUTHS).turn(),
+            sky: None,
+        }
     }
 
     /// A bowl of uniform radiance 1 around receivers on its floor and walls: the gathered
@@ -885,6 +962,7 @@ mod tests {
             terrain: Some(terrain),
             spheres: Vec::new(),
             turn: WedgeOperator::new(ORDER, AZIMUTHS).turn(),
+            sky: None,
         };
         for (x, y) in [(0.0, 0.0), (2.0, 1.0), (4.0, 0.0), (6.0, -2.0)] {
             let p = [x, y, field.height_at(x, y)];
