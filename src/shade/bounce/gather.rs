@@ -436,14 +436,7 @@ impl SkyWeighting {
     /// [`convolved_with`] convolves the weighted occlusion: `pi` times the luminance
     /// under a constant sky.
     pub(super) fn open(&self, y: &[f64; COUNT]) -> f64 {
-        let mut sum = 0.0;
-        for l in 0..ORDER {
-            let factor = clamped_cosine_factor(l);
-            for i in l * l..(l + 1) * (l + 1) {
-                sum += factor * self.luminance[i] * y[i];
-            }
-        }
-        sum.max(1e-12)
+        convolved_one(&self.luminance, y, clamped_cosine_factor).max(1e-12)
     }
 }
 
@@ -477,16 +470,19 @@ pub(super) type Incident32 = [[f32; COUNT]; CHANNELS];
 /// `sum_lm factor(l) U_lm y_lm(axis)` per channel, clamped at 0, given the basis at the
 /// axis, `y`: with the clamped cosine's factors, the irradiance about `axis`.
 pub(super) fn convolved_with(incident: &Incident, y: &[f64; COUNT], factor: impl Fn(usize) -> f64) -> [f64; CHANNELS] {
-    std::array::from_fn(|c| {
-        let mut sum = 0.0;
-        for l in 0..ORDER {
-            let f = factor(l);
-            for i in l * l..(l + 1) * (l + 1) {
-                sum += f * incident[c][i] * y[i];
-            }
+    std::array::from_fn(|c| convolved_one(&incident[c], y, &factor).max(0.0))
+}
+
+/// `sum_lm factor(l) U_lm y_lm` of one SH vector, unclamped.
+fn convolved_one(coefficients: &[f64; COUNT], y: &[f64; COUNT], factor: impl Fn(usize) -> f64) -> f64 {
+    let mut sum = 0.0;
+    for l in 0..ORDER {
+        let f = factor(l);
+        for i in l * l..(l + 1) * (l + 1) {
+            sum += f * coefficients[i] * y[i];
         }
-        sum.max(0.0)
-    })
+    }
+    sum
 }
 
 /// A frame's bounce light per pixel, by where it comes from.

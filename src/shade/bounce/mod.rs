@@ -853,18 +853,7 @@ mod tests {
     #[test]
     fn the_covered_share_is_weighted_by_the_sky() {
         let quadrature = crate::sh::quadrature::SphereQuadrature::gauss(48);
-        let project = |f: &dyn Fn([f64; 3]) -> f64| {
-            let mut out = [0.0f64; COUNT];
-            let mut y = [0.0f64; COUNT];
-            for (&d, &w) in quadrature.directions.iter().zip(&quadrature.weights) {
-                eval_basis(ORDER, d, &mut y);
-                let v = w * f(d);
-                for (o, b) in out.iter_mut().zip(&y) {
-                    *o += v * b;
-                }
-            }
-            out
-        };
+        let project = |f: &dyn Fn([f64; 3]) -> f64| quadrature.project::<f64>(ORDER, f);
         // A cap of 25 degrees, its centre 12 degrees above the horizon, as the gather's
         // occlusion channel holds it.
         let mut cap = [0.0f64; ORDER];
@@ -893,18 +882,9 @@ mod tests {
         let luminance = |d: [f64; 3]| 1.0 + 3.0 * d[2] * d[2];
         let graded = SkyWeighting::new(&project(&luminance)).expect("a lit sky");
         let weighted = cosine_share(Some(&graded));
-        let occlusion_at = |d: [f64; 3]| {
-            let mut yd = [0.0f64; COUNT];
-            eval_basis(ORDER, d, &mut yd);
-            occlusion.iter().zip(&yd).map(|(a, b)| a * b).sum::<f64>()
-        };
-        let (mut covered, mut all) = (0.0, 0.0);
-        for (&d, &w) in quadrature.directions.iter().zip(&quadrature.weights) {
-            let lit = w * luminance(d) * d[2].max(0.0);
-            covered += lit * occlusion_at(d);
-            all += lit;
-        }
-        let expected = covered / all;
+        let lit = |d: [f64; 3]| luminance(d) * d[2].max(0.0);
+        let covered = quadrature.integrate(|d| lit(d) * crate::sh::basis::eval_expansion(ORDER, &occlusion, d));
+        let expected = covered / quadrature.integrate(lit);
         println!("unweighted {unweighted:.4}, weighted {weighted:.4}, quadrature {expected:.4}");
         assert!(weighted < 0.8 * unweighted, "the dim horizon's share: {weighted} against {unweighted}");
         assert!((weighted - expected).abs() < 0.001, "{weighted} against {expected}");
