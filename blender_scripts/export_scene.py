@@ -23,6 +23,9 @@ per-frame sphere blockers and camera, height map, materials and the World's ligh
     --approximate           export materials logsh cannot represent (transmission,
                             subsurface, emission, another shader) with a warning each,
                             where the export otherwise stops naming the material
+    --sun-shadow-resolution N
+                            texels along the longer side of each sun's shadow map of the
+                            blockers, 64 to 8192, or 0 for none (1024)
 
 What is exported and how materials and blockers are derived is documented at the top of
 `blender_scripts/logsh_exporter/exporter.py`; the add-on in the same folder runs the same
@@ -91,6 +94,8 @@ def main(argv):
                              "colours (the materials of render_cycles.py's direct-light truth)")
     parser.add_argument("--approximate", action="store_true",
                         help="export materials logsh cannot represent with a warning each, where the export stops")
+    parser.add_argument("--sun-shadow-resolution", type=int, default=Options.sun_shadow_resolution,
+                        help="texels along the longer side of each sun's shadow map, 64 to 8192; 0 writes none")
     args = parser.parse_args(argv)
 
     if args.blend:
@@ -105,7 +110,8 @@ def main(argv):
     options = Options(out=args.out, frames=args.frames, resolution=args.resolution, spheres=args.spheres,
                       fit_error=args.fit_error, heightfield=args.heightfield,
                       heightmap_size=args.heightmap_size, supersample=args.supersample,
-                      colour_passes=args.colour_passes, approximate=args.approximate)
+                      colour_passes=args.colour_passes, approximate=args.approximate,
+                      sun_shadow_resolution=args.sun_shadow_resolution)
     try:
         export(scene, options)
     except ExportError as e:

@@ -489,7 +489,7 @@ fn prefiltered_glossy(occlusion: ptr<function, array<f32, COUNT_CAP>>, material:
     var by_cone = 0.0;
     if share > 0.0 {
         var disk = disk_around(r, core);
-        let blocked = disk_blocked(&disk, p, n, object, r, core, core_patch, 3.0e38, false, false);
+        let blocked = disk_blocked(&disk, p, n, object, r, core, core_patch, 3.0e38, false, false, NO_MAP, 0.0);
         for (var q = 0u; q < DISK_QUADS; q++) {
             let w = vec4<f32>(tables[weights + 4u * q], tables[weights + 4u * q + 1u], tables[weights + 4u * q + 2u], tables[weights + 4u * q + 3u]);
             by_cone += dot(w, 1.0 - blocked[q]);
@@ -602,7 +602,7 @@ fn sunlit(p: vec3<f32>, n: vec3<f32>, object: u32, r: vec3<f32>, material: GpuMa
     }
     for (var s = 0u; s < SUN_COUNT; s++) {
         let sun = load_GpuSun(T_SUNS + GpuSun_FLOATS * s);
-        add_disk_light(p, n, object, r, material, albedo, sun.axis.xyz, sun.axis.w, sun.integral.w, 3.0e38, sun.integral.xyz, diffuse, specular);
+        add_disk_light(p, n, object, r, material, albedo, sun.axis.xyz, sun.axis.w, sun.integral.w, 3.0e38, sun.integral.xyz, sun.shadow_map, sun.drift, diffuse, specular);
     }
     for (var s = 0u; s < POINT_COUNT; s++) {
         // The lamp's disk seen from p (src/scene/light.rs, PointLight::seen_from).
@@ -632,19 +632,20 @@ fn sunlit(p: vec3<f32>, n: vec3<f32>, object: u32, r: vec3<f32>, material: GpuMa
         // SunLight::disk_integral of the lamp's irradiance, intensity / spread.
         let integral = min(intensity / spread, vec3<f32>(3.0e38)) * (2.0 / (2.0 - one_minus_cos));
         let patch_radius = half_angle / sqrt(f32(DISK_DIRECTIONS));
-        add_disk_light(p, n, object, r, material, albedo, axis, one_minus_cos, patch_radius, distance, integral, diffuse, specular);
+        add_disk_light(p, n, object, r, material, albedo, axis, one_minus_cos, patch_radius, distance, integral, NO_MAP, 0.0, diffuse, specular);
     }
 }
 
 // One disk light's share (kernel.rs, sunlit's loop body): `integral` is the disk's
-// radiance times its solid angle, `reach` its distance (3e38 for a sun).
-fn add_disk_light(p: vec3<f32>, n: vec3<f32>, object: u32, r: vec3<f32>, material: GpuMaterial, albedo: f32, axis: vec3<f32>, one_minus_cos: f32, patch_radius: f32, reach: f32, integral: vec3<f32>, diffuse: ptr<function, vec3<f32>>, specular: ptr<function, vec3<f32>>) {
+// radiance times its solid angle, `reach` its distance (3e38 for a sun); a sun's shadow
+// map at `shadow_map` (NO_MAP for none), its rays drifting `drift` per unit of depth.
+fn add_disk_light(p: vec3<f32>, n: vec3<f32>, object: u32, r: vec3<f32>, material: GpuMaterial, albedo: f32, axis: vec3<f32>, one_minus_cos: f32, patch_radius: f32, reach: f32, integral: vec3<f32>, shadow_map: u32, drift: f32, diffuse: ptr<function, vec3<f32>>, specular: ptr<function, vec3<f32>>) {
     let glossy = material.kind == MATERIAL_PHONG;
     let ggx = glossy && lobe_kind(material) == LOBE_GGX;
     let n_v = dot(n, r);
     let v = 2.0 * n_v * n - r;
     var disk = disk_around(axis, one_minus_cos);
-    let blocked = disk_blocked(&disk, p, n, object, axis, one_minus_cos, patch_radius, reach, true, true);
+    let blocked = disk_blocked(&disk, p, n, object, axis, one_minus_cos, patch_radius, reach, true, true, shadow_map, drift);
     var cosine = 0.0;
     var lobe = 0.0;
     // GGX smooth over an open disk takes its value at the axis (glossy.rs,

@@ -261,6 +261,36 @@ gpu_struct! {
         /// The disk integral, radiance times solid angle (rgb), and the patch radius of
         /// its directions (w).
         integral: [f32; 4],
+        /// Offset of the sun's shadow map in the tables ([`GpuShadowMap`]), or
+        /// [`NO_MAP`]: the blocker spheres shadow it then.
+        shadow_map: u32,
+        /// How far the disk's rays drift sideways per unit of depth in its map: the tangent
+        /// of the disk's half-angle plus the map's tolerance (src/shade/sun_shadow.rs).
+        drift: f32,
+        pad: u32,
+        pad_2: u32,
+    }
+}
+
+gpu_struct! {
+    /// A sun's shadow map of the blocker meshes in the shading pass's tables
+    /// (src/shade/sun_shadow.rs, ShadowMapMarch; [`TableRecord`]), followed by its
+    /// `levels` [`GpuLevel`]s of minima of `Z` (level 0 `Z` itself), whose `offset`s index
+    /// the tables.
+    GpuShadowMap {
+        /// Unit, towards the sun (xyz), and the side of a texel in metres (w).
+        axis: [f32; 4],
+        /// The centre of the map's plane (xyz), and the shallowest depth in it (w).
+        origin: [f32; 4],
+        /// Unit, along the columns (xyz), and the width spanned (w).
+        right: [f32; 4],
+        /// Unit, up the rows (xyz), and the height spanned (w).
+        up: [f32; 4],
+        columns: u32,
+        rows: u32,
+        levels: u32,
+        /// Offset of `Zfar` in the tables, level 0's layout.
+        far: u32,
     }
 }
 
@@ -296,6 +326,8 @@ gpu_struct! {
 }
 
 impl TableRecord for GpuSun {}
+impl TableRecord for GpuShadowMap {}
+impl TableRecord for GpuLevel {}
 impl TableRecord for GpuPointLamp {}
 impl TableRecord for GpuLobeHead {}
 
@@ -326,6 +358,7 @@ pub fn shared_structs() -> Vec<Declared> {
         declared::<GpuDecimation>(),
         declared::<GpuTap>(),
         declared::<GpuSun>(),
+        declared::<GpuShadowMap>(),
         declared::<GpuPointLamp>(),
         declared::<GpuLobeHead>(),
     ]
@@ -333,7 +366,14 @@ pub fn shared_structs() -> Vec<Declared> {
 
 /// The loaders of the records of the shading pass's tables ([`TableRecord`]).
 pub fn wgsl_table_loaders() -> String {
-    [GpuSun::wgsl_loader(), GpuPointLamp::wgsl_loader(), GpuLobeHead::wgsl_loader()].concat()
+    [
+        GpuSun::wgsl_loader(),
+        GpuShadowMap::wgsl_loader(),
+        GpuLevel::wgsl_loader(),
+        GpuPointLamp::wgsl_loader(),
+        GpuLobeHead::wgsl_loader(),
+    ]
+    .concat()
 }
 
 /// Invocations per workgroup of every compute pass (`@workgroup_size(WORKGROUP_SIZE)`).

@@ -316,6 +316,201 @@ fn sun_lamp_exports_as_a_sun_light() {
     assert_ok(&output, "logsh shade");
 }
 
+/// Each sun gets a shadow map of the blockers' own surfaces (`sun_shadows` of
+/// blockers.####.json, `exporter.py`): a 2 m cube standing on a plane under a Sun lamp 30
+/// degrees from vertical. The entry's axis is the lamp's direction as scene.json has it,
+/// `right`, `up` and `axis` are orthonormal and right-handed, and the plane lies beyond the
+/// cube towards the sun; the image is one scan-line part of float `Z` and `Zfar`, square
+/// texels, 1024 along its longer side, the cube's outline 2 texels inside its edges. The
+/// ray through every texel centre enters and leaves the cube (slab test) at the texel's `Z`
+/// and `Zfar` within 0.1 mm, and misses it where `Z` is 1e9 or more: the plane, flat and
+/// without spheres, is not in the map. The texels over points of the top and of the two lit
+/// sides hold those points' `(origin - x) . axis` within 1.5 texels' worth of the face's
+/// slope (the texel centre lies within 0.71 texel of the point, and the depth changes by
+/// tan(angle between the face's normal and the axis) per metre across the map). Without
+/// maps (`--sun-shadow-resolution 0`) the key is left out; 32 stops the export.
+#[test]
+fn sun_shadow_map_holds_the_blockers_depth() {
+    let Some(python) = bpy_python() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let blend = dir.path().join("cube.blend");
+    make_blend(
+        &python,
+        &blend,
+        "bpy.ops.mesh.primitive_plane_add(size=8); bpy.ops.mesh.primitive_cube_add(size=2, location=(0, 0, 1)); \
+         bpy.ops.object.camera_add(location=(7, -7, 5), rotation=(math.radians(63), 0, math.radians(45))); \
+         bpy.context.scene.camera = bpy.context.object; \
+         bpy.ops.object.light_add(type='SUN', rotation=(math.radians(30), 0, math.radians(40))); \
+         w = bpy.data.worlds.new('World'); bpy.context.scene.world = w; w.use_nodes = True; \
+         w.node_tree.nodes['Background'].inputs['Color'].default_value = (0.2, 0.2, 0.2, 1)",
+    );
+    let out = dir.path().join("scene");
+    assert_ok(&export_frame_1(&python, &blend, &out, "32x18"), "exporting a cube under a Sun lamp");
+    let json =
+        |file: &Path| -> serde_json::Value { serde_json::from_str(&std::fs::read_to_string(file).unwrap()).unwrap() };
+    let (description, blockers) = (json(&out.join("scene.json")), json(&out.join("blockers.0001.json")));
+    let maps = blockers["sun_shadows"].as_array().expect("blockers.0001.json has sun_shadows");
+    assert_eq!(maps.len(), 1, "{maps:?}");
+    let map = &maps[0];
+    assert_eq!(map["image"], "sun_shadow.0001.0.exr");
+    assert_eq!(map["axis"], description["lights"][0]["direction"], "the axis is the sun's direction as written");
+    let vector = |key: &str| -> [f64; 3] { serde_json::from_value(map[key].clone()).unwrap() };
+    let (axis, origin, right, up) = (vector("axis"), vector("origin"), vector("right"), vector("up"));
+    let [w, h]: [f64; 2] = serde_json::from_value(map["size"].clone()).unwrap();
+    let dot = |p: [f64; 3], q: [f64; 3]| p[0] * q[0] + p[1] * q[1] + p[2] * q[2];
+    let sub = |p: [f64; 3], q: [f64; 3]| [p[0] - q[0], p[1] - q[1], p[2] - q[2]];
+    let cross =
+        |p: [f64; 3], q: [f64; 3]| [p[1] * q[2] - p[2] * q[1], p[2] * q[0] - p[0] * q[2], p[0] * q[1] - p[1] * q[0]];
+    let (a, b) = (30f64.to_radians(), 40f64.to_radians());
+    let lamp = [a.sin() * b.sin(), -a.sin() * b.cos(), a.cos()];
+    for k in 0..3 {
+        assert!((axis[k] - lamp[k]).abs() < 1e-6, "axis {axis:?}, lamp {lamp:?}");
+    }
+    for (what, value, expected) in [
+        ("right . right", dot(right, right), 1.0),
+        ("up . up", dot(up, up), 1.0),
+        ("right . up", dot(right, up), 0.0),
+        ("right . axis", dot(right, axis), 0.0),
+        ("up . axis", dot(up, axis), 0.0),
+        ("(right x up) . axis", dot(cross(right, up), axis), 1.0),
+    ] {
+        assert!((value - expected).abs() < 1e-6, "{what} = {value}");
+    }
+
+    let image = out.join("sun_shadow.0001.0.exr");
+    let meta = exr::meta::MetaData::read_from_file(&image, false).unwrap();
+    assert_eq!(meta.headers.len(), 1, "one part");
+    let header = &meta.headers[0];
+    assert_eq!(header.blocks, exr::meta::BlockDescription::ScanLines);
+    let names: Vec<String> = header.channels.list.iter().map(|c| c.name.to_string()).collect();
+    assert_eq!(names, ["Z", "Zfar"]);
+    assert!(header.channels.list.iter().all(|c| c.sample_type == exr::meta::attribute::SampleType::F32));
+    let (nx, ny) = (header.layer_size.width(), header.layer_size.height());
+
+    // The cube [-1, 1] x [-1, 1] x [0, 2]: the plane beyond it, square texels, 2 of them
+    // between its outline and the edges along the longer side and at least 2 along the
+    // other, whose texels are ceil(1024 x its span / the longer span), margins included.
+    let corners: Vec<[f64; 3]> = (0..8)
+        .map(|k| {
+            [
+                if k & 1 == 0 { -1.0 } else { 1.0 },
+                if k & 2 == 0 { -1.0 } else { 1.0 },
+                if k & 4 == 0 { 0.0 } else { 2.0 },
+            ]
+        })
+        .collect();
+    assert!(corners.iter().all(|&x| dot(sub(x, origin), axis) < 0.0), "the plane lies beyond the cube");
+    let texel = w / nx as f64;
+    assert!((h / ny as f64 - texel).abs() < 1e-9 * texel, "texels of {texel} x {} m", h / ny as f64);
+    assert_eq!(nx.max(ny), 1024);
+    let span = |v: [f64; 3]| {
+        let along: Vec<f64> = corners.iter().map(|&x| dot(sub(x, origin), v)).collect();
+        (along.iter().copied().fold(f64::INFINITY, f64::min), along.iter().copied().fold(f64::NEG_INFINITY, f64::max))
+    };
+    let ((u0, u1), (v0, v1)) = (span(right), span(up));
+    let margins = [(u0 + w / 2.0) / texel, (w / 2.0 - u1) / texel, (v0 + h / 2.0) / texel, (h / 2.0 - v1) / texel];
+    assert!(margins.iter().all(|&m| m > 2.0 - 1e-6), "margins of {margins:?} texels");
+    let longer = if nx >= ny { &margins[..2] } else { &margins[2..] };
+    assert!(longer.iter().all(|&m| (m - 2.0).abs() < 1e-6), "margins of {margins:?} texels");
+    let (short, extent) = if nx >= ny { (ny as f64, v1 - v0) } else { (nx as f64, u1 - u0) };
+    let wanted = (extent + 4.0 * texel) / texel;
+    assert!(short >= wanted - 1e-6 && short < wanted + 1.0, "{short} texels along the shorter side, for {wanted}");
+
+    let channels = raw_channels(&image);
+    let (z, zfar) = (&channels["Z"], &channels["Zfar"]);
+    assert_eq!(z.len(), nx * ny);
+    // The ray from texel (i, j)'s centre c meets the point c - axis d at depth d.
+    let centre = |i: usize, j: usize| -> [f64; 3] {
+        let (s, t) = (((i as f64 + 0.5) / nx as f64 - 0.5) * w, (0.5 - (j as f64 + 0.5) / ny as f64) * h);
+        [0, 1, 2].map(|k| origin[k] + right[k] * s + up[k] * t)
+    };
+    let slab = |c: [f64; 3]| -> Option<(f64, f64)> {
+        let (lo, hi) = ([-1.0, -1.0, 0.0], [1.0, 1.0, 2.0]);
+        let (mut near, mut far) = (f64::NEG_INFINITY, f64::INFINITY);
+        for k in 0..3 {
+            let (t0, t1) = ((c[k] - lo[k]) / axis[k], (c[k] - hi[k]) / axis[k]);
+            near = near.max(t0.min(t1));
+            far = far.min(t0.max(t1));
+        }
+        (near <= far).then_some((near, far))
+    };
+    let (mut hits, mut outline, mut worst) = (0usize, 0usize, 0f64);
+    for j in 0..ny {
+        for i in 0..nx {
+            let at = j * nx + i;
+            let border = i < 2 || j < 2 || i >= nx - 2 || j >= ny - 2;
+            assert!(!border || z[at] >= 1e9, "texel ({i}, {j}) of the margin holds Z {}", z[at]);
+            match slab(centre(i, j)) {
+                Some((near, far)) if z[at] < 1e9 => {
+                    hits += 1;
+                    worst = worst.max((f64::from(z[at]) - near).abs()).max((f64::from(zfar[at]) - far).abs());
+                }
+                None if z[at] >= 1e9 => {}
+                _ => outline += 1,
+            }
+        }
+    }
+    println!("{nx}x{ny} texels of {:.3} mm: {hits} on the cube, depths within {worst:.2e} m", 1000.0 * texel);
+    assert!(worst < 1e-4, "Z or Zfar off the cube's by {worst} m");
+    assert!(outline <= 8, "{outline} texels hit or miss the cube where the ray through their centre does not");
+    // The cube's outline covers 4 (|ax| + |ay| + |az|) square metres of the plane.
+    let area = 4.0 * (axis[0].abs() + axis[1].abs() + axis[2].abs());
+    assert!((hits as f64 * texel * texel / area - 1.0).abs() < 0.01, "{hits} texels for {area} m2");
+    let tan = |normal: [f64; 3]| {
+        let c = dot(normal, axis).abs();
+        (1.0 - c * c).sqrt() / c
+    };
+    let top = [0.0, 0.0, 1.0];
+    for (x, normal) in [
+        ([0.0, 0.0, 2.0], top),
+        ([0.5, 0.5, 2.0], top),
+        ([-0.6, 0.3, 2.0], top),
+        ([1.0, 0.0, 1.0], [1.0, 0.0, 0.0]),
+        ([0.0, -1.0, 1.0], [0.0, -1.0, 0.0]),
+    ] {
+        let d = sub(x, origin);
+        let i = ((dot(d, right) / w + 0.5) * nx as f64).floor() as usize;
+        let j = ((0.5 - dot(d, up) / h) * ny as f64).floor() as usize;
+        let (got, expected, tolerance) =
+            (f64::from(z[j * nx + i]), dot(sub(origin, x), axis), 1.5 * texel * tan(normal));
+        assert!(
+            (got - expected).abs() <= tolerance,
+            "{x:?}: texel ({i}, {j}) holds Z {got}, the point {expected} (±{tolerance})"
+        );
+    }
+
+    // No maps: no key, no image; a resolution out of range stops the export.
+    let (none, refused) = (dir.path().join("no_maps"), dir.path().join("refused"));
+    for (target, resolution) in [(&none, "0"), (&refused, "32")] {
+        let output = run_python(
+            &python,
+            "blender_scripts/export_scene.py",
+            &[
+                Path::new("--blend"),
+                &blend,
+                Path::new("--out"),
+                target,
+                Path::new("--resolution"),
+                Path::new("32x18"),
+                Path::new("--frames"),
+                Path::new("1"),
+                Path::new("--sun-shadow-resolution"),
+                Path::new(resolution),
+            ],
+        );
+        if resolution == "0" {
+            assert_ok(&output, "exporting without sun shadow maps");
+        } else {
+            assert_eq!(output.status.code(), Some(1));
+            let stderr = String::from_utf8_lossy(&output.stderr);
+            assert!(stderr.contains("error: sun shadow resolution 32 is neither 0"), "{stderr}");
+        }
+    }
+    assert!(json(&none.join("blockers.0001.json")).get("sun_shadows").is_none());
+    assert!(!none.join("sun_shadow.0001.0.exr").exists());
+    assert!(!refused.exists(), "a refused export left {} behind", refused.display());
+}
+
 /// Point lamps become `point` lights of scene.json (world position, Radius, Power times
 /// 2^Exposure, Color, Soft Falloff), and logsh shades them as Cycles renders them: a
 /// plane and a cube under a sphere lamp and a Soft Falloff one, against Cycles at 256

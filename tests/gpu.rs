@@ -147,6 +147,25 @@ fn small_dunes(dir: &Path) -> Scene {
 }
 
 /// [`small_dunes`] with a checker texture's colour passes (`SynthScene::checker`).
+/// The spheres example at 64x36 (blockers alone), written into `dir`.
+fn small_spheres(dir: &Path) -> Scene {
+    synth::example_scene("spheres", dir, ExampleOptions { width: 64, height: 36, ..Default::default() })
+        .expect("write spheres");
+    Scene::load(dir).unwrap()
+}
+
+/// A sun towards (0.4, -0.5, 0.6) of `degrees` half-angle, strength 3, warm white.
+fn tilted_sun(degrees: f64) -> logsh::scene::SunLight {
+    let d = [0.4f64, -0.5, 0.6];
+    let l = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+    logsh::scene::SunLight {
+        direction: d.map(|c| c / l),
+        half_angle: degrees.to_radians(),
+        strength: 3.0,
+        color: [1.0, 0.9, 0.8],
+    }
+}
+
 fn textured_dunes(dir: &Path) -> Scene {
     let mut scene = synth::example("dunes", ExampleOptions { width: 64, height: 36, ..Default::default() }).unwrap();
     scene.checker = Some(synth::Checker { cell: 1.5, dark: 0.2 });
@@ -265,10 +284,7 @@ fn generic_program_gives_the_specialised_image() {
     let Some(gpu) = gpu() else { return };
     let dir = tempfile::tempdir().unwrap();
     let scene = small_dunes(dir.path());
-    let spheres_dir = dir.path().join("spheres");
-    synth::example_scene("spheres", &spheres_dir, ExampleOptions { width: 64, height: 36, ..Default::default() })
-        .expect("write spheres");
-    let spheres = Scene::load(&spheres_dir).unwrap();
+    let spheres = small_spheres(&dir.path().join("spheres"));
     for scene in [&scene, &spheres] {
         let frame = scene.frame(scene.default_frame()).unwrap();
         let settings = ShadingSettings::default();
@@ -591,16 +607,7 @@ fn suns_and_sharp_glossy_match() {
     let dir = tempfile::tempdir().unwrap();
     let dunes = small_dunes(dir.path());
     let cones = Scene::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("gbuffers/cones")).unwrap();
-    let sun = logsh::scene::SunLight {
-        direction: {
-            let d = [0.4f64, -0.5, 0.6];
-            let l = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
-            d.map(|c| c / l)
-        },
-        half_angle: 2f64.to_radians(),
-        strength: 3.0,
-        color: [1.0, 0.9, 0.8],
-    };
+    let sun = tilted_sun(2.0);
     let base = within_loop_budget();
     let mut lamps_levels_at_w8 = ShadingSettings::default();
     lamps_levels_at_w8.horizon.directions = 8;
@@ -749,10 +756,7 @@ fn visibility_grid_matches() {
     let Some(gpu) = gpu() else { return };
     let dir = tempfile::tempdir().unwrap();
     let dunes = small_dunes(dir.path());
-    let spheres_dir = dir.path().join("spheres");
-    synth::example_scene("spheres", &spheres_dir, ExampleOptions { width: 64, height: 36, ..Default::default() })
-        .expect("write spheres");
-    let spheres = Scene::load(&spheres_dir).unwrap();
+    let spheres = small_spheres(&dir.path().join("spheres"));
     let mut sunlit = dunes.frame(dunes.default_frame()).unwrap();
     sunlit.suns.push(logsh::scene::SunLight {
         direction: [0.48, -0.6, 0.64],
@@ -804,4 +808,37 @@ fn visibility_grid_matches() {
     let refused =
         support::gpu_beauty(&own_device(), scene, frame, &settings).err().map(|e| e.to_string()).unwrap_or_default();
     assert!(refused.contains("--visibility-grid 2") && refused.contains("storage buffers"), "{refused}");
+}
+
+/// A sun's shadow map on both executors (`shadow_blocked` in shaders/disk.wgsl against
+/// src/shade/sun_shadow.rs): the spheres example and the small dunes (height field,
+/// water, Phong) under a sun 2 degrees wide, each with the map of its spheres. The map
+/// took effect: the frame differs from the spheres' own shadows.
+#[test]
+fn sun_shadow_maps_match() {
+    let Some(gpu) = gpu() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let dunes = small_dunes(dir.path());
+    let spheres = small_spheres(&dir.path().join("spheres"));
+    let sun = tilted_sun(1.0);
+    for (name, scene) in [("spheres 64x36", &spheres), ("dunes 64x36", &dunes)] {
+        let mut frame = scene.frame(scene.default_frame()).unwrap();
+        frame.suns.push(sun);
+        let by_spheres = support::cpu_beauty(scene, &frame, &within_loop_budget()).unwrap();
+        let objects: Vec<synth::Object> = frame
+            .blockers
+            .iter()
+            .map(|s| synth::Object { shape: synth::Shape::Sphere { center: s.center, radius: s.radius }, material: 1 })
+            .collect();
+        let map = synth::sun_shadow_map(&objects, sun.direction, 256).expect("spheres");
+        frame.sun_shadows = vec![std::sync::Arc::new(map)];
+        let d = check_parity(gpu, scene, &frame, &within_loop_budget(), &format!("{name} with a sun's shadow map"))
+            .unwrap_or_else(|| panic!("{name}: refused"));
+        assert!(d.mean.is_finite());
+        let by_map = support::cpu_beauty(scene, &frame, &within_loop_budget()).unwrap();
+        let unit = unoccluded_value(&frame.light).max(1e-12);
+        let apart = difference(&by_map, &by_spheres, unit);
+        eprintln!("{name}: the map against the spheres: worst {:.3}, mean {:.2e}", apart.worst, apart.mean);
+        assert!(apart.worst > 1e-3, "{name}: the map changed nothing");
+    }
 }

@@ -26,6 +26,7 @@ const LAYERS: &[(&str, usize)] = &[
     ("shade::blocker_tree", 2),
     ("shade::cap_packet", 2),
     ("shade::sun", 2),
+    ("shade::sun_shadow", 2),
     ("shade::glossy", 2),
     ("shade::frame", 2),
     ("shade::kernel", 2),

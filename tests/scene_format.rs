@@ -276,6 +276,57 @@ fn negative_radius_and_non_finite_blockers() {
     assert_mentions(&frame_error(dir.path()), &["says frame 2 but was read for frame 1"]);
 }
 
+/// An EXR's channels by name, as [`write_raw_exr`] takes them.
+type Channels = Vec<(&'static str, Vec<f32>)>;
+
+/// A sun's shadow map in the blockers file: read with both depths, and each way it can be
+/// wrong refused, naming the file and what is wrong.
+#[test]
+fn sun_shadow_maps_are_read_and_checked() {
+    let entry = || {
+        serde_json::json!({"image": "sun.exr", "axis": [0.0, 0.0, 1.00005], "origin": [0.0, 0.0, 5.0],
+            "right": [1.0, 0.0, 0.0], "up": [0.0, 1.0, 0.0], "size": [4.0, 2.0]})
+    };
+    let with_map = |map: serde_json::Value, channels: Channels| {
+        let dir = base_scene();
+        write_raw_exr(&dir.path().join("sun.exr"), 4, 2, channels);
+        edit_json(&dir.path().join("blockers.0001.json"), |v| v["sun_shadows"] = serde_json::json!([map]));
+        dir
+    };
+    let depths = || vec![("Z", vec![1.0, 2.0, 1e10, 1e10, 1.0, 2.0, 3.0, 4.0]), ("Zfar", vec![5.0; 8])];
+
+    let dir = with_map(entry(), depths());
+    let frame = Scene::load(dir.path()).unwrap().frame(1).unwrap();
+    let map = &frame.sun_shadows[0];
+    assert_eq!((map.columns, map.rows, map.depths[1], map.far_depths[0]), (4, 2, 2.0, 5.0));
+    // Read unit (the exporter writes Blender's single-precision direction), it serves its sun.
+    assert!(map.serves([0.0, 0.0, 1.0]) && !map.serves([0.0, 0.01, 0.99995]));
+
+    let mut skewed = entry();
+    skewed["up"] = serde_json::json!([0.0, 0.6, 0.8]);
+    let mut outside = entry();
+    outside["image"] = serde_json::json!("../sun.exr");
+    let mut stretched = entry();
+    stretched["size"] = serde_json::json!([4.0, 3.0]);
+    let mut flat = entry();
+    flat["size"] = serde_json::json!([4.0, 0.0]);
+    let inverted = vec![("Z", vec![3.0; 8]), ("Zfar", vec![2.0; 8])];
+    let not_a_number = vec![("Z", vec![f32::NAN; 8]), ("Zfar", vec![2.0; 8])];
+    let cases: Vec<(serde_json::Value, Channels, &[&str])> = vec![
+        (skewed, depths(), &["blockers.0001.json", "sun_shadows[0]", "orthogonal"]),
+        (outside, depths(), &["sun_shadows[0].image", "inside the scene directory"]),
+        (stretched, depths(), &["sun_shadows[0]", "not square"]),
+        (flat, depths(), &["sun_shadows[0]", "\"size\"", "positive"]),
+        (entry(), vec![("Z", vec![1.0; 8])], &["sun.exr", "Zfar"]),
+        (entry(), inverted, &["sun.exr", "texel (0, 0)", "Zfar 2 lies above Z 3"]),
+        (entry(), not_a_number, &["sun.exr", "Z at texel (0, 0)"]),
+    ];
+    for (map, channels, parts) in cases {
+        let dir = with_map(map, channels);
+        assert_mentions(&frame_error(dir.path()), parts);
+    }
+}
+
 #[test]
 fn fractional_and_unknown_material_indices() {
     let dir = base_scene();

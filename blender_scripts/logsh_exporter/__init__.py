@@ -7,10 +7,10 @@ sit in the Render Properties' logsh panel.
 
 File > Export > logsh scene (format v1) writes a scene directory for the command line.
 The operator sets up Cycles' data passes, renders every frame of the chosen range and
-writes G-buffers, reflection G-buffers, blockers, cameras, the height map, the material
-table and the light into a directory, with the same code the command line uses
-(`exporter.py`; its top comment documents the scene markup and the conversions). Render
-settings are restored afterwards.
+writes G-buffers, reflection G-buffers, blockers and their sun shadow maps, cameras, the
+height map, the material table and the light into a directory, with the same code the
+command line uses (`exporter.py`; its top comment documents the scene markup and the
+conversions). Render settings are restored afterwards.
 
 Install: zip this folder (`blender --command extension build` inside it, or any zip of
 the folder), then Edit > Preferences > Get Extensions > Install from Disk.
@@ -64,6 +64,11 @@ class LOGSH_OT_export_scene(bpy.types.Operator, ExportHelper):
     approximate: BoolProperty(name="Approximate", default=False,
                               description="Export materials logsh cannot represent (transmission, subsurface, "
                                           "emission, other shaders) with a warning each, where the export stops")
+    sun_shadow_resolution: IntProperty(name="Sun shadow resolution", default=exporter.Options.sun_shadow_resolution,
+                                       min=0, max=exporter.SUN_SHADOW_RESOLUTIONS[1],
+                                       description="Texels along the longer side of each sun's shadow map of the "
+                                                   f"blockers, {exporter.SUN_SHADOW_RESOLUTIONS[0]} or more; "
+                                                   "0 writes none")
 
     def invoke(self, context, event):
         self.frame_start, self.frame_end = context.scene.frame_start, context.scene.frame_end
@@ -81,6 +86,7 @@ class LOGSH_OT_export_scene(bpy.types.Operator, ExportHelper):
             supersample=self.supersample,
             colour_passes=self.colour_passes,
             approximate=self.approximate,
+            sun_shadow_resolution=self.sun_shadow_resolution,
         )
         try:
             exporter.export(context.scene, options, log=lambda line: self.report({"INFO"}, line))
@@ -108,6 +114,7 @@ class LOGSH_OT_export_scene(bpy.types.Operator, ExportHelper):
         layout.prop(self, "supersample")
         layout.prop(self, "colour_passes")
         layout.prop(self, "approximate")
+        layout.prop(self, "sun_shadow_resolution")
 
 
 def _menu(self, context):

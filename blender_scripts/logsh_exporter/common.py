@@ -39,11 +39,15 @@ def new_file(out, name):
     return path
 
 
-def write_blockers(path, frame, spheres):
-    """One sphere per line: hundreds of blockers stay small and readable."""
+def write_blockers(path, frame, spheres, sun_shadows=None):
+    """One sphere per line: hundreds of blockers stay small and readable. `sun_shadows`,
+    when there are any, one line each after them."""
     lines = ",\n".join("  " + json.dumps(s) for s in spheres)
+    shadows = ""
+    if sun_shadows:
+        shadows = ', "sun_shadows": [\n' + ",\n".join("  " + json.dumps(s) for s in sun_shadows) + "\n]"
     with open(path, "w") as f:
-        f.write(f'{{"frame": {frame}, "spheres": [\n{lines}\n]}}\n')
+        f.write(f'{{"frame": {frame}, "spheres": [\n{lines}\n]{shadows}}}\n')
 
 
 def write_json(path, value):

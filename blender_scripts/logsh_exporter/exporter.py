@@ -27,6 +27,23 @@ What is written into the output directory, per frame `####`:
 - `camera.####.json`: the scene camera (perspective only, no lens shift).
 - `blockers.####.json`: spheres for every mesh that is not the height field, evaluated at
   that frame (modifiers, armatures, shape keys, animation applied); see `blockers.py`.
+  Spheres shadow the sun along their own outline, not the mesh's, so for each sun of the
+  frame's `lights` (Sun lamps and a Sky Texture's sun) the file's `sun_shadows` also
+  names a shadow map, `sun_shadow.####.K.exr` (K the sun's place among the frame's
+  suns): Cycles' depth pass of exactly the objects that have spheres, seen through an
+  orthographic camera from the sun's side and from beyond them (`render_depths`). Each
+  entry holds `image`, `axis` (the sun's direction as `lights` has it), `origin` (the
+  centre of the image plane, beyond every blocker towards the sun), `right` and `up`
+  (unit, right x up = axis) and `size` ([w, h] metres along them). The EXR's channel
+  `Z`, row 0 along the +up edge and column 0 along the -right edge, is at texel (i, j)
+  the distance along -axis from the plane to the first blocker surface on the ray
+  through the texel centre `origin + right ((i + 0.5) / nx - 0.5) w + up (0.5 -
+  (j + 0.5) / ny) h`, so a surface point x has Z = (origin - x) . axis, and 1e10 where
+  the ray meets none; its channel `Zfar` the distance to the last blocker surface on
+  that ray, where it leaves the blockers for good (at least Z; 1e10 where Z is). One
+  sample at each centre, as in the G-buffer; `Options.sun_shadow_resolution` square
+  texels along the longer side, the map covering the blockers' outline with a margin of
+  2 texels. Without a sun or a blocker the key is left out.
 - `heightmap.exr`: the height field object sampled on a grid by vertical rays; one map
   per frame, `heightmap.####.exr`, when the terrain moves within the exported frames (an
   animated transform, modifiers such as Wave or Ocean, shape keys, armatures, geometry
@@ -122,14 +139,16 @@ import time
 from dataclasses import dataclass
 
 import bpy
+import mathutils
 import numpy as np
 
 from .common import (  # noqa: F401 (GEOMETRY_TYPES and MAX_SUPERSAMPLE for the add-on's panel)
     DATA_FILTER, DATA_FILTER_WIDTH, GEOMETRY_TYPES, MAX_SUPERSAMPLE, VIEW_LAYER, ExportError, new_file,
     write_blockers, write_json)
-from .exr import write_exr
+from .exr import channel_names, read_exr_channels, write_exr
 from .geometry import (
-    camera_json, export_blockers, export_heightmap, find_ground, object_indices, terrain_moves, write_reflection)
+    camera_json, export_blockers, export_heightmap, find_ground, object_indices, sun_shadow_frame, terrain_moves,
+    write_reflection)
 from .materials import (
     export_lamps, find_heightfield, fit_to_passes, material_table, renderable_objects, roughness_aovs)
 from .world import export_world, world_keys
@@ -164,6 +183,13 @@ class Options:
     # Export materials logsh cannot represent (module doc) with a warning each, where
     # the export otherwise stops.
     approximate: bool = False
+    # Texels along the longer side of each sun's shadow map (module doc), from
+    # SUN_SHADOW_RESOLUTIONS; 0 writes no maps.
+    sun_shadow_resolution: int = 1024
+
+
+# The sizes a sun shadow map may have along its longer side.
+SUN_SHADOW_RESOLUTIONS = (64, 8192)
 
 
 # ---- undoable scene changes ------------------------------------------------------------
@@ -209,6 +235,10 @@ def export(scene, options, log=print):
         frames = sorted(set(options.frames))
     if not frames:
         raise ExportError(f"the frames {options.frames or (scene.frame_start, scene.frame_end)} are empty")
+    lo, hi = SUN_SHADOW_RESOLUTIONS
+    if options.sun_shadow_resolution != 0 and not lo <= options.sun_shadow_resolution <= hi:
+        raise ExportError(f"sun shadow resolution {options.sun_shadow_resolution} is neither 0 (no sun shadow maps) "
+                          f"nor from {lo} to {hi} texels")
     start, end = frames[0], frames[-1]
     created = not os.path.exists(out)
     os.makedirs(out, exist_ok=True)
@@ -320,12 +350,16 @@ def export(scene, options, log=print):
                 fit_to_passes(scene.render.filepath, frame, table, textured_roughness, warnings, log)
             camera = camera_json(scene, frame, width, height)
             write_json(new_file(out, f"camera.{frame:04d}.json"), camera)
-            spheres = export_blockers(scene, depsgraph, objects, terrain, index_of, table, object_index, options, fits,
-                                      frame, log)
-            write_blockers(new_file(out, f"blockers.{frame:04d}.json"), frame, spheres)
+            spheres, casters = export_blockers(scene, depsgraph, objects, terrain, index_of, table, object_index,
+                                               options, fits, frame, log)
             if water:
                 sampled = dict(camera, resolution=[width * options.supersample, height * options.supersample])
                 write_reflection(scene, depsgraph, sampled, index_of, water, new_file(out, f"reflection.{frame:04d}.exr"))
+            suns = [light for light in per_frame[frame].get("lights", lights) if light["type"] == "sun"]
+            shadows = None
+            if options.sun_shadow_resolution and suns and casters:
+                shadows = export_sun_shadows(scene, view_layer, out, frame, suns, casters, options, log)
+            write_blockers(new_file(out, f"blockers.{frame:04d}.json"), frame, spheres, shadows)
             log(f"frame {frame}: {len(spheres)} blocker spheres, {time.time() - began:.1f} s")
         write_json(new_file(out, "scene.json"), description)
         if warnings:
@@ -468,6 +502,128 @@ def configure_render(scene, options, changes):
         if attribute.startswith("use_pass_") or attribute in ("denoising_store_passes", "pass_debug_sample_count"):
             changes.set(layer.cycles, attribute, False)
     return layer
+
+
+# ---- sun shadow maps -------------------------------------------------------------------
+
+def export_sun_shadows(scene, view_layer, out, frame, suns, casters, options, log):
+    """The shadow map of each of `suns` (module doc) over `casters`, the frame's blockers
+    from `export_blockers`; returns blockers.####.json's `sun_shadows`, or None when the
+    blockers have no outline to map."""
+    points = np.concatenate([vertices for _, _, vertices in casters])
+    specs = [sun_shadow_frame(sun["direction"], points, options.sun_shadow_resolution) for sun in suns]
+    if any(spec is None for spec in specs):
+        log(f"note: frame {frame}: the blockers have no extent across a sun; no sun shadow maps")
+        return None
+    entries = []
+    for k, (sun, spec) in enumerate(zip(suns, specs)):
+        began = time.time()
+        name = f"sun_shadow.{frame:04d}.{k}.exr"
+        near, far = render_depths(scene, view_layer, spec, casters, new_file(out, name + ".render"))
+        write_exr(new_file(out, name), {"Z": near, "Zfar": far})
+        entries.append({
+            "image": name,
+            "axis": list(sun["direction"]),
+            "origin": [float(c) + 0.0 for c in spec["origin"]],
+            "right": [float(c) + 0.0 for c in spec["right"]],
+            "up": [float(c) + 0.0 for c in spec["up"]],
+            "size": [float(c) for c in spec["size"]],
+        })
+        nx, ny = spec["texels"]
+        log(f"frame {frame}: sun {k} shadow map {nx}x{ny}, texel {1000 * spec['texel']:.3g} mm, "
+            f"{time.time() - began:.1f} s")
+    return entries
+
+
+# Blender's depth where a ray meets nothing, which the maps keep; the format reads any
+# depth from NO_SURFACE up as no surface.
+NO_DEPTH, NO_SURFACE = 1e10, 1e9
+
+
+def render_depths(scene, view_layer, spec, casters, path):
+    """The map's `Z` and `Zfar` (module doc) over the blocker objects of `casters` alone,
+    rows from the top: Cycles' depth pass through an orthographic camera in the image
+    plane of `spec` (`sun_shadow_frame`) looking along -axis, and through one beyond the
+    farthest blocker looking back along +axis, whose first surface is the last one along
+    the map's ray. Cycles' orthographic depth is the distance from the camera's plane
+    along its view axis (1e10 where a ray meets nothing): the first render's is `Z` as it
+    stands, the second's is turned into the distance from the map's plane and mirrored
+    left to right (its camera's right is the map's left; the texel centres coincide).
+    `Zfar` is at least `Z` wherever `Z` holds a surface, and 1e10 where it does not.
+
+    Every other object that renders is disabled in renders, an instancer that is no
+    blocker itself keeps its instances but not its own surface (where Blender lets it),
+    and the blockers are made visible to camera rays; one plain material replaces every
+    material, so that transparency and shading cannot move or hide a surface, and the World
+    is taken away. The camera, the World, the resolution, the passes and the objects'
+    visibility are restored before this returns, so the next G-buffer renders as if no map
+    had been made."""
+    changes = Changes()
+    render = scene.render
+    camera_data = bpy.data.cameras.new("logsh sun shadow")
+    camera = bpy.data.objects.new("logsh sun shadow", camera_data)
+    plain = bpy.data.materials.new("logsh sun shadow")
+    try:
+        scene.collection.objects.link(camera)
+        nx, ny = spec["texels"]
+        camera_data.type = "ORTHO"
+        camera_data.sensor_fit = "AUTO"
+        camera_data.ortho_scale = max(spec["size"])
+        camera_data.clip_start = 0.5 * spec["gap"]
+        camera_data.clip_end = spec["depth"] + spec["gap"]
+        changes.set(scene, "camera", camera)
+        changes.set(scene, "world", None)
+        changes.set(render, "resolution_x", nx)
+        changes.set(render, "resolution_y", ny)
+        changes.set(render, "resolution_percentage", 100)
+        changes.set(render, "use_border", False)
+        changes.set(render, "filepath", path)
+        changes.set(render.image_settings, "exr_codec", "NONE")
+        changes.set(view_layer, "material_override", plain)
+        if hasattr(view_layer, "samples"):
+            changes.set(view_layer, "samples", 0)
+        for attribute in dir(view_layer):
+            if attribute.startswith("use_pass_"):
+                changes.set(view_layer, attribute, attribute == "use_pass_z")
+        blockers = {obj.name for obj, _, _ in casters}
+        instancers = {parent.name for _, parent, _ in casters if parent is not None}
+        for obj in scene.objects:
+            if obj == camera:
+                continue
+            if obj.name in blockers:
+                changes.set(obj, "visible_camera", True)
+            elif obj.name in instancers:
+                changes.set(obj, "show_instancer_for_render", False)
+            elif not obj.hide_render:
+                changes.set(obj, "hide_render", True)
+        right, up = np.asarray(spec["right"]), np.asarray(spec["up"])
+        axis = np.cross(right, up)
+        behind = spec["depth"] + spec["gap"]
+        views = [(right, axis, spec["origin"]), (-right, -axis, spec["origin"] - axis * behind)]
+        depths = []
+        for x, z, position in views:
+            columns = [x, up, z, position]
+            camera.matrix_world = mathutils.Matrix([[float(c[row]) for c in columns] for row in range(3)] +
+                                                   [[0.0, 0.0, 0.0, 1.0]])
+            bpy.ops.render.render(write_still=True, scene=scene.name, layer=view_layer.name)
+            names = channel_names(path)
+            wanted = [n for n in (f"{view_layer.name}.Depth.Z", "Depth.Z", "Z") if n in names]
+            if not wanted:
+                raise ExportError(f"{path}: Cycles wrote no depth pass (channels {', '.join(names)})")
+            depths.append(read_exr_channels(path, wanted[:1])[wanted[0]])
+            os.remove(path)
+    finally:
+        changes.undo()
+        bpy.data.objects.remove(camera)
+        bpy.data.cameras.remove(camera_data)
+        bpy.data.materials.remove(plain)
+        if os.path.exists(path):
+            os.remove(path)
+    near, back = depths[0], depths[1][:, ::-1]
+    surface = near < NO_SURFACE
+    far = np.where(back < NO_SURFACE, behind - back.astype(np.float64), near).astype(np.float32)
+    far = np.where(surface, np.maximum(far, near), np.float32(NO_DEPTH))
+    return near, far
 
 
 def output_size(scene):

@@ -1,6 +1,7 @@
 """The geometry of an export: the objects' triangles, the ground plane, the blocker
-spheres fitted per object (`blockers.py`), the height map sampled from the terrain, the
-camera per frame and the reflection G-buffer of water."""
+spheres fitted per object (`blockers.py`), the frame of each sun's shadow map around them,
+the height map sampled from the terrain, the camera per frame and the reflection G-buffer
+of water."""
 
 import bpy
 import mathutils
@@ -115,9 +116,13 @@ def volume_sample(triangles, count=16000, seed=0):
 
 
 def export_blockers(scene, depsgraph, objects, terrain, index_of, table, object_index, options, fits, frame, log):
-    """Spheres of every blocker object at this frame; prints each fit's error."""
+    """Spheres of every blocker object at this frame, and the blockers themselves as
+    `(object, instancer, vertices)`: the original object, the original object whose
+    instance it is (None when it is not one) and the vertices of its world-space triangles
+    at this frame. The sun shadow maps hold exactly these objects (`exporter.py`,
+    `render_depths`). Prints each fit's error."""
     allowed = {o.name for o in objects}
-    spheres, reports = [], []
+    spheres, reports, casters = [], [], []
     for instance in depsgraph.object_instances:
         original = instance.object.original
         if original.name not in allowed or original == terrain or original.type not in GEOMETRY_TYPES:
@@ -163,8 +168,61 @@ def export_blockers(scene, depsgraph, objects, terrain, index_of, table, object_
         object_id = object_index.get(original.name, 0)
         spheres += [{"center": [float(v) for v in c], "radius": float(r), "object": object_id}
                     for c, r in zip(centres, radii)]
+        parent = instance.parent.original if instance.is_instance and instance.parent else None
+        casters.append((original, parent, triangles.reshape(-1, 3)))
     report_fit_errors(reports, frame, log)
-    return spheres
+    return spheres, casters
+
+
+# Texels of the sun shadow map beyond the blockers' outline on every side.
+SUN_SHADOW_MARGIN = 2
+# The least texels along the shorter side of a sun shadow map.
+SUN_SHADOW_MIN_SIDE = 16
+
+
+def sun_shadow_frame(axis, points, resolution):
+    """Where the shadow map of the sun towards `axis` (unit) lies, for blockers of
+    world-space vertices `points` (N, 3): an orthographic view along -axis whose image
+    plane, centred on `origin`, lies beyond every vertex towards the sun and covers their
+    outline with a margin of `SUN_SHADOW_MARGIN` square texels on each side, `resolution`
+    of them along the longer side (`sun_shadows` of blockers.####.json, `exporter.py`).
+
+    `right` is horizontal and `up` climbs (world +Z projected onto the plane); with the
+    sun straight overhead, where that has no direction, they are world +X and +Y. Returns
+    a dict of `right`, `up`, `origin`, `size` ([w, h] metres), `texels` ([nx, ny]),
+    `texel` (metres), `gap` (from the plane to the nearest vertex) and `depth` (from the
+    plane to the farthest); None when the vertices project onto a single point."""
+    axis = np.asarray(axis, dtype=float)
+    axis = axis / np.linalg.norm(axis)
+    reference = np.array([0.0, 0.0, 1.0])
+    if np.linalg.norm(np.cross(reference, axis)) < 1e-3:
+        reference = np.array([0.0, 1.0, 0.0])
+    right = np.cross(reference, axis)
+    right /= np.linalg.norm(right)
+    up = np.cross(axis, right)
+    u, v, s = points @ right, points @ up, points @ axis
+    extents = np.array([np.ptp(u), np.ptp(v)])
+    longest = int(np.argmax(extents))
+    if not extents[longest] > 0.0:
+        return None
+    texel = float(extents[longest]) / (resolution - 2 * SUN_SHADOW_MARGIN)
+    span = extents[1 - longest] + 2 * SUN_SHADOW_MARGIN * texel
+    texels = [resolution, resolution]
+    texels[1 - longest] = min(resolution, max(SUN_SHADOW_MIN_SIDE, int(np.ceil(span / texel - 1e-9))))
+    # Beyond the nearest vertex by a few texels and a little of the blockers' size: the
+    # render's clipping plane fits between.
+    gap = max(4.0 * texel, 1e-3 * float(extents[longest]))
+    top = float(s.max()) + gap
+    return {
+        "right": right,
+        "up": up,
+        "origin": right * 0.5 * (u.min() + u.max()) + up * 0.5 * (v.min() + v.max()) + axis * top,
+        "size": [texels[0] * texel, texels[1] * texel],
+        "texels": texels,
+        "texel": texel,
+        "gap": gap,
+        "depth": top - float(s.min()),
+    }
 
 
 def report_fit_errors(reports, frame, log):

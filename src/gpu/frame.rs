@@ -160,7 +160,7 @@ impl Gpu {
         let occluded = plan.contents.heightfield || plan.contents.blockers;
         let grid = if occluded { settings.visibility_grid } else { 1 };
         let features = Features { contents: plan.contents, specialisation, passes, grid };
-        let program = ShadeProgram::new(kernel, features, march);
+        let program = ShadeProgram::new(kernel, features, march, &plan.sun_shadows);
         timings.add_wall("tables", started);
         if self.is_lavapipe() {
             self.check_loop_budget(&program, plan, march)?;

@@ -11,8 +11,8 @@
 //! source text: a sequence compiles once.
 
 use super::layout::{
-    wgsl_declarations, wgsl_table_loaders, GpuLobeHead, GpuMaterial, GpuPointLamp, GpuSun, TableRecord,
-    MATERIAL_DIFFUSE, MATERIAL_PHONG, NO_MAP,
+    wgsl_declarations, wgsl_table_loaders, GpuLevel, GpuLobeHead, GpuMaterial, GpuPointLamp, GpuShadowMap, GpuSun,
+    TableRecord, MATERIAL_DIFFUSE, MATERIAL_PHONG, NO_MAP,
 };
 use crate::heightfield::{HorizonSettings, LevelReconstruction, PyramidPlan, ScaleMax};
 use crate::logsh::cap_scale;
@@ -23,6 +23,7 @@ use crate::sh::{ExpMethod, SeparableQuadrature};
 use crate::shade::glossy::{Prefiltered, SharpLobe, ALBEDO_ENTRIES};
 use crate::shade::kernel::{sh_space_max_magnitude, LUMINANCE, SH_SPACE_BLEND};
 use crate::shade::sun::{disk_pattern, patch_radius, DISK_DIRECTIONS};
+use crate::shade::sun_shadow::{drift_per_depth, SunShadows, MAX_STEPS, MINIMA_LEVELS};
 use crate::shade::{FrameContents, ShadingKernel};
 use std::collections::BTreeMap;
 use std::sync::Arc;
@@ -208,9 +209,15 @@ pub struct ShadeProgram {
 
 impl ShadeProgram {
     /// Generates the program from the CPU kernel's tables. `march` is `Some` when the
-    /// frame has a height field.
-    pub fn new(kernel: &ShadingKernel<f32>, features: Features, march: Option<MarchShape>) -> Self {
-        let tables = ProgramTables::build(kernel, march);
+    /// frame has a height field. The frame's shadow maps go last in the tables, so that
+    /// the offsets the source bakes in stay the same from frame to frame.
+    pub fn new(
+        kernel: &ShadingKernel<f32>,
+        features: Features,
+        march: Option<MarchShape>,
+        sun_shadows: &SunShadows,
+    ) -> Self {
+        let tables = ProgramTables::build(kernel, march, sun_shadows);
         let source = compose_source(kernel, features, march, &tables);
         Self {
             source,
@@ -245,7 +252,7 @@ pub struct QuadratureGrid {
 }
 
 impl ProgramTables {
-    fn build(kernel: &ShadingKernel<f32>, march: Option<MarchShape>) -> Self {
+    fn build(kernel: &ShadingKernel<f32>, march: Option<MarchShape>, sun_shadows: &SunShadows) -> Self {
         let order = kernel.order;
         let mut t = TableBuilder::default();
 
@@ -285,7 +292,7 @@ impl ProgramTables {
         // (src/scene/light.rs, PointLight).
         let pattern = disk_pattern();
         t.push("T_DISK", pattern.iter().map(|p| p[0] as f32).chain(pattern.iter().map(|p| p[1] as f32)));
-        t.push(
+        let suns_at = t.push(
             "T_SUNS",
             kernel.suns.iter().flat_map(|sun| {
                 let (d, i) = (sun.light.direction, sun.disk_integral);
@@ -293,6 +300,9 @@ impl ProgramTables {
                 GpuSun {
                     axis: [d[0], d[1], d[2], one_minus_cos].map(|v| v as f32),
                     integral: [i[0], i[1], i[2], sun.disk.patch].map(|v| v as f32),
+                    shadow_map: NO_MAP,
+                    drift: drift_per_depth(sun.light.half_angle) as f32,
+                    ..Default::default()
                 }
                 .floats()
             }),
@@ -314,10 +324,50 @@ impl ProgramTables {
         // The light, channel-major, and the exponentiation's tables (src/sh/exp.rs).
         let quadrature = push_exponentiation(kernel, &mut t);
         push_wedge(kernel, march, &mut t);
+        push_sun_shadows(kernel, sun_shadows, suns_at, &mut t);
         if t.data.is_empty() {
             t.data.push(0.0);
         }
         Self { builder: t, materials, slots, quadrature }
+    }
+}
+
+/// Each sun's shadow map where the frame has one ([`SunShadows::of_sun`], as the CPU
+/// picks it): its [`GpuShadowMap`], its levels' [`GpuLevel`]s, their minima and `Zfar`,
+/// its offset written into the sun's record at `suns_at`.
+fn push_sun_shadows(kernel: &ShadingKernel<f32>, sun_shadows: &SunShadows, suns_at: usize, t: &mut TableBuilder) {
+    let field = std::mem::offset_of!(GpuSun, shadow_map) / 4;
+    let record = std::mem::size_of::<GpuSun>() / 4;
+    let level_record = std::mem::size_of::<GpuLevel>() / 4;
+    for (s, sun) in kernel.suns.iter().enumerate() {
+        let Some(march) = sun_shadows.of_sun(sun.disk.axis) else { continue };
+        let map = &march.map;
+        let head = GpuShadowMap {
+            axis: [map.axis[0], map.axis[1], map.axis[2], map.texel()].map(|v| v as f32),
+            origin: [map.origin[0], map.origin[1], map.origin[2], f64::from(march.shallowest())].map(|v| v as f32),
+            right: [map.right[0], map.right[1], map.right[2], map.size[0]].map(|v| v as f32),
+            up: [map.up[0], map.up[1], map.up[2], map.size[1]].map(|v| v as f32),
+            columns: map.columns as u32,
+            rows: map.rows as u32,
+            levels: march.levels.len() as u32,
+            far: 0,
+        };
+        let at = t.data.len();
+        let mut minima_at = at + head.floats().len() + level_record * march.levels.len();
+        let mut levels = Vec::new();
+        for level in &march.levels {
+            let record =
+                GpuLevel { offset: minima_at as u32, columns: level.columns as u32, rows: level.rows as u32, pad: 0 };
+            levels.extend(record.floats());
+            minima_at += level.depths.len();
+        }
+        let head = GpuShadowMap { far: minima_at as u32, ..head };
+        t.push_unnamed(head.floats().into_iter().chain(levels));
+        for level in &march.levels {
+            t.push_unnamed(level.depths.iter().copied());
+        }
+        t.push_unnamed(map.far_depths.iter().copied());
+        t.data[suns_at + s * record + field] = f32::from_bits(at as u32);
     }
 }
 
@@ -558,6 +608,7 @@ fn prelude(
         ("DISK_DIRECTIONS", U32(DISK_DIRECTIONS)),
         ("DISK_QUADS", U32(DISK_DIRECTIONS / 4)),
         ("SUN_COUNT", U32(kernel.suns.len())),
+        ("MAP_MAX_STEPS", U32(MAX_STEPS)),
         ("POINT_COUNT", U32(kernel.points.len())),
         ("POINT_HALF_ANGLE_MIN", F32(crate::scene::light::POINT_HALF_ANGLE_MIN)),
         ("POINT_NEAREST", F32(crate::scene::light::POINT_NEAREST)),
@@ -677,7 +728,10 @@ impl ShadeProgram {
         // The specular occlusion: its cone, its own height-field march, the open lobe.
         let prefiltered =
             if self.features.contents.prefiltered { disk + quads + heightfield + add_rotated + c } else { 0 };
-        let suns = self.suns as u64 * (disk + quads);
+        // A shadow map's march (shaders/disk.wgsl, shadow_blocked): its footprint's levels,
+        // then every direction's steps.
+        let map = MINIMA_LEVELS as u64 + DISK_DIRECTIONS as u64 * (1 + MAX_STEPS as u64);
+        let suns = self.suns as u64 * (disk + quads + map);
         // The grid's four blocks, read and weighed; a point no block is like is computed
         // alone, so the march and the caps above stay in the bound (the pre-pass runs
         // fewer: one point's march and caps).

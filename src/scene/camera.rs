@@ -10,9 +10,11 @@
 
 use super::error::SceneError;
 use super::read_json;
+use super::sun_shadow::{read_sun_shadows, SunShadowEntry, SunShadowMap};
 use crate::vector::{cross, normalize, sub};
 use serde::Deserialize;
 use std::path::Path;
+use std::sync::Arc;
 
 /// A sphere blocker: something that casts a shadow.
 #[derive(Clone, Copy, Debug, PartialEq, Deserialize)]
@@ -40,6 +42,16 @@ impl Sphere {
 struct BlockersFile {
     frame: Option<i64>,
     spheres: Vec<Sphere>,
+    #[serde(default)]
+    sun_shadows: Vec<SunShadowEntry>,
+}
+
+/// What casts shadows in one frame: the sphere proxies, and the suns' shadow maps of the
+/// meshes themselves ([`super::sun_shadow`]).
+#[derive(Clone, Debug, Default)]
+pub struct FrameBlockers {
+    pub spheres: Vec<Sphere>,
+    pub sun_shadows: Vec<Arc<SunShadowMap>>,
 }
 
 /// Most blocker spheres a frame may hold: the tree of a million spheres
@@ -47,9 +59,10 @@ struct BlockersFile {
 /// is guaranteed to hold (WebGPU's default 128 MiB).
 pub const MAX_BLOCKERS: usize = 1_000_000;
 
-/// Reads `blockers.####.json`: `frame` (optional; when present must equal `frame`) and
-/// `spheres`. A negative radius or a non-finite number is an error naming the sphere.
-pub fn read_blockers(file: &Path, frame: i64) -> Result<Vec<Sphere>, SceneError> {
+/// Reads `blockers.####.json`: `frame` (optional; when present must equal `frame`),
+/// `spheres` and, optionally, `sun_shadows` (images relative to `dir`). A negative radius
+/// or a non-finite number is an error naming the sphere.
+pub fn read_blockers(file: &Path, frame: i64, dir: &Path) -> Result<FrameBlockers, SceneError> {
     let raw: BlockersFile = read_json(file, "the sphere blockers")?;
     check_frame_key(file, raw.frame, frame)?;
     let most = MAX_BLOCKERS;
@@ -73,7 +86,8 @@ pub fn read_blockers(file: &Path, frame: i64) -> Result<Vec<Sphere>, SceneError>
             return Err(SceneError::invalid(file, format!("sphere {i} has negative radius {}", s.radius)));
         }
     }
-    Ok(raw.spheres)
+    let sun_shadows = read_sun_shadows(&raw.sun_shadows, file, dir)?.into_iter().map(Arc::new).collect();
+    Ok(FrameBlockers { spheres: raw.spheres, sun_shadows })
 }
 
 fn check_frame_key(file: &Path, found: Option<i64>, frame: i64) -> Result<(), SceneError> {

@@ -15,6 +15,8 @@ pub struct Frame {
     pub camera: Option<Camera>,
     /// Empty when `scene.json` has no `blockers`.
     pub blockers: Vec<Sphere>,
+    /// The suns' shadow maps of the blocker meshes (`sun_shadows` in the blockers file).
+    pub sun_shadows: Vec<Arc<SunShadowMap>>,
     pub height_map: Option<Arc<HeightMap>>,
     pub light: Arc<Light>,
     /// The CRC-32 of the light's map file as it was read, `None` without a map.
@@ -36,6 +38,7 @@ pub struct OpenFrame {
     reflection: Option<GBufferFile>,
     camera: Option<Camera>,
     blockers: Vec<Sphere>,
+    sun_shadows: Vec<Arc<SunShadowMap>>,
     height_map: Option<Arc<HeightMap>>,
     light: Arc<Light>,
     light_file_crc: Option<u32>,
@@ -84,6 +87,7 @@ impl OpenFrame {
             reflection,
             camera: self.camera.clone(),
             blockers: self.blockers.clone(),
+            sun_shadows: self.sun_shadows.clone(),
             height_map: self.height_map.clone(),
             light: self.light.clone(),
             light_file_crc: self.light_file_crc,
@@ -190,9 +194,9 @@ impl Scene {
                 Some(c)
             }
         };
-        let blockers = match &self.blockers {
-            None => Vec::new(),
-            Some(t) => camera::read_blockers(&t.resolve(&self.dir, frame), frame)?,
+        let FrameBlockers { spheres: blockers, sun_shadows } = match &self.blockers {
+            None => FrameBlockers::default(),
+            Some(t) => camera::read_blockers(&t.resolve(&self.dir, frame), frame, &self.dir)?,
         };
         // The frame's file read once, for the height map, the light and the lamps.
         let changes = self.changes(frame)?;
@@ -208,6 +212,7 @@ impl Scene {
             reflection,
             camera,
             blockers,
+            sun_shadows,
             height_map,
             light,
             light_file_crc,

@@ -95,15 +95,17 @@ pub mod light;
 pub mod output;
 mod paths;
 pub mod per_frame;
+pub mod sun_shadow;
 pub mod view;
 
-pub use camera::{Camera, Sphere};
+pub use camera::{Camera, FrameBlockers, Sphere};
 pub use error::{SceneError, MAX_IMAGE_PIXELS, MAX_IMAGE_SIDE};
 use format::*;
 pub use frame::{BuriedCount, Frame, OpenFrame};
 pub use gbuffer::{ChannelNames, GBuffer, GBufferFile, Reading};
 pub use heightmap::HeightMap;
 pub use light::{EnvironmentMap, Light, LightSource, PointLight, SunLight, MAX_SUNS};
+pub use sun_shadow::SunShadowMap;
 pub use view::{ViewSpec, ViewTransform};
 
 use serde::Deserialize;

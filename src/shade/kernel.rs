@@ -16,7 +16,8 @@ use super::glossy::{
 };
 pub use super::point::{above_ground, reflect_view, SurfacePoint};
 use super::settings::{GlossyMethod, ShadingSettings, MAX_DIRECTIONS};
-use super::sun::{DiskDirections, DiskHorizon, DiskShape, Planes, SunDisk, DISK_DIRECTIONS};
+use super::sun::{Casters, DiskDirections, DiskHorizon, DiskShape, Planes, SunDisk, DISK_DIRECTIONS};
+use super::sun_shadow::SunShadows;
 use crate::heightfield::{HorizonAgainst, HorizonPyramid};
 use crate::logsh::{
     cap_log_zh, lobe_log_zh_as, shared_optimal_lobe_epsilon, view_blocker, BlockerView, Lobe, WedgeOperator, WedgeTurn,
@@ -178,6 +179,8 @@ pub struct Occluders<'a> {
     /// `None` without blockers.
     pub blockers: Option<&'a BlockerTree>,
     pub horizons: Option<&'a HorizonPyramid>,
+    /// The suns' shadow maps of the blocker meshes, `None` without any.
+    pub sun_shadows: Option<&'a SunShadows>,
 }
 
 /// Where a point's sphere caps (and height-field horizons) come from: walked and marched
@@ -812,7 +815,7 @@ impl<T: Real> ShadingKernel<T> {
             (false, true) => (1.0, visibility),
             (true, true) => {
                 let count = coefficient_count(self.order);
-                let spheres_only = Occluders { blockers: occluders.blockers, horizons: None };
+                let spheres_only = Occluders { blockers: occluders.blockers, horizons: None, sun_shadows: None };
                 let mut blockers = [T::zero(); MAX_COEFFICIENTS];
                 let (p, n) = (point.position, point.normal);
                 let blockers_only = &mut blockers[..count];

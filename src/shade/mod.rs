@@ -23,6 +23,7 @@ pub mod settings;
 pub mod shaded;
 pub mod sharp_lights;
 pub mod sun;
+pub mod sun_shadow;
 pub mod visibility_grid;
 
 pub use compositing::ShadedPasses;

@@ -14,6 +14,7 @@ use super::blocker_tree::BlockerTree;
 use super::frame::{check_frame, height_field, ShadeError};
 use super::kernel::ShadingKernel;
 use super::settings::{Precision, ShadingSettings};
+use super::sun_shadow::SunShadows;
 use crate::heightfield::{HeightField, HorizonPyramid, PyramidPlan};
 use crate::scene::{Frame, Light, Material, PointLight, Scene, SunLight};
 use crate::sh::Real;
@@ -69,6 +70,8 @@ pub struct FramePlan<'a> {
     pub kernel: Arc<PlannedKernel>,
     /// The frame's sphere blockers as a hierarchy.
     pub blockers: BlockerTree,
+    /// The suns' shadow maps of the blocker meshes, ready to march.
+    pub sun_shadows: SunShadows,
     /// The sharp lights the kernel shades: the scene's, then those taken out of its map.
     pub suns: Vec<SunLight>,
     /// How many of `suns` came out of the environment map, and each one's share of its power.
@@ -111,6 +114,7 @@ impl<'a> FramePlan<'a> {
             ..contents
         };
         let blockers = BlockerTree::new(&frame.blockers, settings.cluster_ratio);
+        let sun_shadows = SunShadows::new(&frame.sun_shadows);
         let mut timings = StageTimings::default();
         timings.add_wall("tables", started);
         Ok(Self {
@@ -121,6 +125,7 @@ impl<'a> FramePlan<'a> {
             terrain,
             kernel,
             blockers,
+            sun_shadows,
             suns,
             extracted_shares,
             timings,

@@ -21,7 +21,9 @@
 //!   environment's hierarchy: [`BlockerTree::visit_cone`]): a cap of half-angle
 //!   `asin(r / d)` about the sphere's direction; a receiver inside a sphere sees it as the
 //!   half-space towards its centre (as the reference's surface band does); the receiver's
-//!   own spheres behind its tangent plane cast nothing (the self-shadowing rule);
+//!   own spheres behind its tangent plane cast nothing (the self-shadowing rule); or, for
+//!   a sun whose frame holds its shadow map, the blocker meshes themselves, from the map
+//!   ([`super::sun_shadow`]);
 //! - the ground plane, for a receiver above it: the horizontal (not for a lamp above the
 //!   plane too, whose light never crosses it);
 //! - the height field: its horizon marched once along the sun's azimuth
@@ -42,6 +44,7 @@
 //! value at the directions' mean ([`SunDisk::diffuse_reflected`]).
 
 use super::blocker_tree::BlockerTree;
+use super::sun_shadow::{drift_per_depth, ShadowMapMarch};
 use crate::heightfield::{lowest_horizon, ElevationBand, HorizonAgainst, HorizonPyramid};
 use crate::logsh::Lobe;
 use crate::scene::{PointLight, SunLight};
@@ -236,7 +239,7 @@ impl DiskDirections {
         object: u32,
     ) -> [f64; DISK_DIRECTIONS] {
         let horizon = horizons.map_or(DiskHorizon::None, DiskHorizon::Marched);
-        self.seen_against(blockers, horizon, planes, p, n, object).visibility()
+        self.seen_against(Casters::from(blockers), horizon, planes, p, n, object).visibility()
     }
 
     /// Whether `planes` alone hide the whole disk at `p` with unit normal `n` (a sun
@@ -318,14 +321,15 @@ impl DiskDirections {
 
     /// [`Self::visibility`] with the height field's horizon from `horizon` (marched here,
     /// or marched already with the other pixels of a frame:
-    /// [`HorizonPyramid::horizons_against`], the same bits), told as [`DiskSeen`]: a disk
+    /// [`HorizonPyramid::horizons_against`], the same bits) and `casters` for the blockers
+    /// (their spheres, or a sun's shadow map of their meshes), told as [`DiskSeen`]: a disk
     /// that nothing covers and that lies clear of the tangent plane is [`DiskSeen::Open`]
     /// without a visibility per direction (97 % of the surface pixels and lamps of the
     /// Sun-lamp scene's three lamps turned 75 deg, whose turn then takes two thirds of
     /// the time).
     pub fn seen_against(
         &self,
-        blockers: Option<&BlockerTree>,
+        casters: Casters,
         horizon: DiskHorizon,
         planes: Planes,
         p: [f64; 3],
@@ -380,7 +384,16 @@ impl DiskDirections {
                 }
             }
         }
-        if let Some(tree) = blockers {
+        if let Casters::Map(map) = casters {
+            if let Some(hidden) = map.blocked(&self.directions, drift_per_depth(self.half_angle), p, n) {
+                let blocked = blocked.get_or_insert([0.0; DISK_DIRECTIONS]);
+                for (b, hidden) in blocked.iter_mut().zip(hidden) {
+                    if hidden {
+                        *b = 1.0;
+                    }
+                }
+            }
+        } else if let Casters::Spheres(tree) = casters {
             tree.visit_cone(p, n, object, self.axis, self.cone, |sphere| {
                 let d = [0, 1, 2].map(|k| sphere.center[k] - p[k]);
                 let distance = dot(d, d).sqrt();
@@ -407,6 +420,23 @@ impl DiskDirections {
             None => DiskSeen::Open,
             Some(blocked) => DiskSeen::Partial(blocked.map(|b| 1.0 - b)),
         }
+    }
+}
+
+/// What casts shadows on a disk besides the planes and the height field.
+#[derive(Clone, Copy, Debug)]
+pub enum Casters<'a> {
+    None,
+    /// The blocker spheres, each sphere that reaches the disk's cone.
+    Spheres(&'a BlockerTree),
+    /// A sun's shadow map of the blocker meshes ([`super::sun_shadow`]), in place of the
+    /// spheres.
+    Map(&'a ShadowMapMarch),
+}
+
+impl<'a> From<Option<&'a BlockerTree>> for Casters<'a> {
+    fn from(blockers: Option<&'a BlockerTree>) -> Self {
+        blockers.map_or(Casters::None, Casters::Spheres)
     }
 }
 
@@ -545,17 +575,17 @@ impl SunDisk {
 
     /// What the occluders leave of the disk at `p` with unit normal `n` on object `object`
     /// (module doc): the tangent plane, the ground plane at `ground`, the height field
-    /// (its horizon from `horizon`) and the blockers ([`DiskDirections::seen_against`]).
+    /// (its horizon from `horizon`) and `casters` ([`DiskDirections::seen_against`]).
     pub fn seen(
         &self,
-        blockers: Option<&BlockerTree>,
+        casters: Casters,
         horizon: DiskHorizon,
         ground: Option<f64>,
         p: [f64; 3],
         n: [f64; 3],
         object: u32,
     ) -> DiskSeen {
-        self.disk.seen_against(blockers, horizon, Planes { tangent: true, ground }, p, n, object)
+        self.disk.seen_against(casters, horizon, Planes { tangent: true, ground }, p, n, object)
     }
 
     /// `integral over the disk of L V lobe(axis . w) dw` for a lobe given by its value at `cos theta` from `axis`, given the disk's
@@ -772,7 +802,7 @@ mod tests {
                         clear += 1;
                         assert!(shares.iter().all(|s| s.to_bits() == 0), "{degrees} deg, axis {axis:?}, n {n:?}");
                         let planes = Planes { tangent: true, ground: None };
-                        let seen = disk.seen_against(None, DiskHorizon::None, planes, [0.0; 3], n, 0);
+                        let seen = disk.seen_against(Casters::None, DiskHorizon::None, planes, [0.0; 3], n, 0);
                         assert!(matches!(seen, DiskSeen::Open), "{degrees} deg, axis {axis:?}, n {n:?}");
                     } else {
                         tested += 1;
@@ -807,7 +837,7 @@ mod tests {
                     let r = (1.0 - z * z).sqrt();
                     let n = [r * phi.cos(), r * phi.sin(), z];
                     let per_direction = |v: &[f64; DISK_DIRECTIONS]| sun.reflected(v, |z| Lobe::Diffuse.value(z), n);
-                    match sun.seen(None, DiskHorizon::None, None, [0.0; 3], n, 0) {
+                    match sun.seen(Casters::None, DiskHorizon::None, None, [0.0; 3], n, 0) {
                         DiskSeen::Open => {
                             open += 1;
                             assert!(sun.disk.directions.iter().all(|&w| dot(w, n) > 0.0), "{degrees} deg, n {n:?}");
@@ -846,7 +876,7 @@ mod tests {
                     SunDisk::new(&SunLight { direction: axis, half_angle, strength: 2.0, color: [1.0, 0.5, 0.25] });
                 for k in 0..300 {
                     let n = spiral_normal(k, 300, 1.0);
-                    if !matches!(sun.seen(None, DiskHorizon::None, None, [0.0; 3], n, 0), DiskSeen::Open) {
+                    if !matches!(sun.seen(Casters::None, DiskHorizon::None, None, [0.0; 3], n, 0), DiskSeen::Open) {
                         continue;
                     }
                     for j in 0..12 {
@@ -965,7 +995,8 @@ mod tests {
         let distance = 10.0;
         for (offset, radius) in [(0.0, 0.3), (0.5, 0.6), (0.7, 0.4), (0.9, 0.2), (0.3, 1.5)] {
             let tree = BlockerTree::new(&[Sphere::new([offset, 0.0, distance], radius)], 0.0);
-            let v = disk.seen(Some(&tree), DiskHorizon::None, None, [0.0; 3], [0.0, 0.0, 1.0], 0).visibility();
+            let v =
+                disk.seen(Casters::Spheres(&tree), DiskHorizon::None, None, [0.0; 3], [0.0, 0.0, 1.0], 0).visibility();
             let visible = v.iter().sum::<f64>() / DISK_DIRECTIONS as f64;
             let cap = (radius / distance.hypot(offset)).asin();
             let gamma = (offset / distance).atan();

@@ -21,8 +21,10 @@
 //! [`sphere_over_plane`] with its closed-form answer [`SphereOverPlane::expected_at`].
 
 pub mod raycast;
+pub mod sun_shadow;
 
 pub use raycast::{render_gbuffer, render_reflection, trace, Hit, Object, Shape};
+pub use sun_shadow::sun_shadow_map;
 
 use crate::scene::camera::blockers_json;
 use crate::scene::gbuffer::{SurfaceColours, MATERIAL_INDEX_BLENDER4, MATERIAL_INDEX_BLENDER5};

@@ -28,6 +28,7 @@ use crate::sh::Real;
 use crate::shade::blocker_tree::BlockerTree;
 use crate::shade::frame::suns_along;
 use crate::shade::sun::{Planes, SunDisk};
+use crate::shade::sun_shadow::SunShadows;
 use crate::shade::{
     pixel_source, FramePlan, KnownAlongSun, Occluders, PixelSource, PlannedKernel, ShadingKernel, ShadingSettings,
     Terrain,
@@ -62,6 +63,7 @@ pub struct SunLampFrame {
     scene_frame: Frame,
     kernel: Arc<PlannedKernel>,
     blockers: BlockerTree,
+    sun_shadows: SunShadows,
     pyramid: Option<Arc<HorizonPyramid>>,
 }
 
@@ -201,8 +203,8 @@ impl SunLampTurn {
             (Some(map), Some(terrain)) => Some(self.pyramid_of(map, terrain, &plan.settings)),
             _ => None,
         };
-        let (kernel, blockers) = (plan.kernel.clone(), plan.blockers);
-        Ok(SunLampFrame { scene_frame, kernel, blockers, pyramid })
+        let (kernel, blockers, sun_shadows) = (plan.kernel.clone(), plan.blockers, plan.sun_shadows);
+        Ok(SunLampFrame { scene_frame, kernel, blockers, sun_shadows, pyramid })
     }
 
     /// The filtered pyramid of a frame's height map `map`, planned as `terrain`: the last
@@ -337,6 +339,7 @@ impl SunLampTurn {
             materials: &self.scene.materials,
             frame: scene_frame,
             blockers: &prepared.blockers,
+            sun_shadows: &prepared.sun_shadows,
             pyramid: prepared.pyramid.as_deref(),
         };
         match prepared.kernel.as_ref() {
@@ -541,6 +544,7 @@ struct Shaded<'a> {
     materials: &'a BTreeMap<u32, Material>,
     frame: &'a Frame,
     blockers: &'a BlockerTree,
+    sun_shadows: &'a SunShadows,
     pyramid: Option<&'a HorizonPyramid>,
 }
 
@@ -558,7 +562,8 @@ fn move_lamps<T: Real>(
     let disks: Vec<SunDisk> = turned.iter().chain(suns).map(SunDisk::new).collect();
     let blockers = (!shaded.blockers.is_empty()).then_some(shaded.blockers);
     let pyramid = shaded.pyramid;
-    let occluders = Occluders { blockers, horizons: pyramid };
+    let sun_shadows = (!shaded.sun_shadows.is_empty()).then_some(shaded.sun_shadows);
+    let occluders = Occluders { blockers, horizons: pyramid, sun_shadows };
     // The tinted turned light in place of the rendered (tinted when written).
     let moved = |lamps: &mut [f32; 3], rendered: [f32; 3], tint: [f32; 3], turned: [f32; 3]| {
         for k in 0..3 {

@@ -758,6 +758,8 @@ fn secondary_points(
         reflection: None,
         camera: frame.camera.clone(),
         blockers: frame.blockers.clone(),
+        // The surroundings' points lie on the proxies, not on the meshes the maps hold.
+        sun_shadows: Vec::new(),
         height_map: frame.height_map.clone(),
         light: frame.light.clone(),
         light_file_crc: frame.light_file_crc,

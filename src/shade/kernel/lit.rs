@@ -225,8 +225,13 @@ impl<T: Real> ShadingKernel<T> {
                 (None, Some(pyramid)) => DiskHorizon::Marched(pyramid),
                 (None, None) => DiskHorizon::None,
             };
-            let blockers = occluders.blockers.filter(|_| known.is_none_or(|known| known.blockers));
-            let seen = sun.seen(blockers, horizon, self.ground, point.position, n, point.object);
+            // A sun's shadow map, where the frame has one, in place of the spheres.
+            let map = occluders.sun_shadows.filter(|_| k < suns.len()).and_then(|maps| maps.of_sun(sun.disk.axis));
+            let casters = match map {
+                Some(map) => Casters::Map(map),
+                None => Casters::from(occluders.blockers.filter(|_| known.is_none_or(|known| known.blockers))),
+            };
+            let seen = sun.seen(casters, horizon, self.ground, point.position, n, point.object);
             if seen.is_dark() {
                 return None;
             }

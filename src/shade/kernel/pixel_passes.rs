@@ -94,7 +94,7 @@ impl<T: Real> ShadingKernel<T> {
         let diffuse = [0, 1, 2].map(|i| diffuse[i] + sun_diffuse[i]);
         let specular = [0, 1, 2].map(|i| specular[i] + sun_glossy[i]);
 
-        let none = Occluders { blockers: None, horizons: None };
+        let none = Occluders { blockers: None, horizons: None, sun_shadows: None };
         let mut unoccluded = [T::zero(); MAX_COEFFICIENTS];
         self.add_visibility(none, p, n, point.object, &mut unoccluded[..count]);
         let lit_unoccluded = self.lit(&unoccluded, &self.diffuse, n);

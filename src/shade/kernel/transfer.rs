@@ -189,7 +189,7 @@ impl<T: Real> ShadingKernel<T> {
         let normal = n.map(|c| c as f32);
         let mut out = PointTransfer { albedo, specular_colour, horizons, normal, ..PointTransfer::DARK };
         self.transfer(&full, &self.diffuse, n, &mut out.diffuse);
-        let none = Occluders { blockers: None, horizons: None };
+        let none = Occluders { blockers: None, horizons: None, sun_shadows: None };
         let mut unoccluded = [T::zero(); MAX_COEFFICIENTS];
         self.add_visibility(none, p, n, point.object, &mut unoccluded[..count]);
         self.transfer(&unoccluded, &self.diffuse, n, &mut out.unoccluded);
