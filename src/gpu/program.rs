@@ -342,6 +342,17 @@ fn push_sun_shadows(kernel: &ShadingKernel<f32>, sun_shadows: &SunShadows, suns_
     for (s, sun) in kernel.suns.iter().enumerate() {
         let Some(march) = sun_shadows.of_sun(sun.disk.axis) else { continue };
         let map = &march.map;
+        let levels = march.level_count();
+        let at = t.data.len();
+        // The head, the level records, each level's minima, then `Zfar`.
+        let mut minima_at = at + std::mem::size_of::<GpuShadowMap>() / 4 + level_record * levels;
+        let mut records = Vec::new();
+        for k in 0..levels {
+            let (columns, rows, minima) = march.level(k);
+            let record = GpuLevel { offset: minima_at as u32, columns: columns as u32, rows: rows as u32, pad: 0 };
+            records.extend(record.floats());
+            minima_at += minima.len();
+        }
         let head = GpuShadowMap {
             axis: [map.axis[0], map.axis[1], map.axis[2], map.texel()].map(|v| v as f32),
             origin: [map.origin[0], map.origin[1], map.origin[2], f64::from(march.shallowest())].map(|v| v as f32),
@@ -349,22 +360,12 @@ fn push_sun_shadows(kernel: &ShadingKernel<f32>, sun_shadows: &SunShadows, suns_
             up: [map.up[0], map.up[1], map.up[2], map.size[1]].map(|v| v as f32),
             columns: map.columns as u32,
             rows: map.rows as u32,
-            levels: march.levels.len() as u32,
-            far: 0,
+            levels: levels as u32,
+            far: minima_at as u32,
         };
-        let at = t.data.len();
-        let mut minima_at = at + head.floats().len() + level_record * march.levels.len();
-        let mut levels = Vec::new();
-        for level in &march.levels {
-            let record =
-                GpuLevel { offset: minima_at as u32, columns: level.columns as u32, rows: level.rows as u32, pad: 0 };
-            levels.extend(record.floats());
-            minima_at += level.depths.len();
-        }
-        let head = GpuShadowMap { far: minima_at as u32, ..head };
-        t.push_unnamed(head.floats().into_iter().chain(levels));
-        for level in &march.levels {
-            t.push_unnamed(level.depths.iter().copied());
+        t.push_unnamed(head.floats().into_iter().chain(records));
+        for k in 0..levels {
+            t.push_unnamed(march.level(k).2.iter().copied());
         }
         t.push_unnamed(map.far_depths.iter().copied());
         t.data[suns_at + s * record + field] = f32::from_bits(at as u32);

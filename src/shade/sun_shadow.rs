@@ -30,7 +30,7 @@
 //! - Two tests end most receivers' march: a receiver inside its own texel's interval is
 //!   blocked along every direction (every ray starts there); and one whose rays' whole
 //!   footprint lies over texels whose `Z` is deeper than it (the minima of
-//!   [`ShadowMapMarch::levels`], a pyramid of 2 x 2 minima) sees the whole disk. The
+//!   [`ShadowMapMarch::level`], a pyramid of 2 x 2 minima) sees the whole disk. The
 //!   footprint's shallowest `Z` also ends the others' rays: none of its texels blocks a
 //!   ray risen above it.
 //!
@@ -53,12 +53,13 @@ pub const MINIMA_LEVELS: usize = 15;
 #[derive(Debug)]
 pub struct ShadowMapMarch {
     pub map: Arc<SunShadowMap>,
-    /// Level 0 is the map's depths; each next level the minimum over 2 x 2 texels of the
-    /// one before (an odd last column or row alone), down to one texel.
-    pub levels: Vec<MinLevel>,
+    /// Levels 1 and on: each the minimum over 2 x 2 texels of the one before (an odd last
+    /// column or row alone), down to one texel; level 0 is the map's `Z` itself
+    /// ([`Self::level`]).
+    coarser: Vec<MinLevel>,
 }
 
-/// One level of [`ShadowMapMarch::levels`].
+/// One level of the pyramid of minima ([`ShadowMapMarch::level`]).
 #[derive(Clone, Debug)]
 pub struct MinLevel {
     pub columns: usize,
@@ -77,24 +78,44 @@ struct InMap {
 
 impl ShadowMapMarch {
     pub fn new(map: Arc<SunShadowMap>) -> Self {
-        let mut levels = vec![MinLevel { columns: map.columns, rows: map.rows, depths: map.depths.clone() }];
-        while let Some(last) = levels.last().filter(|l| l.columns > 1 || l.rows > 1) {
-            let (columns, rows) = (last.columns.div_ceil(2), last.rows.div_ceil(2));
+        let mut coarser: Vec<MinLevel> = Vec::new();
+        let mut last = (map.columns, map.rows, &map.depths[..]);
+        while last.0 > 1 || last.1 > 1 {
+            let (columns, rows) = (last.0.div_ceil(2), last.1.div_ceil(2));
             let mut depths = vec![f32::INFINITY; columns * rows];
-            for y in 0..last.rows {
-                for x in 0..last.columns {
+            for y in 0..last.1 {
+                for x in 0..last.0 {
                     let at = &mut depths[(y / 2) * columns + x / 2];
-                    *at = at.min(last.depths[y * last.columns + x]);
+                    *at = at.min(last.2[y * last.0 + x]);
                 }
             }
-            levels.push(MinLevel { columns, rows, depths });
+            coarser.push(MinLevel { columns, rows, depths });
+            let level = coarser.last().expect("just pushed");
+            last = (level.columns, level.rows, &level.depths[..]);
         }
-        Self { map, levels }
+        Self { map, coarser }
+    }
+
+    /// How many levels the pyramid has, level 0 the map's `Z`.
+    pub fn level_count(&self) -> usize {
+        1 + self.coarser.len()
+    }
+
+    /// Level `k`'s columns, rows and minima.
+    pub fn level(&self, k: usize) -> (usize, usize, &[f32]) {
+        match k {
+            0 => (self.map.columns, self.map.rows, &self.map.depths),
+            k => {
+                let l = &self.coarser[k - 1];
+                (l.columns, l.rows, &l.depths)
+            }
+        }
     }
 
     /// The shallowest surface in the map.
     pub fn shallowest(&self) -> f32 {
-        self.levels.last().map_or(NOTHING_BELOW, |l| l.depths[0])
+        let (_, _, top) = self.level(self.level_count() - 1);
+        top.first().copied().unwrap_or(NOTHING_BELOW)
     }
 
     /// Where `p` (unit normal `n`) lies in the map's frame.
@@ -142,8 +163,8 @@ impl ShadowMapMarch {
             (x0, x1, y0, y1) = (x0 / 2, x1 / 2, y0 / 2, y1 / 2);
             level += 1;
         }
-        let l = &self.levels[level];
-        let at = |x: usize, y: usize| l.depths[y * l.columns + x];
+        let (columns, _, minima) = self.level(level);
+        let at = |x: usize, y: usize| minima[y * columns + x];
         Some(f64::from(at(x0, y0).min(at(x1, y0)).min(at(x0, y1)).min(at(x1, y1))))
     }
 
@@ -207,8 +228,6 @@ impl ShadowMapMarch {
         if self.texel_under(at.across).is_some_and(|texel| self.meets(texel, at.depth, at.depth, at.bias)) {
             return Some([true; K]);
         }
-        // Every ray ends where it rises above the shallowest surface, `reach` along the
-        // axis; sideways it has then drifted at most `reach tan(spread)`.
         // Every ray stays within the footprint of a ray that rises to the map's shallowest
         // surface, and no texel there blocks it once it rises above their shallowest.
         let nearby = match self.shallowest_around(at.across, (clear_below - top) * drift) {
