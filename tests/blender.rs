@@ -643,6 +643,115 @@ fn world_mapping_rotation_exports() {
     }
 }
 
+/// A sun in the World's environment map, behind a Mapping rotation, gets a shadow map as a
+/// Sun lamp does: the exporter finds it by logsh's rule, turns it as the Mapping node
+/// turns the map, and logsh's own sun, taken out of the map, is within the degree a map
+/// serves a sun by, so that the cube's shadow changes with the map.
+#[test]
+fn an_environment_maps_sun_gets_a_shadow_map() {
+    let Some(python) = bpy_python() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let blend = dir.path().join("hdri_sun.blend");
+    // The sun 2 degrees wide at azimuth -40, elevation 35 in the map's frame; the Mapping
+    // node turns the map by (20, 0, 70) degrees.
+    let (azimuth, elevation) = ((-40f64).to_radians(), 35f64.to_radians());
+    let in_map = [elevation.cos() * azimuth.cos(), elevation.cos() * azimuth.sin(), elevation.sin()];
+    make_blend(
+        &python,
+        &blend,
+        &format!(
+            "import numpy as np, sys; sys.path.insert(0, {scenes:?}); from common import environment_world, sky_directions; \
+             d = sky_directions(512); \
+             rgb = 0.5 + 400.0 * (d @ {in_map:?} > math.cos(math.radians(2)))[..., None] * np.ones(3); \
+             w = environment_world('sky', {sky:?}, rgb, 1.0); n = w.node_tree.nodes; \
+             coord = n.new('ShaderNodeTexCoord'); m = n.new('ShaderNodeMapping'); \
+             m.inputs['Rotation'].default_value = (math.radians(20), 0, math.radians(70)); \
+             w.node_tree.links.new(coord.outputs['Generated'], m.inputs['Vector']); \
+             w.node_tree.links.new(m.outputs['Vector'], n['Environment Texture'].inputs['Vector']); \
+             bpy.ops.mesh.primitive_plane_add(size=8); bpy.ops.mesh.primitive_cube_add(size=2, location=(0, 0, 1)); \
+             bpy.ops.object.camera_add(location=(7, -7, 5), rotation=(math.radians(63), 0, math.radians(45))); \
+             bpy.context.scene.camera = bpy.context.object",
+            scenes = Path::new(REPO).join("blender_scripts/scenes"),
+            in_map = in_map.map(|c| (c * 1e9).round() / 1e9),
+            sky = dir.path().join("sky.exr"),
+        ),
+    );
+    let (with_map, without) = (dir.path().join("with_map"), dir.path().join("without"));
+    assert_ok(&export_frame_1(&python, &blend, &with_map, "48x27"), "exporting a cube under an HDRI sun");
+    let blockers: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(with_map.join("blockers.0001.json")).unwrap()).unwrap();
+    let maps = blockers["sun_shadows"].as_array().expect("blockers.0001.json has sun_shadows");
+    assert_eq!(maps.len(), 1, "{maps:?}");
+    let axis: [f64; 3] = serde_json::from_value(maps[0]["axis"].clone()).unwrap();
+    let angle =
+        |p: [f64; 3], q: [f64; 3]| (p[0] * q[0] + p[1] * q[1] + p[2] * q[2]).clamp(-1.0, 1.0).acos().to_degrees();
+    // The radiance along d is the map's along R d: the sun lies along R^T times its place
+    // in the map.
+    let r = logsh::scene::light::euler_xyz([20f64.to_radians(), 0.0, 70f64.to_radians()]);
+    let world = [0, 1, 2].map(|j| (0..3).map(|i| r[i][j] * in_map[i]).sum::<f64>());
+    println!("the map's axis is {:.3} degrees from the sun", angle(axis, world));
+    assert!(
+        angle(axis, world) < 0.5,
+        "the map's axis {axis:?} is {} degrees from the sun {world:?}",
+        angle(axis, world)
+    );
+
+    // logsh's sun, as `logsh render` prints it (to a tenth of a degree).
+    let render = |scene: &Path, out: &Path| {
+        let output = Command::cargo_bin("logsh")
+            .unwrap()
+            .args(["render", "--frames", "1", "--bounces", "0", "--progress", "none", "--device", "cpu"])
+            .arg(scene)
+            .arg("--out")
+            .arg(out)
+            .output()
+            .unwrap();
+        assert_ok(&output, "logsh render");
+        String::from_utf8_lossy(&output.stderr).into_owned()
+    };
+    let printed = render(&with_map, &dir.path().join("shaded_with_map"));
+    let number_after = |key: &str| -> f64 {
+        let at = printed.find(key).unwrap_or_else(|| panic!("no {key:?} in {printed}")) + key.len();
+        printed[at..].split_whitespace().next().unwrap().parse().unwrap()
+    };
+    let (a, e) = (number_after("azimuth ").to_radians(), number_after("elevation ").to_radians());
+    let taken = [e.cos() * a.cos(), e.cos() * a.sin(), e.sin()];
+    println!("logsh's sun, printed to 0.1 degree, is {:.3} degrees from the map's axis", angle(axis, taken));
+    assert!(
+        angle(axis, taken) < 0.5,
+        "logsh's sun {taken:?} is {} degrees from the map's axis {axis:?}",
+        angle(axis, taken)
+    );
+
+    // The same frame without maps shades the sun through the cube's spheres.
+    let output = run_python(
+        &python,
+        "blender_scripts/export_scene.py",
+        &[
+            Path::new("--blend"),
+            &blend,
+            Path::new("--out"),
+            &without,
+            Path::new("--resolution"),
+            Path::new("48x27"),
+            Path::new("--frames"),
+            Path::new("1"),
+            Path::new("--sun-shadow-resolution"),
+            Path::new("0"),
+        ],
+    );
+    assert_ok(&output, "exporting without sun shadow maps");
+    render(&without, &dir.path().join("shaded_without"));
+    let beauty = |shaded: &str| support::exr_channels(&dir.path().join(shaded).join("render.0001.exr"));
+    let (mapped, spheres) = (beauty("shaded_with_map"), beauty("shaded_without"));
+    let differs = ["R", "G", "B"]
+        .iter()
+        .flat_map(|c| mapped[*c].iter().zip(&spheres[*c]))
+        .filter(|(a, b)| a.is_finite() && b.is_finite() && (*a - *b).abs() > 0.01)
+        .count();
+    assert!(differs > 0, "the shadow map changes no pixel: logsh took the sun's shadows from the spheres");
+}
+
 /// A Sky Texture World is baked by Cycles into the scene's map without its sun disc, and
 /// the disc becomes a sun light of Blender's Sun Size towards the Sky Texture's sun (Sun
 /// Elevation 30 degrees, Sun Rotation 0 and 120), of the same strength however turned.

@@ -28,11 +28,13 @@ What is written into the output directory, per frame `####`:
 - `blockers.####.json`: spheres for every mesh that is not the height field, evaluated at
   that frame (modifiers, armatures, shape keys, animation applied); see `blockers.py`.
   Spheres shadow the sun along their own outline, not the mesh's, so for each sun of the
-  frame's `lights` (Sun lamps and a Sky Texture's sun) the file's `sun_shadows` also
-  names a shadow map, `sun_shadow.####.K.exr` (K the sun's place among the frame's
-  suns): Cycles' depth pass of exactly the objects that have spheres, seen through an
+  frame's `lights` (Sun lamps and a Sky Texture's sun), and for each sun that logsh
+  will take out of the environment map (`environment_suns`, turned by the frame's
+  Mapping rotation), the file's `sun_shadows` also names a shadow map,
+  `sun_shadow.####.K.exr` (K the sun's place among those suns): Cycles' depth pass of exactly the objects that have spheres, seen through an
   orthographic camera from the sun's side and from beyond them (`render_depths`). Each
-  entry holds `image`, `axis` (the sun's direction as `lights` has it), `origin` (the
+  entry holds `image`, `axis` (the sun's direction as `lights` has it, or as the map's
+  sun lies in the world), `origin` (the
   centre of the image plane, beyond every blocker towards the sun), `right` and `up`
   (unit, right x up = axis) and `size` ([w, h] metres along them). The EXR's channel
   `Z`, row 0 along the +up edge and column 0 along the -right edge, is at texel (i, j)
@@ -151,7 +153,7 @@ from .geometry import (
     write_reflection)
 from .materials import (
     export_lamps, find_heightfield, fit_to_passes, material_table, renderable_objects, roughness_aovs)
-from .world import export_world, world_keys
+from .world import environment_suns, export_world, map_sun_direction, world_keys
 
 
 @dataclass
@@ -293,6 +295,13 @@ def export(scene, options, log=print):
                 per_frame[frame]["light"] = world_by_frame[frame]
             log(f"the World changes within frames {start}-{end}: each frame's Strength, rotation or colour is in "
                 "frame.####.json")
+        # The suns logsh will take out of the environment map, each to have a shadow map.
+        map_suns = []
+        if options.sun_shadow_resolution and "environment" in description["light"]:
+            map_suns = environment_suns(os.path.join(out, description["light"]["environment"]))
+            for direction in map_suns:
+                log(f"sun in the environment map towards {[round(c, 4) for c in direction]} (the map's own frame): "
+                    "its shadows come from the blocker meshes' depth map")
         if options.colour_passes:
             description["colour_passes"] = True
         if lights:
@@ -356,6 +365,8 @@ def export(scene, options, log=print):
                 sampled = dict(camera, resolution=[width * options.supersample, height * options.supersample])
                 write_reflection(scene, depsgraph, sampled, index_of, water, new_file(out, f"reflection.{frame:04d}.exr"))
             suns = [light for light in per_frame[frame].get("lights", lights) if light["type"] == "sun"]
+            rotation = per_frame[frame].get("light", description["light"]).get("rotation")
+            suns += [{"type": "sun", "direction": map_sun_direction(d, rotation)} for d in map_suns]
             shadows = None
             if options.sun_shadow_resolution and suns and casters:
                 shadows = export_sun_shadows(scene, view_layer, out, frame, suns, casters, options, log)

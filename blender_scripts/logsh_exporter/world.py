@@ -274,3 +274,116 @@ def mapping_rotation(node):
     if kind == "TEXTURE":
         euler = euler.to_matrix().inverted().to_euler("XYZ")
     return [math.degrees(a) for a in euler]
+
+
+# ---- suns in an environment map --------------------------------------------------------
+
+# logsh's rule for the suns it takes out of an environment map (`src/shade/sharp_lights.rs`,
+# whose constants these are): a peak at least SUN_CONTRAST times the median luminance, its
+# region of texels at least REGION_FLOOR of the peak, within MAX_SUN_RADIUS of its centre
+# and carrying at least MIN_SUN_SHARE of the map's power; at most MAX_SUNS suns out of
+# REGIONS_TRIED regions.
+SUN_CONTRAST, REGION_FLOOR, MIN_SUN_SHARE = 50.0, 0.01, 0.02
+MAX_SUN_RADIUS = math.radians(10.0)
+MAX_SUNS, REGIONS_TRIED = 4, 16
+LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
+
+
+def environment_suns(path):
+    """The directions, in the map's own frame, of the suns logsh takes out of the
+    equirectangular map at `path` (`--sharp-lights auto`), so that each gets a shadow map
+    (`map_sun_direction` turns them as the World's Mapping node does). The same rule as
+    logsh's; the directions agree with logsh's to the map's resampling, a fraction of a
+    texel, within the tolerance a shadow map serves a sun by (1 degree)."""
+    channels = read_exr_channels(path, ["R", "G", "B"])
+    rgb = np.stack([channels[c] for c in "RGB"], axis=-1).astype(np.float64)
+    height, width = rgb.shape[:2]
+    luminance = rgb @ LUMINANCE
+    theta = np.pi * (np.arange(height) + 0.5) / height
+    phi = np.pi - 2.0 * np.pi * (np.arange(width) + 0.5) / width
+    edges = np.pi * np.arange(height + 1) / height
+    solid_angle = 2.0 * np.pi / width * (np.cos(edges[:-1]) - np.cos(edges[1:]))
+
+    def direction(r, c):
+        return np.stack([np.sin(theta[r]) * np.cos(phi[c]), np.sin(theta[r]) * np.sin(phi[c]),
+                         np.cos(theta[r])], axis=-1)
+
+    total = float((luminance * solid_angle[:, None]).sum())
+    flat = luminance.ravel()
+    median = float(np.partition(flat, flat.size // 2)[flat.size // 2])
+    suns = []
+    if not total > 0.0:
+        return suns
+    tried = np.zeros(luminance.shape, dtype=bool)
+    for _ in range(REGIONS_TRIED):
+        if len(suns) == MAX_SUNS:
+            break
+        open_luminance = np.where(tried, -np.inf, luminance)
+        peak = np.unravel_index(int(np.argmax(open_luminance)), luminance.shape)
+        peak_luminance = float(luminance[peak])
+        if not (peak_luminance >= SUN_CONTRAST * median and peak_luminance > 0.0):
+            break
+        floor = REGION_FLOOR * peak_luminance
+        region = grow_region(luminance, peak, floor, direction)
+        if region is None:
+            # A broad bright area, no sun: what of it lies near the peak is not tried again.
+            near = (direction(*np.indices(luminance.shape)) @ direction(*peak)) > math.cos(2.0 * MAX_SUN_RADIUS)
+            tried |= near & (luminance >= floor)
+            continue
+        rows, columns = np.array([p[0] for p in region]), np.array([p[1] for p in region])
+        tried[rows, columns] = True
+        inside = np.zeros(luminance.shape, dtype=bool)
+        inside[rows, columns] = True
+        ring = set()
+        for r, c in region:
+            for rr in (r - 1, r, r + 1):
+                for cc in (c - 1, c, c + 1):
+                    if 0 <= rr < height and not inside[rr, cc % width]:
+                        ring.add((rr, cc % width))
+        background = np.mean([rgb[p] for p in ring], axis=0) if ring else np.zeros(3)
+        above = np.clip(rgb[rows, columns] - background, 0.0, None) * solid_angle[rows, None]
+        weight = above @ LUMINANCE
+        directions = direction(rows, columns)
+        centre = (weight[:, None] * directions).sum(axis=0)
+        if not (weight.sum() / total >= MIN_SUN_SHARE and np.linalg.norm(centre) > 0.0):
+            continue
+        axis = centre / np.linalg.norm(centre)
+        if np.arccos(np.clip(directions @ axis, -1.0, 1.0)).max() > MAX_SUN_RADIUS:
+            continue
+        luminance[rows, columns] = background @ LUMINANCE
+        rgb[rows, columns] = background
+        suns.append([float(c) for c in axis])
+    return suns
+
+
+def grow_region(luminance, peak, floor, direction):
+    """The 8-connected texels of `luminance` at least `floor` around `peak`, wrapping in
+    azimuth; None for a region reaching twice MAX_SUN_RADIUS from its peak, which fails
+    the radius test whatever its centre (the walk stops there: such an area can cover
+    half the map)."""
+    height, width = luminance.shape
+    centre = direction(*peak)
+    region, seen, next_texel = [peak], {peak}, 0
+    while next_texel < len(region):
+        r, c = region[next_texel]
+        next_texel += 1
+        for rr in (r - 1, r, r + 1):
+            for cc in (c - 1, c, c + 1):
+                texel = (rr, cc % width)
+                if not 0 <= rr < height or texel in seen or luminance[texel] < floor:
+                    continue
+                seen.add(texel)
+                region.append(texel)
+                if float(direction(*texel) @ centre) < math.cos(2.0 * MAX_SUN_RADIUS):
+                    return None
+    return region
+
+
+def map_sun_direction(direction, rotation):
+    """A sun's direction `direction` in the map's frame as the World shows it behind a
+    Mapping rotation `rotation` (Euler XYZ degrees, `mapping_rotation`; None for none):
+    the radiance along d is the map's along R d, so the sun lies along R^T."""
+    if rotation is None:
+        return list(direction)
+    m = mathutils.Euler([math.radians(a) for a in rotation], "XYZ").to_matrix()
+    return [float(c) for c in m.transposed() @ mathutils.Vector(direction)]

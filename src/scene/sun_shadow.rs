@@ -17,9 +17,9 @@
 //!   at least [`NOTHING_BELOW`] where the ray meets none (Blender writes 1e10), and
 //!   `Zfar` is then not read. Texels are square.
 //!
-//! The map serves the sun whose direction is its `axis` ([`SunShadowMap::serves`]): a
-//! sun turned away from it (`--light-rotation`, a relight) takes its shadows from the
-//! proxies again.
+//! The map serves the sun whose direction is within [`SAME_SUN_RADIANS`] of its `axis`
+//! ([`SunShadowMap::serves`]): a sun turned further from it (`--light-rotation`, a
+//! relight) takes its shadows from the proxies again.
 
 use super::error::{check_image_size, SceneError};
 use super::exr_read::ExrChannels;
@@ -31,9 +31,14 @@ use std::path::{Path, PathBuf};
 /// A depth of at least this means no blocker surface along the texel's ray.
 pub const NOTHING_BELOW: f32 = 1e9;
 
-/// How far a sun may be from a map's axis and still be the sun it was rendered for: the
-/// exporter copies the sun's direction, so only rounding separates them.
-pub const SAME_SUN_RADIANS: f64 = 1e-5;
+/// How far a sun may be from a map's axis and still take its shadows from the map (1
+/// degree). A Sun lamp's map holds the lamp's direction to rounding; a sun logsh takes
+/// out of an environment map was found there by the exporter too, by the same rule but
+/// on the map before its Mapping rotation resamples it, which moves it by a fraction of
+/// a texel. A ray off the axis walks
+/// through the map sideways ([`crate::shade::sun_shadow`]), so a sun turned within this
+/// takes the meshes' shadow still; beyond it, the spheres'.
+pub const SAME_SUN_RADIANS: f64 = std::f64::consts::PI / 180.0;
 
 /// At most this many shadow maps a frame.
 pub const MAX_SHADOW_MAPS: usize = 16;
@@ -138,8 +143,7 @@ impl SunShadowMap {
                 ),
             ));
         }
-        // Unit to the rounding of f64, as the sun's direction is once read: a map serves
-        // the sun whose direction it holds to 1e-5 rad.
+        // Unit to the rounding of f64, as the sun's direction is once read.
         Ok(Self {
             file,
             axis: normalize(entry.axis),
