@@ -16,7 +16,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 OUT=${1:-target/bounce}
-SCENES=${SCENES:-"primitives sun_lamp canyon cones glossy textured dunes"}
+SCENES=${SCENES:-"primitives sun_lamp canyon cones glossy textured dunes primitives_hdri_sun primitives_sun_lamp"}
 CONVERTED=${CONVERTED:-"primitives sun_lamp canyon cones"}
 RESOLUTION=${RESOLUTION:-240x135}
 TRUTH_SAMPLES=${TRUTH_SAMPLES:-1024}
