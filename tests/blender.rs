@@ -752,6 +752,68 @@ fn an_environment_maps_sun_gets_a_shadow_map() {
     assert!(differs > 0, "the shadow map changes no pixel: logsh took the sun's shadows from the spheres");
 }
 
+/// The exporter finds the suns in an environment map that logsh takes out of it
+/// (`environment_suns` in the exporter's world.py against
+/// `shade::sharp_lights::extract_suns`), on maps made for it: two suns, a sun across the
+/// map's seam, one near the zenith, a bright area too wide to be a sun and a disc too dim.
+#[test]
+fn the_exporter_finds_the_suns_logsh_takes_out_of_a_map() {
+    let Some(python) = bpy_python() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let script = format!(
+        "import json, math, sys; import numpy as np; sys.path.insert(0, {scripts:?}); sys.path.insert(0, {scenes:?})
+from common import sky_directions
+from logsh_exporter.exr import write_exr
+from logsh_exporter.world import environment_suns
+d = sky_directions(512)
+def towards(azimuth, elevation):
+    a, e = math.radians(azimuth), math.radians(elevation)
+    return np.array([math.cos(e) * math.cos(a), math.cos(e) * math.sin(a), math.sin(e)])
+def disc(azimuth, elevation, degrees, radiance):
+    return radiance * (d @ towards(azimuth, elevation) > math.cos(math.radians(degrees)))
+sky = 0.3 + 0.4 * np.clip(d[..., 2], 0.0, 1.0)
+cases = {{
+    'two_suns': sky + disc(30, 40, 1.5, 300.0) + disc(-120, 15, 1.0, 500.0),
+    'seam': sky + disc(180, 25, 1.5, 300.0),
+    'zenith': sky + disc(0, 88, 1.5, 300.0),
+    'window': sky + disc(60, 30, 25.0, 40.0),
+    'dim': sky + disc(60, 30, 1.5, 10.0),
+}}
+found = {{}}
+for name, radiance in cases.items():
+    path = {dir:?} + '/' + name + '.exr'
+    write_exr(path, {{c: (radiance * [1.0, 0.9, 0.8][k]).astype(np.float32) for k, c in enumerate('RGB')}})
+    found[name] = environment_suns(path)
+print('SUNS ' + json.dumps(found))",
+        scripts = Path::new(REPO).join("blender_scripts"),
+        scenes = Path::new(REPO).join("blender_scripts/scenes"),
+        dir = dir.path(),
+    );
+    let output = std::process::Command::new(&python).args(["-c", &script]).output().unwrap();
+    assert_ok(&output, "environment_suns");
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    let line = stdout.lines().find_map(|l| l.strip_prefix("SUNS ")).expect("the suns printed");
+    let found: HashMap<String, Vec<[f64; 3]>> = serde_json::from_str(line).unwrap();
+    let angle =
+        |p: [f64; 3], q: [f64; 3]| (p[0] * q[0] + p[1] * q[1] + p[2] * q[2]).clamp(-1.0, 1.0).acos().to_degrees();
+    for (name, expected) in [("two_suns", 2), ("seam", 1), ("zenith", 1), ("window", 0), ("dim", 0)] {
+        let map = logsh::scene::EnvironmentMap::read(&dir.path().join(format!("{name}.exr"))).unwrap();
+        let taken = logsh::shade::sharp_lights::extract_suns(&map, 1.0).suns;
+        let exporter = &found[name];
+        assert_eq!(taken.len(), expected, "{name}: logsh takes {} suns", taken.len());
+        assert_eq!(exporter.len(), expected, "{name}: the exporter finds {exporter:?}");
+        for (sun, &direction) in taken.iter().zip(exporter) {
+            let apart = angle(sun.direction, direction);
+            println!("{name}: the exporter's sun {apart:.4} degrees from logsh's");
+            assert!(
+                apart < 0.05,
+                "{name}: the exporter's sun {direction:?} is {apart} degrees from logsh's {:?}",
+                sun.direction
+            );
+        }
+    }
+}
+
 /// A Sky Texture World is baked by Cycles into the scene's map without its sun disc, and
 /// the disc becomes a sun light of Blender's Sun Size towards the Sky Texture's sun (Sun
 /// Elevation 30 degrees, Sun Rotation 0 and 120), of the same strength however turned.
