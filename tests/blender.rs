@@ -656,10 +656,7 @@ fn an_environment_maps_sun_gets_a_shadow_map() {
     // node turns the map by (20, 0, 70) degrees.
     let (azimuth, elevation) = ((-40f64).to_radians(), 35f64.to_radians());
     let in_map = [elevation.cos() * azimuth.cos(), elevation.cos() * azimuth.sin(), elevation.sin()];
-    make_blend(
-        &python,
-        &blend,
-        &format!(
+    let scene = format!(
             "import numpy as np, sys; sys.path.insert(0, {scenes:?}); from common import environment_world, sky_directions; \
              d = sky_directions(512); \
              rgb = 0.5 + 400.0 * (d @ {in_map:?} > math.cos(math.radians(2)))[..., None] * np.ones(3); \
@@ -674,8 +671,8 @@ fn an_environment_maps_sun_gets_a_shadow_map() {
             scenes = Path::new(REPO).join("blender_scripts/scenes"),
             in_map = in_map.map(|c| (c * 1e9).round() / 1e9),
             sky = dir.path().join("sky.exr"),
-        ),
     );
+    make_blend(&python, &blend, &scene);
     let (with_map, without) = (dir.path().join("with_map"), dir.path().join("without"));
     assert_ok(&export_frame_1(&python, &blend, &with_map, "48x27"), "exporting a cube under an HDRI sun");
     let blockers: serde_json::Value =
@@ -750,6 +747,20 @@ fn an_environment_maps_sun_gets_a_shadow_map() {
         .filter(|(a, b)| a.is_finite() && b.is_finite() && (*a - *b).abs() > 0.01)
         .count();
     assert!(differs > 0, "the shadow map changes no pixel: logsh took the sun's shadows from the spheres");
+
+    // A Sun lamp set along the map's sun (0.2 degrees off): one map, the lamp's, serves
+    // both.
+    let lamp = dir.path().join("with_lamp.blend");
+    let (theta, phi) = (world[2].acos() + 0.2f64.to_radians(), world[0].atan2(-world[1]));
+    make_blend(&python, &lamp, &format!("{scene}; bpy.ops.object.light_add(type='SUN', rotation=({theta}, 0, {phi}))"));
+    let with_lamp = dir.path().join("with_lamp");
+    assert_ok(&export_frame_1(&python, &lamp, &with_lamp, "48x27"), "exporting the cube under an HDRI sun and a lamp");
+    let blockers: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(with_lamp.join("blockers.0001.json")).unwrap()).unwrap();
+    let maps = blockers["sun_shadows"].as_array().expect("blockers.0001.json has sun_shadows");
+    assert_eq!(maps.len(), 1, "one map for the lamp and the map's sun: {maps:?}");
+    let axis: [f64; 3] = serde_json::from_value(maps[0]["axis"].clone()).unwrap();
+    assert!((angle(axis, world) - 0.2).abs() < 0.05, "the lamp's map, {} degrees from the sun", angle(axis, world));
 }
 
 /// The exporter finds the suns in an environment map that logsh takes out of it

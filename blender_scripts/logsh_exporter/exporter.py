@@ -135,6 +135,7 @@ Every change to the scene (render settings, passes, material pass indices, a def
 material on objects without one) is undone before `export` returns, so the add-on
 leaves the user's file as it was, and the .blend on disk is never written.
 """
+import math
 import os
 import shutil
 import time
@@ -366,7 +367,10 @@ def export(scene, options, log=print):
                 write_reflection(scene, depsgraph, sampled, index_of, water, new_file(out, f"reflection.{frame:04d}.exr"))
             suns = [light for light in per_frame[frame].get("lights", lights) if light["type"] == "sun"]
             rotation = per_frame[frame].get("light", description["light"]).get("rotation")
-            suns += [{"type": "sun", "direction": map_sun_direction(d, rotation)} for d in map_suns]
+            for direction in (map_sun_direction(d, rotation) for d in map_suns):
+                # A Sun lamp set along the map's sun: its map serves both (within 1 degree).
+                if all(np.dot(direction, sun["direction"]) < math.cos(math.radians(0.5)) for sun in suns):
+                    suns.append({"type": "sun", "direction": direction})
             shadows = None
             if options.sun_shadow_resolution and suns and casters:
                 shadows = export_sun_shadows(scene, view_layer, out, frame, suns, casters, options, log)
