@@ -69,6 +69,20 @@ fn export_frame_1(python: &Path, blend: &Path, out: &Path, resolution: &str) -> 
     run_python(python, "blender_scripts/export_scene.py", &[&args[..], &[Path::new("--frames"), frames]].concat())
 }
 
+/// [`export_frame_1`] with `--sun-shadow-resolution sun_shadows`.
+fn export_frame_1_with_sun_shadows(
+    python: &Path,
+    blend: &Path,
+    out: &Path,
+    resolution: &str,
+    sun_shadows: &str,
+) -> Output {
+    let (resolution, frames) = (Path::new(resolution), Path::new("1-1"));
+    let args = [Path::new("--blend"), blend, Path::new("--out"), out, Path::new("--resolution"), resolution];
+    let options = [Path::new("--frames"), frames, Path::new("--sun-shadow-resolution"), Path::new(sun_shadows)];
+    run_python(python, "blender_scripts/export_scene.py", &[&args[..], &options].concat())
+}
+
 fn assert_ok(output: &Output, what: &str) {
     assert!(
         output.status.success(),
@@ -482,22 +496,7 @@ fn sun_shadow_map_holds_the_blockers_depth() {
     // No maps: no key, no image; a resolution out of range stops the export.
     let (none, refused) = (dir.path().join("no_maps"), dir.path().join("refused"));
     for (target, resolution) in [(&none, "0"), (&refused, "32")] {
-        let output = run_python(
-            &python,
-            "blender_scripts/export_scene.py",
-            &[
-                Path::new("--blend"),
-                &blend,
-                Path::new("--out"),
-                target,
-                Path::new("--resolution"),
-                Path::new("32x18"),
-                Path::new("--frames"),
-                Path::new("1"),
-                Path::new("--sun-shadow-resolution"),
-                Path::new(resolution),
-            ],
-        );
+        let output = export_frame_1_with_sun_shadows(&python, &blend, target, "32x18", resolution);
         if resolution == "0" {
             assert_ok(&output, "exporting without sun shadow maps");
         } else {
@@ -675,11 +674,15 @@ fn an_environment_maps_sun_gets_a_shadow_map() {
     make_blend(&python, &blend, &scene);
     let (with_map, without) = (dir.path().join("with_map"), dir.path().join("without"));
     assert_ok(&export_frame_1(&python, &blend, &with_map, "48x27"), "exporting a cube under an HDRI sun");
-    let blockers: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(with_map.join("blockers.0001.json")).unwrap()).unwrap();
-    let maps = blockers["sun_shadows"].as_array().expect("blockers.0001.json has sun_shadows");
-    assert_eq!(maps.len(), 1, "{maps:?}");
-    let axis: [f64; 3] = serde_json::from_value(maps[0]["axis"].clone()).unwrap();
+    // The axis of the export's one shadow map.
+    let the_maps_axis = |scene: &Path| -> [f64; 3] {
+        let blockers: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(scene.join("blockers.0001.json")).unwrap()).unwrap();
+        let maps = blockers["sun_shadows"].as_array().expect("blockers.0001.json has sun_shadows");
+        assert_eq!(maps.len(), 1, "one map: {maps:?}");
+        serde_json::from_value(maps[0]["axis"].clone()).unwrap()
+    };
+    let axis = the_maps_axis(&with_map);
     let angle =
         |p: [f64; 3], q: [f64; 3]| (p[0] * q[0] + p[1] * q[1] + p[2] * q[2]).clamp(-1.0, 1.0).acos().to_degrees();
     // The radiance along d is the map's along R d: the sun lies along R^T times its place
@@ -721,22 +724,7 @@ fn an_environment_maps_sun_gets_a_shadow_map() {
     );
 
     // The same frame without maps shades the sun through the cube's spheres.
-    let output = run_python(
-        &python,
-        "blender_scripts/export_scene.py",
-        &[
-            Path::new("--blend"),
-            &blend,
-            Path::new("--out"),
-            &without,
-            Path::new("--resolution"),
-            Path::new("48x27"),
-            Path::new("--frames"),
-            Path::new("1"),
-            Path::new("--sun-shadow-resolution"),
-            Path::new("0"),
-        ],
-    );
+    let output = export_frame_1_with_sun_shadows(&python, &blend, &without, "48x27", "0");
     assert_ok(&output, "exporting without sun shadow maps");
     render(&without, &dir.path().join("shaded_without"));
     let beauty = |shaded: &str| support::exr_channels(&dir.path().join(shaded).join("render.0001.exr"));
@@ -755,11 +743,7 @@ fn an_environment_maps_sun_gets_a_shadow_map() {
     make_blend(&python, &lamp, &format!("{scene}; bpy.ops.object.light_add(type='SUN', rotation=({theta}, 0, {phi}))"));
     let with_lamp = dir.path().join("with_lamp");
     assert_ok(&export_frame_1(&python, &lamp, &with_lamp, "48x27"), "exporting the cube under an HDRI sun and a lamp");
-    let blockers: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(with_lamp.join("blockers.0001.json")).unwrap()).unwrap();
-    let maps = blockers["sun_shadows"].as_array().expect("blockers.0001.json has sun_shadows");
-    assert_eq!(maps.len(), 1, "one map for the lamp and the map's sun: {maps:?}");
-    let axis: [f64; 3] = serde_json::from_value(maps[0]["axis"].clone()).unwrap();
+    let axis = the_maps_axis(&with_lamp);
     assert!((angle(axis, world) - 0.2).abs() < 0.05, "the lamp's map, {} degrees from the sun", angle(axis, world));
 }
 

@@ -299,8 +299,10 @@ fn sun_shadow_maps_are_read_and_checked() {
     let frame = Scene::load(dir.path()).unwrap().frame(1).unwrap();
     let map = &frame.sun_shadows[0];
     assert_eq!((map.columns, map.rows, map.depths[1], map.far_depths[0]), (4, 2, 2.0, 5.0));
-    // Read unit (the exporter writes Blender's single-precision direction), it serves its sun.
-    assert!(map.serves([0.0, 0.0, 1.0]) && !map.serves([0.0, 0.01, 0.99995]));
+    // Read unit (the exporter writes Blender's single-precision direction), it serves its
+    // sun, and a sun up to 1 degree from it.
+    let tilted = |degrees: f64| [0.0, degrees.to_radians().sin(), degrees.to_radians().cos()];
+    assert!(map.serves([0.0, 0.0, 1.0]) && map.serves(tilted(0.9)) && !map.serves(tilted(1.1)));
 
     let mut skewed = entry();
     skewed["up"] = serde_json::json!([0.0, 0.6, 0.8]);
