@@ -30,12 +30,13 @@ What is written into the output directory, per frame `####`:
   Spheres shadow the sun along their own outline, not the mesh's, so for each sun of the
   frame's `lights` (Sun lamps and a Sky Texture's sun), and for each sun that logsh
   will take out of the environment map (`environment_suns`, turned by the frame's
-  Mapping rotation), the file's `sun_shadows` also names a shadow map,
-  `sun_shadow.####.K.exr` (K the sun's place among those suns): Cycles' depth pass of exactly the objects that have spheres, seen through an
-  orthographic camera from the sun's side and from beyond them (`render_depths`). Each
-  entry holds `image`, `axis` (the sun's direction as `lights` has it, or as the map's
-  sun lies in the world), `origin` (the
-  centre of the image plane, beyond every blocker towards the sun), `right` and `up`
+  Mapping rotation; none within half a degree of a lamp's, whose map serves it), the
+  file's `sun_shadows` also names a shadow map, `sun_shadow.####.K.exr` (K the sun's
+  place among those suns): Cycles' depth pass of exactly the objects that have spheres,
+  seen through an orthographic camera from the sun's side and from beyond them
+  (`render_depths`). Each entry holds `image`, `axis` (the sun's direction as `lights`
+  has it, or as the map's sun lies in the world), `origin` (the centre of the image
+  plane, beyond every blocker towards the sun), `right` and `up`
   (unit, right x up = axis) and `size` ([w, h] metres along them). The EXR's channel
   `Z`, row 0 along the +up edge and column 0 along the -right edge, is at texel (i, j)
   the distance along -axis from the plane to the first blocker surface on the ray

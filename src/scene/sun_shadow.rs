@@ -35,9 +35,10 @@ pub const NOTHING_BELOW: f32 = 1e9;
 /// degree). A Sun lamp's map holds the lamp's direction to rounding; a sun logsh takes
 /// out of an environment map was found there by the exporter too, by the same rule but
 /// on the map before its Mapping rotation resamples it, which moves it by a fraction of
-/// a texel. A ray off the axis walks
-/// through the map sideways ([`crate::shade::sun_shadow`]), so a sun turned within this
-/// takes the meshes' shadow still; beyond it, the spheres'.
+/// a texel at most (under 1e-4 degrees for a sun 2 degrees wide on a 512-wide map turned
+/// by (20, 0, 70) degrees). A ray off the axis walks through the map sideways
+/// ([`crate::shade::sun_shadow`]), so a sun turned within this takes the meshes' shadow
+/// still; beyond it, the spheres'.
 pub const SAME_SUN_RADIANS: f64 = std::f64::consts::PI / 180.0;
 
 /// At most this many shadow maps a frame.
