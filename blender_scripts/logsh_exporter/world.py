@@ -296,17 +296,18 @@ def environment_suns(path):
     logsh's; the directions agree with logsh's to the map's resampling, a fraction of a
     texel, within the tolerance a shadow map serves a sun by (1 degree)."""
     channels = read_exr_channels(path, ["R", "G", "B"])
-    rgb = np.stack([channels[c] for c in "RGB"], axis=-1).astype(np.float64)
+    # Texels in f32 as logsh holds them (a residual texel too), sums in f64 as it takes them.
+    rgb = np.stack([channels[c] for c in "RGB"], axis=-1).astype(np.float32)
     height, width = rgb.shape[:2]
-    luminance = rgb @ LUMINANCE
+    luminance = sum(LUMINANCE[k] * rgb[..., k].astype(np.float64) for k in range(3))
     theta = np.pi * (np.arange(height) + 0.5) / height
     phi = np.pi - 2.0 * np.pi * (np.arange(width) + 0.5) / width
     edges = np.pi * np.arange(height + 1) / height
     solid_angle = 2.0 * np.pi / width * (np.cos(edges[:-1]) - np.cos(edges[1:]))
 
     def direction(r, c):
-        return np.stack([np.sin(theta[r]) * np.cos(phi[c]), np.sin(theta[r]) * np.sin(phi[c]),
-                         np.cos(theta[r])], axis=-1)
+        return np.stack(np.broadcast_arrays(np.sin(theta[r]) * np.cos(phi[c]), np.sin(theta[r]) * np.sin(phi[c]),
+                                            np.cos(theta[r])), axis=-1)
 
     total = float((luminance * solid_angle[:, None]).sum())
     flat = luminance.ravel()
@@ -323,25 +324,18 @@ def environment_suns(path):
         peak_luminance = float(luminance[peak])
         if not (peak_luminance >= SUN_CONTRAST * median and peak_luminance > 0.0):
             break
-        floor = REGION_FLOOR * peak_luminance
-        region = grow_region(luminance, peak, floor, direction)
-        if region is None:
-            # A broad bright area, no sun: what of it lies near the peak is not tried again.
-            near = (direction(*np.indices(luminance.shape)) @ direction(*peak)) > math.cos(2.0 * MAX_SUN_RADIUS)
-            tried |= near & (luminance >= floor)
-            continue
-        rows, columns = np.array([p[0] for p in region]), np.array([p[1] for p in region])
+        rows, columns = grow_region(luminance >= REGION_FLOOR * peak_luminance, peak)
         tried[rows, columns] = True
-        inside = np.zeros(luminance.shape, dtype=bool)
-        inside[rows, columns] = True
-        ring = set()
-        for r, c in region:
-            for rr in (r - 1, r, r + 1):
-                for cc in (c - 1, c, c + 1):
-                    if 0 <= rr < height and not inside[rr, cc % width]:
-                        ring.add((rr, cc % width))
-        background = np.mean([rgb[p] for p in ring], axis=0) if ring else np.zeros(3)
-        above = np.clip(rgb[rows, columns] - background, 0.0, None) * solid_angle[rows, None]
+        # A region reaching twice MAX_SUN_RADIUS from its peak fails the radius test below
+        # whatever its centre: a bright area of the sky, which can cover half the map.
+        if (direction(rows, columns) @ direction(*peak)).min() < math.cos(2.0 * MAX_SUN_RADIUS):
+            continue
+        # The ring of texels around the region (rows clamped, columns wrapping).
+        around = [((rows + dr) * width + (columns + dc) % width)[(rows + dr >= 0) & (rows + dr < height)]
+                  for dr in (-1, 0, 1) for dc in (-1, 0, 1)]
+        ring = np.setdiff1d(np.concatenate(around), rows * width + columns)
+        background = rgb.reshape(-1, 3)[ring].astype(np.float64).mean(axis=0) if ring.size else np.zeros(3)
+        above = np.clip(rgb[rows, columns].astype(np.float64) - background, 0.0, None) * solid_angle[rows, None]
         weight = above @ LUMINANCE
         directions = direction(rows, columns)
         centre = (weight[:, None] * directions).sum(axis=0)
@@ -350,33 +344,45 @@ def environment_suns(path):
         axis = centre / np.linalg.norm(centre)
         if np.arccos(np.clip(directions @ axis, -1.0, 1.0)).max() > MAX_SUN_RADIUS:
             continue
-        luminance[rows, columns] = background @ LUMINANCE
         rgb[rows, columns] = background
+        luminance[rows, columns] = rgb[rows[0], columns[0]].astype(np.float64) @ LUMINANCE
         suns.append([float(c) for c in axis])
     return suns
 
 
-def grow_region(luminance, peak, floor, direction):
-    """The 8-connected texels of `luminance` at least `floor` around `peak`, wrapping in
-    azimuth; None for a region reaching twice MAX_SUN_RADIUS from its peak, which fails
-    the radius test whatever its centre (the walk stops there: such an area can cover
-    half the map)."""
-    height, width = luminance.shape
-    centre = direction(*peak)
-    region, seen, next_texel = [peak], {peak}, 0
-    while next_texel < len(region):
-        r, c = region[next_texel]
-        next_texel += 1
-        for rr in (r - 1, r, r + 1):
-            for cc in (c - 1, c, c + 1):
-                texel = (rr, cc % width)
-                if not 0 <= rr < height or texel in seen or luminance[texel] < floor:
-                    continue
-                seen.add(texel)
-                region.append(texel)
-                if float(direction(*texel) @ centre) < math.cos(2.0 * MAX_SUN_RADIUS):
-                    return None
-    return region
+def grow_region(mask, peak):
+    """The rows and columns of the texels of `mask` 8-connected to `peak`, wrapping in
+    azimuth, found a run of a row at a time (a region of millions of texels is a few
+    thousand runs)."""
+    height, width = mask.shape
+    seen = np.zeros_like(mask)
+    runs = []
+    seeds = [peak]
+    while seeds:
+        r, c = seeds.pop()
+        if seen[r, c] or not mask[r, c]:
+            continue
+        # The run through (r, c): out along the row both ways, at most once round.
+        open_ = np.roll(mask[r] & ~seen[r], -c)
+        if open_.all():
+            left, right = 0, width - 1
+        else:
+            right = int(np.argmin(open_)) - 1
+            left = int(np.argmin(open_[::-1]))
+        span = np.arange(c - left, c + right + 1) % width
+        seen[r, span] = True
+        runs.append((r, span))
+        # Runs of the rows above and below touching it, diagonals included.
+        touching = np.arange(c - left - 1, c + right + 2) % width
+        for rr in (r - 1, r + 1):
+            if not 0 <= rr < height:
+                continue
+            open_ = mask[rr, touching] & ~seen[rr, touching]
+            starts = np.flatnonzero(open_ & ~np.concatenate(([False], open_[:-1])))
+            seeds.extend((rr, int(touching[k])) for k in starts)
+    rows = np.concatenate([np.full(len(span), r) for r, span in runs])
+    columns = np.concatenate([span for _, span in runs])
+    return rows, columns
 
 
 def map_sun_direction(direction, rotation):
