@@ -86,9 +86,7 @@ fn shade_plan_pixels<P: PixelResult>(plan: &FramePlan, timings: &mut StageTiming
     if pyramid.is_some() {
         timings.add_wall("pyramid", started);
     }
-    let blockers = (!plan.blockers.is_empty()).then_some(&plan.blockers);
-    let sun_shadows = (!plan.sun_shadows.is_empty()).then_some(&plan.sun_shadows);
-    let occluders = Occluders { blockers, horizons: pyramid.as_ref(), sun_shadows };
+    let occluders = Occluders::of(&plan.blockers, pyramid.as_ref(), &plan.sun_shadows);
     match plan.kernel.as_ref() {
         PlannedKernel::F32(kernel) => shade_pixels::<P, f32>(kernel, occluders, plan, timings),
         PlannedKernel::F64(kernel) => shade_pixels::<P, f64>(kernel, occluders, plan, timings),

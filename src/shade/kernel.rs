@@ -173,7 +173,8 @@ pub struct KnownAlongSun {
     pub blockers: bool,
 }
 
-/// What occludes a frame: its sphere blockers and its height-field pyramid.
+/// What occludes a frame: its sphere blockers, its height-field pyramid and its suns'
+/// shadow maps.
 #[derive(Clone, Copy)]
 pub struct Occluders<'a> {
     /// `None` without blockers.
@@ -181,6 +182,17 @@ pub struct Occluders<'a> {
     pub horizons: Option<&'a HorizonPyramid>,
     /// The suns' shadow maps of the blocker meshes, `None` without any.
     pub sun_shadows: Option<&'a SunShadows>,
+}
+
+impl<'a> Occluders<'a> {
+    /// A frame's occluders as its plan holds them: an empty tree or set of maps is none.
+    pub fn of(blockers: &'a BlockerTree, horizons: Option<&'a HorizonPyramid>, sun_shadows: &'a SunShadows) -> Self {
+        Self {
+            blockers: (!blockers.is_empty()).then_some(blockers),
+            horizons,
+            sun_shadows: (!sun_shadows.is_empty()).then_some(sun_shadows),
+        }
+    }
 }
 
 /// Where a point's sphere caps (and height-field horizons) come from: walked and marched

@@ -26,9 +26,7 @@ pub fn shade_with_transfer(
     check_grid(settings)?;
     let plan = FramePlan::new(scene, frame, settings)?;
     let pyramid = plan.terrain.as_ref().map(|terrain| terrain.horizon_pyramid(&plan.settings));
-    let blockers = (!plan.blockers.is_empty()).then_some(&plan.blockers);
-    let sun_shadows = (!plan.sun_shadows.is_empty()).then_some(&plan.sun_shadows);
-    let occluders = Occluders { blockers, horizons: pyramid.as_ref(), sun_shadows };
+    let occluders = Occluders::of(&plan.blockers, pyramid.as_ref(), &plan.sun_shadows);
     let light = scene.light_source(frame.number)?;
     Ok(match plan.kernel.as_ref() {
         PlannedKernel::F32(kernel) => walk(kernel, occluders, &plan, light),

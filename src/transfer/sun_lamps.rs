@@ -560,10 +560,8 @@ fn move_lamps<T: Real>(
     lamps: Lamps,
 ) {
     let disks: Vec<SunDisk> = turned.iter().chain(suns).map(SunDisk::new).collect();
-    let blockers = (!shaded.blockers.is_empty()).then_some(shaded.blockers);
-    let pyramid = shaded.pyramid;
-    let sun_shadows = (!shaded.sun_shadows.is_empty()).then_some(shaded.sun_shadows);
-    let occluders = Occluders { blockers, horizons: pyramid, sun_shadows };
+    let occluders = Occluders::of(shaded.blockers, shaded.pyramid, shaded.sun_shadows);
+    let (blockers, pyramid) = (occluders.blockers, occluders.horizons);
     // The tinted turned light in place of the rendered (tinted when written).
     let moved = |lamps: &mut [f32; 3], rendered: [f32; 3], tint: [f32; 3], turned: [f32; 3]| {
         for k in 0..3 {
