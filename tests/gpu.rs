@@ -814,8 +814,9 @@ fn visibility_grid_matches() {
 /// src/shade/sun_shadow.rs): the spheres example and the small dunes (height field,
 /// water, Phong) under a sun 2 degrees wide, each with the map of its spheres; the dunes'
 /// map is rendered 0.7 degrees off the sun, as an HDRI's sun is found by the exporter and
-/// by logsh apart, so that its rays drift through it sideways. The map took effect: the
-/// frame differs from the spheres' own shadows.
+/// by logsh apart, so that its rays drift through it sideways, and a second, dimmer sun
+/// 0.4 degrees from the first shares it (a Sun lamp set along an HDRI's sun). The map
+/// took effect: the frame differs from the spheres' own shadows.
 #[test]
 fn sun_shadow_maps_match() {
     let Some(gpu) = gpu() else { return };
@@ -833,6 +834,7 @@ fn sun_shadow_maps_match() {
     for (name, scene, offset) in [("spheres 64x36", &spheres, 0.0), ("dunes 64x36", &dunes, 0.7)] {
         let mut frame = scene.frame(scene.default_frame()).unwrap();
         frame.suns.push(sun);
+        frame.suns.push(logsh::scene::SunLight { direction: turned(offset - 0.4), strength: 0.5, ..sun });
         let by_spheres = support::cpu_beauty(scene, &frame, &within_loop_budget()).unwrap();
         let objects: Vec<synth::Object> = frame
             .blockers

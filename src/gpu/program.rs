@@ -23,7 +23,7 @@ use crate::sh::{ExpMethod, SeparableQuadrature};
 use crate::shade::glossy::{Prefiltered, SharpLobe, ALBEDO_ENTRIES};
 use crate::shade::kernel::{sh_space_max_magnitude, LUMINANCE, SH_SPACE_BLEND};
 use crate::shade::sun::{disk_pattern, patch_radius, DISK_DIRECTIONS};
-use crate::shade::sun_shadow::{drift_per_depth, SunShadows, MAX_STEPS, MINIMA_LEVELS};
+use crate::shade::sun_shadow::{drift_per_depth, ShadowMapMarch, SunShadows, MAX_STEPS, MINIMA_LEVELS};
 use crate::shade::{FrameContents, ShadingKernel};
 use std::collections::BTreeMap;
 use std::sync::Arc;
@@ -334,13 +334,20 @@ impl ProgramTables {
 
 /// Each sun's shadow map where the frame has one ([`SunShadows::of_sun`], as the CPU
 /// picks it): its [`GpuShadowMap`], its levels' [`GpuLevel`]s, their minima and `Zfar`,
-/// its offset written into the sun's record at `suns_at`.
+/// its offset written into the sun's record at `suns_at`. Suns that one map serves (a Sun
+/// lamp along an HDRI's sun) share its tables.
 fn push_sun_shadows(kernel: &ShadingKernel<f32>, sun_shadows: &SunShadows, suns_at: usize, t: &mut TableBuilder) {
     let field = std::mem::offset_of!(GpuSun, shadow_map) / 4;
     let record = std::mem::size_of::<GpuSun>() / 4;
     let level_record = std::mem::size_of::<GpuLevel>() / 4;
+    // Maps already in the tables, and where.
+    let mut pushed: Vec<(*const ShadowMapMarch, usize)> = Vec::new();
     for (s, sun) in kernel.suns.iter().enumerate() {
         let Some(march) = sun_shadows.of_sun(sun.disk.axis) else { continue };
+        if let Some(&(_, at)) = pushed.iter().find(|(m, _)| std::ptr::eq(*m, march)) {
+            t.data[suns_at + s * record + field] = f32::from_bits(at as u32);
+            continue;
+        }
         let map = &march.map;
         let levels = march.level_count();
         let at = t.data.len();
@@ -369,6 +376,7 @@ fn push_sun_shadows(kernel: &ShadingKernel<f32>, sun_shadows: &SunShadows, suns_
         }
         t.push_unnamed(map.far_depths.iter().copied());
         t.data[suns_at + s * record + field] = f32::from_bits(at as u32);
+        pushed.push((march, at));
     }
 }
 
