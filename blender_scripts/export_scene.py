@@ -34,6 +34,7 @@ scene cannot be exported. The .blend is never written.
 """
 import argparse
 import os
+import re
 import sys
 
 try:
@@ -47,24 +48,33 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from logsh_exporter.exporter import ExportError, Options, export  # noqa: E402
 
 
+# As `logsh render --frames` (src/render/frames.rs's MAX_FRAMES): a typo such as
+# 1-1000000000 is refused.
+MAX_FRAMES = 1_000_000
+FRAME_ITEM = re.compile(r"^(-?\d+)(?:(?:\.\.|-)(-?\d+)(?:[x:](\d+))?)?$")
+
+
 def frame_range(text):
-    """The frames of a spec as `logsh render --frames` reads it: `7`, `1-24`, `1..24`,
-    `1-240x2` (every second frame), and comma-separated lists of those; returns the sorted
-    distinct frames."""
+    """The frames of a spec as `logsh render --frames` reads it (src/render/frames.rs):
+    `7`, `1-24`, `1..24`, `1-240x2` or `1-240:2` (every second frame), `24-1` (counting
+    down), negative frames (`-5--1`), and comma-separated lists of those; returns the
+    sorted distinct frames."""
     frames = set()
     for part in text.split(","):
-        part = part.strip()
-        body, _, step = part.partition("x")
-        start, sep, end = body.partition("..") if ".." in body else body.partition("-")
-        try:
-            first = int(start)
-            last = int(end) if sep else first
-            step = int(step) if step else 1
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"\"{part}\" is not a frame spec like 7, 1-24, 1..24, 1-240x2 or 1,5,10-20")
-        if last < first or step < 1:
-            raise argparse.ArgumentTypeError(f"\"{part}\": the range is empty or the step is below 1")
-        frames.update(range(first, last + 1, step))
+        item = "".join(part.split())
+        match = FRAME_ITEM.match(item)
+        if match is None:
+            raise argparse.ArgumentTypeError(
+                f"\"{part.strip()}\" is not a frame spec like 7, 1-24, 1..24, 1-240x2 or 1,5,10-20")
+        first, last, step = match.groups()
+        first = int(first)
+        last = first if last is None else int(last)
+        step = 1 if step is None else int(step)
+        if step < 1:
+            raise argparse.ArgumentTypeError(f"\"{part.strip()}\": the step must be at least 1")
+        if abs(last - first) // step + 1 + len(frames) > MAX_FRAMES:
+            raise argparse.ArgumentTypeError(f"\"{text}\": more than {MAX_FRAMES} frames")
+        frames.update(range(first, last + 1, step) if last >= first else range(first, last - 1, -step))
     return sorted(frames)
 
 

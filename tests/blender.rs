@@ -919,7 +919,10 @@ fn dunes_height_map_and_sky_match_blender() {
 /// The exporter's sphere fit on Blender's primitives (`tests/support/fit_primitives.py`):
 /// a UV sphere is one sphere within 1 % of its radius; the other primitives stay within
 /// the volume errors measured when the fit was made (cube 0.27 with 4 spheres, cone 0.35
-/// with 7, its thin tip the hardest part, torus 0.155 with 16), with a margin.
+/// with 7, its thin tip the hardest part, torus 0.155 with 16), with a margin, and so do
+/// they, with the same spheres, mirrored by a negative scale, which turns their triangles'
+/// winding over (it once made the fit take a mirrored mesh's inside for its outside: one
+/// sphere where there were 7, reaching through the ground).
 #[test]
 fn primitives_fit_their_volume() {
     let Some(python) = bpy_python() else { return };
@@ -935,11 +938,19 @@ fn primitives_fit_their_volume() {
     let centre: Vec<f64> = sphere["centres"][0].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
     assert!(centre.iter().all(|c| c.abs() <= 0.01), "UV sphere centre {centre:?}");
     for (name, most_error, most_spheres) in [("cube", 0.32, 16), ("cone", 0.45, 16), ("torus", 0.2, 16)] {
-        let fit = &fits[name];
-        let error = fit["error"].as_f64().unwrap();
-        let count = fit["count"].as_u64().unwrap();
-        assert!(error <= most_error, "{name}: volume error {error} > {most_error}: {fit}");
-        assert!((1..=most_spheres).contains(&count), "{name}: {count} spheres");
+        for name in [name.to_string(), format!("{name}_mirrored")] {
+            let fit = &fits[&name];
+            let error = fit["error"].as_f64().unwrap();
+            let count = fit["count"].as_u64().unwrap();
+            assert!(error <= most_error, "{name}: volume error {error} > {most_error}: {fit}");
+            assert!((1..=most_spheres).contains(&count), "{name}: {count} spheres");
+        }
+        // These primitives are symmetric under their mirror: the same solid, its faces
+        // wound the other way, takes the same fit.
+        let (plain, mirrored) = (&fits[name], &fits[&format!("{name}_mirrored")]);
+        assert_eq!(plain["count"], mirrored["count"], "{name}: {plain}\nmirrored: {mirrored}");
+        let error = |fit: &serde_json::Value| fit["error"].as_f64().unwrap();
+        assert!((error(plain) - error(mirrored)).abs() <= 0.03, "{name}: {plain}\nmirrored: {mirrored}");
     }
 }
 
@@ -1270,6 +1281,78 @@ fn textured_materials_shade_as_blender_evaluates_them() {
     let scene = Scene::load(&plain).unwrap();
     assert!(!scene.colour_passes() && scene.frame(1).unwrap().gbuffer.colours.is_none());
     assert!(scene.fresnel.is_empty(), "the converted material has no Fresnel term: {:?}", scene.fresnel);
+}
+
+/// The exporter's `--frames` reads a spec as `logsh render --frames` does: ranges counting
+/// down, `:` steps and negative frames included (the same frames, sorted); a malformed
+/// spec is refused by both.
+#[test]
+fn the_exporter_reads_frame_specs_as_logsh_does() {
+    let Some(python) = bpy_python() else { return };
+    let specs =
+        ["7", "1-5", "12-10", "1-10x3", "1-10:4", "10-1x3", "-2-1", "-5--3", "-3..-1", " 1, 5 ,10-12", "1..9x4"];
+    let bad = ["", "1,,2", "7x2", "1-5x0", "a", "1-2000000"];
+    let script = format!(
+        "import sys, json, argparse; sys.path.insert(0, {:?}); from export_scene import frame_range\n\
+         def read(spec):\n    try: return frame_range(spec)\n    except argparse.ArgumentTypeError: return None\n\
+         print(json.dumps([read(s) for s in {:?}]))",
+        Path::new(REPO).join("blender_scripts").to_str().unwrap(),
+        specs.iter().chain(&bad).collect::<Vec<_>>(),
+    );
+    let output = std::process::Command::new(&python).args(["-c", &script]).output().unwrap();
+    assert_ok(&output, "frame_range");
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    let line = stdout.lines().rev().find(|l| l.starts_with('[')).expect("a JSON line");
+    let read: Vec<Option<Vec<i64>>> = serde_json::from_str(line).unwrap();
+    for (spec, exported) in specs.iter().chain(&bad).zip(read) {
+        let logsh = spec.parse::<logsh::render::frames::FrameSpec>().ok().map(|s| {
+            let mut frames = s.frames;
+            frames.sort();
+            frames
+        });
+        assert_eq!(exported, logsh, "spec {spec:?}");
+    }
+}
+
+/// Faces whose material slot is empty render in Cycles with its default surface (a Diffuse
+/// BSDF of colour 0.8), and so they are exported: a cylinder whose caps sit in an empty
+/// second slot, seen from above, has its cap under a material of that albedo, not the
+/// background (they once took material index 0, and logsh showed the sky there).
+#[test]
+fn faces_in_an_empty_material_slot_take_cycles_default_surface() {
+    let Some(python) = bpy_python() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let blend = dir.path().join("slots.blend");
+    make_blend(
+        &python,
+        &blend,
+        "bpy.ops.mesh.primitive_plane_add(size=20); ground = bpy.data.materials.new('ground'); \
+         bpy.context.object.data.materials.append(ground); \
+         bpy.ops.mesh.primitive_cylinder_add(radius=2, depth=1, location=(0, 0, 0.5)); c = bpy.context.object; \
+         red = bpy.data.materials.new('red'); red.node_tree.nodes['Principled BSDF'].inputs['Base Color'].default_value = (0.8, 0.05, 0.05, 1); \
+         c.data.materials.append(red); c.data.materials.append(None); \
+         [setattr(p, 'material_index', 1 if abs(p.normal.z) > 0.5 else 0) for p in c.data.polygons]; \
+         bpy.ops.object.camera_add(location=(0, 0, 8)); bpy.context.scene.camera = bpy.context.object; \
+         w = bpy.data.worlds.new('World'); bpy.context.scene.world = w",
+    );
+    let out = dir.path().join("scene");
+    assert_ok(&export_frame_1(&python, &blend, &out, "32x32"), "export_scene.py");
+    let scene = Scene::load(&out).unwrap();
+    let frame = scene.frame(1).unwrap();
+    let g = &frame.gbuffer;
+    let centre = g.index(16, 16);
+    let index = g.material[centre];
+    assert_ne!(index, 0, "the cylinder's cap is taken for the background");
+    assert!(scene.materials.contains_key(&index), "material {index} is not in the table");
+    let colours = g.colours.as_ref().expect("colour passes");
+    for (k, c) in colours.diffuse[centre].iter().enumerate() {
+        assert!(
+            (c - 0.8).abs() < 0.01,
+            "the cap's Diffuse Color {:?} (channel {k}) is not 0.8",
+            colours.diffuse[centre]
+        );
+    }
+    assert_eq!(colours.glossy[centre], [0.0; 3], "Cycles' default surface has no glossy layer");
 }
 
 /// What logsh cannot shade stops the export, naming the material and the node: emission,

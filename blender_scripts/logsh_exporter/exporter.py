@@ -82,7 +82,9 @@ Scene markup, all optional (custom properties, set in the Object or Material tab
 - material `logsh_tint` (colour): a water tint other than its base colour.
 
 What a material may hold: a Principled BSDF, a Diffuse BSDF or a Glossy BSDF feeding the
-Material Output, with any nodes in front of them. The Principled BSDF's Transmission,
+Material Output, with any nodes in front of them. Faces with no material (an object
+without one, or an empty slot) take Cycles' default surface for the export (`logsh
+default`, a Diffuse BSDF of colour 0.8, removed again after it), as Cycles renders them. The Principled BSDF's Transmission,
 Subsurface, Sheen and Coat weights must be at most `NEGLIGIBLE_WEIGHT` and unlinked, and
 it must not emit (Emission Strength times Emission Color). Water with colour passes is
 the other way round: logsh shades it as its reflection alone (the reflection G-buffer's

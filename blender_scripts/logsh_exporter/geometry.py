@@ -16,7 +16,10 @@ from .common import ExportError, FLAT_THICKNESS, GEOMETRY_TYPES, new_file
 # ---- geometry --------------------------------------------------------------------------
 
 def world_triangles(obj_eval, matrix):
-    """(T, 3, 3) world-space triangles of an evaluated object, or None without geometry."""
+    """(T, 3, 3) world-space triangles of an evaluated object, or None without geometry,
+    wound as the mesh is seen from outside: a transform that mirrors (a negative scale on
+    one or three axes) turns the winding over, and the blocker fit's inside test reads
+    the side of a face from it, so such a transform's triangles are wound back."""
     mesh = obj_eval.to_mesh()
     try:
         if mesh is None or len(mesh.polygons) == 0:
@@ -30,7 +33,10 @@ def world_triangles(obj_eval, matrix):
         obj_eval.to_mesh_clear()
     m = np.array(matrix)
     world = co.reshape(-1, 3) @ m[:3, :3].T + m[:3, 3]
-    return world[tris.reshape(-1, 3)]
+    corners = tris.reshape(-1, 3)
+    if np.linalg.det(m[:3, :3]) < 0.0:
+        corners = corners[:, ::-1]
+    return world[corners]
 
 
 def triangle_tree(triangles):
@@ -308,9 +314,12 @@ def camera_json(scene, frame, width, height):
     obj = scene.camera
     data = obj.data
     if data.type != "PERSP":
-        raise ExportError(f"camera \"{obj.name}\" is {data.type}; logsh reads perspective cameras only")
+        kind = {"ORTHO": "Orthographic", "PANO": "Panoramic"}.get(data.type, data.type)
+        raise ExportError(f"camera \"{obj.name}\" is {kind}; logsh reads perspective cameras only: set its "
+                          "Lens > Type to Perspective")
     if data.shift_x != 0.0 or data.shift_y != 0.0:
-        raise ExportError(f"camera \"{obj.name}\" has a lens shift; logsh's camera has none")
+        raise ExportError(f"camera \"{obj.name}\" has a lens shift ({data.shift_x:g}, {data.shift_y:g}); logsh's "
+                          "camera has none: set its Lens > Shift X and Y to 0")
     # logsh reads Blender's default sensor fit (AUTO: the sensor width spans the longer
     # image side); other fits are written as the AUTO width that gives the same view.
     landscape = width >= height

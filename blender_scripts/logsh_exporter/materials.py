@@ -137,16 +137,19 @@ def material_table(objects, terrain, changes, options, warnings):
     used = {}
     for obj in objects:
         slots = obj.material_slots
-        if obj.type == "MESH" and not any(s.material for s in slots):
+        empty = [slot for slot in slots if slot.material is None]
+        if (obj.type == "MESH" and len(slots) == 0) or empty:
+            # Faces with no material, which Cycles renders with its default surface: given
+            # that surface as a material for the export, so that they have an index and
+            # are not taken for the background.
             if default is None:
-                default = bpy.data.materials.new("logsh default")
+                default = cycles_default_surface()
                 changes.on_undo(lambda m=default: bpy.data.materials.remove(m))
             if len(slots) == 0:
                 obj.data.materials.append(default)
                 changes.on_undo(lambda data=obj.data: data.materials.pop())
-            else:
-                for slot in slots:
-                    changes.set(slot, "material", default)
+            for slot in empty:
+                changes.set(slot, "material", default)
         for slot in obj.material_slots:
             if slot.material is not None:
                 used.setdefault(slot.material.name, (slot.material, set()))[1].add(obj == terrain)
@@ -161,6 +164,21 @@ def material_table(objects, terrain, changes, options, warnings):
                                     lambda problem: refuse(problem, options, warnings), warnings.append)
         index_of[name] = i
     return table, index_of
+
+
+def cycles_default_surface():
+    """A material that renders as Cycles renders a face with none (its default surface: a
+    Diffuse BSDF of colour 0.8)."""
+    material = bpy.data.materials.new("logsh default")
+    if material.node_tree is None:  # Blender 4 makes a material without nodes
+        material.use_nodes = True
+    tree = material.node_tree
+    tree.nodes.clear()
+    diffuse = tree.nodes.new("ShaderNodeBsdfDiffuse")
+    diffuse.inputs["Color"].default_value = (0.8, 0.8, 0.8, 1.0)
+    output = tree.nodes.new("ShaderNodeOutputMaterial")
+    tree.links.new(diffuse.outputs["BSDF"], output.inputs["Surface"])
+    return material
 
 
 ROUGHNESS_AOV = "logsh_roughness"

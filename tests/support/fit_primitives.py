@@ -1,6 +1,8 @@
 """Fits blocker spheres to Blender's primitive meshes with the exporter's own code and
 prints, per primitive, the sphere count, the fit's volume error and the spheres, as one
-JSON object (read by `tests/blender.rs::primitives_fit_their_volume`)."""
+JSON object (read by `tests/blender.rs::primitives_fit_their_volume`). The `_mirrored`
+ones are the same meshes under a negative scale they are symmetric under, which turns
+their triangles' winding over."""
 import json
 import os
 import sys
@@ -19,9 +21,14 @@ add = {
     "torus": lambda: bpy.ops.mesh.primitive_torus_add(major_radius=1.0, minor_radius=0.25),
 }
 result = {}
-for name, make in add.items():
-    make()
+scales = {name: (1.0, 1.0, 1.0) for name in add}
+scales.update({"cube_mirrored": (-1.0, 1.0, 1.0), "cone_mirrored": (-1.0, 1.0, 1.0),
+               "torus_mirrored": (-1.0, -1.0, -1.0)})
+for name, scale in scales.items():
+    add[name.removesuffix("_mirrored")]()
     obj = bpy.context.active_object
+    obj.scale = scale
+    bpy.context.view_layer.update()
     depsgraph = bpy.context.evaluated_depsgraph_get()
     triangles = geometry.world_triangles(obj.evaluated_get(depsgraph), obj.matrix_world)
     points, inside, depth, point_volume = geometry.volume_sample(triangles)
