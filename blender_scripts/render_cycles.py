@@ -77,7 +77,8 @@ import bpy
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from export_scene import size  # noqa: E402
 from logsh_exporter.exporter import DATA_FILTER, DATA_FILTER_WIDTH, Changes, material_table, find_heightfield, Options, \
-    output_size, renderable_objects  # noqa: E402
+    output_size, renderable_objects, rendered_view_layer  # noqa: E402
+from logsh_exporter.geometry import as_rendered  # noqa: E402
 
 
 def roughness_of(exponent):
@@ -167,9 +168,10 @@ def main(argv):
 
     water = False
     if not args.as_authored:
-        objects = renderable_objects(scene, bpy.context.view_layer)
+        changes = Changes()
+        objects, materials_of = as_rendered(scene, rendered_view_layer(scene), renderable_objects, changes)
         options = Options(out=args.out, colour_passes=False, approximate=True)
-        table, index_of = material_table(objects, find_heightfield(objects, options), Changes(), options, [])
+        table, index_of = material_table(objects, materials_of, find_heightfield(objects, options), changes, options, [])
         for material, index in index_of.items():
             cycles_shader(bpy.data.materials[material], table[index])
         water = any(m["type"] == "water" for m in table.values())
@@ -201,6 +203,11 @@ def main(argv):
         cycles.blur_glossy = 0.0
         cycles.caustics_reflective = True
     render.use_motion_blur = False
+    # The frame and the view layer the exporter takes: the whole frame, one layer.
+    render.use_border = False
+    layer = rendered_view_layer(scene)
+    for other in scene.view_layers:
+        other.use = other == layer
     render.use_compositing = render.use_sequencer = False
     render.film_transparent = False
     for attribute in dir(render):  # no metadata (file path, date, host) in the outputs

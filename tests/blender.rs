@@ -1314,6 +1314,80 @@ fn the_exporter_reads_frame_specs_as_logsh_does() {
     }
 }
 
+/// The exporter sees the scene as Cycles renders it, not as the viewport shows it: a
+/// cylinder lifted 1 m by a Displace modifier shown in renders only has its spheres
+/// lifted with it, and a cube subdivided at its Render level only (Viewport 0, Render 3)
+/// is fitted as the near-sphere it renders as; a Render Region is left out (the whole
+/// frame is exported, which the camera describes); a material Geometry Nodes set (Set
+/// Material) has its index, while geometry they make without one stops the export with
+/// the object's name, as does hair.
+#[test]
+fn the_export_follows_the_render_not_the_viewport() {
+    let Some(python) = bpy_python() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let blend = dir.path().join("render.blend");
+    let setup = "bpy.ops.mesh.primitive_plane_add(size=20); \
+         bpy.ops.mesh.primitive_cylinder_add(radius=0.5, depth=1, location=(-2, 0, 0.5)); c = bpy.context.object; \
+         c.name = 'lifted'; d = c.modifiers.new('lift', 'DISPLACE'); d.direction = 'Z'; d.strength = 2.0; \
+         d.mid_level = 0.5; d.show_viewport = False; \
+         bpy.ops.mesh.primitive_cube_add(size=1.6, location=(2, 0, 0.8)); b = bpy.context.object; b.name = 'rounded'; \
+         m = b.modifiers.new('subdivision', 'SUBSURF'); m.levels = 0; m.render_levels = 3; \
+         pink = bpy.data.materials.new('pink'); \
+         pink.node_tree.nodes['Principled BSDF'].inputs['Base Color'].default_value = (0.9, 0.3, 0.5, 1); \
+         bpy.ops.mesh.primitive_plane_add(size=0.1, location=(0, 0, 0.01)); h = bpy.context.object; h.name = 'host'; \
+         g = bpy.data.node_groups.new('box', 'GeometryNodeTree'); \
+         g.interface.new_socket('Geometry', in_out='INPUT', socket_type='NodeSocketGeometry'); \
+         g.interface.new_socket('Geometry', in_out='OUTPUT', socket_type='NodeSocketGeometry'); \
+         o = g.nodes.new('NodeGroupOutput'); k = g.nodes.new('GeometryNodeMeshCube'); \
+         k.inputs['Size'].default_value = (1, 1, 1); t = g.nodes.new('GeometryNodeTransform'); \
+         t.inputs['Translation'].default_value = (0, 0, 0.5); g.links.new(k.outputs['Mesh'], t.inputs['Geometry']); \
+         s = g.nodes.new('GeometryNodeSetMaterial'); s.inputs['Material'].default_value = pink; \
+         g.links.new(t.outputs['Geometry'], s.inputs['Geometry']); g.links.new(s.outputs['Geometry'], o.inputs['Geometry']); \
+         h.modifiers.new('box', 'NODES').node_group = g; \
+         bpy.ops.object.camera_add(location=(0, 0, 12)); bpy.context.scene.camera = bpy.context.object; \
+         r = bpy.context.scene.render; r.use_border = True; r.use_crop_to_border = True; \
+         r.border_min_x, r.border_max_x, r.border_min_y, r.border_max_y = 0.2, 0.6, 0.3, 0.8; \
+         w = bpy.data.worlds.new('World'); bpy.context.scene.world = w";
+    make_blend(&python, &blend, setup);
+    let out = dir.path().join("scene");
+    let output = export_frame_1(&python, &blend, &out, "48x32");
+    assert_ok(&output, "export_scene.py");
+    let scene = Scene::load(&out).unwrap();
+    let frame = scene.frame(1).unwrap();
+    assert_eq!([frame.gbuffer.width, frame.gbuffer.height], [48, 32], "the Render Region is left out");
+    let log = String::from_utf8_lossy(&output.stdout);
+    // The spheres about x, where the cylinder (x = -2) and the cube (x = 2) stand.
+    let spheres_at =
+        |x: f64| -> Vec<&Sphere> { frame.blockers.iter().filter(|s| (s.center[0] - x).abs() < 1.0).collect() };
+    let lifted = spheres_at(-2.0);
+    assert!(!lifted.is_empty() && lifted.iter().all(|s| s.center[2] - s.radius > 0.5), "lifted: {lifted:?}");
+    let rounded = spheres_at(2.0);
+    assert!(log.contains("rounded: 1 sphere(s)"), "the cube subdivided at render is one sphere: {rounded:?}\n{log}");
+    // The Set Material's cube, seen from above at the frame's centre.
+    let centre = frame.gbuffer.index(24, 16);
+    let index = frame.gbuffer.material[centre];
+    let colours = frame.gbuffer.colours.as_ref().expect("colour passes");
+    assert!(index != 0 && (colours.diffuse[centre][1] - 0.3).abs() < 0.02, "{index}: {:?}", colours.diffuse[centre]);
+
+    // Geometry Nodes geometry with no material, and hair, stop the export by name.
+    for (name, change, says) in [
+        ("bare", "s.inputs['Material'].default_value = None", "object \"host\": "),
+        (
+            "hair",
+            "p = c.modifiers.new('fur', 'PARTICLE_SYSTEM').particle_system; p.settings.type = 'HAIR'",
+            "object \"lifted\" has hair (particle system \"fur\")",
+        ),
+    ] {
+        let blend = dir.path().join(format!("{name}.blend"));
+        make_blend(&python, &blend, &format!("{setup}; {change}"));
+        let out = dir.path().join(name);
+        let output = export_frame_1(&python, &blend, &out, "48x32");
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert_eq!(output.status.code(), Some(1), "{name}: the export stops: {stderr}");
+        assert!(stderr.contains(says), "{name}: {stderr}");
+    }
+}
+
 /// Faces whose material slot is empty render in Cycles with its default surface (a Diffuse
 /// BSDF of colour 0.8), and so they are exported: a cylinder whose caps sit in an empty
 /// second slot, seen from above, has its cap under a material of that albedo, not the

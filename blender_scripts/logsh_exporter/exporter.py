@@ -3,6 +3,15 @@
 Used by the command line (`blender_scripts/export_scene.py`) and by the add-on's
 operator (`__init__.py`); both call `export(scene, Options(...))`.
 
+Everything is taken from the scene as Cycles renders it, the render's view layer
+evaluated with render settings (`geometry.as_rendered`): a modifier shown in renders only,
+a Subdivision Surface at its Render level, particles and Geometry Nodes as rendered. A
+Render Region is left out: the whole frame is exported. Geometry that Geometry Nodes or
+particles make without a material (which Cycles renders with its default surface, and
+which would have no material index), and hair (particle hair, Curves objects), whose
+strands no sphere fits, stop the export with the object's name (`Options.approximate`:
+a warning each).
+
 What is written into the output directory, per frame `####`:
 
 - `gbuffer.####.exr`: Cycles' Position, Normal, UV and Material Index passes in Blender's
@@ -153,10 +162,12 @@ from .common import (  # noqa: F401 (GEOMETRY_TYPES and MAX_SUPERSAMPLE for the 
     write_blockers, write_json)
 from .exr import channel_names, read_exr_channels, write_exr
 from .geometry import (
-    camera_json, export_blockers, export_heightmap, find_ground, object_indices, sun_shadow_frame, terrain_moves,
+    as_rendered, camera_json, export_blockers, export_heightmap, find_ground, object_indices, sun_shadow_frame,
+    terrain_moves,
     write_reflection)
 from .materials import (
-    export_lamps, find_heightfield, fit_to_passes, material_table, renderable_objects, roughness_aovs)
+    check_indexed, export_lamps, find_heightfield, fit_to_passes, material_table, refuse_hair, renderable_objects,
+    roughness_aovs)
 from .world import environment_suns, export_world, map_sun_direction, world_keys
 
 
@@ -256,10 +267,11 @@ def export(scene, options, log=print):
         view_layer = configure_render(scene, options, changes)
         lamps_by_frame = export_lamps(scene, view_layer, frames)
         lights = [dict(light) for light in lamps_by_frame[start]]
-        objects = renderable_objects(scene, view_layer)
+        objects, materials_of = as_rendered(scene, view_layer, renderable_objects, changes)
         terrain = find_heightfield(objects, options)
         warnings = []
-        table, index_of = material_table(objects, terrain, changes, options, warnings)
+        refuse_hair(objects, options, warnings)
+        table, index_of = material_table(objects, materials_of, terrain, changes, options, warnings)
         textured_roughness = roughness_aovs(table, index_of, view_layer, changes) if options.colour_passes else {}
         for warning in warnings:
             log(f"warning: {warning}")
@@ -324,15 +336,15 @@ def export(scene, options, log=print):
             description["supersample"] = options.supersample
 
         scene.frame_set(start)
-        ground = find_ground(objects, terrain, log)
+        ground = as_rendered(scene, view_layer, lambda depsgraph: find_ground(objects, terrain, depsgraph, log), changes)
         if ground is not None:
             description["ground"] = {"height": float(ground)}
-        if terrain is not None and len(frames) > 1 and terrain_moves(scene, terrain, frames):
+        if terrain is not None and len(frames) > 1 and terrain_moves(scene, view_layer, terrain, frames, changes):
             log(f"height field \"{terrain.name}\" moves within frames {start}-{end}: one height map per frame")
             for frame in frames:
                 scene.frame_set(frame)
-                spec = export_heightmap(terrain, bpy.context.evaluated_depsgraph_get(), out, options, log,
-                                        f"heightmap.{frame:04d}.exr")
+                spec = as_rendered(scene, view_layer, lambda depsgraph: export_heightmap(
+                    terrain, depsgraph, out, options, log, f"heightmap.{frame:04d}.exr"), changes)
                 if frame == start:
                     description["heightfield"] = dict(spec, heights="heightmap.####.exr")
                 elif [spec["min"], spec["max"]] != [description["heightfield"]["min"],
@@ -343,7 +355,8 @@ def export(scene, options, log=print):
                                                    "max": description["heightfield"]["max"]}
             scene.frame_set(start)
         elif terrain is not None:
-            description["heightfield"] = export_heightmap(terrain, bpy.context.evaluated_depsgraph_get(), out, options, log)
+            description["heightfield"] = as_rendered(
+                scene, view_layer, lambda depsgraph: export_heightmap(terrain, depsgraph, out, options, log), changes)
         if any(len(changes) > 1 for changes in per_frame.values()):
             description["per_frame"] = "frame.####.json"
             for frame in frames:
@@ -356,18 +369,20 @@ def export(scene, options, log=print):
         for frame in frames:
             began = time.time()
             scene.frame_set(frame)
-            depsgraph = bpy.context.evaluated_depsgraph_get()
             scene.render.filepath = new_file(out, f"gbuffer.{frame:04d}.exr")
             bpy.ops.render.render(write_still=True, scene=scene.name, layer=view_layer.name)
+            check_indexed(scene.render.filepath, object_index, options, warnings, log)
             if options.colour_passes and frame == frames[0]:
                 fit_to_passes(scene.render.filepath, frame, table, textured_roughness, warnings, log)
             camera = camera_json(scene, frame, width, height)
             write_json(new_file(out, f"camera.{frame:04d}.json"), camera)
-            spheres, casters = export_blockers(scene, depsgraph, objects, terrain, index_of, table, object_index,
-                                               options, fits, frame, log)
+            spheres, casters = as_rendered(scene, view_layer, lambda depsgraph: export_blockers(
+                scene, depsgraph, objects, terrain, index_of, table, object_index, options, fits, frame, log), changes)
             if water:
                 sampled = dict(camera, resolution=[width * options.supersample, height * options.supersample])
-                write_reflection(scene, depsgraph, sampled, index_of, water, new_file(out, f"reflection.{frame:04d}.exr"))
+                reflection = new_file(out, f"reflection.{frame:04d}.exr")
+                as_rendered(scene, view_layer, lambda depsgraph: write_reflection(
+                    scene, depsgraph, sampled, index_of, water, reflection), changes)
             suns = [light for light in per_frame[frame].get("lights", lights) if light["type"] == "sun"]
             rotation = per_frame[frame].get("light", description["light"]).get("rotation")
             for direction in (map_sun_direction(d, rotation) for d in map_suns):
@@ -457,6 +472,12 @@ def export_view(scene, out, changes):
 
 # ---- render settings -------------------------------------------------------------------
 
+def rendered_view_layer(scene):
+    """The view layer the export takes (and `render_cycles.py` renders): the window's
+    active one where it is used for rendering, else the first."""
+    return bpy.context.view_layer if bpy.context.view_layer.use else scene.view_layers[0]
+
+
 def configure_render(scene, options, changes):
     """Cycles, one centred sample per pixel, the four data passes, multilayer float EXR."""
     render, cycles = scene.render, scene.cycles
@@ -468,6 +489,7 @@ def configure_render(scene, options, changes):
     changes.set(cycles, "filter_width", DATA_FILTER_WIDTH)
     changes.set(cycles, "max_bounces", 0)  # data passes come from the camera ray alone
     changes.set(render, "use_motion_blur", False)
+    changes.set(render, "use_border", False)  # the whole frame, which the camera describes
     changes.set(render, "use_multiview", False)
     changes.set(render, "use_compositing", False)
     changes.set(render, "use_sequencer", False)
@@ -502,7 +524,7 @@ def configure_render(scene, options, changes):
     changes.on_undo(lambda path=render.filepath: setattr(render, "filepath", path))
 
     # One view layer, named as the format's default channel names expect.
-    layer = bpy.context.view_layer if bpy.context.view_layer.use else scene.view_layers[0]
+    layer = rendered_view_layer(scene)
     for other in scene.view_layers:
         if other != layer:
             if other.name == VIEW_LAYER:

@@ -13,6 +13,51 @@ from .exr import write_exr
 from .common import ExportError, FLAT_THICKNESS, GEOMETRY_TYPES, new_file
 
 
+# ---- the scene as Cycles renders it -----------------------------------------------------
+
+class EvaluateAsRendered(bpy.types.RenderEngine):
+    """A render engine that draws nothing: rendering with it is how the exporter is handed
+    the scene evaluated as a render evaluates it (Blender's render depsgraph: modifiers
+    with their render visibility and levels, a Subdivision Surface at its Render level,
+    particles and Geometry Nodes as rendered, the render's view layer), which a script's
+    `evaluated_depsgraph_get`, the viewport's, is not. The G-buffer is Cycles', so the
+    blockers, the height map and the reflection rays must see what it sees."""
+    bl_idname = "LOGSH_EXPORT_EVALUATION"
+    bl_label = "logsh export (evaluation only)"
+    job = None
+
+    def render(self, depsgraph):
+        job = EvaluateAsRendered.job
+        try:
+            job["result"] = job["work"](depsgraph)
+        except BaseException as error:  # Blender would print it and carry on
+            job["error"] = error
+
+
+def as_rendered(scene, view_layer, work, changes):
+    """`work(depsgraph)` on the scene's current frame evaluated as Cycles renders it
+    (`EvaluateAsRendered`), and its result. The engine is registered on the first call and
+    unregistered by `changes`."""
+    if not EvaluateAsRendered.is_registered:
+        bpy.utils.register_class(EvaluateAsRendered)
+        changes.on_undo(lambda: bpy.utils.unregister_class(EvaluateAsRendered))
+    job = {"work": work}
+    EvaluateAsRendered.job = job
+    engine = scene.render.engine
+    scene.render.engine = EvaluateAsRendered.bl_idname
+    try:
+        bpy.ops.render.render(write_still=False, scene=scene.name, layer=view_layer.name)
+    finally:
+        scene.render.engine = engine
+        EvaluateAsRendered.job = None
+    if "error" in job:
+        raise job["error"]
+    if "result" not in job:
+        raise ExportError(f"Blender did not evaluate frame {scene.frame_current} of scene \"{scene.name}\" for "
+                          "rendering")
+    return job["result"]
+
+
 # ---- geometry --------------------------------------------------------------------------
 
 def world_triangles(obj_eval, matrix):
@@ -52,7 +97,7 @@ def is_flat(triangles):
     return extents[-1] <= 0 or extents[0] < FLAT_THICKNESS * extents[-1]
 
 
-def find_ground(objects, terrain, log):
+def find_ground(objects, terrain, depsgraph, log):
     """The height of the scene's floor, when there is no height field: the lowest flat,
     horizontal mesh whose extent covers every other object's in x and y (an object may set
     the custom property `logsh_ground` to false to be left out). logsh then treats it as
@@ -61,7 +106,6 @@ def find_ground(objects, terrain, log):
     undersides of objects from below the floor."""
     if terrain is not None:
         return None
-    depsgraph = bpy.context.evaluated_depsgraph_get()
     bounds = {}
     for obj in objects:
         if obj.type not in GEOMETRY_TYPES or obj.is_instancer:
@@ -287,7 +331,7 @@ def export_heightmap(terrain, depsgraph, out, options, log, name="heightmap.exr"
     return {"heights": name, "min": [float(lo[0]), float(lo[1])], "max": [float(hi[0]), float(hi[1])]}
 
 
-def terrain_moves(scene, terrain, frames):
+def terrain_moves(scene, view_layer, terrain, frames, changes):
     """Whether the terrain's evaluated surface differs between `frames`: anything that
     moves it (an animated transform, modifiers such as Wave or Ocean, shape keys,
     armatures, geometry nodes) shows in its world-space triangles. Compared to 1e-6 of its
@@ -295,9 +339,8 @@ def terrain_moves(scene, terrain, frames):
     first = None
     for frame in frames:
         scene.frame_set(frame)
-        depsgraph = bpy.context.evaluated_depsgraph_get()
-        evaluated = terrain.evaluated_get(depsgraph)
-        triangles = world_triangles(evaluated, evaluated.matrix_world)
+        triangles = as_rendered(scene, view_layer, lambda depsgraph: world_triangles(
+            terrain.evaluated_get(depsgraph), terrain.evaluated_get(depsgraph).matrix_world), changes)
         if triangles is None:
             raise ExportError(f"height field \"{terrain.name}\" has no faces on frame {frame}")
         if first is None:

@@ -102,18 +102,43 @@ def lamp_json(obj):
     }
 
 
-def renderable_objects(scene, view_layer):
-    """Geometry objects that render in this view layer, and the sources of instances
-    (collection instances, particles, geometry nodes), which render through their
-    instancer even when they are not in the view layer themselves."""
-    names = {o.name for o in view_layer.objects}
-    direct = [o for o in scene.objects if o.type in GEOMETRY_TYPES and o.name in names and not o.hide_render]
-    instanced = []
-    for instance in bpy.context.evaluated_depsgraph_get().object_instances:
+def renderable_objects(depsgraph):
+    """Geometry objects that render, in the scene evaluated as Cycles renders it
+    (`geometry.as_rendered`): those of the view layer that render, then the sources of
+    instances (collection instances, particles, geometry nodes), which render through
+    their instancer even when they are not in the view layer themselves; and per object
+    the materials its rendered geometry carries, which Geometry Nodes may have set (Set
+    Material) beyond its slots."""
+    direct, instanced, materials_of = [], [], {}
+    for instance in depsgraph.object_instances:
         source = instance.object.original
-        if instance.is_instance and source.type in GEOMETRY_TYPES and source not in direct and source not in instanced:
+        if source.type not in GEOMETRY_TYPES:
+            continue
+        if not instance.is_instance and source not in direct:
+            direct.append(source)
+        elif instance.is_instance and source not in instanced:
             instanced.append(source)
-    return direct + instanced
+        data = getattr(instance.object, "data", None)
+        carried = materials_of.setdefault(source.name, set())
+        carried.update(m.original.name for m in getattr(data, "materials", ()) if m is not None)
+        carried.update(slot.material.original.name for slot in instance.object.material_slots if slot.material)
+    return direct + [o for o in instanced if o not in direct], materials_of
+
+
+def refuse_hair(objects, options, warnings):
+    """Hair (a hair particle system that renders its strands, or a Curves object) renders
+    in Cycles as strands that logsh fits no spheres to and shades as unshadowed surfaces:
+    refused, or with `options.approximate` a warning."""
+    for obj in objects:
+        if obj.type == "CURVES":
+            refuse(f"object \"{obj.name}\" is hair (a Curves object): it would cast no shadow", options, warnings)
+        for modifier in obj.modifiers:
+            if modifier.type != "PARTICLE_SYSTEM" or not modifier.show_render:
+                continue
+            settings = modifier.particle_system.settings
+            if settings.type == "HAIR" and settings.render_type == "PATH":
+                refuse(f"object \"{obj.name}\" has hair (particle system \"{modifier.particle_system.name}\"): "
+                       "its strands would cast no shadow", options, warnings)
 
 
 def find_heightfield(objects, options):
@@ -128,10 +153,11 @@ def find_heightfield(objects, options):
     return marked[0] if marked else None
 
 
-def material_table(objects, terrain, changes, options, warnings):
-    """Gives every material on a renderable object its own pass index 1..N and returns
-    the table (index -> format-v1 material) and the map material name -> index; what a
-    material holds that logsh cannot represent stops the export, or with
+def material_table(objects, materials_of, terrain, changes, options, warnings):
+    """Gives every material on a renderable object, in its slots or set on its rendered
+    geometry (`materials_of`, from `renderable_objects`), its own pass index 1..N and
+    returns the table (index -> format-v1 material) and the map material name -> index;
+    what a material holds that logsh cannot represent stops the export, or with
     `options.approximate` is appended to `warnings`."""
     default = None
     used = {}
@@ -153,6 +179,8 @@ def material_table(objects, terrain, changes, options, warnings):
         for slot in obj.material_slots:
             if slot.material is not None:
                 used.setdefault(slot.material.name, (slot.material, set()))[1].add(obj == terrain)
+        for name in materials_of.get(obj.name, ()):
+            used.setdefault(name, (bpy.data.materials[name], set()))[1].add(obj == terrain)
 
     table, index_of = {}, {}
     for i, name in enumerate(sorted(used), start=1):
@@ -219,6 +247,22 @@ def _read_first(gbuffer, alternatives):
         except ValueError:
             continue
     raise ExportError(f"{gbuffer}: Blender wrote none of {alternatives[0]}")
+
+
+def check_indexed(gbuffer, object_index, options, warnings, log):
+    """Pixels of an object that carry no material index: geometry its Geometry Nodes or
+    particles made without a material, which Cycles renders with its default surface and
+    logsh would take for the background. Refused per object, or with
+    `options.approximate` a warning (logsh then shows the environment there)."""
+    objects, = _read_first(gbuffer, [[f"{VIEW_LAYER}.Object Index.X"], [f"{VIEW_LAYER}.IndexOB.X"]])
+    material, = _read_first(gbuffer, [[f"{VIEW_LAYER}.Material Index.X"], [f"{VIEW_LAYER}.IndexMA.X"]])
+    bare = np.rint(objects[np.rint(material) == 0]).astype(int)
+    names = {i: name for name, i in object_index.items()}
+    for i, count in zip(*np.unique(bare[bare > 0], return_counts=True)):
+        refuse(f"object \"{names.get(int(i), f'with index {i}')}\": {count} pixels of its rendered geometry have no "
+               "material (made by Geometry Nodes or particles without one: give it one, with a Set Material node), "
+               "and would show as background", options, warnings)
+        log(f"warning: {warnings[-1]}")
 
 
 def fit_to_passes(gbuffer, frame, table, textured, warnings, log):
