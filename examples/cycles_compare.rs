@@ -37,7 +37,9 @@
 //! |logsh - Cycles| divided by the radiance an open white floor receives from the scene's
 //! light (a point lamp's share averaged over the frame). Also printed: the 95th percentile
 //! and the mean signed difference (positive: logsh brighter); and the plain mean absolute
-//! difference over non-background pixels and R, G, B, the figure the issues quote.
+//! difference over non-background pixels and R, G, B, the figure the issues quote. Where
+//! many background pixels differ from the truth, as a surface the G-buffer lacks would
+//! make them, it says so on stderr.
 
 use logsh::compare::{frame_error, read_rgb, unoccluded_value};
 use logsh::executor::{Executor, ShadeJob};
@@ -187,6 +189,11 @@ fn main() {
                 read_rgb(&noise.join(&scene_name).join(format!("cycles.{number:04}.exr"))).unwrap_or_else(|e| fail(e));
             images.push(("Cycles, another seed".to_string(), second));
         }
+        if let Some((_, image)) = images.first() {
+            for (truth, cycles) in &truths {
+                report_missed_surfaces(&dir, truth, &frame.gbuffer.material, image, cycles);
+            }
+        }
         for ((truth, cycles), (name, image)) in truths.iter().flat_map(|t| images.iter().map(move |i| (t, i))) {
             if cycles.len() != width * height {
                 fail(format!("{}: the {truth} render and the G-buffer differ in size", dir.display()));
@@ -208,6 +215,32 @@ fn main() {
                 print_by_material(&frame.gbuffer.material, image, cycles, unoccluded);
             }
         }
+    }
+}
+
+/// The figures are over the G-buffer's surface pixels, so a surface it lacks (geometry
+/// exported without a material index, which logsh shows as background) does not count:
+/// says so on stderr where more than 0.1 % of the background pixels differ from the
+/// truth by more than 0.05 (the mean over R, G, B), as a surface there would.
+fn report_missed_surfaces(
+    dir: &std::path::Path,
+    truth: &str,
+    material: &[u32],
+    image: &[[f32; 3]],
+    cycles: &[[f32; 3]],
+) {
+    let background: Vec<usize> = (0..material.len()).filter(|&i| material[i] == 0).collect();
+    let unlike = background
+        .iter()
+        .filter(|&&i| (0..3).map(|k| (image[i][k] - cycles[i][k]).abs()).sum::<f32>() / 3.0 > 0.05)
+        .count();
+    if unlike * 1000 > background.len() {
+        eprintln!(
+            "{}: {unlike} of {} background pixels differ from the {truth} render by more than 0.05: a surface the \
+             G-buffer lacks may show there, which the figures leave out",
+            dir.display(),
+            background.len()
+        );
     }
 }
 
