@@ -376,13 +376,18 @@ def export(scene, options, log=print):
                 fit_to_passes(scene.render.filepath, frame, table, textured_roughness, warnings, log)
             camera = camera_json(scene, frame, width, height)
             write_json(new_file(out, f"camera.{frame:04d}.json"), camera)
-            spheres, casters = as_rendered(scene, view_layer, lambda depsgraph: export_blockers(
-                scene, depsgraph, objects, terrain, index_of, table, object_index, options, fits, frame, log), changes)
-            if water:
-                sampled = dict(camera, resolution=[width * options.supersample, height * options.supersample])
-                reflection = new_file(out, f"reflection.{frame:04d}.exr")
-                as_rendered(scene, view_layer, lambda depsgraph: write_reflection(
-                    scene, depsgraph, sampled, index_of, water, reflection), changes)
+            sampled = dict(camera, resolution=[width * options.supersample, height * options.supersample])
+            reflection = new_file(out, f"reflection.{frame:04d}.exr") if water else None
+
+            def frame_geometry(depsgraph):
+                """The frame's blockers, and its reflection G-buffer where there is water."""
+                blockers = export_blockers(scene, depsgraph, objects, terrain, index_of, table, object_index, options,
+                                           fits, frame, log)
+                if reflection:
+                    write_reflection(scene, depsgraph, sampled, index_of, water, reflection)
+                return blockers
+
+            spheres, casters = as_rendered(scene, view_layer, frame_geometry, changes)
             suns = [light for light in per_frame[frame].get("lights", lights) if light["type"] == "sun"]
             rotation = per_frame[frame].get("light", description["light"]).get("rotation")
             for direction in (map_sun_direction(d, rotation) for d in map_suns):
