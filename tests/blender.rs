@@ -1388,9 +1388,70 @@ fn the_export_follows_the_render_not_the_viewport() {
     }
 }
 
-/// Faces whose material slot is empty render in Cycles with its default surface (a Diffuse
-/// BSDF of colour 0.8), and so they are exported: a cylinder whose caps sit in an empty
-/// second slot, seen from above, has its cap under a material of that albedo, not the
+/// What no sphere fits still shadows the sun, and what renders as nothing is left out: a
+/// flat roof over the ground (no spheres; its sky occlusion is not modelled) casts its
+/// Sun lamp shadow through the sun shadow map, as an open sheet does (a dome: its inside
+/// once took a slab of spheres out to its bounding box; Suzanne, whose eyes leave her
+/// open, keeps hers); a cube keyed to scale 0 on frame 2 exports there with no spheres (it
+/// once stopped the export on a singular matrix).
+#[test]
+fn flat_roofs_cast_sun_shadows_and_vanished_objects_export() {
+    let Some(python) = bpy_python() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let blend = dir.path().join("roof.blend");
+    make_blend(
+        &python,
+        &blend,
+        "bpy.ops.mesh.primitive_plane_add(size=20); bpy.ops.mesh.primitive_plane_add(size=2, location=(0, 0, 1.2)); \
+         bpy.context.object.name = 'roof'; \
+         bpy.ops.mesh.primitive_cube_add(size=0.6, location=(3, 2, 0.3)); k = bpy.context.object; k.name = 'vanishing'; \
+         k.keyframe_insert('scale', frame=1); k.scale = (0, 0, 0); k.keyframe_insert('scale', frame=2); \
+         import bmesh; bpy.ops.mesh.primitive_uv_sphere_add(radius=0.5, location=(-3, -2, 0.5)); \
+         d = bpy.context.object; d.name = 'dome'; b = bmesh.new(); b.from_mesh(d.data); \
+         bmesh.ops.delete(b, geom=[v for v in b.verts if v.co.z < -1e-4], context='VERTS'); b.to_mesh(d.data); \
+         bpy.ops.mesh.primitive_monkey_add(size=0.8, location=(3, -2, 0.5)); \
+         bpy.ops.object.light_add(type='SUN', rotation=(math.radians(30), 0, 0)); bpy.context.object.data.energy = 3.0; \
+         bpy.ops.object.camera_add(location=(0, 0, 9)); bpy.context.scene.camera = bpy.context.object; \
+         w = bpy.data.worlds.new('World'); bpy.context.scene.world = w",
+    );
+    let out = dir.path().join("scene");
+    let args = [Path::new("--blend"), &blend, Path::new("--out"), &out, Path::new("--resolution"), Path::new("48x48")];
+    let output = run_python(
+        &python,
+        "blender_scripts/export_scene.py",
+        &[&args[..], &[Path::new("--frames"), Path::new("1-2")]].concat(),
+    );
+    assert_ok(&output, "export_scene.py");
+    let log = String::from_utf8_lossy(&output.stdout);
+    assert!(log.contains("\"roof\" is flat; not a blocker, so it casts sun shadows only"), "{log}");
+    // An open dome is a sheet; Suzanne, open at her eyes, is still a solid.
+    assert!(log.contains("\"dome\" is an open sheet, not a solid; not a blocker"), "{log}");
+    assert!(log.contains("Suzanne: ") && log.contains(" sphere(s)"), "{log}");
+    let scene = Scene::load(&out).unwrap();
+    // The cube's spheres on frame 1, and only Suzanne's on frame 2.
+    let far_right = |frame: i64| scene.frame(frame).unwrap().blockers.iter().filter(|s| s.center[1] > 1.0).count();
+    assert!(far_right(1) > 0 && far_right(2) == 0, "{} and {}", far_right(1), far_right(2));
+    let shaded = dir.path().join("out");
+    let output = crate::support::cli::logsh()
+        .args(["render", "--frames", "1", "--bounces", "0", "--progress", "none", "--out"])
+        .arg(&shaded)
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert_ok(&output, "logsh render");
+    let beauty = raw_channels(&shaded.join("render.0001.exr"));
+    // Seen from above, the roof covers 15 pixels about the centre; the sun, 30 degrees
+    // from the zenith, throws its shadow 0.7 m (5 pixels) beyond it on one side.
+    let at = |x: usize, y: usize| beauty["R"][y * 48 + x];
+    let beside = (9..=11).flat_map(|d| [at(24, 24 - d), at(24, 24 + d)]).fold(f32::INFINITY, f32::min);
+    let open = at(2, 2);
+    assert!(beside < 0.5 * open, "beside the roof {beside}, open ground {open}");
+}
+
+/// Faces whose material slot is empty render in Cycles with its default surface, and so
+/// they are exported: a cylinder whose caps sit in an empty second slot, seen from above,
+/// has its cap under a material with that surface's colours (Diffuse Color 0.763 and
+/// Glossy Color 0.046 head on, as Cycles renders a plane with no material), not the
 /// background (they once took material index 0, and logsh showed the sky there).
 #[test]
 fn faces_in_an_empty_material_slot_take_cycles_default_surface() {
@@ -1419,14 +1480,14 @@ fn faces_in_an_empty_material_slot_take_cycles_default_surface() {
     assert_ne!(index, 0, "the cylinder's cap is taken for the background");
     assert!(scene.materials.contains_key(&index), "material {index} is not in the table");
     let colours = g.colours.as_ref().expect("colour passes");
-    for (k, c) in colours.diffuse[centre].iter().enumerate() {
+    for (pass, colour, expected) in
+        [("Diffuse", colours.diffuse[centre], 0.763), ("Glossy", colours.glossy[centre], 0.046)]
+    {
         assert!(
-            (c - 0.8).abs() < 0.01,
-            "the cap's Diffuse Color {:?} (channel {k}) is not 0.8",
-            colours.diffuse[centre]
+            colour.iter().all(|c| (c - expected).abs() < 0.01),
+            "the cap's {pass} Color {colour:?}, not {expected}"
         );
     }
-    assert_eq!(colours.glossy[centre], [0.0; 3], "Cycles' default surface has no glossy layer");
 }
 
 /// What logsh cannot shade stops the export, naming the material and the node: emission,

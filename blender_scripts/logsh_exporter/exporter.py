@@ -92,8 +92,9 @@ Scene markup, all optional (custom properties, set in the Object or Material tab
 
 What a material may hold: a Principled BSDF, a Diffuse BSDF or a Glossy BSDF feeding the
 Material Output, with any nodes in front of them. Faces with no material (an object
-without one, or an empty slot) take Cycles' default surface for the export (`logsh
-default`, a Diffuse BSDF of colour 0.8, removed again after it), as Cycles renders them. The Principled BSDF's Transmission,
+without one, or an empty slot) take a new material for the export (`logsh default`,
+removed again after it), whose Principled BSDF renders as Cycles' default surface, the
+same Diffuse and Glossy Color passes. The Principled BSDF's Transmission,
 Subsurface, Sheen and Coat weights must be at most `NEGLIGIBLE_WEIGHT` and unlinked, and
 it must not emit (Emission Strength times Emission Color). Water with colour passes is
 the other way round: logsh shades it as its reflection alone (the reflection G-buffer's
@@ -141,7 +142,10 @@ about the mirror direction, `docs/design.md`):
 Without markup every visible mesh-like object (mesh, curve, surface, text, metaball, and
 their instances) is a blocker of `Options.spheres` spheres, except flat ones (thinner
 than 2% of their size, such as a ground plane or a water surface: spheres around a plane
-would swallow everything standing on it) and water-only ones; there is no height field.
+would swallow everything standing on it), open sheets (`geometry.is_sheet`: a bent
+plane, cloth, a dome, whose inside no sphere can fill) and water-only ones; there is no
+height field. Flat meshes but the ground, and sheets, still cast sun shadows: the sun
+shadow maps hold them.
 
 Every change to the scene (render settings, passes, material pass indices, a default
 material on objects without one) is undone before `export` returns, so the add-on
@@ -338,7 +342,7 @@ def export(scene, options, log=print):
         scene.frame_set(start)
         ground = as_rendered(scene, view_layer, lambda depsgraph: find_ground(objects, terrain, depsgraph, log), changes)
         if ground is not None:
-            description["ground"] = {"height": float(ground)}
+            description["ground"] = {"height": float(ground[0])}
         if terrain is not None and len(frames) > 1 and terrain_moves(scene, view_layer, terrain, frames, changes):
             log(f"height field \"{terrain.name}\" moves within frames {start}-{end}: one height map per frame")
             for frame in frames:
@@ -382,7 +386,7 @@ def export(scene, options, log=print):
             def frame_geometry(depsgraph):
                 """The frame's blockers, and its reflection G-buffer where there is water."""
                 blockers = export_blockers(scene, depsgraph, objects, terrain, index_of, table, object_index, options,
-                                           fits, frame, log)
+                                           fits, frame, log, ground=ground and ground[1])
                 if reflection:
                     write_reflection(scene, depsgraph, sampled, index_of, water, reflection)
                 return blockers

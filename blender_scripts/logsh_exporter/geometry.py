@@ -98,7 +98,8 @@ def is_flat(triangles):
 
 
 def find_ground(objects, terrain, depsgraph, log):
-    """The height of the scene's floor, when there is no height field: the lowest flat,
+    """The height of the scene's floor and its object's name, or None, when there is no
+    height field: the lowest flat,
     horizontal mesh whose extent covers every other object's in x and y (an object may set
     the custom property `logsh_ground` to false to be left out). logsh then treats it as
     an infinite plane hiding the lower hemisphere from everything above it, as Cycles'
@@ -134,7 +135,7 @@ def find_ground(objects, terrain, depsgraph, log):
     if best is not None:
         log(f"ground: \"{best[1]}\" at z = {best[0]:.4g} hides the lower hemisphere from the objects above it "
             "(set its logsh_ground property to false to leave it out)")
-        return best[0]
+        return best
     return None
 
 
@@ -147,6 +148,63 @@ def object_indices(objects, changes):
         changes.set(obj, "pass_index", i)
         index_of[obj.name] = i
     return index_of
+
+
+def is_closed(triangles):
+    """Whether every edge of the triangles is shared by two of them (vertices at the same
+    place, to a millionth of the mesh's extent, counted as one, so that a mesh split at
+    its UV seams is still closed)."""
+    points = triangles.reshape(-1, 3)
+    extent = float(np.ptp(points, axis=0).max()) or 1.0
+    _, ids = np.unique(np.round(points / (1e-6 * extent)).astype(np.int64), axis=0, return_inverse=True)
+    ids = ids.reshape(-1, 3)
+    edges = np.sort(np.concatenate([ids[:, [0, 1]], ids[:, [1, 2]], ids[:, [2, 0]]]), axis=1)
+    _, counts = np.unique(edges, axis=0, return_counts=True)
+    return bool((counts >= 2).all())
+
+
+# Directions of the parity test's rays: off the axes, so that they do not run along the
+# faces of axis-aligned meshes.
+PARITY_RAYS = [mathutils.Vector(d).normalized() for d in ((1.0, 0.0123, 0.0271), (0.0187, 1.0, -0.0311),
+                                                           (-0.0217, 0.0143, 1.0))]
+
+
+def crossings(tree, origin, direction, step):
+    """How many faces of `tree` the ray from `origin` along `direction` crosses."""
+    count = 0
+    while True:
+        location, _, _, _ = tree.ray_cast(origin, direction)
+        if location is None:
+            return count
+        count += 1
+        origin = location + direction * step
+
+
+def is_sheet(triangles, count=2000, seed=0):
+    """Whether the mesh is an open sheet (a bent plane, cloth) rather than a solid: open
+    (`is_closed`), and of the points of its grown bounding box that lie on the inner side
+    of their nearest face (`volume_sample`'s inside), fewer than half are inside by ray
+    parity (an odd number of crossings both ways along each of three lines). Behind a
+    sheet the nearest face's side fills a slab out to the box, which a fit would cover
+    with spheres reaching the ground (a waving plane's shadow came out 0.059 too dark);
+    a model with a few holes (Suzanne's eyes) keeps nearly all of its inside."""
+    if is_closed(triangles):
+        return False
+    points, inside, _, _ = volume_sample(triangles, count, seed)
+    candidates = np.flatnonzero(inside)
+    if candidates.size == 0:
+        return True
+    tree = triangle_tree(triangles)
+    step = 1e-6 * (float(np.ptp(triangles.reshape(-1, 3), axis=0).max()) or 1.0)
+
+    def enclosed(point):
+        # Along how many of the three lines through the point both half-rays cross an odd
+        # number of faces, as they do from inside a solid.
+        return sum(crossings(tree, point, d, step) % 2 == 1 and crossings(tree, point, -d, step) % 2 == 1
+                   for d in PARITY_RAYS)
+
+    inside_by_parity = sum(enclosed(mathutils.Vector(points[i])) == len(PARITY_RAYS) for i in candidates)
+    return inside_by_parity < 0.5 * candidates.size
 
 
 def volume_sample(triangles, count=16000, seed=0):
@@ -165,12 +223,14 @@ def volume_sample(triangles, count=16000, seed=0):
     return points, inside, depth, box_volume / count
 
 
-def export_blockers(scene, depsgraph, objects, terrain, index_of, table, object_index, options, fits, frame, log):
-    """Spheres of every blocker object at this frame, and the blockers themselves as
-    `(object, instancer, vertices)`: the original object, the original object whose
-    instance it is (None when it is not one) and the vertices of its world-space triangles
-    at this frame. The sun shadow maps hold exactly these objects (`exporter.py`,
-    `render_depths`). Prints each fit's error."""
+def export_blockers(scene, depsgraph, objects, terrain, index_of, table, object_index, options, fits, frame, log,
+                    ground=None):
+    """Spheres of every blocker object at this frame, and the objects that cast sun
+    shadows as `(object, instancer, vertices)`: the original object, the original object
+    whose instance it is (None when it is not one) and the vertices of its world-space
+    triangles at this frame. The sun shadow maps hold exactly these objects (`exporter.py`,
+    `render_depths`): the blockers, and the flat meshes and open sheets that no sphere
+    fits but for the ground plane (the object named `ground`). Prints each fit's error."""
     allowed = {o.name for o in objects}
     spheres, reports, casters = [], [], []
     for instance in depsgraph.object_instances:
@@ -187,7 +247,14 @@ def export_blockers(scene, depsgraph, objects, terrain, index_of, table, object_
         if triangles is None:
             continue
         fit = fits.get(key)
+        parent = instance.parent.original if instance.is_instance and instance.parent else None
         if fit == "skip":
+            continue
+        if fit == "casts":
+            casters.append((original, parent, triangles.reshape(-1, 3)))
+            continue
+        if abs(np.linalg.det(matrix[:3, :3])) <= 1e-12 * np.abs(matrix[:3, :3]).max() ** 3:
+            # Scaled to nothing along an axis (keyed to 0, say): it renders nothing.
             continue
         inverse = np.linalg.inv(matrix)
         local = triangles.reshape(-1, 3) @ inverse[:3, :3].T + inverse[:3, 3]
@@ -198,9 +265,15 @@ def export_blockers(scene, depsgraph, objects, terrain, index_of, table, object_
                     fits[key] = "skip"
                     log(f"note: \"{original.name}\" is water only; not a blocker")
                     continue
-                if is_flat(triangles):
-                    fits[key] = "skip"
-                    log(f"note: \"{original.name}\" is flat; not a blocker (set its logsh_spheres property to force it)")
+                if is_flat(triangles) or is_sheet(triangles):
+                    what = "flat" if is_flat(triangles) else "an open sheet, not a solid"
+                    casts = original.name != ground
+                    fits[key] = "casts" if casts else "skip"
+                    log(f"note: \"{original.name}\" is {what}; not a blocker"
+                        + (", so it casts sun shadows only (a Solidify modifier makes it a solid" if casts else
+                           " (the ground") + "; or set its logsh_spheres property to force spheres)")
+                    if casts:
+                        casters.append((original, parent, triangles.reshape(-1, 3)))
                     continue
             name = original.name + (f" (instanced by {instancer}, {instance.persistent_id[0]})" if instance.is_instance else "")
             points, inside, depth, point_volume = volume_sample(triangles)
@@ -218,7 +291,6 @@ def export_blockers(scene, depsgraph, objects, terrain, index_of, table, object_
         object_id = object_index.get(original.name, 0)
         spheres += [{"center": [float(v) for v in c], "radius": float(r), "object": object_id}
                     for c, r in zip(centres, radii)]
-        parent = instance.parent.original if instance.is_instance and instance.parent else None
         casters.append((original, parent, triangles.reshape(-1, 3)))
     report_fit_errors(reports, frame, log)
     return spheres, casters

@@ -195,18 +195,10 @@ def material_table(objects, materials_of, terrain, changes, options, warnings):
 
 
 def cycles_default_surface():
-    """A material that renders as Cycles renders a face with none (its default surface: a
-    Diffuse BSDF of colour 0.8)."""
-    material = bpy.data.materials.new("logsh default")
-    if material.node_tree is None:  # Blender 4 makes a material without nodes
-        material.use_nodes = True
-    tree = material.node_tree
-    tree.nodes.clear()
-    diffuse = tree.nodes.new("ShaderNodeBsdfDiffuse")
-    diffuse.inputs["Color"].default_value = (0.8, 0.8, 0.8, 1.0)
-    output = tree.nodes.new("ShaderNodeOutputMaterial")
-    tree.links.new(diffuse.outputs["BSDF"], output.inputs["Surface"])
-    return material
+    """A material that renders as Cycles renders a face with none: a new material, whose
+    Principled BSDF (base colour 0.8, roughness 0.5, IOR 1.5) gives the same Diffuse and
+    Glossy Color passes as Cycles' default surface (0.763 and 0.046 seen head on)."""
+    return bpy.data.materials.new("logsh default")
 
 
 ROUGHNESS_AOV = "logsh_roughness"
