@@ -249,7 +249,8 @@ def export(scene, options, log=print):
     if scene.camera is None:
         raise ExportError("the scene has no camera; set Scene > Camera")
     if options.frames is None:
-        frames = list(range(scene.frame_start, scene.frame_end + 1))
+        # Every frame_step-th, as Blender renders the animation.
+        frames = list(range(scene.frame_start, scene.frame_end + 1, max(1, scene.frame_step)))
     elif isinstance(options.frames, tuple):
         frames = list(range(options.frames[0], options.frames[1] + 1))
     else:
@@ -268,6 +269,11 @@ def export(scene, options, log=print):
     frame_before = scene.frame_current
     try:
         view = export_view(scene, out, changes)
+        dropped = [what for what, on in (("motion blur", scene.render.use_motion_blur),
+                                         ("depth of field", scene.camera.data.dof.use_dof)) if on]
+        if dropped:
+            log(f"note: the G-buffers are taken without the scene's {' and '.join(dropped)}, which logsh does not "
+                "model: its frames are sharp")
         view_layer = configure_render(scene, options, changes)
         lamps_by_frame = export_lamps(scene, view_layer, frames)
         lights = [dict(light) for light in lamps_by_frame[start]]
