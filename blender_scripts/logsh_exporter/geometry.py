@@ -84,6 +84,12 @@ def world_triangles(obj_eval, matrix):
     return world[corners]
 
 
+def evaluated_triangles(obj, depsgraph):
+    """`world_triangles` of `obj` as `depsgraph` evaluates it, where it stands then."""
+    evaluated = obj.evaluated_get(depsgraph)
+    return world_triangles(evaluated, evaluated.matrix_world)
+
+
 def triangle_tree(triangles):
     """Blender's BVH over (T, 3, 3) triangles, for nearest-point and ray queries."""
     vertices = triangles.reshape(-1, 3)
@@ -111,8 +117,7 @@ def find_ground(objects, terrain, depsgraph, log):
     for obj in objects:
         if obj.type not in GEOMETRY_TYPES or obj.is_instancer:
             continue
-        evaluated = obj.evaluated_get(depsgraph)
-        triangles = world_triangles(evaluated, evaluated.matrix_world)
+        triangles = evaluated_triangles(obj, depsgraph)
         if triangles is not None:
             points = triangles.reshape(-1, 3)
             bounds[obj.name] = (points.min(axis=0), points.max(axis=0), obj)
@@ -265,8 +270,9 @@ def export_blockers(scene, depsgraph, objects, terrain, index_of, table, object_
                     fits[key] = "skip"
                     log(f"note: \"{original.name}\" is water only; not a blocker")
                     continue
-                if is_flat(triangles) or is_sheet(triangles):
-                    what = "flat" if is_flat(triangles) else "an open sheet, not a solid"
+                flat = is_flat(triangles)
+                if flat or is_sheet(triangles):
+                    what = "flat" if flat else "an open sheet, not a solid"
                     casts = original.name != ground
                     fits[key] = "casts" if casts else "skip"
                     log(f"note: \"{original.name}\" is {what}; not a blocker"
@@ -365,7 +371,7 @@ def report_fit_errors(reports, frame, log):
 def export_heightmap(terrain, depsgraph, out, options, log, name="heightmap.exr"):
     """Samples the terrain's top surface on a corner-registered grid over its XY bounds,
     into the file `name`."""
-    triangles = world_triangles(terrain.evaluated_get(depsgraph), terrain.evaluated_get(depsgraph).matrix_world)
+    triangles = evaluated_triangles(terrain, depsgraph)
     if triangles is None:
         raise ExportError(f"height field \"{terrain.name}\" has no faces")
     vertices = triangles.reshape(-1, 3)
@@ -411,8 +417,7 @@ def terrain_moves(scene, view_layer, terrain, frames, changes):
     first = None
     for frame in frames:
         scene.frame_set(frame)
-        triangles = as_rendered(scene, view_layer, lambda depsgraph: world_triangles(
-            terrain.evaluated_get(depsgraph), terrain.evaluated_get(depsgraph).matrix_world), changes)
+        triangles = as_rendered(scene, view_layer, lambda depsgraph: evaluated_triangles(terrain, depsgraph), changes)
         if triangles is None:
             raise ExportError(f"height field \"{terrain.name}\" has no faces on frame {frame}")
         if first is None:
