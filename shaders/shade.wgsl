@@ -467,6 +467,96 @@ fn open_corrected(lit: vec3<f32>, n: vec3<f32>) -> vec3<f32> {
     return select(lit, full * share, unoccluded > vec3<f32>(OPEN_LIGHT_FLOOR));
 }
 
+//#if BLOCKERS
+// The light's detail beyond order n that the caps seen from p hide (kernel.rs,
+// hidden_detail): visit_blockers' walk, each cap's share times its detail.
+fn hidden_detail(p: vec3<f32>, n: vec3<f32>, object: u32) -> vec3<f32> {
+    var sum = vec3<f32>(0.0);
+    var i = 0u;
+    while i < params.node_count {
+        let node = blocker_tree[i];
+        let d = node.bounds.xyz - p;
+        let r = node.bounds.w;
+        if behind_tangent_plane(d, r, n) {
+            i = node.skip;
+            continue;
+        }
+        if node.leaf != 0u {
+            if !(object != 0u && node.object == object && own_sphere_holds(p, node.equivalent)) {
+                sum += node.share * cap_detail(p, n, node.equivalent);
+            }
+            i = node.skip;
+            continue;
+        }
+        let distance = length(d);
+        if distance > r && r <= params.cluster_ratio * distance {
+            if node.equivalent.w >= NEGLIGIBLE_RATIO * length(node.equivalent.xyz - p) {
+                sum += node.share * cap_detail(p, n, node.equivalent);
+            }
+            i = node.skip;
+            continue;
+        }
+        i++;
+    }
+    return sum;
+}
+
+// n . M(d, alpha) of the cap `sphere` casts on p (cap_detail.rs, CapDetail::at), faded
+// where the tangent plane cuts it (CapDetail::cap_seen): the table's moments read
+// trilinearly in direction and radius; 0 for a sphere behind the tangent plane or a cap
+// below CAP_DETAIL_MIN_RATIO.
+fn cap_detail(p: vec3<f32>, n: vec3<f32>, sphere: vec4<f32>) -> vec3<f32> {
+    let d = sphere.xyz - p;
+    let distance = length(d);
+    if !(distance > 0.0) {
+        return vec3<f32>(0.0);
+    }
+    let direction = d / distance;
+    if dot(direction, n) <= 0.0 {
+        return vec3<f32>(0.0);
+    }
+    let ratio = min(sphere.w / distance, 1.0);
+    if ratio < CAP_DETAIL_MIN_RATIO {
+        return vec3<f32>(0.0);
+    }
+    let alpha = asin(ratio);
+    let cut = min(dot(n, direction) / ratio, 1.0);
+    let theta = atan2(length(direction.xy), direction.z);
+    let phi = atan2(direction.y, direction.x);
+    let columns = f32(CAP_DETAIL_COLUMNS);
+    let y = clamp(theta / 3.141592653589793 * f32(CAP_DETAIL_ROWS) - 0.5, 0.0, f32(CAP_DETAIL_ROWS - 1u));
+    var x = phi / 6.283185307179586 * columns - 0.5;
+    x = x - floor(x / columns) * columns;
+    let r = clamp(alpha / CAP_DETAIL_MAX_RADIUS * f32(CAP_DETAIL_RADII - 1u), 0.0, f32(CAP_DETAIL_RADII - 1u));
+    let y0 = u32(y);
+    let x0 = min(u32(x), CAP_DETAIL_COLUMNS - 1u);
+    let r0 = u32(r);
+    let f = vec3<f32>(x - f32(x0), y - f32(y0), r - f32(r0));
+    let x1 = (x0 + 1u) % CAP_DETAIL_COLUMNS;
+    let y1 = min(y0 + 1u, CAP_DETAIL_ROWS - 1u);
+    let r1 = min(r0 + 1u, CAP_DETAIL_RADII - 1u);
+    var moment: array<f32, 9>;
+    for (var corner = 0u; corner < 8u; corner++) {
+        let cx = corner & 1u;
+        let cy = (corner >> 1u) & 1u;
+        let cr = corner >> 2u;
+        let column = select(x0, x1, cx == 1u);
+        let row = select(y0, y1, cy == 1u);
+        let radius = select(r0, r1, cr == 1u);
+        let weight = select(1.0 - f.x, f.x, cx == 1u) * select(1.0 - f.y, f.y, cy == 1u) * select(1.0 - f.z, f.z, cr == 1u);
+        let at = T_CAP_DETAIL + ((radius * CAP_DETAIL_ROWS + row) * CAP_DETAIL_COLUMNS + column) * 9u;
+        for (var k = 0u; k < 9u; k++) {
+            moment[k] += weight * tables[at + k];
+        }
+    }
+    return cut * vec3<f32>(
+        dot(n, vec3<f32>(moment[0], moment[1], moment[2])),
+        dot(n, vec3<f32>(moment[3], moment[4], moment[5])),
+        dot(n, vec3<f32>(moment[6], moment[7], moment[8])),
+    );
+}
+//#endif
+
 // The lobe's albedo at n . v = mu, linearly (glossy.rs, albedo_lookup).
 fn albedo_lookup(offset: u32, mu: f32) -> f32 {
     let x = clamp(mu, 0.0, 1.0) * f32(ALBEDO_ENTRIES - 1u);
@@ -714,7 +804,13 @@ fn shade(@builtin(global_invocation_id) id: vec3<u32>) {
         if slot != SLOT_UNKNOWN {
             let material = materials[slot];
             let lit_diffuse = lit(&v, T_DIFFUSE, n);
-            diffuse = open_corrected(lit_diffuse, n) * material.albedo.xyz;
+            var diffuse_light = open_corrected(lit_diffuse, n);
+//#if BLOCKERS
+            if CAP_DETAIL {
+                diffuse_light = max(diffuse_light - hidden_detail(a.xyz, n, object) / 3.141592653589793, vec3<f32>(0.0));
+            }
+//#endif
+            diffuse = diffuse_light * material.albedo.xyz;
 //#if PHONG
             if material.kind == MATERIAL_PHONG && enabled(FEATURE_PHONG) {
                 let reflected = record.reflected.xyz;

@@ -205,6 +205,9 @@ pub struct ShadingArgs {
     /// auto: take the suns out of an environment map and shade them as sharp lights (printed); off: keep the whole map in SH.
     #[arg(long, value_enum, default_value_t = SharpLights::Auto)]
     pub sharp_lights: SharpLights,
+    /// Take from the diffuse light the environment's detail beyond the SH order that each sphere blocker hides: darker, sharper contact shadows under a map with structure [default: off at --quality draft, on otherwise].
+    #[arg(long, value_enum)]
+    pub cap_detail: Option<Switch>,
     /// Window the light's SH bands (Sloan 2008): lanczos or hann trade the ringing of a truncated projection around bright regions for blur.
     #[arg(long, value_enum, default_value_t = LightWindow::None)]
     pub light_window: LightWindow,
@@ -256,6 +259,9 @@ impl ShadingArgs {
         settings.tangent_occlusion = self.tangent_occlusion == Switch::On;
         settings.overlap_floor = self.overlap_floor == Switch::On;
         settings.sharp_lights = self.sharp_lights == SharpLights::Auto;
+        if let Some(switch) = self.cap_detail {
+            settings.cap_detail = switch == Switch::On;
+        }
         settings.light_window = self.light_window;
         settings.glossy = self.glossy;
         if let Some(ratio) = self.cluster_ratio {

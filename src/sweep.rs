@@ -23,8 +23,8 @@ use std::time::Instant;
 #[derive(Clone, Debug, Serialize)]
 pub struct SweepRow {
     /// What was varied: "preset", "order", "epsilon", "exp", "directions", "level_step",
-    /// "level_offset", "ratio_attenuation", "fitted_depths", "tangent_occlusion" or
-    /// "visibility_grid"; every other knob is the base's
+    /// "level_offset", "ratio_attenuation", "fitted_depths", "tangent_occlusion",
+    /// "cap_detail" or "visibility_grid"; every other knob is the base's
     /// (fitted caps on).
     pub knob: String,
     /// The value, as a user would type it.
@@ -88,6 +88,7 @@ pub fn configurations() -> Vec<(String, String, ShadingSettings)> {
     out.push(("ratio_attenuation".into(), "on".into(), ShadingSettings { ratio_attenuation: true, ..base }));
     out.push(("fitted_depths".into(), "off".into(), ShadingSettings { fitted_depths: false, ..base }));
     out.push(("tangent_occlusion".into(), "off".into(), ShadingSettings { tangent_occlusion: false, ..base }));
+    out.push(("cap_detail".into(), "off".into(), ShadingSettings { cap_detail: false, ..base }));
     for visibility_grid in [2, 4] {
         out.push(("visibility_grid".into(), visibility_grid.to_string(), ShadingSettings { visibility_grid, ..base }));
     }
@@ -293,6 +294,7 @@ mod tests {
             "ratio_attenuation",
             "fitted_depths",
             "tangent_occlusion",
+            "cap_detail",
             "visibility_grid",
         ] {
             assert!(knobs.contains(k), "{k}");

@@ -25,6 +25,7 @@ const LAYERS: &[(&str, usize)] = &[
     ("shade::fitted_depth", 2),
     ("shade::blocker_tree", 2),
     ("shade::cap_packet", 2),
+    ("shade::cap_detail", 2),
     ("shade::sun", 2),
     ("shade::sun_shadow", 2),
     ("shade::glossy", 2),

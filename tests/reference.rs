@@ -600,3 +600,36 @@ fn bounce_of_a_sphere_over_a_plane(
     );
     (truth / n, ours / n, abs / n)
 }
+
+/// The caps' hidden detail (docs/method/materials.md, "The detail a cap hides") takes
+/// the light's bands beyond the order that the spheres hide, so a frame of spheres under
+/// a sky with structure comes nearer the reference's exact visibility of the same
+/// proxies. Measured on the dunes at 48x27, mean absolute over surface pixels and R, G, B:
+/// 0.0158 with it, 0.0173 without.
+#[test]
+fn the_caps_hidden_detail_brings_a_frame_nearer_the_exact_visibility() {
+    let dir = tempfile::tempdir().unwrap();
+    example_scene("dunes", dir.path(), ExampleOptions { width: 48, height: 27, ..Default::default() }).unwrap();
+    let scene = Scene::load(dir.path()).unwrap();
+    let frame = scene.frame(1).unwrap();
+    let exact = render(&scene, &frame, &options(3e-3, 6));
+    let error = |cap_detail: bool| {
+        let settings = logsh::shade::ShadingSettings {
+            cap_detail,
+            bounce: logsh::shade::bounce::BounceSettings::none(),
+            ..logsh::shade::Quality::Default.settings()
+        };
+        let shaded = support::executors::cpu_beauty(&scene, &frame, &settings).unwrap();
+        let (mut sum, mut count) = (0.0, 0usize);
+        for ((a, b), &m) in shaded.rgba.iter().zip(&exact.rgba).zip(&frame.gbuffer.material) {
+            if m != 0 {
+                sum += (0..3).map(|c| f64::from((a[c] - b[c]).abs())).sum::<f64>();
+                count += 3;
+            }
+        }
+        sum / count as f64
+    };
+    let (with, without) = (error(true), error(false));
+    println!("dunes 48x27 against the reference: {with:.4} with the caps' detail, {without:.4} without");
+    assert!(with < 0.95 * without, "the detail must bring the frame nearer: {with} against {without}");
+}

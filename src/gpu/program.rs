@@ -287,6 +287,8 @@ impl ProgramTables {
         );
         t.push("T_IRRADIANCE_FACTORIAL", (0..eight).map(|m| double_factorial_odd(m) as f32));
         t.push("T_DIFFUSE_OPEN", kernel.diffuse_open.iter().copied());
+        // The caps' hidden detail (src/shade/cap_detail.rs), empty without it.
+        t.push("T_CAP_DETAIL", kernel.cap_detail.iter().flat_map(|table| table.values()));
         let (materials, slots) = material_slots(kernel, &mut t);
         // The disk pattern (x, then y), the suns (src/shade/sun.rs) and the point lamps
         // (src/scene/light.rs, PointLight).
@@ -594,6 +596,12 @@ fn prelude(
         ("BAND_ROWS", U32(kernel.band_coverages.len())),
         ("OVERLAP_FLOOR", Bool(kernel.overlap_floor)),
         ("IRRADIANCE", Bool(kernel.irradiance.is_some())),
+        ("CAP_DETAIL", Bool(kernel.cap_detail.is_some())),
+        ("CAP_DETAIL_COLUMNS", U32(crate::shade::cap_detail::COLUMNS)),
+        ("CAP_DETAIL_ROWS", U32(crate::shade::cap_detail::ROWS)),
+        ("CAP_DETAIL_RADII", U32(crate::shade::cap_detail::RADII)),
+        ("CAP_DETAIL_MAX_RADIUS", F32(crate::shade::cap_detail::MAX_RADIUS)),
+        ("CAP_DETAIL_MIN_RATIO", F32(crate::shade::cap_detail::MIN_RATIO)),
         ("IRRADIANCE_ORDER", U32(crate::shade::kernel::IRRADIANCE_ORDER)),
         ("OPEN_LIGHT_FLOOR", F32(crate::shade::kernel::OPEN_LIGHT_FLOOR)),
         ("GROUND", Bool(kernel.ground.is_some())),

@@ -3,6 +3,7 @@
 //! holds are the ones a GPU executor uploads.
 
 use super::blocker_tree::BlockerTree;
+use super::cap_detail::CapDetail;
 use super::cap_packet::{CapPacket, Receiver, LANES};
 pub use super::exponentiator::{quadrature_weight, sh_space_max_magnitude, Exponentiator, SH_SPACE_BLEND};
 use super::fitted_depth::{
@@ -285,12 +286,16 @@ pub struct ShadingKernel<T> {
     pub(crate) irradiance: Option<OpenIrradiance>,
     /// `exp*(T + D)` about +Z as ZH: the open receiver's diffuse transfer in log-SH.
     pub(crate) diffuse_open: Vec<T>,
+    /// The light's detail beyond order n over sphere caps, which [`Self::hidden_detail`]
+    /// takes from the diffuse light (none without blockers, a map, or `cap_detail`).
+    pub(crate) cap_detail: Option<CapDetail>,
 }
 
 impl<T: Real> ShadingKernel<T> {
     /// Builds the tables. `light` holds `order^2` RGB coefficients of `residual` (the
     /// scene's light with its suns taken out), whose map the glossy term reflects;
-    /// `has_heightfield` decides whether the wedge operator is built at all; `suns` and
+    /// `has_heightfield` decides whether the wedge operator is built at all, `has_blockers`
+    /// whether the caps' detail table is ([`CapDetail`]); `suns` and
     /// `points` are the sharp lights; `ground` the height of the scene's ground plane;
     /// `lamp_fresnel`: each Phong material's reflectance at normal incidence for the sharp
     /// lights' Fresnel term ([`super::glossy::lamp_fresnel`]);
@@ -310,6 +315,7 @@ impl<T: Real> ShadingKernel<T> {
         light: &[[f64; 3]],
         residual: &Light,
         has_heightfield: bool,
+        has_blockers: bool,
         suns: &[SunLight],
         points: &[PointLight],
         ground: Option<f64>,
@@ -377,6 +383,10 @@ impl<T: Real> ShadingKernel<T> {
             sky_only,
             irradiance: glossy_map(residual).map(|(map, strength)| OpenIrradiance::new(&map, strength)),
             diffuse_open,
+            cap_detail: (settings.cap_detail && has_blockers)
+                .then(|| glossy_map(residual))
+                .flatten()
+                .map(|(map, strength)| CapDetail::new(&map, strength, order, light, sky_only)),
         }
     }
 
@@ -752,6 +762,27 @@ impl<T: Real> ShadingKernel<T> {
                 }
             }
         });
+    }
+
+    /// The light's detail beyond order n that the sphere caps seen from `point` hide, per
+    /// colour channel ([`CapDetail`]): each cap of [`Self::add_blocker_caps`] (the same
+    /// walk) weighed by its object's overlap share and by how much of it the tangent plane
+    /// leaves ([`CapDetail::cap_seen`]). Zero without a table or blockers.
+    pub(crate) fn hidden_detail(&self, occluders: Occluders, point: &SurfacePoint) -> [f64; 3] {
+        let (Some(table), Some(tree)) = (&self.cap_detail, occluders.blockers) else {
+            return [0.0; 3];
+        };
+        let (p, n) = (point.position, point.normal);
+        let mut sum = [0.0; 3];
+        tree.visit(p, n, point.object, |sphere, share| {
+            if let Some((direction, alpha, cut)) = CapDetail::cap_seen(p, n, sphere.center, sphere.radius) {
+                let weight = share * cut;
+                for (s, d) in sum.iter_mut().zip(table.at(direction, alpha, n)) {
+                    *s += weight * d;
+                }
+            }
+        });
+        sum
     }
 
     /// The height field's slices with bands from `bases[k]` up to `sigmas[k]` (tangents of

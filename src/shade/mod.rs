@@ -8,6 +8,7 @@
 pub mod adaptive;
 pub mod blocker_tree;
 pub mod bounce;
+pub mod cap_detail;
 pub mod cap_packet;
 pub mod compositing;
 pub mod cpu;

@@ -175,6 +175,7 @@ struct KernelInputs<'a> {
     residual: &'a Light,
     heightfield: bool,
     suns: &'a [SunLight],
+    blockers: bool,
 }
 
 impl KernelInputs<'_> {
@@ -188,6 +189,7 @@ impl KernelInputs<'_> {
             self.light,
             self.residual,
             self.heightfield,
+            self.blockers,
             self.suns,
             &self.frame.points,
             self.frame.ground,
@@ -221,6 +223,7 @@ struct LightingKey {
     points: Vec<PointLight>,
     ground: Option<f64>,
     heightfield: bool,
+    blockers: bool,
 }
 
 impl LightingKey {
@@ -234,6 +237,7 @@ impl LightingKey {
             && self.points == other.points
             && self.ground == other.ground
             && self.heightfield == other.heightfield
+            && self.blockers == other.blockers
     }
 }
 
@@ -253,6 +257,7 @@ fn lighting(settings: &ShadingSettings, scene: &Scene, frame: &Frame, heightfiel
         points: frame.points.clone(),
         ground: frame.ground,
         heightfield,
+        blockers: !frame.blockers.is_empty(),
     };
     let last = || LAST_LIGHTING.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
     if let Some((_, lighting)) = last().as_ref().filter(|(previous, _)| previous.same(&key)) {
@@ -282,6 +287,7 @@ fn lighting(settings: &ShadingSettings, scene: &Scene, frame: &Frame, heightfiel
         residual,
         heightfield,
         suns: &suns,
+        blockers: key.blockers,
     };
     let kernel = match settings.precision {
         Precision::F32 => PlannedKernel::F32(inputs.kernel()),

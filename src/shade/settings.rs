@@ -52,6 +52,11 @@ pub struct ShadingSettings {
     /// Take the suns out of an environment map and shade them as sharp lights
     /// ([`super::sharp_lights`]); off keeps the whole map in SH.
     pub sharp_lights: bool,
+    /// Take from the diffuse light the part of the map's detail beyond order n that each
+    /// sphere's cap hides ([`super::cap_detail`]). Absent from a transfer frame, which is
+    /// shaded without it.
+    #[serde(default)]
+    pub cap_detail: bool,
     /// The window on the light's SH bands ([`LightWindow`]).
     pub light_window: LightWindow,
     /// How glossy lobes are shaded ([`GlossyMethod`]).
@@ -232,6 +237,7 @@ impl ShadingSettings {
             overlap_floor: true,
             cluster_ratio: DEFAULT_CLUSTER_RATIO,
             sharp_lights: true,
+            cap_detail: true,
             light_window: LightWindow::None,
             glossy: GlossyMethod::Ggx,
             horizon: HorizonSettings::default(),
@@ -365,6 +371,9 @@ impl Quality {
             Quality::Ultra => Some((12.0, 8.0)),
         };
         let mut settings = ShadingSettings::for_order(order);
+        // The caps' hidden detail costs blocker scenes 1.3 to 1.7 times the CPU's shading
+        // stage (docs/method/materials.md): the fastest preset goes without it.
+        settings.cap_detail = self != Quality::Draft;
         settings.exp = exp;
         settings.horizon.directions = directions;
         settings.horizon.level_step = level_step;

@@ -24,6 +24,9 @@ pub fn shade_with_transfer(
     settings: &ShadingSettings,
 ) -> Result<(ShadedPasses, TransferFrame), ShadeError> {
     check_grid(settings)?;
+    // A relight turns the light, which moves the detail over every cap: the frame is
+    // shaded without it, so that a relight under the render's light gives it back.
+    let settings = &ShadingSettings { cap_detail: false, ..*settings };
     let plan = FramePlan::new(scene, frame, settings)?;
     let pyramid = plan.terrain.as_ref().map(|terrain| terrain.horizon_pyramid(&plan.settings));
     let occluders = Occluders::of(&plan.blockers, pyramid.as_ref(), &plan.sun_shadows);

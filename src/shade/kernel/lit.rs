@@ -39,7 +39,7 @@ impl<T: Real> ShadingKernel<T> {
     ) -> ([T; 3], [f32; 3], [f32; 3]) {
         let n = point.normal;
         let lit_diffuse = self.lit(visibility, &self.diffuse, n);
-        let diffuse_light = self.open_corrected(lit_diffuse, n);
+        let diffuse_light = self.less_hidden_detail(self.open_corrected(lit_diffuse, n), occluders, point);
         let scale = |c: [T; 3], k: [f32; 3]| [0, 1, 2].map(|i| c[i].to_f32().unwrap_or(0.0) * k[i]);
         match &lobes.material {
             Material::Diffuse { albedo } | Material::Heightfield { albedo } => {
@@ -68,6 +68,16 @@ impl<T: Real> ShadingKernel<T> {
             let lit = lit[c].to_f64().unwrap_or(0.0);
             T::of(open_corrected_channel(lit, open[c].to_f64().unwrap_or(0.0), full[c]))
         })
+    }
+
+    /// `light`, the diffuse light at `point`, less the detail its blockers' caps hide
+    /// ([`Self::hidden_detail`], its cosine-weighted integral divided by pi), at least 0.
+    fn less_hidden_detail(&self, light: [T; 3], occluders: Occluders, point: &SurfacePoint) -> [T; 3] {
+        if self.cap_detail.is_none() {
+            return light;
+        }
+        let detail = self.hidden_detail(occluders, point);
+        [0, 1, 2].map(|c| T::of((light[c].to_f64().unwrap_or(0.0) - detail[c] / std::f64::consts::PI).max(0.0)))
     }
 
     /// The glossy radiance of a Phong material at `point`, times its specular colour: the
