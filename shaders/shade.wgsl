@@ -822,6 +822,10 @@ fn shade(@builtin(global_invocation_id) id: vec3<u32>) {
 //#if HEIGHTFIELD
                     if enabled(FEATURE_HEIGHTFIELD) && load_GpuLobeHead(material.sharp_tables).cone_share < 1.0 {
                         add_horizons(a.xyz, n, false, from_grid, &horizons, &occlusion);
+                        // Only what rises above the horizontal (kernel.rs, add_visibility_parts).
+                        for (var i = 0u; i < COUNT; i++) {
+                            occlusion[i] -= tables[T_BELOW_HORIZONTAL + i];
+                        }
                     }
 //#endif
                     specular = prefiltered_glossy(&occlusion, material, a.xyz, n, object, reflected) * material.specular.xyz;

@@ -274,6 +274,9 @@ impl ProgramTables {
 
         // Lobes: order log-ZH values then the log of the peak.
         t.push("T_TANGENT", kernel.tangent.iter().copied());
+        // The height field's slices at the horizontal, which the specular occlusion takes
+        // out (kernel.rs, below_horizontal_slices); empty without a height field.
+        t.push("T_BELOW_HORIZONTAL", kernel.below_horizontal_slices.iter().copied());
         t.push("T_DIFFUSE", kernel.diffuse.zonal.iter().copied().chain([kernel.diffuse.log_peak as f32]));
         // The open receiver's diffuse light in full (kernel.rs, OpenIrradiance): the
         // light's order-8 coefficients weighted by the rotated cosine, R then G then B, the

@@ -18,8 +18,10 @@
 //!   are all in it); for the Phong lobe, the part of it above the tangent plane.
 //! - `O`: the specular occlusion by the blockers and the height field, in `[0, 1]`. For
 //!   a lobe order n resolves, log-SH's own, `lum(exp*(V + lobe) . L) / lum(exp*(lobe) .
-//!   L)` with `V` their log visibility, the log-SH Phong lobe of the same width and `L`
-//!   the light's SH vector. A sharper lobe's would be blurred over the order's `pi / n`
+//!   L)` with `V` their log visibility (the height field's only above the horizontal,
+//!   since the map's black lower hemisphere already darkens the lobe below it: counting it
+//!   twice left a rough lobe on a height field 15 % too dark against the reference), the
+//!   log-SH Phong lobe of the same width and `L` the light's SH vector. A sharper lobe's would be blurred over the order's `pi / n`
 //!   (a mirror reflecting a sphere came out 0.4 where the truth is 0), so its core (the
 //!   cone holding 80 % of it, [`SharpLobe::core_radius`]) is tested as a sun's disk is
 //!   (`super::sun`: 32 directions against the spheres themselves and the horizon along

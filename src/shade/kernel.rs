@@ -264,6 +264,11 @@ pub struct ShadingKernel<T> {
     pub(crate) tangent: Vec<T>,
     /// The same hemisphere about -Z as SH: the ground plane's log visibility.
     below_horizon: Vec<T>,
+    /// The height field's slices with every horizon at the horizontal, turned by the wedge
+    /// operator: the `log(eps)` each slice holds below the horizontal, which the specular
+    /// occlusion takes back out ([`Self::add_visibility_parts`]). Empty without a height
+    /// field.
+    pub(crate) below_horizontal_slices: Vec<T>,
     pub(crate) materials: BTreeMap<u32, MaterialLobes<T>>,
     /// Light SH coefficients per colour channel.
     pub(crate) light: [Vec<T>; 3],
@@ -351,7 +356,7 @@ impl<T: Real> ShadingKernel<T> {
             exp.exp(&f, None, table.log_peak, &mut e);
             (0..order).map(|l| e[l * l + l]).collect()
         };
-        Self {
+        let mut kernel = Self {
             order,
             log_epsilon: T::of(epsilon.ln()),
             cap_depths_f32: cap_depths.iter().map(|d| d.to_f32().unwrap_or(0.0)).collect(),
@@ -387,7 +392,15 @@ impl<T: Real> ShadingKernel<T> {
                 .then(|| glossy_map(residual))
                 .flatten()
                 .map(|(map, strength)| CapDetail::new(&map, strength, order, light, sky_only)),
+            below_horizontal_slices: Vec::new(),
+        };
+        if let (Some(wedge), Some(turn)) = (&kernel.wedge, &kernel.wedge_turn) {
+            let level = [0.0f64; MAX_DIRECTIONS];
+            let mut slices = vec![T::zero(); coefficient_count(order)];
+            kernel.add_horizon_slices(turn, &level[..wedge.directions], None, &mut slices);
+            kernel.below_horizontal_slices = slices;
         }
+        kernel
     }
 
     /// Each material's lobes: a Phong material's log-SH lobe and, where the light has a
@@ -577,8 +590,9 @@ impl<T: Real> ShadingKernel<T> {
     }
 
     /// [`add_visibility`](Self::add_visibility), and into `occlusion` when given, the part
-    /// the specular occlusion reads ([`super::glossy`]): the height field (unfolded) and
-    /// the blockers, without the tangent plane and the ground plane. Where the height
+    /// the specular occlusion reads ([`super::glossy`]): the height field above the
+    /// horizontal (unfolded, less [`Self::below_horizontal_slices`]) and the blockers,
+    /// without the tangent plane and the ground plane. Where the height
     /// field's horizons are marched and `horizons_found` is given, the highest tangent of
     /// each sector of their azimuths goes into it, rounded up to f32
     /// ([`HorizonPyramid::sector_maxima`](crate::heightfield::HorizonPyramid::sector_maxima):
@@ -638,7 +652,12 @@ impl<T: Real> ShadingKernel<T> {
                     pyramid.sector_maxima(&horizons[..directions], found);
                 }
                 if let Some(occlusion) = occlusion.as_deref_mut() {
+                    // Only what rises above the horizontal: the lobe's part below it reads
+                    // the map's black lower hemisphere already ([`super::glossy`]).
                     self.add_horizon_slices(turn, &horizons[..directions], None, occlusion);
+                    for (a, &b) in occlusion.iter_mut().zip(&self.below_horizontal_slices) {
+                        *a = *a - b;
+                    }
                 }
                 let fold_normal = fold_tangent.then_some(n);
                 match (given, whole) {
