@@ -106,10 +106,7 @@ fn sample_scenes() -> Vec<PathBuf> {
 }
 
 fn frame_numbers(scene: &Scene) -> Vec<i64> {
-    match &scene.frames {
-        Some(range) => (range.start..=range.end).collect(),
-        None => vec![scene.default_frame()],
-    }
+    scene.frame_numbers(usize::MAX)
 }
 
 #[test]

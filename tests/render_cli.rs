@@ -608,7 +608,7 @@ fn flags_and_outputs_are_checked_before_rendering() {
     assert_fails_with(
         &render(&["--frames", "2-9"], &out),
         FAILED,
-        &["frame(s) 4, 5, 6, 7, 8 outside the scene's frames 1-3"],
+        &["frame(s) 4, 5, 6, 7, 8 and 1 more outside the scene's frames 1-3"],
     );
     assert_fails_with(&render(&["--order", "12"], &out), FAILED, &["--order 12"]);
     assert_fails_with(&render(&["--threads", "0"], &out), FAILED, &["--threads 0"]);
@@ -644,6 +644,42 @@ fn flags_and_outputs_are_checked_before_rendering() {
         .map(|e| e["frame"].as_i64().unwrap())
         .collect();
     assert_eq!(frames, [3, 1, 2]);
+}
+
+/// A scene whose export skipped frames (Blender's frame step, or a list of frames) lists
+/// the ones it holds, and `logsh render` without `--frames` renders those alone.
+#[test]
+fn a_scene_with_frames_skipped_renders_the_frames_it_holds() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = three_frame_scene(dir.path(), 16, 9);
+    for file in ["gbuffer.0002.exr", "camera.0002.json", "blockers.0002.json"] {
+        std::fs::remove_file(scene.join(file)).unwrap();
+    }
+    let json = scene.join("scene.json");
+    let mut v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    v["frames"] = serde_json::json!({"start": 1, "end": 3, "list": [1, 3]});
+    std::fs::write(&json, v.to_string()).unwrap();
+    let out = dir.path().join("out");
+    let output = logsh().arg("render").arg(&scene).args(["--progress", "json", "--out"]).arg(&out).output().unwrap();
+    assert!(output.status.success(), "{}", stderr_of(&output));
+    let frames: Vec<i64> = String::from_utf8_lossy(&output.stdout)
+        .lines()
+        .map(|l| serde_json::from_str::<serde_json::Value>(l).unwrap())
+        .filter(|e| e["event"] == "frame")
+        .map(|e| e["frame"].as_i64().unwrap())
+        .collect();
+    assert_eq!(frames, [1, 3]);
+    assert!(out.join("render.0003.exr").is_file() && !out.join("render.0002.exr").exists());
+    // A farm's chunk over the range renders what the scene holds; a frame it lacks alone
+    // is refused.
+    let chunk = dir.path().join("chunk");
+    let output = logsh().arg("render").arg(&scene).args(["--frames", "2-3", "--out"]).arg(&chunk).output().unwrap();
+    assert!(output.status.success(), "{}", stderr_of(&output));
+    assert!(stderr_of(&output).contains("frame(s) 2 not among the scene's frames 1, 3"), "{}", stderr_of(&output));
+    assert!(chunk.join("render.0003.exr").is_file() && !chunk.join("render.0002.exr").exists());
+    let again =
+        logsh().arg("render").arg(&scene).args(["--frames", "2", "--out"]).arg(dir.path().join("again")).output();
+    assert_fails_with(&again.unwrap(), FAILED, &["scene.json", "frame(s) 2 not among the scene's frames 1, 3"]);
 }
 
 #[test]

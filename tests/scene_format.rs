@@ -229,6 +229,15 @@ fn scene_level_validation() {
         (Box::new(|v| v["light"] = serde_json::json!({"environment": "nope.exr"})), &["nope.exr", "file not found"]),
         (Box::new(|v| v["frames"] = serde_json::json!({"start": 5, "end": 1})), &["start 5 is after end 1"]),
         (
+            Box::new(|v| v["frames"] = serde_json::json!({"start": 1, "end": 9, "list": [1, 5, 5, 9]})),
+            &["sorted and without repeats", "5 before 5"],
+        ),
+        (
+            Box::new(|v| v["frames"] = serde_json::json!({"start": 1, "end": 9, "list": [2, 9]})),
+            &["list must begin with start (1)"],
+        ),
+        (Box::new(|v| v["frames"] = serde_json::json!({"start": 1, "end": 9, "list": []})), &["list must begin"]),
+        (
             Box::new(|v| v["heightfield"] = serde_json::json!({"heights": "h.exr", "min": [0, 0], "max": [0, 1]})),
             &["min", "below max"],
         ),
@@ -246,7 +255,8 @@ fn frames_outside_the_range_are_refused() {
     let dir = base_scene();
     let scene = Scene::load(dir.path()).unwrap();
     let err = scene.frame(2).unwrap_err();
-    assert!(matches!(err, SceneError::FrameOutOfRange { frame: 2, start: 1, end: 1, .. }), "{err:?}");
+    assert!(matches!(err, SceneError::FrameOutOfRange { frame: 2, .. }), "{err:?}");
+    assert!(err.to_string().contains("not one of the scene's frames (1-1)"), "{err}");
     edit_json(&dir.path().join("scene.json"), |v| {
         v.as_object_mut().unwrap().remove("frames");
     });

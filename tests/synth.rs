@@ -134,11 +134,11 @@ fn dunes_sample_scene_reads_back() {
     example_scene("dunes", dir.path(), options).unwrap();
     let spec = example("dunes", options).unwrap();
     let scene = Scene::load(dir.path()).unwrap();
-    assert_eq!(scene.frame_numbers(), 1..=2);
+    assert_eq!(scene.frame_numbers(usize::MAX), [1, 2]);
     assert!(scene.heightfield.is_some() && scene.reflection_gbuffer.is_some());
 
     let mut blockers = Vec::new();
-    for (k, n) in scene.frame_numbers().enumerate() {
+    for (k, n) in scene.frame_numbers(usize::MAX).into_iter().enumerate() {
         let f = scene.frame(n).unwrap();
         let (g, r) = spec.render_frame(&spec.frames[k]);
         assert_eq!(f.gbuffer.position, g.position);

@@ -175,6 +175,15 @@ from .materials import (
 from .world import environment_suns, export_world, map_sun_direction, world_keys
 
 
+def frames_entry(frames):
+    """scene.json's `frames` for the exported `frames` (sorted, distinct): their first and
+    last, and the list of them where some between were skipped (a Frame Step, a list)."""
+    start, end = frames[0], frames[-1]
+    if frames == list(range(start, end + 1)):
+        return {"start": start, "end": end}
+    return {"start": start, "end": end, "list": list(frames)}
+
+
 @dataclass
 class Options:
     out: str
@@ -291,7 +300,7 @@ def export(scene, options, log=print):
         width, height = (size // options.supersample for size in output_size(scene))
         description = {
             "version": 1,
-            "frames": {"start": start, "end": end},
+            "frames": frames_entry(frames),
             "gbuffer": "gbuffer.####.exr",
             "camera": "camera.####.json",
             "blockers": "blockers.####.json",

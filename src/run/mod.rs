@@ -353,40 +353,56 @@ fn check_recordable_paths(scene: &Scene) -> Result<()> {
     }
 }
 
-/// The frames `--frames` asks for, all within the scene's, or the scene's own.
+/// The frames `--frames` asks for, or the scene's own. A frame outside the scene's range
+/// is refused; one inside it that the export skipped (scene.json's `frames.list`: a
+/// Frame Step) is left out with a note, so that a farm's chunk `1-10` of a shot exported
+/// every second frame renders its five, unless none of the frames asked for is there.
 fn frames_to_render(args: &crate::cli::RenderArgs, scene: &Scene) -> Result<Vec<i64>> {
-    let frames: Vec<i64> = match &args.frames {
-        Some(spec) => spec.frames.clone(),
-        None => {
-            let range = scene.frame_numbers();
-            let count = i128::from(*range.end()) - i128::from(*range.start()) + 1;
-            if count > crate::render::frames::MAX_FRAMES as i128 {
-                return Err(anyhow!(
-                    "{}: the scene's frames {}-{} are {count} frames, more than {} in one run; choose some with --frames",
-                    scene.scene_file().display(),
-                    range.start(),
-                    range.end(),
-                    crate::render::frames::MAX_FRAMES
-                ));
-            }
-            range.collect()
-        }
-    };
-    if let Some(range) = scene.frames {
-        let outside: Vec<String> =
-            frames.iter().filter(|f| !(range.start..=range.end).contains(*f)).take(5).map(|f| f.to_string()).collect();
-        if !outside.is_empty() {
+    let limit = crate::render::frames::MAX_FRAMES;
+    let Some(spec) = &args.frames else {
+        let count = scene.frames.as_ref().map_or(1, |range| range.count());
+        if count > limit as i128 {
             return Err(anyhow!(
-                "--frames {}: frame(s) {} outside the scene's frames {}-{} ({})",
-                args.frames.as_ref().map(|s| s.text.as_str()).unwrap_or_default(),
-                outside.join(", "),
-                range.start,
-                range.end,
-                scene.scene_file().display()
+                "{}: the scene's frames {} are {count} frames, more than {limit} in one run; choose some with --frames",
+                scene.scene_file().display(),
+                scene.frames.as_ref().map(|range| range.describe()).unwrap_or_default(),
             ));
         }
+        return Ok(scene.frame_numbers(limit));
+    };
+    let Some(range) = &scene.frames else { return Ok(spec.frames.clone()) };
+    let listed = |frames: Vec<&i64>| {
+        let first = frames.iter().take(5).map(|f| f.to_string()).collect::<Vec<_>>().join(", ");
+        match frames.len() {
+            0..=5 => first,
+            more => format!("{first} and {} more", more - 5),
+        }
+    };
+    let outside: Vec<&i64> = spec.frames.iter().filter(|f| !(range.start..=range.end).contains(*f)).collect();
+    if !outside.is_empty() {
+        return Err(anyhow!(
+            "--frames {}: frame(s) {} outside the scene's frames {}-{} ({})",
+            spec.text,
+            listed(outside),
+            range.start,
+            range.end,
+            scene.scene_file().display()
+        ));
     }
-    Ok(frames)
+    let (held, skipped): (Vec<i64>, Vec<i64>) = spec.frames.iter().partition(|&&f| range.contains(f));
+    if !skipped.is_empty() {
+        let what = format!(
+            "frame(s) {} not among the scene's frames {} ({})",
+            listed(skipped.iter().collect()),
+            range.describe(),
+            scene.scene_file().display()
+        );
+        if held.is_empty() {
+            return Err(anyhow!("--frames {}: {what}", spec.text));
+        }
+        eprintln!("render: leaving out {what}");
+    }
+    Ok(held)
 }
 
 /// Says how many frames were rendered, skipped and failed, and fails naming each failure.

@@ -62,9 +62,9 @@ pub enum SceneError {
     #[error("{}: {what} is not a finite number", .file.display())]
     NonFinite { file: PathBuf, what: String },
 
-    /// A frame outside the scene's `frames` range was asked for.
-    #[error("{}: frame {frame} is outside the scene's frames {start}..={end}", .file.display())]
-    FrameOutOfRange { file: PathBuf, frame: i64, start: i64, end: i64 },
+    /// A frame that is not one of the scene's `frames` was asked for.
+    #[error("{}: frame {frame} is not one of the scene's frames ({frames})", .file.display())]
+    FrameOutOfRange { file: PathBuf, frame: i64, frames: String },
 
     /// An output path would overwrite one of the scene's inputs.
     #[error("{}: refusing to write over an input of the scene ({what})", .file.display())]

@@ -152,12 +152,80 @@ impl Material {
     }
 }
 
-/// Inclusive frame range from `"frames"`.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize)]
+/// The scene's frames from `"frames"`: every frame from `start` to `end` (inclusive), or
+/// only those of `list` where the export skipped some (Blender's frame step, or a list of
+/// frames given to the exporter).
+#[derive(Clone, Debug, PartialEq, Eq, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct FrameRange {
     pub start: i64,
     pub end: i64,
+    /// The frames exported, sorted and distinct, from `start` to `end`.
+    #[serde(default)]
+    pub list: Option<Vec<i64>>,
+}
+
+impl FrameRange {
+    /// Whether `frame` is one of the scene's.
+    pub fn contains(&self, frame: i64) -> bool {
+        match &self.list {
+            Some(list) => list.binary_search(&frame).is_ok(),
+            None => (self.start..=self.end).contains(&frame),
+        }
+    }
+
+    /// How many frames the scene has.
+    pub fn count(&self) -> i128 {
+        match &self.list {
+            Some(list) => list.len() as i128,
+            None => i128::from(self.end) - i128::from(self.start) + 1,
+        }
+    }
+
+    /// The scene's frames, in order (at most `limit` of them, so that an absurd range
+    /// cannot fill memory: check [`Self::count`] first).
+    pub fn numbers(&self, limit: usize) -> Vec<i64> {
+        match &self.list {
+            Some(list) => list.iter().copied().take(limit).collect(),
+            None => (self.start..=self.end).take(limit).collect(),
+        }
+    }
+
+    /// The frames as a user reads them: `1-24`, or `1, 5, 9` (the first few of a long list).
+    pub fn describe(&self) -> String {
+        match &self.list {
+            Some(list) if list.len() > 8 => format!(
+                "{} ... {} ({} frames from {} to {})",
+                list[..4].iter().map(i64::to_string).collect::<Vec<_>>().join(", "),
+                list[list.len() - 1],
+                list.len(),
+                self.start,
+                self.end
+            ),
+            Some(list) => list.iter().map(i64::to_string).collect::<Vec<_>>().join(", "),
+            None => format!("{}-{}", self.start, self.end),
+        }
+    }
+
+    /// What is wrong with the range, if anything.
+    fn problem(&self) -> Option<String> {
+        if self.start > self.end {
+            return Some(format!("frames: start {} is after end {}", self.start, self.end));
+        }
+        let list = self.list.as_ref()?;
+        if list.first() != Some(&self.start) || list.last() != Some(&self.end) {
+            return Some(format!(
+                "frames: list must begin with start ({}) and end with end ({}), found {:?} ... {:?}",
+                self.start,
+                self.end,
+                list.first(),
+                list.last()
+            ));
+        }
+        list.windows(2)
+            .find(|w| w[0] >= w[1])
+            .map(|w| format!("frames: list must be sorted and without repeats, found {} before {}", w[0], w[1]))
+    }
 }
 
 /// A path of `scene.json`, possibly with `#` runs standing for the frame number.
@@ -332,10 +400,8 @@ impl Scene {
         let raw: SceneFile = serde_json::from_str(&text).map_err(|e| SceneError::json(&file, e))?;
         raw.check_paths_inside(&file, dir)?;
 
-        if let Some(f) = raw.frames {
-            if f.start > f.end {
-                return Err(SceneError::invalid(&file, format!("frames: start {} is after end {}", f.start, f.end)));
-            }
+        if let Some(problem) = raw.frames.as_ref().and_then(FrameRange::problem) {
+            return Err(SceneError::invalid(&file, problem));
         }
         let (mut materials, mut fresnel) = (BTreeMap::new(), BTreeMap::new());
         for (key, m) in &raw.materials {
@@ -469,24 +535,25 @@ impl Scene {
 
     /// The frame to shade when none is given: `frames.start`, or 1.
     pub fn default_frame(&self) -> i64 {
-        self.frames.map_or(1, |f| f.start)
+        self.frames.as_ref().map_or(1, |f| f.start)
     }
 
-    /// Frame numbers of the scene's range, or just the default frame.
-    pub fn frame_numbers(&self) -> std::ops::RangeInclusive<i64> {
-        match self.frames {
-            Some(f) => f.start..=f.end,
-            None => self.default_frame()..=self.default_frame(),
+    /// The scene's frame numbers (at most `limit`: [`FrameRange::count`] says how many
+    /// there are), or just the default frame.
+    pub fn frame_numbers(&self, limit: usize) -> Vec<i64> {
+        match &self.frames {
+            Some(f) => f.numbers(limit),
+            None => vec![self.default_frame()],
         }
     }
 
     fn check_frame(&self, frame: i64) -> Result<(), SceneError> {
-        if let Some(f) = self.frames {
-            if frame < f.start || frame > f.end {
-                return Err(SceneError::FrameOutOfRange { file: self.scene_file(), frame, start: f.start, end: f.end });
+        match &self.frames {
+            Some(f) if !f.contains(frame) => {
+                Err(SceneError::FrameOutOfRange { file: self.scene_file(), frame, frames: f.describe() })
             }
+            _ => Ok(()),
         }
-        Ok(())
     }
 
     /// Turns the scene's light (the environment and the suns) by `degrees` about Z, on
